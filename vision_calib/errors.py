@@ -1,0 +1,38 @@
+"""Exception hierarchy. Every error a user can cause derives from :class:`VisionCalibError`;
+the CLI turns these into a one-line message and a non-zero exit code (never a traceback)."""
+
+
+class VisionCalibError(Exception):
+    """Base class of all errors raised on bad input or impossible requests."""
+
+    exit_code = 2
+
+
+class ConfigError(VisionCalibError):
+    """Invalid scene/target/study/recording file: message names the file, the key and what was expected."""
+
+
+class DataError(VisionCalibError):
+    """Bad data: NaN values, missing or mismatched files, unreadable images, too few usable poses."""
+
+
+class ParameterError(VisionCalibError):
+    """Unknown parameter name or an invalid fix/free request."""
+
+
+class UnreachablePoseError(VisionCalibError):
+    """A pose cannot be reached by the (H4) inverse model: message names the pose and the chain."""
+
+    def __init__(self, message: str, pose_index: int | None = None, chain: int | None = None):
+        super().__init__(message)
+        self.pose_index = pose_index
+        self.chain = chain
+
+
+class IdentifiabilityError(VisionCalibError):
+    """The requested parameter set cannot be identified from the given poses (e.g. fewer
+    equations than identifiable parameters); message names the parameters."""
+
+
+class MeasurementError(VisionCalibError):
+    """Detection / PnP failed for a whole batch where a per-pose rejection is not possible."""

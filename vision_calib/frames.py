@@ -1,0 +1,225 @@
+"""SE(3) helpers and frame conventions (pure numpy/scipy).
+
+Conventions (DESIGN.md §3):
+- ``T_a_b`` is a (4, 4) float64 homogeneous transform, the pose of frame b expressed in
+  frame a; it maps points from b to a: ``p_a = T_a_b @ p_b``. Inner names cancel:
+  ``T_base_cam @ T_cam_target == T_base_target``.
+- Batches are (..., 4, 4). Rotation vectors are axis*angle in rad, translations in m.
+- A *pose error* between two transforms is the 6-vector ``[dt (3, m), dtheta (3, rad)]`` with
+  ``dt = t_b - t_a`` and ``dtheta = rotvec(R_b @ R_a.T)`` (small rotation expressed in the
+  common parent frame). Kinematic Jacobians of "position + small rotation" use the same
+  convention, so ``pose_error(T(x), T(x + dx)) ~= J @ dx``.
+- Camera frames are OpenCV (x right, y down, z forward). OpenGL/pyrender cameras (y up,
+  z backward) are converted only by :func:`cam_cv_from_gl` / :data:`T_CV_GL`.
+- Quaternions appear only at I/O, in scipy's scalar-last order (qx, qy, qz, qw).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from .errors import DataError
+
+#: T_cvcam_glcam: pose of the OpenGL camera frame in the OpenCV camera frame (x same, y and z flipped).
+T_CV_GL = np.diag([1.0, -1.0, -1.0, 1.0])
+
+
+# ----------------------------------------------------------------------------- elementary
+def rot_x(a):
+    """Rotation matrices about x. a: (...,) rad -> (..., 3, 3)."""
+    a = np.asarray(a, dtype=float)
+    c, s = np.cos(a), np.sin(a)
+    R = np.zeros(a.shape + (3, 3))
+    R[..., 0, 0] = 1.0
+    R[..., 1, 1] = c
+    R[..., 1, 2] = -s
+    R[..., 2, 1] = s
+    R[..., 2, 2] = c
+    return R
+
+
+def rot_y(a):
+    """Rotation matrices about y. a: (...,) rad -> (..., 3, 3)."""
+    a = np.asarray(a, dtype=float)
+    c, s = np.cos(a), np.sin(a)
+    R = np.zeros(a.shape + (3, 3))
+    R[..., 1, 1] = 1.0
+    R[..., 0, 0] = c
+    R[..., 0, 2] = s
+    R[..., 2, 0] = -s
+    R[..., 2, 2] = c
+    return R
+
+
+def rot_z(a):
+    """Rotation matrices about z. a: (...,) rad -> (..., 3, 3)."""
+    a = np.asarray(a, dtype=float)
+    c, s = np.cos(a), np.sin(a)
+    R = np.zeros(a.shape + (3, 3))
+    R[..., 2, 2] = 1.0
+    R[..., 0, 0] = c
+    R[..., 0, 1] = -s
+    R[..., 1, 0] = s
+    R[..., 1, 1] = c
+    return R
+
+
+def make_T(R=None, t=None):
+    """Build (..., 4, 4) transforms from rotations (..., 3, 3) and translations (..., 3) [m]."""
+    if R is None and t is None:
+        return np.eye(4)
+    if R is None:
+        t = np.asarray(t, dtype=float)
+        R = np.broadcast_to(np.eye(3), t.shape[:-1] + (3, 3))
+    R = np.asarray(R, dtype=float)
+    if t is None:
+        t = np.zeros(R.shape[:-2] + (3,))
+    t = np.asarray(t, dtype=float)
+    shape = np.broadcast_shapes(R.shape[:-2], t.shape[:-1])
+    T = np.zeros(shape + (4, 4))
+    T[..., :3, :3] = R
+    T[..., :3, 3] = t
+    T[..., 3, 3] = 1.0
+    return T
+
+
+def inv_T(T):
+    """Inverse of rigid transforms (..., 4, 4) (uses R.T, not a general inverse)."""
+    T = np.asarray(T, dtype=float)
+    R = T[..., :3, :3]
+    t = T[..., :3, 3]
+    Rt = np.swapaxes(R, -1, -2)
+    return make_T(Rt, -np.einsum("...ij,...j->...i", Rt, t))
+
+
+def transform_points(T_a_b, p_b):
+    """Map points (N, 3) [m] from frame b to frame a with T_a_b (4, 4) -> (N, 3)."""
+    p_b = np.asarray(p_b, dtype=float)
+    return p_b @ T_a_b[:3, :3].T + T_a_b[:3, 3]
+
+
+def skew(v):
+    """Skew-symmetric matrices (..., 3, 3) of vectors (..., 3): skew(a) @ b == cross(a, b)."""
+    v = np.asarray(v, dtype=float)
+    S = np.zeros(v.shape[:-1] + (3, 3))
+    S[..., 0, 1] = -v[..., 2]
+    S[..., 0, 2] = v[..., 1]
+    S[..., 1, 0] = v[..., 2]
+    S[..., 1, 2] = -v[..., 0]
+    S[..., 2, 0] = -v[..., 1]
+    S[..., 2, 1] = v[..., 0]
+    return S
+
+
+# ----------------------------------------------------------------------------- conversions
+def T_from_rvec_tvec(rvec, tvec):
+    """OpenCV rvec (..., 3) rad and tvec (..., 3) m -> (..., 4, 4)."""
+    rvec = np.asarray(rvec, dtype=float)
+    tvec = np.asarray(tvec, dtype=float)
+    R = Rotation.from_rotvec(rvec.reshape(-1, 3)).as_matrix().reshape(rvec.shape[:-1] + (3, 3))
+    return make_T(R, tvec.reshape(rvec.shape))
+
+
+def rvec_tvec_from_T(T):
+    """(4, 4) -> (rvec (3,) rad, tvec (3,) m), OpenCV convention."""
+    T = np.asarray(T, dtype=float)
+    return Rotation.from_matrix(T[..., :3, :3]).as_rotvec(), T[..., :3, 3].copy()
+
+
+def T_from_xyz_rpy(xyz, rpy):
+    """xyz (..., 3) m and roll-pitch-yaw (..., 3) rad -> (..., 4, 4), R = Rz(yaw) Ry(pitch) Rx(roll)."""
+    rpy = np.asarray(rpy, dtype=float)
+    R = rot_z(rpy[..., 2]) @ rot_y(rpy[..., 1]) @ rot_x(rpy[..., 0])
+    return make_T(R, xyz)
+
+
+def xyz_rpy_from_T(T):
+    """(..., 4, 4) -> (xyz (..., 3) m, rpy (..., 3) rad) with R = Rz(yaw) Ry(pitch) Rx(roll)."""
+    T = np.asarray(T, dtype=float)
+    ypr = Rotation.from_matrix(T[..., :3, :3]).as_euler("ZYX")
+    return T[..., :3, 3].copy(), ypr[..., ::-1].copy()
+
+
+def T_from_xyz_quat(xyz, quat_xyzw):
+    """xyz (..., 3) m, quaternion (..., 4) scalar-last -> (..., 4, 4). I/O only."""
+    q = np.asarray(quat_xyzw, dtype=float)
+    return make_T(Rotation.from_quat(q).as_matrix(), xyz)
+
+
+def xyz_quat_from_T(T):
+    """(..., 4, 4) -> (xyz (..., 3) m, quaternion (..., 4) scalar-last). I/O only."""
+    T = np.asarray(T, dtype=float)
+    return T[..., :3, 3].copy(), Rotation.from_matrix(T[..., :3, :3]).as_quat()
+
+
+def T_from_xyz_rotvec(v6):
+    """6-vector(s) (..., 6) = [x, y, z (m), rotation vector (rad)] -> (..., 4, 4)."""
+    v6 = np.asarray(v6, dtype=float)
+    R = Rotation.from_rotvec(v6[..., 3:].reshape(-1, 3)).as_matrix().reshape(v6.shape[:-1] + (3, 3))
+    return make_T(R, v6[..., :3])
+
+
+def xyz_rotvec_from_T(T):
+    """(..., 4, 4) -> (..., 6) = [x, y, z (m), rotation vector (rad)]."""
+    T = np.asarray(T, dtype=float)
+    rv = Rotation.from_matrix(T[..., :3, :3].reshape(-1, 3, 3)).as_rotvec().reshape(T.shape[:-2] + (3,))
+    return np.concatenate([T[..., :3, 3], rv], axis=-1)
+
+
+def cam_cv_from_gl(T_world_camgl):
+    """Pose of the OpenCV camera frame from the pose of the OpenGL camera frame (..., 4, 4).
+
+    The only place the OpenCV <-> OpenGL camera flip lives; it is its own inverse:
+    ``cam_gl_from_cv(T) == cam_cv_from_gl(T)``.
+    """
+    return np.asarray(T_world_camgl, dtype=float) @ T_CV_GL
+
+
+def cam_gl_from_cv(T_world_camcv):
+    """Pose of the OpenGL (pyrender) camera frame from the OpenCV one (..., 4, 4)."""
+    return np.asarray(T_world_camcv, dtype=float) @ T_CV_GL
+
+
+# ----------------------------------------------------------------------------- errors / perturbation
+def pose_error(T_a, T_b):
+    """6-vector(s) (..., 6) from pose T_a to T_b: [t_b - t_a (m), rotvec(R_b R_a^T) (rad)]."""
+    T_a = np.asarray(T_a, dtype=float)
+    T_b = np.asarray(T_b, dtype=float)
+    dR = T_b[..., :3, :3] @ np.swapaxes(T_a[..., :3, :3], -1, -2)
+    shape = dR.shape[:-2]
+    rv = Rotation.from_matrix(dR.reshape(-1, 3, 3)).as_rotvec().reshape(shape + (3,))
+    return np.concatenate([T_b[..., :3, 3] - T_a[..., :3, 3], rv], axis=-1)
+
+
+def perturb_pose(T, delta):
+    """Apply a 6-vector pose error (..., 6) to T (..., 4, 4): inverse of :func:`pose_error`,
+    i.e. ``pose_error(T, perturb_pose(T, d)) == d``."""
+    T = np.asarray(T, dtype=float)
+    delta = np.asarray(delta, dtype=float)
+    shape = np.broadcast_shapes(T.shape[:-2], delta.shape[:-1])
+    dR = Rotation.from_rotvec(np.broadcast_to(delta[..., 3:], shape + (3,)).reshape(-1, 3)).as_matrix()
+    dR = dR.reshape(shape + (3, 3))
+    return make_T(dR @ T[..., :3, :3], T[..., :3, 3] + delta[..., :3])
+
+
+def mean_pose(Ts, weights=None):
+    """SE(3) mean of poses (N, 4, 4): arithmetic mean of translations, chordal L2 rotation mean
+    (scipy ``Rotation.mean``, quaternion eigenvector method). weights: (N,) or None."""
+    Ts = np.asarray(Ts, dtype=float)
+    if Ts.ndim != 3 or Ts.shape[0] == 0:
+        raise DataError("mean_pose needs a non-empty (N, 4, 4) array of poses")
+    w = None if weights is None else np.asarray(weights, dtype=float)
+    R = Rotation.from_matrix(Ts[:, :3, :3]).mean(weights=w).as_matrix()
+    t = np.average(Ts[:, :3, 3], axis=0, weights=w)
+    return make_T(R, t)
+
+
+def check_finite(name: str, a) -> np.ndarray:
+    """Return ``a`` as float64; raise DataError naming ``name`` and the first bad index on NaN/inf."""
+    arr = np.asarray(a, dtype=float)
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        idx = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise DataError(f"{name} contains a non-finite value (NaN or inf) at index {idx}")
+    return arr

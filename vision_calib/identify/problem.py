@@ -1,0 +1,147 @@
+"""Problem and result types shared by every identification method (LSE, EKF, H4 IGM).
+
+An :class:`IdentificationProblem` is a pure description: the parameter set (names, nominal,
+free mask, scales), a residual function and its analytic Jacobian over *observations*
+(one observation = one robot pose), and the measurement covariance of each observation.
+
+Residual convention: ``r = measured - model(x)`` with shape (n_obs, m) where m is the
+number of components per pose (6 for full pose [dt (m), dtheta (rad)], 3 for position
+only, 4 for H4 joint residuals (rad)). ``jacobian(x)`` is d r / d x with shape
+(n_obs, m, n_params) over the FULL parameter vector; solvers select free columns.
+Both functions take an optional ``idx`` (k,) int array of observations to evaluate.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Callable
+
+import numpy as np
+
+from ..kinematics.params import ParameterSet
+
+ResidualFn = Callable[..., np.ndarray]  # (x (n,), idx=None) -> (k, m)
+JacobianFn = Callable[..., np.ndarray]  # (x (n,), idx=None) -> (k, m, n)
+
+
+@dataclass(frozen=True)
+class IdentificationProblem:
+    """What to identify from which observations.
+
+    params: parameter set (nominal = starting point, free mask = what is identified).
+    residual: r(x, idx=None) -> (k, m), measured - model.
+    jacobian: J(x, idx=None) -> (k, m, n_params), analytic d r / d x.
+    obs_cov: (n_obs, m, m) covariance of each observation's measurement noise (SI units),
+        used for weighting (whitening) and for the predicted parameter covariance.
+    residual_kind: "pose" | "position" | "joint".
+    labels: (n_obs,) pose identifiers for reports.
+    prior_std: (n,) prior standard deviation of each parameter around nominal (EKF P0);
+        None -> 100 x params.scale (effectively uninformative).
+    component_names: names of the m residual components, for reports.
+    """
+
+    params: ParameterSet
+    residual: ResidualFn
+    jacobian: JacobianFn
+    obs_cov: np.ndarray
+    residual_kind: str
+    labels: tuple = ()
+    prior_std: np.ndarray | None = None
+    component_names: tuple[str, ...] = ()
+    meta: dict = field(default_factory=dict)
+
+    @property
+    def n_obs(self) -> int:
+        return int(self.obs_cov.shape[0])
+
+    @property
+    def m(self) -> int:
+        return int(self.obs_cov.shape[1])
+
+    def with_params(self, params: ParameterSet) -> "IdentificationProblem":
+        """Same observations, another parameter set (e.g. other free mask / starting point)."""
+        return replace(self, params=params)
+
+    def subset(self, idx) -> "IdentificationProblem":
+        """Problem restricted to observations ``idx`` (k,) int."""
+        idx = np.asarray(idx, dtype=int)
+        res, jac = self.residual, self.jacobian
+
+        def residual(x, sub=None):
+            return res(x, idx if sub is None else idx[np.asarray(sub, int)])
+
+        def jacobian(x, sub=None):
+            return jac(x, idx if sub is None else idx[np.asarray(sub, int)])
+
+        labels = tuple(self.labels[i] for i in idx) if self.labels else ()
+        return replace(self, residual=residual, jacobian=jacobian, obs_cov=self.obs_cov[idx], labels=labels)
+
+    def whitening(self) -> np.ndarray:
+        """(n_obs, m, m) matrices W with W @ cov @ W.T = I (inverse Cholesky factors)."""
+        L = np.linalg.cholesky(self.obs_cov)
+        return np.linalg.inv(L)
+
+
+@dataclass(frozen=True)
+class IdentificationResult:
+    """Outcome of one identification.
+
+    names/nominal/identified: (n,) full parameter vectors (SI units); ``deviation`` =
+    identified - nominal. free: (n,) bool, what was identified. std: (n,) predicted standard
+    deviation (NaN for fixed parameters). covariance: (n_free, n_free) for free parameters
+    in ``free`` order. residuals: (n_obs, m) final residuals (measured - model, SI).
+    cost_initial/final: 0.5 * sum of squared whitened residuals.
+    """
+
+    method: str
+    names: tuple[str, ...]
+    nominal: np.ndarray
+    identified: np.ndarray
+    free: np.ndarray
+    std: np.ndarray
+    covariance: np.ndarray
+    cost_initial: float
+    cost_final: float
+    iterations: int
+    converged: bool
+    residuals: np.ndarray
+    residual_kind: str
+    labels: tuple = ()
+    correlation_warnings: tuple[str, ...] = ()
+    warnings: tuple[str, ...] = ()
+    seconds: float = 0.0
+    info: dict = field(default_factory=dict)
+
+    @property
+    def deviation(self) -> np.ndarray:
+        return self.identified - self.nominal
+
+    def value(self, name: str) -> float:
+        return float(self.identified[self.names.index(name)])
+
+    def std_of(self, name: str) -> float:
+        return float(self.std[self.names.index(name)])
+
+    def to_dict(self) -> dict:
+        """JSON-ready summary (SI units)."""
+        return {
+            "method": self.method,
+            "converged": bool(self.converged),
+            "iterations": int(self.iterations),
+            "cost_initial": float(self.cost_initial),
+            "cost_final": float(self.cost_final),
+            "seconds": float(self.seconds),
+            "residual_kind": self.residual_kind,
+            "parameters": [
+                {
+                    "name": n,
+                    "nominal": float(v0),
+                    "identified": float(v),
+                    "free": bool(f),
+                    "std": None if not np.isfinite(s) else float(s),
+                }
+                for n, v0, v, f, s in zip(self.names, self.nominal, self.identified, self.free, self.std)
+            ],
+            "correlation_warnings": list(self.correlation_warnings),
+            "warnings": list(self.warnings),
+        }
