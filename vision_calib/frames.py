@@ -186,7 +186,7 @@ def pose_error(T_a, T_b):
     """6-vector(s) (..., 6) from pose T_a to T_b: [t_b - t_a (m), rotvec(R_b R_a^T) (rad)]."""
     T_a = np.asarray(T_a, dtype=float)
     T_b = np.asarray(T_b, dtype=float)
-    dR = T_b[..., :3, :3] @ np.swapaxes(T_a[..., :3, :3], -1, -2)
+    dR = np.array(T_b[..., :3, :3] @ np.swapaxes(T_a[..., :3, :3], -1, -2))
     shape = dR.shape[:-2]
     rv = Rotation.from_matrix(dR.reshape(-1, 3, 3)).as_rotvec().reshape(shape + (3,))
     return np.concatenate([T_b[..., :3, 3] - T_a[..., :3, 3], rv], axis=-1)
@@ -198,7 +198,7 @@ def perturb_pose(T, delta):
     T = np.asarray(T, dtype=float)
     delta = np.asarray(delta, dtype=float)
     shape = np.broadcast_shapes(T.shape[:-2], delta.shape[:-1])
-    dR = Rotation.from_rotvec(np.broadcast_to(delta[..., 3:], shape + (3,)).reshape(-1, 3)).as_matrix()
+    dR = Rotation.from_rotvec(np.array(np.broadcast_to(delta[..., 3:], shape + (3,))).reshape(-1, 3)).as_matrix()
     dR = dR.reshape(shape + (3, 3))
     return make_T(dR @ T[..., :3, :3], T[..., :3, 3] + delta[..., :3])
 

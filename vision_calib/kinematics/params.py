@@ -70,7 +70,7 @@ class ParameterSet:
         if free is None:
             free = np.ones(n, dtype=bool)
         if scale is None:
-            scale = [DEFAULT_SCALE[k] for k in kinds]
+            scale = [DEFAULT_SCALE.get(k, 1.0) for k in kinds]
         return cls(tuple(names), np.asarray(nominal, float), tuple(kinds), np.asarray(free, bool), np.asarray(scale, float))
 
     def __len__(self) -> int:

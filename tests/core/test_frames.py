@@ -1,0 +1,78 @@
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from vision_calib import frames as F
+from vision_calib.errors import DataError
+
+
+def _random_T(rng, n=None):
+    shape = () if n is None else (n,)
+    R = Rotation.random(n, random_state=rng.integers(1 << 31)).as_matrix()
+    t = rng.normal(size=shape + (3,))
+    return F.make_T(R, t)
+
+
+def test_inverse_and_composition_cancel_inner_names():
+    rng = np.random.default_rng(0)
+    T_a_b, T_b_c = _random_T(rng), _random_T(rng)
+    T_a_c = T_a_b @ T_b_c
+    p_c = rng.normal(size=(5, 3))
+    np.testing.assert_allclose(F.transform_points(T_a_c, p_c), F.transform_points(T_a_b, F.transform_points(T_b_c, p_c)))
+    np.testing.assert_allclose(F.inv_T(T_a_c) @ T_a_c, np.eye(4), atol=1e-12)
+    batch = _random_T(rng, 7)
+    np.testing.assert_allclose(F.inv_T(batch) @ batch, np.broadcast_to(np.eye(4), (7, 4, 4)), atol=1e-12)
+
+
+def test_conversions_round_trip():
+    rng = np.random.default_rng(1)
+    T = _random_T(rng, 20)
+    rv, tv = F.rvec_tvec_from_T(T)
+    np.testing.assert_allclose(F.T_from_rvec_tvec(rv, tv), T, atol=1e-12)
+    xyz, rpy = F.xyz_rpy_from_T(T)
+    np.testing.assert_allclose(F.T_from_xyz_rpy(xyz, rpy), T, atol=1e-12)
+    xyz, q = F.xyz_quat_from_T(T)
+    np.testing.assert_allclose(F.T_from_xyz_quat(xyz, q), T, atol=1e-12)
+    np.testing.assert_allclose(F.T_from_xyz_rotvec(F.xyz_rotvec_from_T(T)), T, atol=1e-12)
+    # single transform keeps its (4, 4) shape
+    assert F.T_from_rvec_tvec(rv[0], tv[0]).shape == (4, 4)
+
+
+def test_rpy_matches_elementary_rotations():
+    T = F.T_from_xyz_rpy([0, 0, 0], [0.1, -0.2, 0.3])
+    np.testing.assert_allclose(T[:3, :3], F.rot_z(0.3) @ F.rot_y(-0.2) @ F.rot_x(0.1), atol=1e-15)
+    np.testing.assert_allclose(F.rot_x(0.4), Rotation.from_rotvec([0.4, 0, 0]).as_matrix(), atol=1e-15)
+    np.testing.assert_allclose(F.rot_y(0.4), Rotation.from_rotvec([0, 0.4, 0]).as_matrix(), atol=1e-15)
+
+
+def test_pose_error_and_perturb_are_inverse():
+    rng = np.random.default_rng(2)
+    T = _random_T(rng, 10)
+    d = rng.normal(scale=0.1, size=(10, 6))
+    np.testing.assert_allclose(F.pose_error(T, F.perturb_pose(T, d)), d, atol=1e-12)
+
+
+def test_opencv_opengl_flip_is_an_involution_and_flips_y_z():
+    rng = np.random.default_rng(3)
+    T_w_cv = _random_T(rng)
+    T_w_gl = F.cam_gl_from_cv(T_w_cv)
+    np.testing.assert_allclose(F.cam_cv_from_gl(T_w_gl), T_w_cv, atol=1e-15)
+    # OpenCV looks along +z, OpenGL along -z: same viewing direction in the world
+    np.testing.assert_allclose(T_w_cv[:3, 2], -T_w_gl[:3, 2])
+    np.testing.assert_allclose(T_w_cv[:3, 1], -T_w_gl[:3, 1])
+    np.testing.assert_allclose(T_w_cv[:3, 0], T_w_gl[:3, 0])
+
+
+def test_mean_pose_recovers_centre_of_symmetric_spread():
+    rng = np.random.default_rng(4)
+    T0 = _random_T(rng)
+    d = rng.normal(scale=0.01, size=(50, 6))
+    Ts = F.perturb_pose(np.broadcast_to(T0, (100, 4, 4)), np.concatenate([d, -d]))
+    np.testing.assert_allclose(F.mean_pose(Ts), T0, atol=1e-6)
+    with pytest.raises(DataError):
+        F.mean_pose(np.zeros((0, 4, 4)))
+
+
+def test_check_finite_names_the_array_and_index():
+    with pytest.raises(DataError, match=r"joints .* index \(1, 2\)"):
+        F.check_finite("joints", [[0, 0, 0], [0, 0, np.nan]])
