@@ -223,3 +223,17 @@ def check_finite(name: str, a) -> np.ndarray:
         idx = tuple(int(i) for i in np.argwhere(bad)[0])
         raise DataError(f"{name} contains a non-finite value (NaN or inf) at index {idx}")
     return arr
+
+
+def inverse_error_map(T):
+    """(..., 6, 6) linear map G with ``pose_error(inv(T), inv(perturb_pose(T, d))) ~= G @ d``.
+
+    Used to carry a pose covariance from T_cam_target to T_target_cam: ``cov_inv = G cov G^T``.
+    """
+    T = np.asarray(T, dtype=float)
+    Rt = np.swapaxes(T[..., :3, :3], -1, -2)
+    G = np.zeros(T.shape[:-2] + (6, 6))
+    G[..., :3, :3] = -Rt
+    G[..., :3, 3:] = -Rt @ skew(T[..., :3, 3])
+    G[..., 3:, 3:] = -Rt
+    return G

@@ -76,3 +76,18 @@ def test_mean_pose_recovers_centre_of_symmetric_spread():
 def test_check_finite_names_the_array_and_index():
     with pytest.raises(DataError, match=r"joints .* index \(1, 2\)"):
         F.check_finite("joints", [[0, 0, 0], [0, 0, np.nan]])
+
+
+def test_inverse_error_map_matches_finite_differences():
+    rng = np.random.default_rng(5)
+    T = _random_T(rng)
+    G = F.inverse_error_map(T)
+    eps = 1e-6
+    num = np.zeros((6, 6))
+    for k in range(6):
+        d = np.zeros(6)
+        d[k] = eps
+        plus = F.pose_error(F.inv_T(T), F.inv_T(F.perturb_pose(T, d)))
+        minus = F.pose_error(F.inv_T(T), F.inv_T(F.perturb_pose(T, -d)))
+        num[:, k] = (plus - minus) / (2 * eps)
+    np.testing.assert_allclose(G, num, atol=1e-7)
