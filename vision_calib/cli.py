@@ -28,6 +28,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("identifiability", help="rank, base parameters, couplings, condition number of a scene")
     _add_common(p)
     p.add_argument("--residual", choices=["pose", "position", "joint"], default=None)
+    p.add_argument("--all", action="store_true", dest="all_params",
+                   help="analyse every model parameter, also those fixed by default (Hayati d, M_T_E.z...)")
 
     p = sub.add_parser("identify-synthetic", help="truth -> synthetic pose measurements (no images) -> identify -> evaluate")
     _add_common(p)
@@ -75,7 +77,8 @@ def _dispatch(args) -> int:
     if args.command == "identifiability":
         from .experiment.synthetic import identifiability_json
 
-        out = identifiability_json(args.scene, residual=args.residual, n_poses=args.poses, seed=args.seed)
+        out = identifiability_json(args.scene, residual=args.residual, n_poses=args.poses, seed=args.seed,
+                                  all_params=args.all_params)
         print(to_json(out) if args.json else _summary_identifiability(out))
         return 0
     if args.command == "identify-synthetic":
