@@ -1,0 +1,304 @@
+"""End-to-end simulated experiment: truth -> render + sensor effects -> measure ->
+identifiability -> identify -> evaluate -> report (``vision-calib simulate`` / ``demo``).
+
+Rendering and measurement run in worker processes (one OpenGL context and one torch thread
+each); everything else in the calling process. Per-pose seeds derive from the run seed, so the
+same seed gives the same report whatever the number of workers.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import DataError
+from .scene import SCENES_DIR, Scene, load_scene, scene_poses, true_parameters
+from .setup import Measurements
+from .synthetic import STREAM_TRUTH, identifiability_report, identify, parameters_table, report_to_json, rngs
+
+DEFAULT_SCENE = SCENES_DIR / "h4_vision.yaml"
+REPORT_VERSION = "1.0"
+
+_W = {}  # per-process worker state
+
+
+def effects_from_scene(scene: Scene):
+    """SensorEffects from the scene's ``effects`` mapping (short names noise_grey / blur_px accepted)."""
+    from ..sensor import SensorEffects
+
+    d = dict(scene.effects)
+    alias = {"noise_grey": "read_noise_grey", "blur_px": "blur_sigma_px"}
+    d = {alias.get(k, k): v for k, v in d.items()}
+    return SensorEffects.from_dict(d, where=f"{scene.path}: effects")
+
+
+def _worker_init(target_path, intrinsics, supersample):
+    os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+    os.environ.setdefault("EGL_PLATFORM", "surfaceless")
+    import torch
+
+    torch.set_num_threads(1)
+    from ..render import TargetRenderer
+    from ..targets import load_target
+
+    target = load_target(target_path)
+    _W["target"] = target
+    _W["intr"] = intrinsics
+    _W["renderer"] = TargetRenderer(target, intrinsics.without_distortion(), supersample=supersample)
+
+
+def _worker_pose(job):
+    """Render, add effects, (optionally) write PNGs, measure one pose -> (index, PoseMeasurement, timings)."""
+    from ..measure import MeasureConfig, measure_images
+    from ..sensor import apply_effects
+
+    i, pose_id, T_cam_target, effects, n_frames, seed, averaging, image_dir = job
+    t0 = time.perf_counter()
+    ideal = _W["renderer"].render(T_cam_target)
+    t1 = time.perf_counter()
+    frames = apply_effects(ideal, effects, n_frames, seed, _W["intr"])
+    t2 = time.perf_counter()
+    if image_dir is not None:
+        import cv2
+
+        d = Path(image_dir) / str(pose_id)
+        d.mkdir(parents=True, exist_ok=True)
+        for k, fr in enumerate(frames):
+            ok, buf = cv2.imencode(".png", fr)
+            (d / f"{k:02d}.png").write_bytes(buf.tobytes())
+    t3 = time.perf_counter()
+    pm, _ = measure_images(frames, _W["target"], _W["intr"], pose_id=pose_id, config=MeasureConfig(mode=averaging))
+    t4 = time.perf_counter()
+    return i, pm, {"render": t1 - t0, "effects": t2 - t1, "write": t3 - t2, "measure": t4 - t3}
+
+
+def measure_poses(scene: Scene, T_cam_targets, labels, seed: int, frames: int, workers: int | None = None,
+                  image_dir=None, progress: bool = False, supersample: int = 2):
+    """Render + effects + measure every pose. Returns (list of PoseMeasurement in pose order,
+    timings {stage: total seconds})."""
+    from concurrent.futures import ProcessPoolExecutor
+    import multiprocessing as mp
+
+    if scene.target_path is None:
+        raise DataError(f"{scene.path}: the scene has no target: image simulation needs one")
+    effects = effects_from_scene(scene)
+    cam = scene.setup.camera
+    jobs = [(i, labels[i], T_cam_targets[i], effects, frames,
+             int(np.random.default_rng([seed, 5, i]).integers(2**31 - 1)), scene.measurement["averaging"], image_dir)
+            for i in range(len(T_cam_targets))]
+    workers = max(1, min(workers or os.cpu_count() or 1, len(jobs)))
+    results = [None] * len(jobs)
+    stage = {"render": 0.0, "effects": 0.0, "write": 0.0, "measure": 0.0}
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(jobs), desc="render+measure", unit="pose", leave=False)
+    init = (str(scene.target_path), cam, supersample)
+    if workers == 1:
+        _worker_init(*init)
+        it = map(_worker_pose, jobs)
+        ex = None
+    else:
+        ex = ProcessPoolExecutor(workers, mp_context=mp.get_context("fork"), initializer=_worker_init, initargs=init)
+        it = ex.map(_worker_pose, jobs, chunksize=1)
+    try:
+        for i, pm, t in it:
+            results[i] = pm
+            for k, v in t.items():
+                stage[k] += v
+            if bar is not None:
+                bar.update(1)
+    finally:
+        if ex is not None:
+            ex.shutdown()
+        if bar is not None:
+            bar.close()
+    return results, stage
+
+
+def _to_measurements(setup, poses, pms, x_true_joints) -> tuple[Measurements, list[int]]:
+    ok = [i for i, pm in enumerate(pms) if pm.valid]
+    T = np.array([pms[i].T_cam_target for i in ok]).reshape(-1, 4, 4)
+    cov = np.array([pms[i].cov for i in ok]).reshape(-1, 6, 6)
+    labels = tuple(str(pms[i].pose_id) for i in ok)
+    return Measurements(np.asarray(poses)[ok], np.asarray(x_true_joints)[ok], T, cov, labels), ok
+
+
+def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, method=None, export_recording=None,
+                   workers=None, progress=False, overrides=None) -> dict:
+    """The whole simulated experiment; writes ``out_dir/report.json`` (+ plots, calibrated model)
+    when out_dir is given and returns the report dict (with ``summary_text``)."""
+    from ..io.report import write_report
+
+    t_start = time.perf_counter()
+    scene = scene if isinstance(scene, Scene) else load_scene(scene)
+    if overrides:
+        scene = apply_overrides(scene, overrides)
+    setup = scene.setup
+    seed = 0 if seed is None else int(seed)
+    frames = frames or scene.measurement["frames"]
+    method = method or scene.identification["method"]
+    residual = scene.identification["residual"]
+    timings = {}
+    rp, rn, rv = rngs(seed)
+
+    t = time.perf_counter()
+    poses = scene_poses(scene, rp, n_poses)
+    validation = scene_poses(scene, rv, which="validation")
+    rep, _ = identifiability_report(scene, poses, residual)
+    base = setup.params.mask(rep.base_parameters)
+    x_true = true_parameters(scene, np.random.default_rng([scene.truth["seed"], STREAM_TRUTH]), base)
+    T_true = setup.T_cam_target(poses, x_true)
+    q_true = setup.joints(poses, x_true)
+    labels = [f"{i:03d}" for i in range(len(poses))]
+    timings["setup"] = time.perf_counter() - t
+
+    image_dir = None
+    if export_recording is not None:
+        image_dir = Path(export_recording) / "images"
+    pms, stage = measure_poses(scene, T_true, labels, seed, frames, workers, image_dir, progress)
+    timings.update({f"{k}_cpu": v for k, v in stage.items()})
+    timings["render_measure_wall"] = time.perf_counter() - t - timings["setup"]
+    if export_recording is not None:
+        from ..io.recording import write_recording
+
+        write_recording(export_recording, scene, poses, q_true, frames)
+
+    meas, ok = _to_measurements(setup, poses, pms, q_true)
+    rejected = [{"pose_id": pm.pose_id, "reason": pm.reason} for pm in pms if not pm.valid]
+    t = time.perf_counter()
+    result, problem, params = identify_measurements(scene, meas, method, residual, base)
+    timings["identify"] = time.perf_counter() - t
+
+    # measurement accuracy vs ground truth (only in simulation)
+    from .. import frames as F
+
+    err = F.pose_error(T_true[ok], meas.T_cam_target)
+    meas_acc = {
+        "translation_rms_mm": [float(v) for v in np.sqrt(np.mean(err[:, :3] ** 2, axis=0)) * 1e3],
+        "rotation_rms_deg": [float(v) for v in np.degrees(np.sqrt(np.mean(err[:, 3:] ** 2, axis=0)))],
+        "predicted_translation_std_mm": [float(v) for v in np.sqrt(np.mean(meas.cov[:, [0, 1, 2], [0, 1, 2]], axis=0)) * 1e3],
+        "predicted_rotation_std_deg": [float(v) for v in np.degrees(np.sqrt(np.mean(meas.cov[:, [3, 4, 5], [3, 4, 5]], axis=0)))],
+    }
+
+    t = time.perf_counter()
+    st = float(np.sqrt(np.mean(err[:, :3] ** 2)))  # measured pose noise, as pose sigmas
+    sr = float(np.sqrt(np.mean(err[:, 3:] ** 2)))
+    if setup.kind == "h4":
+        meas_val = setup.synthetic_measurements(validation, x_true, rv, st, sr)
+        before = setup.evaluate(setup.params.nominal, x_true, validation, meas_val)
+        after = setup.evaluate(result.identified, x_true, validation, meas_val)
+    else:
+        before = setup.evaluate(setup.params.nominal, x_true, validation)
+        after = setup.evaluate(result.identified, x_true, validation)
+    # reference: the same experiment with synthetic pose measurements of the same noise level
+    from .synthetic import run_synthetic
+
+    ref = run_synthetic(scene, method=method, residual=residual, sigma_t_m=st, sigma_r_rad=sr, seed=seed,
+                        poses=poses, validation=validation, base=base, x_true=x_true)
+    timings["evaluate"] = time.perf_counter() - t
+    timings["total"] = time.perf_counter() - t_start
+
+    ps = setup.params
+    report = {
+        "version": REPORT_VERSION,
+        "kind": "simulation",
+        "scene": {"name": scene.name, "path": str(scene.path), "robot_kind": setup.kind},
+        "seed": seed,
+        "settings": {"poses": int(len(poses)), "frames": int(frames), "method": method, "residual": residual,
+                     "averaging": scene.measurement["averaging"], "camera": setup.camera.to_dict(),
+                     "effects": effects_from_scene(scene).to_dict(), "validation_poses": int(len(validation))},
+        "measurements": {"n_valid": len(ok), "n_rejected": len(rejected), "rejected": rejected,
+                         "accuracy_vs_truth": meas_acc, "poses": [pm.to_dict() for pm in pms]},
+        "identifiability": report_to_json(rep),
+        "parameters": parameters_table(ps.names, ps.nominal, x_true, result),
+        "identification": result.to_dict(),
+        "accuracy": {"before": before, "after": after},
+        "synthetic_reference": {"sigma_mm": st * 1e3, "sigma_deg": float(np.degrees(sr)),
+                                "accuracy_after": ref["after"]},
+        "timings_s": timings,
+    }
+    report["summary_text"] = summary_text(report)
+    if out_dir is not None:
+        write_report(out_dir, report, setup, result, problem, x_true, validation)
+    return report
+
+
+def identify_measurements(scene: Scene, meas: Measurements, method, residual, base=None):
+    """Identification of the scene's (identifiable) free parameters from measurements."""
+    from ..errors import IdentifiabilityError
+    from ..identify import analyze
+
+    setup = scene.setup
+    if base is None:
+        rep = analyze(setup.problem(meas, residual))
+        base = setup.params.mask(rep.base_parameters)
+    params = setup.params.only_free([n for n, b in zip(setup.params.names, base) if b])
+    problem = setup.problem(meas, residual, params=params)
+    if problem.n_obs * problem.m < params.n_free:
+        raise IdentifiabilityError(
+            f"{scene.name}: only {problem.n_obs} usable poses ({problem.n_obs * problem.m} equations) for "
+            f"{params.n_free} identifiable parameters: need at least {int(np.ceil(params.n_free / problem.m))} poses")
+    return identify(problem, method), problem, params
+
+
+def apply_overrides(scene: Scene, overrides: dict) -> Scene:
+    """Scene with settings replaced: noise_grey, blur_px, frames, sigma_mm, sigma_deg, averaging."""
+    from dataclasses import replace
+
+    eff = dict(scene.effects)
+    meas = dict(scene.measurement)
+    for k, v in overrides.items():
+        if k in ("noise_grey", "blur_px"):
+            eff[k] = float(v)
+        elif k == "frames":
+            meas["frames"] = int(v)
+        elif k == "sigma_mm":
+            meas["sigma_t_m"] = float(v) * 1e-3
+        elif k == "sigma_deg":
+            meas["sigma_r_rad"] = float(np.radians(v))
+        elif k == "averaging":
+            meas["averaging"] = str(v)
+        else:
+            raise DataError(f"unknown scene override {k!r} (known: noise_grey, blur_px, frames, sigma_mm, sigma_deg, averaging)")
+    return replace(scene, effects=eff, measurement=meas)
+
+
+def summary_text(report: dict) -> str:
+    """One screen: what was run, what was measured, what changed."""
+    b, a = report["accuracy"]["before"], report["accuracy"]["after"]
+    ident = report["identification"]
+    idf = report["identifiability"]
+    m = report["measurements"]
+    lines = [
+        f"scene {report['scene']['name']}  seed {report['seed']}  poses {report['settings']['poses']}  "
+        f"frames {report['settings']['frames']}  method {report['settings']['method']}",
+        f"measurement: {m['n_valid']} poses valid, {m['n_rejected']} rejected",
+    ]
+    if "accuracy_vs_truth" in m:
+        acc = m["accuracy_vs_truth"]
+        lines.append("  pose error vs truth, RMS per component: t = "
+                     + ", ".join(f"{v:.3f}" for v in acc["translation_rms_mm"]) + " mm; r = "
+                     + ", ".join(f"{v:.4f}" for v in acc["rotation_rms_deg"]) + " deg")
+    lines.append(f"identifiability: {idf['n_params']} parameters, rank {idf['rank']}, cond {idf['condition_number']:.3g}"
+                 + (f"; not identifiable: {', '.join(idf['non_identifiable'])}" if idf["non_identifiable"] else ""))
+    lines.append(f"identification: converged={ident['converged']} iterations={ident['iterations']} "
+                 f"cost {ident['cost_initial']:.4g} -> {ident['cost_final']:.4g}")
+    lines.append(f"validation ({b['n_poses']} poses): position RMS {b['position_rms_mm']:.3f} -> {a['position_rms_mm']:.3f} mm, "
+                 f"max {b['position_max_mm']:.3f} -> {a['position_max_mm']:.3f} mm, rotation RMS "
+                 f"{b['rotation_rms_deg']:.4f} -> {a['rotation_rms_deg']:.4f} deg")
+    if "V2_rad" in a:
+        imp = 100 * (1 - a["V2_rad"] / b["V2_rad"]) if b["V2_rad"] > 0 else float("nan")
+        lines.append(f"H4 criteria: V1 {b['V1_rad']:.3g} -> {a['V1_rad']:.3g} rad, V2 {b['V2_rad']:.3g} -> "
+                     f"{a['V2_rad']:.3g} rad ({imp:.1f} % better), V3 {b['V3_m'] * 1e3:.4f} -> {a['V3_m'] * 1e3:.4f} mm")
+    if "synthetic_reference" in report:
+        r = report["synthetic_reference"]
+        lines.append(f"synthetic reference (no images, sigma {r['sigma_mm']:.3f} mm / {r['sigma_deg']:.4f} deg): "
+                     f"position RMS {r['accuracy_after']['position_rms_mm']:.3f} mm")
+    if "timings_s" in report:
+        lines.append(f"time: {report['timings_s'].get('total', float('nan')):.1f} s")
+    return "\n".join(lines)

@@ -1,0 +1,356 @@
+"""Identifiability analysis of an :class:`IdentificationProblem` (numpy/scipy only).
+
+What is analysed
+----------------
+The *scaled, whitened* Jacobian of the free parameters at ``x``::
+
+    A = blockdiag(W_k) @ J[:, :, free] @ diag(scale[free])        (N, n),  N = n_obs * m
+
+with ``W_k`` the inverse Cholesky factor of ``obs_cov[k]`` (so the noise is N(0, I)) and
+``scale`` the typical deviation of each parameter (``params.scale``, m or rad). A column of A is
+"the effect of one typical deviation of that parameter, in units of measurement-noise
+standard deviations". With ``normalize=True`` every column is further divided by its norm
+(the analysis is then insensitive to the choice of scales; default False).
+
+Rank and base set
+-----------------
+Singular values ``s`` of A (descending). Rank = number of ``s_i > tol * s_max`` where ``tol``
+is relative (dimensionless); default ``tol = max(N, n) * eps * 1e3`` (eps = float64 machine
+epsilon), i.e. 1e3 times the usual LAPACK/numpy rank tolerance, enough to ignore the rounding
+of analytic kinematic Jacobians while keeping any genuinely (even weakly) observable parameter.
+The base set is chosen by QR with column pivoting (``selection="pivot"``, LAPACK geqp3: the
+column with the largest remaining norm first) or greedily in parameter order
+(``selection="order"``: a parameter is kept when its column is not in the span of the kept
+ones, so earlier names are preferred; deterministic when columns tie). The dropped parameters
+are ``non_identifiable``. For each dropped column ``a_j`` the least-squares fit
+``a_j ~= A_base @ c`` (== ``R11^-1 R12`` of the pivoted QR) gives the linear combination of
+base parameters it is confounded with, in scaled units: a deviation of one ``scale_j`` of the
+dropped parameter looks exactly like deviations ``c_k * scale_k`` of the base ones.
+
+Observability indices (over the singular values s_1 >= ... >= s_L of the base-set
+columns of A, L = number of base parameters, M = number of robot poses)
+------------------------------------------------------------------------------------------
+* O1 = (s_1 s_2 ... s_L)^(1/L) / sqrt(M)      Borm & Menq, IJRR 10(1), 1991.
+* O2 = s_L / s_1  (inverse condition number)   Driels & Pathre, IEEE TRA 6(2), 1990.
+* O3 = s_L  (minimum singular value)           Nahvi, Hollerbach & Hayward, ICRA 1994.
+* O4 = s_L^2 / s_1  (noise amplification)      Nahvi & Hollerbach, ICRA 1996.
+* O5 = 1 / (1/s_1 + ... + 1/s_L)                Sun & Hollerbach, ICRA 2008 (who also review O1-O4).
+Larger is better for all five. They depend on the scaling described in ``scaling``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.linalg
+
+from ..errors import DataError, IdentifiabilityError, ParameterError
+from .problem import IdentificationProblem
+
+#: |coefficient| below this fraction of the largest one is pruned from a reported coupling
+COUPLING_PRUNE_REL = 1e-6
+
+
+@dataclass(frozen=True)
+class IdentifiabilityReport:
+    """Result of :func:`analyze`. Arrays are in *scaled* units (see module docstring).
+
+    names: (n,) free parameter names analysed, in ``params`` order. singular_values: (n,)
+    of the scaled whitened Jacobian A. condition_number: s_max / s_min over the base set.
+    non_identifiable / base_parameters: names (partition of ``names``). couplings: one dict
+    per dropped parameter: {"parameter", "combination" {base name: coeff (scaled)},
+    "combination_si" {base name: coeff in SI ratio}, "fit_residual" (relative norm of the
+    part of the column not explained)}. null_space: (n, n - rank) orthonormal, scaled units.
+    observability: {"O1".."O5"}. scaling: text. tol: relative rank tolerance used.
+    """
+
+    names: tuple[str, ...]
+    n_params: int
+    rank: int
+    singular_values: np.ndarray
+    condition_number: float
+    non_identifiable: tuple[str, ...]
+    base_parameters: tuple[str, ...]
+    couplings: list
+    null_space: np.ndarray
+    observability: dict
+    scaling: str
+    n_equations: int = 0
+    n_obs: int = 0
+    tol: float = 0.0
+    scale: np.ndarray = field(default=None, repr=False)
+    column_norms: np.ndarray = field(default=None, repr=False)
+
+    @property
+    def identifiable(self) -> bool:
+        return self.rank == self.n_params
+
+    def coupling_of(self, name: str) -> dict:
+        """Coupling dict of the dropped parameter ``name`` (ParameterError if it is not dropped)."""
+        for c in self.couplings:
+            if c["parameter"] == name:
+                return c
+        raise ParameterError(f"{name!r} is not a dropped (non-identifiable) parameter; dropped: {list(self.non_identifiable)}")
+
+    def to_dict(self) -> dict:
+        """JSON-ready summary."""
+        return {
+            "names": list(self.names),
+            "n_params": self.n_params,
+            "n_equations": self.n_equations,
+            "n_obs": self.n_obs,
+            "rank": self.rank,
+            "tol_rel": self.tol,
+            "singular_values": [float(s) for s in self.singular_values],
+            "condition_number": float(self.condition_number),
+            "non_identifiable": list(self.non_identifiable),
+            "base_parameters": list(self.base_parameters),
+            "couplings": [
+                {
+                    "parameter": c["parameter"],
+                    "combination": {k: float(v) for k, v in c["combination"].items()},
+                    "combination_si": {k: float(v) for k, v in c["combination_si"].items()},
+                    "fit_residual": float(c["fit_residual"]),
+                }
+                for c in self.couplings
+            ],
+            "observability": {k: float(v) for k, v in self.observability.items()},
+            "scaling": self.scaling,
+        }
+
+    def summary(self) -> str:
+        """A few human-readable lines."""
+        lines = [
+            f"{self.n_params} free parameters, {self.n_equations} equations ({self.n_obs} poses), rank {self.rank}, "
+            f"condition number {self.condition_number:.3g}"
+        ]
+        for c in self.couplings:
+            comb = " + ".join(f"{v:+.4g}*{k}" for k, v in c["combination"].items()) or "0 (no effect)"
+            lines.append(f"  not identifiable: {c['parameter']} ~ {comb}")
+        return "\n".join(lines)
+
+
+# ----------------------------------------------------------------------------- helpers
+def _labels(problem: IdentificationProblem, idx) -> list[str]:
+    return [str(problem.labels[i]) if problem.labels else f"#{int(i)}" for i in idx]
+
+
+def check_problem(problem: IdentificationProblem, x=None) -> tuple[np.ndarray, np.ndarray]:
+    """Validate data at ``x`` (n,) (default nominal); return (residual (n_obs, m), jacobian (n_obs, m, n)).
+
+    Raises DataError naming the poses (labels) whose residual, Jacobian or covariance is not
+    finite / not positive definite, or when shapes disagree.
+    """
+    n = len(problem.params)
+    x = problem.params.nominal if x is None else np.asarray(x, float).reshape(-1)
+    if x.shape != (n,):
+        raise ParameterError(f"parameter vector has shape {x.shape}, expected ({n},) for {n} parameters")
+    if not np.all(np.isfinite(x)):
+        bad = [problem.params.names[i] for i in np.flatnonzero(~np.isfinite(x))]
+        raise ParameterError(f"parameter vector is not finite for {bad}")
+    cov = np.asarray(problem.obs_cov, float)
+    if cov.ndim != 3 or cov.shape[1] != cov.shape[2] or cov.shape[0] < 1:
+        raise DataError(f"obs_cov has shape {cov.shape}, expected (n_obs, m, m) with n_obs >= 1")
+    n_obs, m = cov.shape[:2]
+    if problem.labels and len(problem.labels) != n_obs:
+        raise DataError(f"{len(problem.labels)} labels for {n_obs} observations")
+    bad = np.flatnonzero(~np.all(np.isfinite(cov), axis=(1, 2)))
+    if bad.size:
+        raise DataError(f"measurement covariance is not finite for poses {_labels(problem, bad)}")
+    eig_min = np.linalg.eigvalsh(0.5 * (cov + np.swapaxes(cov, 1, 2)))[:, 0]
+    bad = np.flatnonzero(eig_min <= 0)
+    if bad.size:
+        raise DataError(f"measurement covariance is not positive definite for poses {_labels(problem, bad)}")
+    r = np.asarray(problem.residual(x), float)
+    if r.shape != (n_obs, m):
+        raise DataError(f"residual has shape {r.shape}, expected ({n_obs}, {m}) from obs_cov")
+    bad = np.flatnonzero(~np.all(np.isfinite(r), axis=1))
+    if bad.size:
+        raise DataError(
+            f"residual (measured - model) is not finite (NaN/inf measurement?) for poses {_labels(problem, bad)}"
+        )
+    J = np.asarray(problem.jacobian(x), float)
+    if J.shape != (n_obs, m, n):
+        raise DataError(f"jacobian has shape {J.shape}, expected ({n_obs}, {m}, {n})")
+    bad = np.flatnonzero(~np.all(np.isfinite(J), axis=(1, 2)))
+    if bad.size:
+        raise DataError(f"jacobian is not finite for poses {_labels(problem, bad)}")
+    return r, J
+
+
+def whitened_free_jacobian(problem: IdentificationProblem, J: np.ndarray, W: np.ndarray | None = None) -> np.ndarray:
+    """(N, n_free) whitened Jacobian of the free parameters (physical units) from J (n_obs, m, n)."""
+    W = problem.whitening() if W is None else W
+    Jf = J[:, :, problem.params.free_index]
+    return np.einsum("kij,kjn->kin", W, Jf).reshape(-1, Jf.shape[-1])
+
+
+def observability_indices(s: np.ndarray, n_poses: int) -> dict[str, float]:
+    """O1..O5 from singular values s (L,) (descending or not) and the number of poses M (see module doc)."""
+    s = np.sort(np.asarray(s, float))[::-1]
+    if s.size == 0 or s[-1] <= 0:
+        return {"O1": 0.0, "O2": 0.0, "O3": 0.0, "O4": 0.0, "O5": 0.0}
+    L = s.size
+    return {
+        "O1": float(np.exp(np.mean(np.log(s))) / np.sqrt(n_poses)),
+        "O2": float(s[-1] / s[0]),
+        "O3": float(s[-1]),
+        "O4": float(s[-1] ** 2 / s[0]),
+        "O5": float(1.0 / np.sum(1.0 / s)),
+    }
+
+
+def _select_base(A: np.ndarray, rank: int, tol_abs: float, selection: str) -> np.ndarray:
+    """Indices of kept columns (sorted)."""
+    n = A.shape[1]
+    if selection == "pivot":
+        _, _, piv = scipy.linalg.qr(A, mode="economic", pivoting=True)
+        return np.sort(piv[:rank])
+    if selection == "order":
+        kept: list[int] = []
+        Q = np.zeros((A.shape[0], 0))
+        for j in range(n):
+            a = A[:, j]
+            resid = a - Q @ (Q.T @ a)
+            resid = resid - Q @ (Q.T @ resid)  # re-orthogonalise
+            nr = np.linalg.norm(resid)
+            if nr > tol_abs and len(kept) < rank:
+                kept.append(j)
+                Q = np.column_stack([Q, resid / nr])
+        return np.array(kept, dtype=int)
+    raise ParameterError(f"unknown base selection {selection!r} (expected 'pivot' or 'order')")
+
+
+# ----------------------------------------------------------------------------- main API
+def analyze(
+    problem: IdentificationProblem,
+    x=None,
+    tol: float | None = None,
+    normalize: bool = False,
+    selection: str = "pivot",
+) -> IdentifiabilityReport:
+    """Identifiability of the free parameters of ``problem`` at ``x`` (n,) (default nominal).
+
+    tol: relative rank tolerance (fraction of s_max); default max(N, n) * eps * 1e3.
+    normalize: divide each scaled column by its norm before the analysis.
+    selection: "pivot" (QR with column pivoting) or "order" (prefer earlier parameters).
+    Raises IdentifiabilityError when there are fewer scalar equations than free parameters,
+    ParameterError when nothing is free, DataError on non-finite data (naming the poses).
+    """
+    params = problem.params
+    names = params.free_names
+    n = len(names)
+    if n == 0:
+        raise ParameterError("no free parameter to analyse (every parameter is fixed)")
+    N = problem.n_obs * problem.m
+    if N < n:
+        raise IdentifiabilityError(
+            f"{N} scalar equations ({problem.n_obs} poses x {problem.m} components) for {n} free parameters: "
+            f"need at least {n} equations (more poses or fewer free parameters)"
+        )
+    _, J = check_problem(problem, x)
+    scale = params.scale[params.free_index]
+    A = whitened_free_jacobian(problem, J) * scale[None, :]
+    col_norms = np.linalg.norm(A, axis=0)
+    if normalize:
+        A = A / np.where(col_norms > 0, col_norms, 1.0)[None, :]
+    U, s, Vt = np.linalg.svd(A, full_matrices=False)
+    s_max = float(s[0]) if s.size else 0.0
+    tol_rel = max(N, n) * np.finfo(float).eps * 1e3 if tol is None else float(tol)
+    tol_abs = tol_rel * s_max
+    rank = int(np.sum(s > tol_abs)) if s_max > 0 else 0
+    null_space = Vt[rank:].T.copy()
+
+    base_idx = _select_base(A, rank, tol_abs, selection) if rank > 0 else np.zeros(0, int)
+    drop_idx = np.setdiff1d(np.arange(n), base_idx)
+    A_base = A[:, base_idx]
+    couplings = []
+    if drop_idx.size:
+        if base_idx.size:
+            C, *_ = np.linalg.lstsq(A_base, A[:, drop_idx], rcond=None)
+        else:
+            C = np.zeros((0, drop_idx.size))
+        for col, j in enumerate(drop_idx):
+            c = C[:, col]
+            a = A[:, j]
+            na = np.linalg.norm(a)
+            fit_res = float(np.linalg.norm(a - A_base @ c) / na) if na > 0 else 0.0
+            cmax = np.max(np.abs(c)) if c.size else 0.0
+            keep = np.abs(c) > COUPLING_PRUNE_REL * cmax if cmax > 0 else np.zeros(c.size, bool)
+            # SI ratio: a unit (m or rad) deviation of the dropped parameter ~ combination_si[k] units of k.
+            # (With normalize=True the scaled columns also include 1/col_norm; undo both.)
+            eff_j = scale[j] / (col_norms[j] if normalize and col_norms[j] > 0 else 1.0)
+            comb = {names[base_idx[i]]: float(c[i]) for i in np.flatnonzero(keep)}
+            comb_si = {}
+            for i in np.flatnonzero(keep):
+                k = base_idx[i]
+                eff_k = scale[k] / (col_norms[k] if normalize and col_norms[k] > 0 else 1.0)
+                comb_si[names[k]] = float(c[i] * eff_k / eff_j)
+            couplings.append(
+                {"parameter": names[j], "combination": comb, "combination_si": comb_si, "fit_residual": fit_res}
+            )
+
+    s_base = np.linalg.svd(A_base, compute_uv=False) if base_idx.size else np.zeros(0)
+    cond = float(s_base[0] / s_base[-1]) if s_base.size and s_base[-1] > 0 else float("inf")
+    scaling = (
+        "whitened by the inverse Cholesky factor of obs_cov (noise std units), each column multiplied by "
+        "params.scale (effect of one typical deviation)"
+        + ("; then each column divided by its norm" if normalize else "; no column normalisation")
+    )
+    return IdentifiabilityReport(
+        names=tuple(names),
+        n_params=n,
+        rank=rank,
+        singular_values=s,
+        condition_number=cond,
+        non_identifiable=tuple(names[j] for j in drop_idx),
+        base_parameters=tuple(names[j] for j in base_idx),
+        couplings=couplings,
+        null_space=null_space,
+        observability=observability_indices(s_base, problem.n_obs),
+        scaling=scaling,
+        n_equations=N,
+        n_obs=problem.n_obs,
+        tol=tol_rel,
+        scale=scale.copy(),
+        column_norms=col_norms,
+    )
+
+
+def base_problem(problem: IdentificationProblem, report: IdentifiabilityReport | None = None, x=None):
+    """Fix the non-identifiable parameters at their current value (``params.nominal``).
+
+    Returns (problem with those parameters fixed, report, warnings) where warnings is a tuple of
+    strings naming every fixed parameter and what it is confounded with. ``report`` defaults to
+    ``analyze(problem, x)``.
+    """
+    report = analyze(problem, x) if report is None else report
+    if not report.non_identifiable:
+        return problem, report, ()
+    warnings = []
+    for c in report.couplings:
+        comb = " + ".join(f"{v:+.4g}*{k}" for k, v in c["combination_si"].items()) or "nothing (no effect on the residuals)"
+        warnings.append(
+            f"parameter {c['parameter']} is not identifiable from these poses: fixed at its current value; "
+            f"its deviation is absorbed as {comb} (SI ratio)"
+        )
+    return problem.with_params(problem.params.fix(report.non_identifiable)), report, tuple(warnings)
+
+
+def equivalent_base_values(problem: IdentificationProblem, report: IdentifiabilityReport, x_true, x_fixed=None) -> np.ndarray:
+    """Full vector (n,) that a solver fixing ``report.non_identifiable`` at ``x_fixed`` should find when the
+    data come from ``x_true`` (simulation): each base parameter gets the deviation of the dropped ones it is
+    confounded with, to first order (exact when the coupling is linear, e.g. two offsets about one axis).
+    """
+    x_true = np.asarray(x_true, float)
+    x_fixed = problem.params.nominal if x_fixed is None else np.asarray(x_fixed, float)
+    out = x_true.copy()
+    p = problem.params
+    for c in report.couplings:
+        j = p.index(c["parameter"])
+        out[j] = x_fixed[j]
+        dj = x_true[j] - x_fixed[j]
+        for k, ratio in c["combination_si"].items():
+            out[p.index(k)] += ratio * dj
+    return out

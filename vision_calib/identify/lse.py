@@ -1,0 +1,235 @@
+"""Least-squares identification (LSE) with scipy ``least_squares``.
+
+Cost: 0.5 * sum_k || W_k r_k(x) ||^2 with ``r = measured - model`` and ``W_k`` the inverse
+Cholesky factor of ``obs_cov[k]`` (whitened residuals). Only free parameters move; the solver
+works in *scaled* variables ``z = (x_free - x0_free) / scale_free`` (``params.scale``), so that
+one unit of z is one typical deviation and scipy's tolerances are meaningful for lengths and
+angles alike. The Jacobian is the problem's analytic one, whitened and scaled the same way
+(``jac="2-point"``/``"3-point"`` uses scipy finite differences instead: the baseline).
+
+Before solving, :func:`~vision_calib.identify.identifiability.analyze` runs at ``x0`` and, with
+``fix_unidentifiable=True`` (default), the non-identifiable parameters are fixed at their ``x0``
+value; a warning naming each of them (and what absorbs its deviation) goes in the result.
+
+Covariance of the free parameters: ``(J_w^T J_w)^-1`` of the whitened Jacobian at the solution,
+i.e. it trusts ``obs_cov``; with ``scale_cov_by_residual=True`` it is multiplied by the a-posteriori
+variance factor ``2 cost / (N - n_free)``.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Iterable
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from ..errors import ConfigError, ParameterError
+from .identifiability import analyze, base_problem, check_problem, whitened_free_jacobian
+from .problem import IdentificationProblem, IdentificationResult
+
+#: |correlation| above which a pair of free parameters is reported
+CORRELATION_WARN = 0.95
+
+
+# ----------------------------------------------------------------------------- shared with ekf.py
+def prepare(
+    problem: IdentificationProblem,
+    x0=None,
+    free: Iterable[str] | None = None,
+    fix: Iterable[str] = (),
+    fix_unidentifiable: bool = True,
+):
+    """Common set-up of the solvers.
+
+    Returns (problem with the final free set, x0 (n,), report, warnings). ``free``: names that
+    are exactly the free ones (None = keep the problem's mask); ``fix``: names fixed in addition.
+    Unknown names raise ParameterError; bad data DataError; too few equations IdentifiabilityError.
+    """
+    params = problem.params
+    if free is not None:
+        params = params.only_free(list(free))
+    fix = list(fix)
+    if fix:
+        params = params.fix(fix)
+    if params.n_free == 0:
+        raise ParameterError("no free parameter left to identify (every parameter is fixed)")
+    problem = problem.with_params(params)
+    x0 = params.nominal.copy() if x0 is None else np.asarray(x0, float).reshape(-1).copy()
+    check_problem(problem, x0)
+    report = analyze(problem, x0)
+    warnings: tuple[str, ...] = ()
+    if report.non_identifiable:
+        if fix_unidentifiable:
+            problem, report, warnings = base_problem(problem, report)
+            report = analyze(problem, x0)
+        else:
+            warnings = (
+                "parameters not identifiable from these poses were left free (fix_unidentifiable=False): "
+                + ", ".join(report.non_identifiable)
+                + "; their covariance is a pseudo-inverse and their values are arbitrary along the null space",
+            )
+    return problem, x0, report, warnings
+
+
+def covariance_from_jacobian(Jw_free: np.ndarray, scale_free: np.ndarray) -> tuple[np.ndarray, bool]:
+    """(n_free, n_free) covariance (JwᵀJw)^-1 computed in scaled variables; returns (cov, full_rank)."""
+    A = Jw_free * scale_free[None, :]
+    U, s, Vt = np.linalg.svd(A, full_matrices=False)
+    tol = max(A.shape) * np.finfo(float).eps * 1e3 * (s[0] if s.size else 0.0)
+    full = bool(s.size and s[-1] > tol)
+    inv_s2 = np.where(s > tol, 1.0 / np.where(s > tol, s, 1.0) ** 2, 0.0)
+    cov_z = (Vt.T * inv_s2) @ Vt
+    return cov_z * np.outer(scale_free, scale_free), full
+
+
+def correlation_warnings(names, cov: np.ndarray, threshold: float = CORRELATION_WARN) -> tuple[str, ...]:
+    """Strings ``"corr(a, b) = +0.973"`` for every pair with |corr| > threshold."""
+    d = np.sqrt(np.clip(np.diag(cov), 0, None))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(d, d)
+    out = []
+    n = len(names)
+    for i in range(n):
+        for j in range(i + 1, n):
+            if np.isfinite(corr[i, j]) and abs(corr[i, j]) > threshold:
+                out.append(f"corr({names[i]}, {names[j]}) = {corr[i, j]:+.3f}")
+    return tuple(out)
+
+
+def whitened_cost(problem: IdentificationProblem, x, W=None) -> float:
+    """0.5 * sum of squared whitened residuals at x (n,)."""
+    W = problem.whitening() if W is None else W
+    rw = np.einsum("kij,kj->ki", W, problem.residual(x))
+    return 0.5 * float(np.sum(rw**2))
+
+
+def finish_result(method, original, problem, x0, x, cov, cost0, iterations, converged, warnings, t0, info, W=None):
+    """Build the IdentificationResult (shared by LSE and EKF)."""
+    params = problem.params
+    fi = params.free_index
+    std = np.full(len(params), np.nan)
+    std[fi] = np.sqrt(np.clip(np.diag(cov), 0, None))
+    W = problem.whitening() if W is None else W
+    r = np.asarray(problem.residual(x), float)
+    cost = 0.5 * float(np.sum(np.einsum("kij,kj->ki", W, r) ** 2))
+    return IdentificationResult(
+        method=method,
+        names=params.names,
+        nominal=original.params.nominal.copy(),
+        identified=np.asarray(x, float).copy(),
+        free=params.free.copy(),
+        std=std,
+        covariance=cov,
+        cost_initial=float(cost0),
+        cost_final=cost,
+        iterations=int(iterations),
+        converged=bool(converged),
+        residuals=r,
+        residual_kind=problem.residual_kind,
+        labels=tuple(problem.labels),
+        correlation_warnings=correlation_warnings(params.free_names, cov),
+        warnings=tuple(warnings),
+        seconds=time.perf_counter() - t0,
+        info=dict(info, x0=np.asarray(x0, float).copy()),
+    )
+
+
+# ----------------------------------------------------------------------------- LSE
+def solve_lse(
+    problem: IdentificationProblem,
+    x0=None,
+    method: str = "auto",
+    loss: str = "linear",
+    f_scale: float = 1.0,
+    fix_unidentifiable: bool = True,
+    max_nfev: int | None = None,
+    xtol: float = 1e-12,
+    ftol: float = 1e-12,
+    gtol: float = 1e-12,
+    jac: str = "analytic",
+    scale_cov_by_residual: bool = False,
+    free: Iterable[str] | None = None,
+    fix: Iterable[str] = (),
+) -> IdentificationResult:
+    """Weighted non-linear least squares on the free parameters of ``problem``.
+
+    x0: (n,) full starting vector (SI), default ``params.nominal``; fixed parameters keep their x0 value.
+    method: "lm" | "trf" | "dogbox" | "auto" (lm for the linear loss, trf otherwise).
+    loss, f_scale: scipy robust loss on the whitened residuals (f_scale in noise-std units).
+    jac: "analytic" (problem.jacobian) or "2-point"/"3-point" (finite-difference baseline).
+    free / fix: parameter names (exactly free / additionally fixed).
+    Returns an IdentificationResult with method "lse"; ``info`` holds nfev, njev, scipy status/message,
+    the identifiability report (``info["identifiability"]``), jac mode, loss.
+    """
+    t0 = time.perf_counter()
+    if jac not in ("analytic", "2-point", "3-point"):
+        raise ConfigError(f"solve_lse: jac={jac!r}; expected 'analytic', '2-point' or '3-point'")
+    if method == "auto":
+        method = "lm" if loss == "linear" else "trf"
+    if method not in ("lm", "trf", "dogbox"):
+        raise ConfigError(f"solve_lse: method={method!r}; expected 'lm', 'trf', 'dogbox' or 'auto'")
+    if method == "lm" and loss != "linear":
+        raise ConfigError(f"solve_lse: method 'lm' supports only loss='linear' (got {loss!r}); use method='trf'")
+    original = problem
+    problem, x0, report, warnings = prepare(problem, x0, free, fix, fix_unidentifiable)
+    params = problem.params
+    fi = params.free_index
+    s = params.scale[fi]
+    W = problem.whitening()
+    x0_free = x0[fi]
+
+    def x_of(z):
+        x = x0.copy()
+        x[fi] = x0_free + s * z
+        return x
+
+    def fun(z):
+        return np.einsum("kij,kj->ki", W, problem.residual(x_of(z))).ravel()
+
+    def jac_fn(z):
+        return whitened_free_jacobian(problem, problem.jacobian(x_of(z)), W) * s[None, :]
+
+    cost0 = whitened_cost(problem, x0, W)
+    sol = least_squares(
+        fun,
+        np.zeros(fi.size),
+        jac=jac_fn if jac == "analytic" else jac,
+        method=method,
+        loss=loss,
+        f_scale=f_scale,
+        max_nfev=max_nfev,
+        xtol=xtol,
+        ftol=ftol,
+        gtol=gtol,
+    )
+    x = x_of(sol.x)
+    Jw = whitened_free_jacobian(problem, problem.jacobian(x), W)
+    cov, full_rank = covariance_from_jacobian(Jw, s)
+    warnings = list(warnings)
+    if not full_rank:
+        warnings.append("Jacobian at the solution is rank deficient: covariance is a pseudo-inverse")
+    N = problem.n_obs * problem.m
+    if scale_cov_by_residual:
+        dof = N - fi.size
+        if dof > 0:
+            cov = cov * (2.0 * float(sol.cost) / dof)
+    converged = bool(sol.status > 0 and np.all(np.isfinite(sol.x)))
+    info = {
+        "nfev": int(sol.nfev),
+        "njev": None if sol.njev is None else int(sol.njev),
+        "status": int(sol.status),
+        "message": str(sol.message),
+        "scipy_method": method,
+        "loss": loss,
+        "jac": jac,
+        "identifiability": report,
+        "scale_cov_by_residual": bool(scale_cov_by_residual),
+    }
+    iterations = sol.njev if sol.njev is not None else sol.nfev
+    return finish_result("lse", original, problem, x0, x, cov, cost0, iterations, converged, warnings, t0, info, W)
+
+
+def solve_lse_fd(problem: IdentificationProblem, x0=None, jac: str = "2-point", **kwargs) -> IdentificationResult:
+    """Same as :func:`solve_lse` with a finite-difference Jacobian (the benchmark's baseline)."""
+    return solve_lse(problem, x0, jac=jac, **kwargs)
