@@ -129,7 +129,7 @@ def _summary_identifiability(out: dict) -> str:
         f"non-identifiable: {', '.join(out['non_identifiable']) or 'none'}",
     ]
     for c in out["couplings"]:
-        comb = " ".join(f"{v:+.3g}*{k}" for k, v in c["combination"].items())
+        comb = " ".join(f"{v:+.3g}*{k}" for k, v in c["combination"].items()) or "(no effect on the measurements)"
         lines.append(f"  {c['parameter']} ~ {comb}")
     return "\n".join(lines)
 

@@ -117,6 +117,7 @@ class StudySpec:
     sweep: tuple
     outputs: tuple
     parameters: tuple | None
+    truth_variant: str | None = None
     hash: str = ""
     raw: dict = field(default_factory=dict, repr=False, compare=False)
 
@@ -189,7 +190,7 @@ def load_study(path) -> StudySpec:
     path = Path(path)
     top = Section(load_yaml(path), path)
     known = {"name", "scene", "mode", "repetitions", "seed", "truth", "settings", "sweep", "outputs", "parameters",
-             "description"}
+             "description", "truth_variant"}
     for k in top.keys():
         if k not in known:
             raise top.error(k, f"unknown key (known: {', '.join(sorted(known))})")
@@ -230,11 +231,17 @@ def load_study(path) -> StudySpec:
         if o not in OUTPUTS:
             raise top.error("outputs", f"unknown output {o!r} (known: {', '.join(OUTPUTS)})")
     params = top.get("parameters", list, None)
+    tv = top.get("truth_variant", str, None)
+    if tv is not None:
+        tv = _convert(path, "truth_variant", "variant", tv, mode)
+        if mode != "synthetic":
+            raise top.error("truth_variant", "only mode: synthetic supports another truth model")
     spec = StudySpec(path=path, name=name, scene_path=scene_path, mode=mode, repetitions=reps, seed=seed,
                      truth=truth, settings=settings, sweep=tuple(sweep), outputs=tuple(outputs),
-                     parameters=None if params is None else tuple(str(p) for p in params), raw=top.data)
+                     parameters=None if params is None else tuple(str(p) for p in params), truth_variant=tv,
+                     raw=top.data)
     _check_cells(spec)
-    key = {"format": RUN_FORMAT, "mode": mode, "seed": seed, "truth": truth, "settings": settings,
+    key = {"format": RUN_FORMAT, "mode": mode, "seed": seed, "truth": truth, "truth_variant": tv, "settings": settings,
            "outputs": sorted(outputs), "parameters": spec.parameters, "files": _file_digest(_scene_files(scene_path))}
     return replace(spec, hash=hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16])
 
@@ -244,6 +251,11 @@ def _check_cells(spec: StudySpec) -> None:
     from .scene import load_scene
 
     base = load_scene(spec.scene_path)
+    if spec.truth_variant is not None:
+        try:
+            scene_with(base, variant=spec.truth_variant)
+        except ConfigError as exc:
+            raise ConfigError(f"{spec.path}: truth_variant: {exc}") from None
     names = set()
     for cell in study_cells(spec):
         sc = _cell_scene(spec, cell, base)
@@ -413,6 +425,8 @@ def _run_synthetic(spec: StudySpec, scene, s: dict, seed: int) -> dict:
     poses = scene_poses(scene, rp, s.get("n_poses"))
     rep, _ = identifiability_report(scene, poses, residual)
     base = scene.setup.params.mask(rep.base_parameters)
+    if spec.truth_variant is not None:
+        return _run_synthetic_other_truth(spec, scene, s, seed, poses, base, rep, residual)
     x_true = None
     if spec.truth == "per_run":
         x_true = true_parameters(scene, np.random.default_rng([seed, STREAM_TRUTH]), base)
@@ -426,6 +440,64 @@ def _run_synthetic(spec: StudySpec, scene, s: dict, seed: int) -> dict:
     return {"converged": res.converged, "iterations": res.iterations, "seconds": out["seconds"],
             "n_free": int(res.free.sum()), "before": out["before"], "after": out["after"],
             "cond": rep.condition_number, "parameters": parameters_table(ps.names, ps.nominal, out["x_true"], res)}
+
+
+def _run_synthetic_other_truth(spec, scene, s, seed, poses, base, rep, residual) -> dict:
+    """Synthetic H4 run whose measurements come from another model (``truth_variant``, e.g. a
+    model-31 robot with deviations on all its free parameters) while the cell's model is
+    identified: the identified model may not fit the truth (model error, as on the real robot).
+    Accuracy and V1..V3 are evaluated across models (joints of the TRUE robot, forward model of
+    the identified one); parameter errors are recorded for names the two models share."""
+    from .scene import scene_poses, true_parameters
+    from .setup import accuracy_stats
+    from .synthetic import STREAM_TRUTH, identify, parameters_table, rngs
+
+    _, rn, rv = rngs(seed)
+    tscene = _scene_for(str(spec.scene_path), spec.truth_variant, None)
+    tsetup, setup = tscene.setup, scene.setup
+    tseed = seed if spec.truth == "per_run" else tscene.truth["seed"]
+    x_true = true_parameters(tscene, np.random.default_rng([tseed, STREAM_TRUTH]))
+    st = scene.measurement["sigma_t_m"] if s.get("sigma_mm") is None else s["sigma_mm"] * 1e-3
+    sr = scene.measurement["sigma_r_rad"] if s.get("sigma_deg") is None else float(np.radians(s["sigma_deg"]))
+    sq = scene.measurement["sigma_q_rad"]
+    validation = scene_poses(scene, rv, which="validation")
+    t0 = time.perf_counter()
+    meas = tsetup.synthetic_measurements(poses, x_true, rn, st, sr, sq)
+    params = setup.params.only_free([n for n, b in zip(setup.params.names, base) if b])
+    problem = setup.problem(meas, residual, params=params)
+    result = identify(problem, s.get("method") or scene.identification["method"])
+    seconds = time.perf_counter() - t0
+    meas_val = tsetup.synthetic_measurements(validation, x_true, rv, st, sr, sq)
+    truth_robot, robot = tsetup.robot, setup.robot
+
+    def evaluate(x):
+        X = validation
+        Xh = robot.fgm(truth_robot.igm(X, x_true), x, X0=X)
+        err = np.zeros((len(X), 6))
+        err[:, :3] = Xh[:, :3] - X[:, :3]
+        err[:, 5] = np.angle(np.exp(1j * (Xh[:, 3] - X[:, 3])))
+        out = accuracy_stats(err)
+        r = np.angle(np.exp(1j * (meas_val.joints - robot.igm_from_camera(meas_val.T_cam_target, x))))
+        out["V1_rad"], out["V2_rad"] = float(np.mean(r)), float(np.sqrt(np.mean(r**2)))
+        rect = []
+        for line in setup.lines():
+            P = robot.fgm(truth_robot.igm(line, x_true), x, X0=line)[:, :3]
+            P = P - P.mean(axis=0)
+            u = np.linalg.svd(P, full_matrices=False)[2][0]
+            rect.append(np.sqrt(np.mean(np.sum((P - np.outer(P @ u, u)) ** 2, axis=1))))
+        out["V3_m"] = float(np.mean(rect))
+        return out
+
+    tval = tsetup.params.values(x_true)
+    ps = setup.params
+    x_shared = np.array([tval.get(n, np.nan) for n in ps.names])
+    table = parameters_table(ps.names, ps.nominal, x_shared, result)
+    for p in table:
+        if p["true"] is not None and not np.isfinite(p["true"]):
+            p["true"] = None
+    return {"converged": result.converged, "iterations": result.iterations, "seconds": seconds,
+            "n_free": int(result.free.sum()), "before": evaluate(ps.nominal), "after": evaluate(result.identified),
+            "cond": rep.condition_number, "parameters": table}
 
 
 def _run_images(spec: StudySpec, scene, s: dict, seed: int) -> dict:
@@ -502,12 +574,13 @@ def _load_run(path: Path, spec_hash: str):
     return d["row"]
 
 
-def run_study(spec, out_dir, workers: int | None = None, scheduler=None, progress: bool = False) -> dict:
+def run_study(spec, out_dir, workers: int | None = None, scheduler=None, progress: bool = False,
+              plots: bool = True) -> dict:
     """Run (or resume) a study and write its outputs in ``out_dir`` (see the module docstring).
 
     spec: StudySpec or path of the study file. workers: local processes (default: CPU count;
     1 = in this process). scheduler: Dask scheduler address (or a ``distributed.Client``): runs
-    go to the cluster instead. Returns {name, spec_hash, out_dir, n_runs, n_computed, n_reused,
+    go to the cluster instead. plots: write the PNG plots. Returns {name, spec_hash, out_dir, n_runs, n_computed, n_reused,
     n_failed, files, summary (per cell: axes + {metric: {mean, std}}), summary_text}.
     """
     spec = spec if isinstance(spec, StudySpec) else load_study(spec)
@@ -547,7 +620,7 @@ def run_study(spec, out_dir, workers: int | None = None, scheduler=None, progres
             bar.close()
     wall = time.perf_counter() - t0
     table = [rows[cell_key(c, r)] for c, r in plan]
-    files = write_outputs(spec, table, out)
+    files = write_outputs(spec, table, out, plots=plots)
     summary = cell_summary(spec, table)
     res = {"name": spec.name, "spec": str(spec.path), "spec_hash": spec.hash, "out_dir": str(out),
            "n_runs": len(plan), "n_computed": len(todo), "n_reused": n_reused,
@@ -582,7 +655,7 @@ def _value(row, c):
     return float(v)
 
 
-def write_outputs(spec: StudySpec, table: list[dict], out: Path) -> dict:
+def write_outputs(spec: StudySpec, table: list[dict], out: Path, plots: bool = True) -> dict:
     """results.csv/.parquet, summary.csv and plots from the run rows; returns {kind: path}."""
     cols = _columns(spec, table)
     buf = io.StringIO()
@@ -617,7 +690,7 @@ def write_outputs(spec: StudySpec, table: list[dict], out: Path) -> dict:
     for r in srows:
         w.writerow([repr(r[c]) if isinstance(r[c], float) else r[c] for c in scols])
     files["summary_csv"] = str(write_text_atomic(out / "summary.csv", buf.getvalue()))
-    files["plots"] = write_plots(spec, table, cols, out)
+    files["plots"] = write_plots(spec, table, cols, out) if plots else []
     return files
 
 

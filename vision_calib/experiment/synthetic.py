@@ -36,8 +36,9 @@ def identifiability_report(scene: Scene, poses, residual: str | None = None, all
     setup = scene.setup
     x0 = setup.params.nominal
     meas = setup.synthetic_measurements(poses, x0, np.random.default_rng(0))
-    params = setup.params.only_free(setup.params.names) if all_params else setup.params
-    problem = setup.problem(meas, residual or scene.identification["residual"], params=params)
+    problem = setup.problem(meas, residual or scene.identification["residual"])
+    if all_params:  # bypass the builders' refusal of known-redundant pairs: the analysis must find them
+        problem = problem.with_params(problem.params.only_free(problem.params.names))
     return analyze(problem), problem
 
 

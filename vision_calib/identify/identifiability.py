@@ -112,6 +112,7 @@ class IdentifiabilityReport:
                     "combination": {k: float(v) for k, v in c["combination"].items()},
                     "combination_si": {k: float(v) for k, v in c["combination_si"].items()},
                     "fit_residual": float(c["fit_residual"]),
+                    "no_effect": bool(c.get("no_effect", False)),
                 }
                 for c in self.couplings
             ],
@@ -278,6 +279,8 @@ def analyze(
             fit_res = float(np.linalg.norm(a - A_base @ c) / na) if na > 0 else 0.0
             cmax = np.max(np.abs(c)) if c.size else 0.0
             keep = np.abs(c) > COUPLING_PRUNE_REL * cmax if cmax > 0 else np.zeros(c.size, bool)
+            if na <= tol_abs:  # the parameter has no effect at all: no combination to report
+                keep[:] = False
             # SI ratio: a unit (m or rad) deviation of the dropped parameter ~ combination_si[k] units of k.
             # (With normalize=True the scaled columns also include 1/col_norm; undo both.)
             eff_j = scale[j] / (col_norms[j] if normalize and col_norms[j] > 0 else 1.0)
@@ -288,7 +291,8 @@ def analyze(
                 eff_k = scale[k] / (col_norms[k] if normalize and col_norms[k] > 0 else 1.0)
                 comb_si[names[k]] = float(c[i] * eff_k / eff_j)
             couplings.append(
-                {"parameter": names[j], "combination": comb, "combination_si": comb_si, "fit_residual": fit_res}
+                {"parameter": names[j], "combination": comb, "combination_si": comb_si,
+                 "fit_residual": 0.0 if na <= tol_abs else fit_res, "no_effect": bool(na <= tol_abs)}
             )
 
     s_base = np.linalg.svd(A_base, compute_uv=False) if base_idx.size else np.zeros(0)

@@ -1,1 +1,9 @@
-"""targets stage."""
+"""targets stage: ChArUco / AprilTag-grid definitions (3-D corners, texture, printable export). cv2 only.
+
+Frame and id conventions are written in :mod:`vision_calib.targets.spec`.
+"""
+
+from .printable import export_printable, read_png_phys
+from .spec import KINDS, TargetSpec, load_target, target_from_dict
+
+__all__ = ["KINDS", "TargetSpec", "export_printable", "load_target", "read_png_phys", "target_from_dict"]

@@ -1,0 +1,402 @@
+"""Hand-eye identification when the flange poses are known (robot assumed calibrated).
+
+Model. For robot pose k the camera measures ``M_k = T_cam_target,k`` and the robot gives
+``T_base_flange,k``. Both mounts write as ``M_k = A . G_k . B`` with ``G_k`` known:
+
+==============  =====================  ============================  =====================
+mount            A (left unknown)       G_k (known)                   B (right unknown)
+==============  =====================  ============================  =====================
+"fixed"          ``T_cam_base``         ``T_base_flange,k``           ``T_flange_target``
+"eye_in_hand"    ``T_cam_flange``       ``inv(T_base_flange,k)``      ``T_base_target``
+==============  =====================  ============================  =====================
+
+For the eye-in-hand mount the camera mounting the user thinks of is ``T_flange_cam = inv(A)``:
+the problem identifies A (names ``T_cam_flange.*``) and :func:`handeye_report` gives both A and
+its inverse, with the covariance carried through :func:`vision_calib.frames.inverse_error_map`.
+
+Parameters (12, SI): ``<A>.tx, .ty, .tz, .rx, .ry, .rz`` then the same for B, with the mount
+parametrisation of :mod:`vision_calib.kinematics.serial`: ``T = [R_nom . Exp(r), t]``, ``r`` a
+rotation vector right-multiplied on the nominal rotation (nominal 0), ``t`` the translation
+(nominal = nominal translation). The nominal transforms are the closed-form initial guess
+(:func:`handeye_initial_guess`) unless given.
+
+Residual (``residual_kind="pose"``, m = 6): ``r_k = frames.pose_error(A G_k B, M_k)`` =
+[t_meas - t_model (m), rotvec(R_meas R_model^T) (rad)], camera frame, i.e. measured - model in
+the error convention of :class:`vision_calib.measure.PoseMeasurement.cov`, so the PnP
+covariances are the observation covariances as they are.
+
+Jacobian (analytic). With the model pose perturbed as ``perturb_pose(M, delta)``:
+``delta = [dtA, 0]`` for A's translation, ``[phi x (t_M - t_A), phi]`` with
+``phi = R_A Jr(r_A) drA`` for A's rotation, ``[R_AG dtB, 0]`` for B's translation and
+``[0, R_AG R_B Jr(r_B) drB]`` for B's rotation (``R_AG`` the rotation of A G_k, ``Jr`` the SO(3)
+right Jacobian). The residual Jacobian is ``-delta`` for the translation rows and
+``-Jr(e)^-1 delta_rot`` for the rotation rows (``e`` the rotation residual), exact at any point.
+
+This module imports cv2 lazily (only :func:`handeye_initial_guess` needs it).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .. import frames
+from ..errors import ConfigError, DataError
+from ..kinematics.params import DEFAULT_SCALE, ParameterSet
+from ..kinematics.serial import MOUNT_SUFFIXES, so3_exp, so3_right_jacobian
+from .problem import IdentificationProblem, IdentificationResult
+
+#: unknown transforms (A, B) named after the frames, per mount
+MOUNT_NAMES = {"fixed": ("T_cam_base", "T_flange_target"), "eye_in_hand": ("T_cam_flange", "T_base_target")}
+#: names of the inverse transforms reported beside A and B
+INVERSE_NAMES = {"T_cam_base": "T_base_cam", "T_flange_target": "T_target_flange",
+                 "T_cam_flange": "T_flange_cam", "T_base_target": "T_target_base"}
+#: default measurement noise when neither pose_cov nor sigmas are given (m, rad)
+DEFAULT_SIGMA_T_M = 1e-3
+DEFAULT_SIGMA_ROT_RAD = np.radians(0.1)
+
+_POSE_COMPONENTS = ("dx", "dy", "dz", "drx", "dry", "drz")
+
+
+# ----------------------------------------------------------------------------- input checks
+def _check_mount(mount: str) -> str:
+    if mount not in MOUNT_NAMES:
+        raise ConfigError(f"hand-eye mount must be 'fixed' or 'eye_in_hand', got {mount!r}")
+    return mount
+
+
+def _check_poses(name: str, T, N: int | None = None) -> np.ndarray:
+    """(N, 4, 4) finite rigid transforms, else DataError naming the pose index."""
+    T = np.asarray(T, dtype=float)
+    if T.ndim != 3 or T.shape[1:] != (4, 4):
+        raise DataError(f"{name} must have shape (N, 4, 4), got {T.shape}")
+    if N is not None and T.shape[0] != N:
+        raise DataError(f"{name} has {T.shape[0]} poses, expected {N} (one per flange pose)")
+    bad = np.flatnonzero(~np.all(np.isfinite(T), axis=(1, 2)))
+    if bad.size:
+        raise DataError(f"{name}: pose {int(bad[0])} contains a non-finite value (NaN or inf)")
+    R = T[:, :3, :3]
+    err = np.abs(R @ np.swapaxes(R, 1, 2) - np.eye(3)).max(axis=(1, 2))
+    bad = np.flatnonzero((err > 1e-6) | (np.linalg.det(R) < 0) | np.any(np.abs(T[:, 3] - [0, 0, 0, 1]) > 1e-9, axis=1))
+    if bad.size:
+        raise DataError(f"{name}: pose {int(bad[0])} is not a rigid transform (rotation not orthonormal "
+                        f"or last row not [0, 0, 0, 1])")
+    return T
+
+
+def _G_of(T_base_flange: np.ndarray, mount: str) -> np.ndarray:
+    return T_base_flange if mount == "fixed" else frames.inv_T(T_base_flange)
+
+
+def _inv_right_jacobian(e: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) inverse of :func:`so3_right_jacobian` at rotation vectors e (..., 3)."""
+    return np.linalg.inv(so3_right_jacobian(e))
+
+
+# ----------------------------------------------------------------------------- closed form
+def handeye_initial_guess(T_base_flange, T_cam_target_meas, mount: str = "fixed",
+                          method: str = "shah") -> tuple[np.ndarray, np.ndarray]:
+    """Closed-form (A, B), each (4, 4), from N >= 3 pose pairs.
+
+    T_base_flange: (N, 4, 4) flange poses in the robot base [m]; T_cam_target_meas: (N, 4, 4)
+    measured target poses in the camera. Returns (T_cam_base, T_flange_target) for "fixed",
+    (T_cam_flange, T_base_target) for "eye_in_hand".
+
+    method "shah" | "li": ``cv2.calibrateRobotWorldHandEye`` on ``M_k = A G_k B``, which is
+    OpenCV's ``cTw_k = cTg . gTb_k . inv(wTb)`` with world = our target side: R_world2cam = M_k,
+    R_base2gripper = G_k, outputs R_gripper2cam = A and R_base2world = inv(B).
+    method "tsai" | "park" | "horaud" | "andreff" | "daniilidis": ``cv2.calibrateHandEye`` (AX = XB)
+    for the left/right unknown that it solves, then the other as the SE(3) mean over the poses.
+    """
+    import cv2
+
+    mount = _check_mount(mount)
+    F = _check_poses("T_base_flange", T_base_flange)
+    M = _check_poses("T_cam_target_meas", T_cam_target_meas, F.shape[0])
+    if F.shape[0] < 3:
+        raise DataError(f"hand-eye calibration needs at least 3 poses, got {F.shape[0]}")
+    G = _G_of(F, mount)
+    rw = {"shah": cv2.CALIB_ROBOT_WORLD_HAND_EYE_SHAH, "li": cv2.CALIB_ROBOT_WORLD_HAND_EYE_LI}
+    he = {"tsai": cv2.CALIB_HAND_EYE_TSAI, "park": cv2.CALIB_HAND_EYE_PARK, "horaud": cv2.CALIB_HAND_EYE_HORAUD,
+          "andreff": cv2.CALIB_HAND_EYE_ANDREFF, "daniilidis": cv2.CALIB_HAND_EYE_DANIILIDIS}
+    try:
+        if method in rw:
+            R_bw, t_bw, R_gc, t_gc = cv2.calibrateRobotWorldHandEye(
+                list(M[:, :3, :3]), list(M[:, :3, 3]), list(G[:, :3, :3]), list(G[:, :3, 3]), method=rw[method])
+            A = frames.make_T(R_gc, np.ravel(t_gc))
+            B = frames.inv_T(frames.make_T(R_bw, np.ravel(t_bw)))
+        elif method in he:
+            # OpenCV finds X with H_k X M_k = const ("gripper2base" H_k, "target2cam" M_k); ours:
+            # inv(G_k) inv(A) M_k = B, so H_k = inv(G_k), X = inv(A), const = B
+            Ginv = frames.inv_T(G)
+            R_x, t_x = cv2.calibrateHandEye(list(Ginv[:, :3, :3]), list(Ginv[:, :3, 3]),
+                                            list(M[:, :3, :3]), list(M[:, :3, 3]), method=he[method])
+            X = frames.make_T(R_x, np.ravel(t_x))  # H_k X M_k = inv(G_k) inv(A) M_k = B for every k
+            A = frames.inv_T(X)
+            B = frames.mean_pose(Ginv @ X @ M)
+        else:
+            raise ConfigError(f"handeye_initial_guess: unknown method {method!r}; expected one of "
+                              f"{sorted(rw) + sorted(he)}")
+    except cv2.error as exc:
+        raise DataError(f"closed-form hand-eye calibration failed ({str(exc).splitlines()[0]}): the poses need "
+                        f"rotations about at least two non-parallel axes; or give A0 and B0") from None
+    A, B = np.asarray(A, float), np.asarray(B, float)
+    if not (np.all(np.isfinite(A)) and np.all(np.isfinite(B))):
+        raise DataError("closed-form hand-eye calibration returned a non-finite result (degenerate motions? "
+                        "the poses need rotations about at least two non-parallel axes)")
+    return A, B
+
+
+# ----------------------------------------------------------------------------- the problem
+def _mount_params(name: str, T: np.ndarray):
+    names = [f"{name}.{s}" for s in MOUNT_SUFFIXES]
+    nominal = list(T[:3, 3]) + [0.0, 0.0, 0.0]
+    kinds = ["length"] * 3 + ["angle"] * 3
+    return names, nominal, kinds
+
+
+def transforms_from_x(problem: IdentificationProblem, x) -> tuple[np.ndarray, np.ndarray]:
+    """(A, B) (4, 4) for the full parameter vector x (12,) of a :func:`handeye_problem`."""
+    x = np.asarray(x, dtype=float).reshape(-1)
+    RA0, RB0 = problem.meta["R_A_nominal"], problem.meta["R_B_nominal"]
+    return (frames.make_T(RA0 @ so3_exp(x[3:6]), x[0:3]), frames.make_T(RB0 @ so3_exp(x[9:12]), x[6:9]))
+
+
+def _obs_cov(N, pose_cov, sigma_t_m, sigma_rot_rad) -> tuple[np.ndarray, dict]:
+    """(N, 6, 6) observation covariances: pose_cov (N, 6, 6) or (6, 6), plus diag(sigmas^2) when given."""
+    meta = {}
+    if pose_cov is None and sigma_t_m is None and sigma_rot_rad is None:
+        sigma_t_m, sigma_rot_rad = DEFAULT_SIGMA_T_M, DEFAULT_SIGMA_ROT_RAD
+        meta["noise"] = "default sigmas"
+    cov = np.zeros((N, 6, 6))
+    if pose_cov is not None:
+        pc = np.asarray(pose_cov, dtype=float)
+        if pc.shape == (6, 6):
+            pc = np.broadcast_to(pc, (N, 6, 6))
+        if pc.shape != (N, 6, 6):
+            raise DataError(f"pose_cov must have shape ({N}, 6, 6) or (6, 6), got {pc.shape}")
+        bad = np.flatnonzero(~np.all(np.isfinite(pc), axis=(1, 2)))
+        if bad.size:
+            raise DataError(f"pose_cov of pose {int(bad[0])} is not finite (invalid measurement?)")
+        cov = cov + 0.5 * (pc + np.swapaxes(pc, 1, 2))
+        meta.setdefault("noise", "pose_cov")
+    for name, s, sl in (("sigma_t_m", sigma_t_m, slice(0, 3)), ("sigma_rot_rad", sigma_rot_rad, slice(3, 6))):
+        if s is None:
+            continue
+        if not (np.isfinite(s) and s >= 0):
+            raise DataError(f"{name} must be a finite number >= 0, got {s}")
+        cov[:, sl, sl] += float(s) ** 2 * np.eye(3)
+        meta[name] = float(s)
+    eig = np.linalg.eigvalsh(cov)[:, 0]
+    bad = np.flatnonzero(eig <= 0)
+    if bad.size:
+        raise DataError(f"observation covariance of pose {int(bad[0])} is not positive definite "
+                        f"(give pose_cov or sigma_t_m > 0 and sigma_rot_rad > 0)")
+    return cov, meta
+
+
+def handeye_problem(T_base_flange, T_cam_target_meas, mount: str = "fixed", A0=None, B0=None, pose_cov=None,
+                    sigma_t_m: float | None = None, sigma_rot_rad: float | None = None,
+                    labels=None) -> IdentificationProblem:
+    """Hand-eye identification problem (residual_kind "pose", m = 6, 12 parameters).
+
+    T_base_flange: (N, 4, 4) known flange poses in the robot base [m] (the problem builds
+    ``G_k`` from them: itself for "fixed", its inverse for "eye_in_hand").
+    T_cam_target_meas: (N, 4, 4) measured target poses in the camera [m].
+    mount: "fixed" (A = T_cam_base, B = T_flange_target) | "eye_in_hand" (A = T_cam_flange,
+    B = T_base_target). A0, B0: (4, 4) nominal transforms (starting point); None -> closed form
+    (:func:`handeye_initial_guess`, both must be None or both given).
+    pose_cov: (N, 6, 6) or (6, 6) covariance of the measured pose error [dt (m), drot (rad)],
+    camera frame (``PoseMeasurement.cov``). sigma_t_m / sigma_rot_rad: isotropic noise added to
+    pose_cov (robot repeatability, model error); with neither pose_cov nor sigmas: 1 mm / 0.1 deg.
+    labels: (N,) pose identifiers. ``meta`` holds mount, the A/B names, G (N, 4, 4) and the
+    nominal rotations used by :func:`transforms_from_x`.
+    """
+    mount = _check_mount(mount)
+    F = _check_poses("T_base_flange", T_base_flange)
+    N = F.shape[0]
+    M = _check_poses("T_cam_target_meas", T_cam_target_meas, N)
+    if N < 3:
+        raise DataError(f"hand-eye identification needs at least 3 poses (12 parameters, 6 equations each, "
+                        f"and two rotation axes), got {N}")
+    if (A0 is None) != (B0 is None):
+        raise ConfigError("handeye_problem: give both A0 and B0, or neither (closed-form start)")
+    if A0 is None:
+        A0, B0 = handeye_initial_guess(F, M, mount)
+    A0 = _check_poses("A0", np.asarray(A0, float)[None])[0]
+    B0 = _check_poses("B0", np.asarray(B0, float)[None])[0]
+    labels = tuple(range(N)) if labels is None else tuple(labels)
+    if len(labels) != N:
+        raise DataError(f"{len(labels)} labels for {N} poses")
+    cov, noise_meta = _obs_cov(N, pose_cov, sigma_t_m, sigma_rot_rad)
+
+    nA, nB = MOUNT_NAMES[mount]
+    na, va, ka = _mount_params(nA, A0)
+    nb, vb, kb = _mount_params(nB, B0)
+    kinds = ka + kb
+    params = ParameterSet.from_lists(na + nb, va + vb, kinds, None, [DEFAULT_SCALE[k] for k in kinds])
+    G = _G_of(F, mount)
+    RA0, RB0 = A0[:3, :3].copy(), B0[:3, :3].copy()
+
+    def model_parts(x, idx):
+        x = np.asarray(x, dtype=float).reshape(-1)
+        A = frames.make_T(RA0 @ so3_exp(x[3:6]), x[0:3])
+        B = frames.make_T(RB0 @ so3_exp(x[9:12]), x[6:9])
+        AG = A @ G[idx]
+        return x, A, B, AG, AG @ B
+
+    def sel(idx):
+        return np.arange(N) if idx is None else np.asarray(idx, dtype=int)
+
+    def residual(x, idx=None):
+        idx = sel(idx)
+        _, _, _, _, Tm = model_parts(x, idx)
+        return frames.pose_error(Tm, M[idx])
+
+    def jacobian(x, idx=None):
+        idx = sel(idx)
+        x, A, B, AG, Tm = model_parts(x, idx)
+        k = idx.size
+        D = np.zeros((k, 6, 12))  # delta (model pose error) per parameter
+        D[:, 0:3, 0:3] = np.eye(3)
+        WA = A[:3, :3] @ so3_right_jacobian(x[3:6])  # (3, 3) axes phi per unit rA, camera frame
+        arm = Tm[:, :3, 3] - A[:3, 3]  # (k, 3)
+        D[:, 0:3, 3:6] = np.einsum("kij,jl->kil", -frames.skew(arm), WA)  # phi x arm = -arm x phi
+        D[:, 3:6, 3:6] = WA
+        D[:, 0:3, 6:9] = AG[:, :3, :3]
+        D[:, 3:6, 9:12] = AG[:, :3, :3] @ (B[:3, :3] @ so3_right_jacobian(x[9:12]))
+        e = frames.pose_error(Tm, M[idx])[:, 3:]
+        J = -D
+        J[:, 3:, :] = -np.einsum("kij,kjl->kil", _inv_right_jacobian(e), D[:, 3:, :])
+        return J
+
+    return IdentificationProblem(
+        params=params, residual=residual, jacobian=jacobian, obs_cov=cov, residual_kind="pose", labels=labels,
+        component_names=_POSE_COMPONENTS,
+        meta={"model": "handeye", "mount": mount, "A_name": nA, "B_name": nB, "G": G, "T_base_flange": F,
+              "T_cam_target_meas": M, "R_A_nominal": RA0, "R_B_nominal": RB0, "A0": A0, "B0": B0, **noise_meta},
+    )
+
+
+def solve_handeye(T_base_flange, T_cam_target_meas, mount: str = "fixed", pose_cov=None,
+                  sigma_t_m: float | None = None, sigma_rot_rad: float | None = None, labels=None,
+                  A0=None, B0=None, **lse_kwargs):
+    """Closed-form start + weighted least squares. Returns (result, A (4, 4), B (4, 4), problem).
+
+    Arguments as :func:`handeye_problem`; ``lse_kwargs`` go to :func:`~vision_calib.identify.lse.solve_lse`
+    (e.g. ``scale_cov_by_residual=True`` when the measurement covariances are not trusted).
+    """
+    from .lse import solve_lse
+
+    problem = handeye_problem(T_base_flange, T_cam_target_meas, mount, A0, B0, pose_cov, sigma_t_m,
+                              sigma_rot_rad, labels)
+    result = solve_lse(problem, **lse_kwargs)
+    A, B = transforms_from_x(problem, result.identified)
+    return result, A, B, problem
+
+
+def stack_measurements(measurements, pool_sigma: bool = False):
+    """Arrays from PoseMeasurement-like objects (``T_cam_target``, ``cov``, ``valid``, ``pose_id``,
+    ``sigma_px``): (T (N, 4, 4), cov (N, 6, 6), labels (N,) tuple, valid (N,) bool).
+
+    Filter with ``valid`` (together with the flange poses) before :func:`handeye_problem`.
+    pool_sigma: rescale each covariance (``sigma_px^2 (J^T J)^-1``) to the RMS of ``sigma_px`` over
+    the valid poses. Use it when each pose has one image and few corners (e.g. one AprilTag: the
+    per-pose sigma_px is then estimated from 2 degrees of freedom and varies by a factor ~10 by chance).
+    """
+    ms = list(measurements)
+    if not ms:
+        raise DataError("stack_measurements: no measurement given")
+    T = np.array([np.asarray(m.T_cam_target, float) for m in ms]).reshape(-1, 4, 4)
+    cov = np.array([np.asarray(m.cov, float) for m in ms]).reshape(-1, 6, 6)
+    valid = np.array([bool(m.valid) for m in ms], dtype=bool)
+    if pool_sigma and valid.any():
+        sig = np.array([float(getattr(m, "sigma_px", np.nan)) for m in ms])
+        ok = valid & np.isfinite(sig) & (sig > 0)
+        if ok.any():
+            pooled = float(np.sqrt(np.mean(sig[ok] ** 2)))
+            cov[ok] *= ((pooled / sig[ok]) ** 2)[:, None, None]
+    return T, cov, tuple(m.pose_id for m in ms), valid
+
+
+# ----------------------------------------------------------------------------- report
+def _mount_error_map(T: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """(6, 6) map from mount parameter deviations [dt, dr] to frames.pose_error(T, T') [m, rad]
+    (rotation right-multiplied: dtheta = R Jr(r) dr)."""
+    L = np.eye(6)
+    L[3:, 3:] = T[:3, :3] @ so3_right_jacobian(r)
+    return L
+
+
+def _transform_dict(T: np.ndarray, cov: np.ndarray | None, unknown: np.ndarray | None = None) -> dict:
+    """xyz/rpy/quat/matrix of T, and stds from cov (6, 6); components flagged in unknown (6,) -> None."""
+    xyz, rpy = frames.xyz_rpy_from_T(T)
+    _, q = frames.xyz_quat_from_T(T)
+    d = {"xyz_m": xyz.tolist(), "rpy_deg": np.degrees(rpy).tolist(), "quat_xyzw": q.tolist(), "matrix": T.tolist()}
+    if cov is not None:
+        s = np.sqrt(np.clip(np.diag(cov), 0, None))
+        s[3:] = np.degrees(s[3:])
+        unknown = np.zeros(6, bool) if unknown is None else unknown
+        vals = [None if u or not np.isfinite(v) else float(v) for v, u in zip(s, unknown)]
+        d["std_xyz_m"] = vals[:3]
+        d["std_rot_deg"] = vals[3:]  # small rotation about the parent frame's axes
+    return d
+
+
+def handeye_report(result: IdentificationResult, A, B, problem: IdentificationProblem) -> dict:
+    """JSON-ready summary of a hand-eye identification.
+
+    ``transforms``: for A, B and their inverses (named after the frames, e.g. ``T_cam_base`` and
+    ``T_base_cam``): xyz [m], rpy [deg] (R = Rz(yaw) Ry(pitch) Rx(roll)), quaternion (x, y, z, w),
+    4x4 matrix, and the standard deviations of the pose error in the frames.pose_error
+    convention (translation [m] and small rotation [deg] about the axes of the transform's
+    parent frame; None for a component that a fixed (non-identifiable) parameter enters).
+    ``parameters``: the raw parameter table (:meth:`IdentificationResult.to_dict`). ``noise``: the
+    observation noise model used. ``residuals``: per pose, translation norm [mm] and rotation
+    angle [deg] (measured - model), plus their RMS and max.
+    """
+    A = np.asarray(A, float)
+    B = np.asarray(B, float)
+    x = result.identified
+    std = result.std
+    # full (12, 12) covariance, zeros for fixed parameters
+    C = np.zeros((12, 12))
+    fi = np.flatnonzero(result.free)
+    if result.covariance.shape == (fi.size, fi.size):
+        C[np.ix_(fi, fi)] = result.covariance
+    fixed = ~np.asarray(result.free, bool)
+    nA, nB = problem.meta["A_name"], problem.meta["B_name"]
+    transforms = {}
+    for name, T, sl in ((nA, A, slice(0, 6)), (nB, B, slice(6, 12))):
+        L = _mount_error_map(T, x[sl][3:])
+        G = frames.inverse_error_map(T)
+        cov = L @ C[sl, sl] @ L.T
+        # a component is unknown when a fixed (non-identifiable) parameter enters it
+        unk = (np.abs(L) @ fixed[sl]) > 0
+        unk_inv = (np.abs(G) @ np.abs(L) @ fixed[sl]) > 0
+        transforms[name] = _transform_dict(T, cov, unk)
+        transforms[INVERSE_NAMES[name]] = _transform_dict(frames.inv_T(T), G @ cov @ G.T, unk_inv)
+    r = np.asarray(result.residuals, float)
+    t_mm = 1e3 * np.linalg.norm(r[:, :3], axis=1)
+    rot_deg = np.degrees(np.linalg.norm(r[:, 3:], axis=1))
+    labels = result.labels or tuple(range(r.shape[0]))
+    return {
+        "model": "handeye",
+        "mount": problem.meta["mount"],
+        "A": nA,
+        "B": nB,
+        "converged": bool(result.converged),
+        "n_poses": int(r.shape[0]),
+        "noise": {k: problem.meta[k] for k in ("noise", "sigma_t_m", "sigma_rot_rad") if k in problem.meta},
+        "transforms": transforms,
+        "parameters": result.to_dict(),
+        "stds": {n: (None if not np.isfinite(s) else float(s)) for n, s in zip(result.names, std)},
+        "residuals": {
+            "per_pose": [{"pose_id": lab if isinstance(lab, str) else int(lab) if isinstance(lab, (int, np.integer))
+                          else str(lab), "translation_mm": float(a), "rotation_deg": float(b),
+                          "components": rr.tolist()} for lab, a, b, rr in zip(labels, t_mm, rot_deg, r)],
+            "rms_translation_mm": float(np.sqrt(np.mean(t_mm**2))),
+            "rms_rotation_deg": float(np.sqrt(np.mean(rot_deg**2))),
+            "max_translation_mm": float(t_mm.max()),
+            "max_rotation_deg": float(rot_deg.max()),
+        },
+    }

@@ -1,0 +1,200 @@
+"""Identification problem of a serial arm from measured poses (or positions) of its end frame.
+
+The observations are the transforms ``T_left_right`` of a :class:`~vision_calib.kinematics.serial.SerialChain`
+(for example ``T_target_cam`` measured by solvePnP for an eye-in-hand camera, ``T_cam_target`` for a
+tripod camera, ``T_world_tool`` from a tracker), one per joint set.
+
+Residual (``measured - model``, per pose)::
+
+    r_k(x) = frames.pose_error(T_model(q_k, x), T_meas_k)      # [dt (m), dtheta (rad)] in frame `left`
+                                                              # "position": the first 3 components
+
+Jacobian: ``d r / d x = -[dt/dx ; J_r(rho)^-1 dtheta/dx]`` where ``[dt/dx; dtheta/dx]`` is the chain's
+analytic :meth:`~vision_calib.kinematics.serial.SerialChain.pose_jacobian` and ``J_r(rho)^-1`` the
+inverse right Jacobian of SO(3) at the rotation residual rho (exact derivative of the rotation-vector
+residual; it is the identity at rho = 0, so near convergence this is the plain ``-J_model``).
+"""
+
+from __future__ import annotations
+
+from typing import Mapping
+
+import numpy as np
+
+from ..errors import DataError, ParameterError
+from ..frames import perturb_pose, pose_error
+from ..kinematics.serial import SerialChain
+from .problem import IdentificationProblem
+
+POSE_COMPONENTS = ("dt_x", "dt_y", "dt_z", "dtheta_x", "dtheta_y", "dtheta_z")
+#: default measurement noise when neither obs_cov nor sigmas are given (1 mm, 1 mrad)
+DEFAULT_SIGMA_T_M = 1e-3
+DEFAULT_SIGMA_R_RAD = 1e-3
+
+
+def so3_right_jacobian_inv(r) -> np.ndarray:
+    """Inverse right Jacobian (..., 3, 3) of Exp at rotation vectors r (..., 3) rad."""
+    from ..frames import skew
+
+    r = np.asarray(r, dtype=float)
+    th = np.linalg.norm(r, axis=-1)[..., None, None]
+    K = skew(r)
+    small = th < 1e-6
+    ths = np.where(small, 1.0, th)
+    # 1/th^2 - (1 + cos th) / (2 th sin th), series 1/12 + th^2/720 near 0
+    c = np.where(small, 1.0 / 12.0 + th**2 / 720.0, 1.0 / ths**2 - (1.0 + np.cos(ths)) / (2.0 * ths * np.sin(ths)))
+    return np.eye(3) + 0.5 * K + c * (K @ K)
+
+
+def _check_poses(T, n, name="T_meas") -> np.ndarray:
+    T = np.asarray(T, dtype=float)
+    if T.ndim != 3 or T.shape[1:] != (4, 4):
+        raise DataError(f"{name} must have shape (N, 4, 4), got {T.shape}")
+    if T.shape[0] != n:
+        raise DataError(f"{name} has {T.shape[0]} poses but there are {n} joint sets")
+    bad = ~np.all(np.isfinite(T), axis=(1, 2))
+    if bad.any():
+        raise DataError(f"{name}: pose {int(np.flatnonzero(bad)[0])} contains a non-finite value (NaN or inf)")
+    R = T[:, :3, :3]
+    err = np.abs(R @ np.swapaxes(R, 1, 2) - np.eye(3)).max(axis=(1, 2))
+    det = np.linalg.det(R)
+    bad = (err > 1e-6) | (det < 0)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise DataError(f"{name}: pose {k} does not hold a rotation matrix (|R R^T - I| = {err[k]:.2g}, det = {det[k]:.3g})")
+    return T
+
+
+def _obs_cov(n, m, obs_cov, sigma_t_m, sigma_r_rad) -> tuple[np.ndarray, str]:
+    if obs_cov is not None:
+        if sigma_t_m is not None or sigma_r_rad is not None:
+            raise ParameterError("give either obs_cov or sigma_t_m/sigma_r_rad, not both")
+        C = np.asarray(obs_cov, dtype=float)
+        if C.ndim == 2:
+            C = np.broadcast_to(C, (n,) + C.shape)
+        if C.ndim != 3 or C.shape[0] != n or C.shape[1] != C.shape[2] or C.shape[1] not in (m, 6):
+            raise DataError(f"obs_cov must have shape ({n}, {m}, {m}) or ({m}, {m}) (or 6x6 for a pose "
+                            f"covariance), got {np.shape(obs_cov)}")
+        C = np.array(C[:, :m, :m])
+        bad = ~np.all(np.isfinite(C), axis=(1, 2))
+        if bad.any():
+            raise DataError(f"obs_cov of pose {int(np.flatnonzero(bad)[0])} contains a non-finite value")
+        sym = np.abs(C - np.swapaxes(C, 1, 2)).max(axis=(1, 2)) <= 1e-12 * np.abs(C).max(axis=(1, 2)) + 1e-300
+        if not sym.all():
+            raise DataError(f"obs_cov of pose {int(np.flatnonzero(~sym)[0])} is not symmetric")
+        ev = np.linalg.eigvalsh(C)
+        if np.any(ev[:, 0] <= 0):
+            raise DataError(f"obs_cov of pose {int(np.flatnonzero(ev[:, 0] <= 0)[0])} is not positive definite")
+        return C, "given"
+    st = DEFAULT_SIGMA_T_M if sigma_t_m is None else float(sigma_t_m)
+    sr = DEFAULT_SIGMA_R_RAD if sigma_r_rad is None else float(sigma_r_rad)
+    if not (st > 0 and sr > 0 and np.isfinite(st) and np.isfinite(sr)):
+        raise ParameterError(f"sigma_t_m and sigma_r_rad must be positive, got {st}, {sr}")
+    d = np.array([st, st, st, sr, sr, sr])[:m] ** 2
+    src = "sigmas" if (sigma_t_m is not None or sigma_r_rad is not None) else "default 1 mm / 1 mrad"
+    return np.broadcast_to(np.diag(d), (n, m, m)).copy(), src
+
+
+def serial_problem(
+    chain: SerialChain,
+    q,
+    T_meas,
+    residual: str = "pose",
+    obs_cov=None,
+    sigma_t_m: float | None = None,
+    sigma_r_rad: float | None = None,
+    labels=None,
+    free=None,
+) -> IdentificationProblem:
+    """Identification problem for ``chain`` from joint sets ``q`` (N, n) rad and measured
+    ``T_meas`` (N, 4, 4) = ``T_left_right`` (m).
+
+    residual: "pose" (6 components [dt (m), dtheta (rad)] in frame ``chain.left``) or "position"
+    (the first 3). obs_cov: (N, m, m) or (m, m) measurement covariance (a (N, 6, 6) pose
+    covariance is cut to (N, 3, 3) for "position"); or sigma_t_m / sigma_r_rad (isotropic);
+    neither -> 1 mm / 1 mrad (recorded in ``meta["obs_cov_source"]``). labels: (N,) pose ids
+    (default "0".."N-1"). free: names to identify (default: the chain's free mask).
+    Raises ParameterError if two exactly redundant parameters (``chain.redundant_pairs()``, e.g.
+    a Hayati ``beta3`` and ``d3``) are both free.
+    """
+    if not isinstance(chain, SerialChain):
+        raise ParameterError(f"serial_problem needs a SerialChain, got {type(chain).__name__}")
+    if residual not in ("pose", "position"):
+        raise ParameterError(f"residual must be 'pose' or 'position', got {residual!r}")
+    q = chain.check_joints(q)
+    n = q.shape[0]
+    T_meas = _check_poses(T_meas, n)
+    m = 6 if residual == "pose" else 3
+    params = chain.params if free is None else chain.params.only_free(list(free))
+    free_set = set(params.free_names)
+    for a, b, why in chain.redundant_pairs():
+        if a in free_set and b in free_set:
+            raise ParameterError(f"{a} and {b} cannot both be free: {why}; fix one of them")
+    cov, cov_src = _obs_cov(n, m, obs_cov, sigma_t_m, sigma_r_rad)
+    if labels is None:
+        labels = tuple(str(i) for i in range(n))
+    else:
+        labels = tuple(labels)
+        if len(labels) != n:
+            raise DataError(f"labels has {len(labels)} entries but there are {n} poses")
+
+    def _idx(idx):
+        if idx is None:
+            return np.arange(n)
+        idx = np.asarray(idx, dtype=int).reshape(-1)
+        if idx.size and (idx.min() < 0 or idx.max() >= n):
+            raise DataError(f"observation index out of range 0..{n - 1}: {idx[(idx < 0) | (idx >= n)][0]}")
+        return idx
+
+    def residual_fn(x, idx=None):
+        idx = _idx(idx)
+        T = chain.forward(q[idx], x)
+        return pose_error(T, T_meas[idx])[:, :m]
+
+    def jacobian_fn(x, idx=None):
+        idx = _idx(idx)
+        Jm = chain.pose_jacobian(q[idx], x)
+        J = -Jm[:, :m, :]
+        if m == 6:
+            rho = pose_error(chain.forward(q[idx], x), T_meas[idx])[:, 3:]
+            J[:, 3:, :] = np.einsum("nij,njk->nik", so3_right_jacobian_inv(rho), J[:, 3:, :])
+        return J
+
+    return IdentificationProblem(
+        params=params,
+        residual=residual_fn,
+        jacobian=jacobian_fn,
+        obs_cov=cov,
+        residual_kind=residual,
+        labels=labels,
+        component_names=POSE_COMPONENTS[:m],
+        meta={
+            "model": "serial",
+            "chain": chain,
+            "q": q,
+            "T_meas": T_meas,
+            "measured": chain.measured_name,
+            "frame": chain.left,
+            "obs_cov_source": cov_src,
+        },
+    )
+
+
+def synthetic_pose_measurements(chain: SerialChain, q, x_true, sigma_t_m: float, sigma_r_rad: float,
+                                rng: np.random.Generator) -> np.ndarray:
+    """Noisy measured poses T_left_right (N, 4, 4): the true pose ``chain.forward(q, x_true)`` perturbed
+    by Gaussian noise ``d ~ N(0, diag(sigma_t^2 I3, sigma_r^2 I3))`` with :func:`frames.perturb_pose`,
+    so that ``pose_error(T_true, T_meas) == d`` (the residual convention of :func:`serial_problem`).
+
+    x_true: full parameter vector (n_params,) or a {name: value} mapping of absolute values applied
+    to the nominal. rng: a numpy Generator (the only source of randomness).
+    """
+    if not isinstance(rng, np.random.Generator):
+        raise ParameterError("rng must be a numpy.random.Generator (seeded by the caller)")
+    if not (np.isfinite(sigma_t_m) and np.isfinite(sigma_r_rad) and sigma_t_m >= 0 and sigma_r_rad >= 0):
+        raise ParameterError(f"sigma_t_m and sigma_r_rad must be >= 0, got {sigma_t_m}, {sigma_r_rad}")
+    if isinstance(x_true, Mapping):
+        x_true = chain.params.vector(x_true)
+    T = chain.forward(q, x_true)
+    d = rng.standard_normal((T.shape[0], 6)) * np.array([sigma_t_m] * 3 + [sigma_r_rad] * 3)
+    return perturb_pose(T, d)

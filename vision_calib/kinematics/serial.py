@@ -1,0 +1,595 @@
+"""Serial arms in modified Denavit-Hartenberg form (+ Hayati beta), with analytic parameter Jacobians.
+
+Model (Khalil-Kleinfinger / Craig modified DH, seed 003 eq. 3.2; all joints revolute)
+-------------------------------------------------------------------------------------
+Link transform of joint i (i = 1..n), joint value q_i (rad)::
+
+    T_{i-1,i} = [Tz(l_i)] Rx(alpha_i) [Ry(beta_i)] Tx(a_i) Rz(theta_i + q_i) Tz(d_i)
+
+* ``theta_i`` is the joint offset (zero reading), ``a_i``/``d_i`` lengths (m), angles in rad.
+* **Hayati** joints (``SerialChain.hayati``, for (nearly) parallel consecutive axes z_{i-1} || z_i,
+  e.g. RX-90 axes 2 and 3): ``Ry(beta_i)`` is inserted right after ``Rx(alpha_i)``, i.e. a rotation
+  about the y axis of frame i-1 once turned by alpha_i, through the origin of frame i-1. Near
+  alpha_i = beta_i = 0 the two small rotations (about x and about y) are independent, so beta is
+  non-singular where the common normal of parallel axes is not defined. The price: with parallel
+  axes, a translation along z_{i-1} before the joint (``d_{i-1}``) and along z_i after it (``d_i``)
+  are the same motion, so ``d_i`` of a Hayati joint is the *dependent* parameter. It is **fixed by
+  default** (kept at its nominal value, 0 for the RX-90) and :meth:`SerialChain.redundant_pairs`
+  lists the pair so that :func:`vision_calib.identify.serial_problem.serial_problem` refuses to free
+  both.
+* ``l_i`` (optional, only for joints whose file gives ``l``): the thesis' extra fixed translation
+  along z_{i-1} before joint i (seed 003 eq. 5.3, matrix L = Tz(l) A). It is exactly redundant with
+  ``d_{i-1}`` (Tz(d_{i-1}) Tz(l_i) = Tz(d_{i-1} + l_i)), hence a parameter **fixed by default**.
+
+Measured chain
+--------------
+``T_left_right(q) = T_left_base . T_base_flange(q) . T_flange_right`` where the two *mounting
+transforms* are named by the scene: ``T_world_base``/``T_flange_tool`` (plain robot),
+``T_target_base``/``T_flange_cam`` (eye-in-hand camera, pattern on the table: the chain gives
+T_target_cam), ``T_cam_base``/``T_flange_target`` (tripod camera, pattern on the probe: T_cam_target).
+``T_base_flange(q)`` is the product of the n link transforms (frame n = flange).
+
+Each mount M (left or right) has 6 parameters about a nominal rotation ``R_nom`` (stored in the
+chain, not a parameter)::
+
+    M = [ R_nom . Exp([M.rx, M.ry, M.rz]) ,  (M.tx, M.ty, M.tz) ]
+
+i.e. the small rotation vector is **right-multiplied** (expressed on the nominal mount frame's
+own axes), nominal 0; the translation is the translation of M itself (in M's parent frame),
+nominal = nominal translation. Non-singular near the nominal, whatever the nominal rotation.
+
+Jacobians (analytic, screw-axis form)
+-------------------------------------
+``pose_jacobian(q, x)`` is d pose_error(T(x), T(x + dx)) / d dx with the :func:`frames.pose_error`
+convention: rows [dt (3, m), dtheta (3, rad)], both expressed in frame ``left``. Column of a
+rotation parameter about unit axis w through point p: ``[w x (p_end - p), w]``; of a translation
+along w: ``[w, 0]``. The mount rotation parameters use the SO(3) right Jacobian of ``Exp`` so the
+columns are exact at any x, not only at the nominal.
+
+Everything is vectorised over N joint sets (numpy); Python loops only over joints.
+This module imports numpy/scipy only (PyYAML lazily, in :func:`load_serial_robot`).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import DataError, ParameterError
+from ..frames import make_T, rot_x, rot_y, rot_z, skew
+from .params import DEFAULT_SCALE, ParameterSet
+
+#: suffixes of the 6 mount parameters, in vector order
+MOUNT_SUFFIXES = ("tx", "ty", "tz", "rx", "ry", "rz")
+
+#: mount names a scene may use (left = parent of the robot base, right = child of the flange)
+KNOWN_LEFT = ("T_world_base", "T_target_base", "T_cam_base")
+KNOWN_RIGHT = ("T_flange_tool", "T_flange_cam", "T_flange_target")
+
+
+# ----------------------------------------------------------------------------- SO(3) helpers
+def so3_exp(r) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) of rotation vectors r (..., 3) rad (Rodrigues)."""
+    r = np.asarray(r, dtype=float)
+    th = np.linalg.norm(r, axis=-1)[..., None, None]
+    K = skew(r)
+    small = th < 1e-8
+    ths = np.where(small, 1.0, th)
+    a = np.where(small, 1.0 - th**2 / 6.0, np.sin(ths) / ths)
+    b = np.where(small, 0.5 - th**2 / 24.0, (1.0 - np.cos(ths)) / ths**2)
+    return np.eye(3) + a * K + b * (K @ K)
+
+
+def so3_right_jacobian(r) -> np.ndarray:
+    """Right Jacobian (..., 3, 3) of Exp at r (..., 3): Exp(r + dr) ~= Exp(r) Exp(Jr(r) dr)."""
+    r = np.asarray(r, dtype=float)
+    th = np.linalg.norm(r, axis=-1)[..., None, None]
+    K = skew(r)
+    small = th < 1e-6
+    ths = np.where(small, 1.0, th)
+    b = np.where(small, 0.5 - th**2 / 24.0, (1.0 - np.cos(ths)) / ths**2)
+    c = np.where(small, 1.0 / 6.0 - th**2 / 120.0, (ths - np.sin(ths)) / ths**3)
+    return np.eye(3) - b * K + c * (K @ K)
+
+
+def _tz(v):
+    T = np.eye(4)
+    T[2, 3] = v
+    return T
+
+
+def _tx(v):
+    T = np.eye(4)
+    T[0, 3] = v
+    return T
+
+
+def _rot4(R):
+    T = np.eye(4)
+    T[:3, :3] = R
+    return T
+
+
+# ----------------------------------------------------------------------------- the chain
+@dataclass(frozen=True, eq=False)
+class SerialChain:
+    """An all-revolute serial arm (modified DH + Hayati) between two mounting transforms.
+
+    name: robot/scene name. n_joints: n. params: every geometric parameter (names, nominal in
+    m/rad, kinds, default free mask, scales). left / right: names of the mounting transforms
+    (``T_world_base`` / ``T_flange_tool`` ...); their 6 parameters are ``<left>.tx`` ... ``<left>.rz``.
+    hayati: 1-based joints with a beta parameter. pre_z: 1-based joints with an ``l`` parameter.
+    joint_limits: (n, 2) rad [min, max] or None. left_R_nominal / right_R_nominal: (3, 3) nominal
+    rotations of the mounts. meta: free-form data from the robot file (configurations, trials,
+    source notes), not used by the maths.
+    """
+
+    name: str
+    n_joints: int
+    params: ParameterSet
+    left: str = "T_world_base"
+    right: str = "T_flange_tool"
+    hayati: tuple[int, ...] = ()
+    pre_z: tuple[int, ...] = ()
+    joint_limits: np.ndarray | None = None
+    left_R_nominal: np.ndarray = field(default_factory=lambda: np.eye(3))
+    right_R_nominal: np.ndarray = field(default_factory=lambda: np.eye(3))
+    meta: dict = field(default_factory=dict, compare=False, repr=False)
+
+    def __post_init__(self):
+        n = int(self.n_joints)
+        if n < 1:
+            raise ParameterError(f"SerialChain {self.name!r}: n_joints must be >= 1, got {n}")
+        object.__setattr__(self, "n_joints", n)
+        for attr in ("hayati", "pre_z"):
+            js = tuple(sorted(int(j) for j in getattr(self, attr)))
+            bad = [j for j in js if not 1 <= j <= n]
+            if bad:
+                raise ParameterError(f"SerialChain {self.name!r}: {attr} joints {bad} outside 1..{n}")
+            object.__setattr__(self, attr, js)
+        for attr in ("left_R_nominal", "right_R_nominal"):
+            R = np.array(getattr(self, attr), dtype=float)
+            if R.shape != (3, 3) or not np.allclose(R @ R.T, np.eye(3), atol=1e-9) or np.linalg.det(R) < 0:
+                raise ParameterError(f"SerialChain {self.name!r}: {attr} is not a rotation matrix")
+            R.setflags(write=False)
+            object.__setattr__(self, attr, R)
+        if self.joint_limits is not None:
+            lim = np.array(self.joint_limits, dtype=float)
+            if lim.shape != (n, 2) or np.any(lim[:, 0] > lim[:, 1]):
+                raise ParameterError(f"SerialChain {self.name!r}: joint_limits must be (n, 2) with min <= max")
+            lim.setflags(write=False)
+            object.__setattr__(self, "joint_limits", lim)
+        # index table, built once (names are the contract, the vector order is ours)
+        ps = self.params
+        idx = {}
+        for i in range(1, n + 1):
+            for p in ("alpha", "a", "theta", "d"):
+                idx[f"{p}{i}"] = ps.index(f"{p}{i}")
+            if i in self.hayati:
+                idx[f"beta{i}"] = ps.index(f"beta{i}")
+            if i in self.pre_z:
+                idx[f"l{i}"] = ps.index(f"l{i}")
+        for m in (self.left, self.right):
+            for s in MOUNT_SUFFIXES:
+                idx[f"{m}.{s}"] = ps.index(f"{m}.{s}")
+        expected = len(idx)
+        if len(ps) != expected:
+            extra = sorted(set(ps.names) - set(idx))
+            raise ParameterError(f"SerialChain {self.name!r}: parameters not used by the model: {extra}")
+        object.__setattr__(self, "_idx", idx)
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def build(
+        cls,
+        name: str,
+        dh,
+        hayati=(),
+        pre_z: dict | None = None,
+        left: str = "T_world_base",
+        right: str = "T_flange_tool",
+        T_left_base=None,
+        T_flange_right=None,
+        joint_limits=None,
+        meta: dict | None = None,
+    ) -> "SerialChain":
+        """Chain from a nominal table. dh: (n, 4) rows [alpha (rad), a (m), theta (rad), d (m)];
+        hayati: joints with beta (nominal 0, d of that joint fixed); pre_z: {joint: l (m)};
+        T_left_base / T_flange_right: nominal (4, 4) mounts (identity if None)."""
+        dh = np.asarray(dh, dtype=float)
+        if dh.ndim != 2 or dh.shape[1] != 4:
+            raise ParameterError(f"dh table must be (n, 4) [alpha, a, theta, d], got shape {dh.shape}")
+        n = dh.shape[0]
+        pre_z = dict(pre_z or {})
+        hayati = tuple(sorted(int(j) for j in hayati))
+        TL = np.eye(4) if T_left_base is None else np.asarray(T_left_base, float)
+        TR = np.eye(4) if T_flange_right is None else np.asarray(T_flange_right, float)
+        names, nom, kinds, free = [], [], [], []
+
+        def add(nm, v, kind, fr=True):
+            names.append(nm)
+            nom.append(float(v))
+            kinds.append(kind)
+            free.append(bool(fr))
+
+        def add_mount(m, T):
+            for s, v in zip(MOUNT_SUFFIXES, list(T[:3, 3]) + [0.0, 0.0, 0.0]):
+                add(f"{m}.{s}", v, "length" if s.startswith("t") else "angle")
+
+        add_mount(left, TL)
+        for i in range(1, n + 1):
+            alpha, a, theta, d = dh[i - 1]
+            if i in pre_z:
+                add(f"l{i}", pre_z[i], "length", False)
+            add(f"alpha{i}", alpha, "angle")
+            if i in hayati:
+                add(f"beta{i}", 0.0, "angle")
+            add(f"a{i}", a, "length")
+            add(f"theta{i}", theta, "angle")
+            add(f"d{i}", d, "length", i not in hayati)
+        add_mount(right, TR)
+        ps = ParameterSet.from_lists(names, nom, kinds, free, [DEFAULT_SCALE[k] for k in kinds])
+        return cls(
+            name=name,
+            n_joints=n,
+            params=ps,
+            left=left,
+            right=right,
+            hayati=hayati,
+            pre_z=tuple(sorted(pre_z)),
+            joint_limits=joint_limits,
+            left_R_nominal=TL[:3, :3],
+            right_R_nominal=TR[:3, :3],
+            meta=dict(meta or {}),
+        )
+
+    def with_params(self, params: ParameterSet) -> "SerialChain":
+        """Same model with another parameter set (same names, e.g. other free mask or nominal)."""
+        if params.names != self.params.names:
+            raise ParameterError("with_params: the parameter names must be those of the chain")
+        return SerialChain(self.name, self.n_joints, params, self.left, self.right, self.hayati, self.pre_z,
+                           self.joint_limits, self.left_R_nominal, self.right_R_nominal, self.meta)
+
+    # ------------------------------------------------------------------ info
+    @property
+    def mount_names(self) -> tuple[str, str]:
+        return (self.left, self.right)
+
+    @property
+    def measured_name(self) -> str:
+        """Name of the transform the chain computes, e.g. ``T_target_cam`` for
+        ``T_target_base`` . FK . ``T_flange_cam``."""
+        a = self.left[2:].rsplit("_base", 1)[0] if self.left.endswith("_base") else self.left[2:]
+        b = self.right[len("T_flange_"):] if self.right.startswith("T_flange_") else self.right[2:]
+        return f"T_{a}_{b}"
+
+    def deviated(self, deviation=None, base=None) -> np.ndarray:
+        """Full vector (n_params,) = base (default nominal) + named deviations {name: SI value}."""
+        x = (self.params.nominal if base is None else self._x(base)).copy()
+        for k, v in (deviation or {}).items():
+            x[self.params.index(k)] += float(v)
+        return x
+
+    def redundant_pairs(self) -> list[tuple[str, str, str]]:
+        """Pairs of parameters that are exactly redundant at the nominal (never both free):
+        (name_a, name_b, reason)."""
+        out = []
+        for i in self.hayati:
+            if i >= 2:
+                out.append((f"d{i}", f"d{i - 1}",
+                            f"joint {i} has a Hayati beta (axes {i - 1} and {i} parallel): d{i} and d{i - 1} "
+                            "are the same translation along the parallel axes"))
+            out.append((f"d{i}", f"beta{i}",
+                        f"joint {i} uses the Hayati parameter beta{i}; its d{i} is the dependent parameter"))
+        for i in self.pre_z:
+            prev = f"d{i - 1}" if i >= 2 else f"{self.left}.tz"
+            out.append((f"l{i}", prev, f"l{i} (translation along z{i - 1} before joint {i}) equals a change of {prev}"))
+        return out
+
+    def nominal_transforms(self, x=None) -> tuple[np.ndarray, np.ndarray]:
+        """(T_left_base (4, 4), T_flange_right (4, 4)) at x (nominal if None)."""
+        x = self._x(x)
+        return self._mount(x, self.left, self.left_R_nominal), self._mount(x, self.right, self.right_R_nominal)
+
+    def within_limits(self, q) -> np.ndarray:
+        """(N,) bool: every joint inside joint_limits (all True when the chain has none)."""
+        q = self.check_joints(q)
+        if self.joint_limits is None:
+            return np.ones(q.shape[0], dtype=bool)
+        return np.all((q >= self.joint_limits[:, 0]) & (q <= self.joint_limits[:, 1]), axis=1)
+
+    # ------------------------------------------------------------------ validation
+    def check_joints(self, q) -> np.ndarray:
+        """Joint sets as a (N, n) float array (a single (n,) set becomes (1, n)); DataError naming
+        the pose on a wrong shape or a non-finite value."""
+        q = np.asarray(q, dtype=float)
+        if q.ndim == 1:
+            q = q[None, :]
+        if q.ndim != 2 or q.shape[1] != self.n_joints:
+            raise DataError(f"{self.name}: joint values must have shape (N, {self.n_joints}) rad, got {q.shape}")
+        bad = ~np.isfinite(q)
+        if bad.any():
+            k, j = (int(v) for v in np.argwhere(bad)[0])
+            raise DataError(f"{self.name}: joint values of pose {k} are not finite (joint {j + 1} = {q[k, j]})")
+        return q
+
+    def _x(self, x) -> np.ndarray:
+        if x is None:
+            return self.params.nominal
+        x = np.asarray(x, dtype=float)
+        if x.shape != (len(self.params),):
+            raise ParameterError(
+                f"{self.name}: parameter vector must have shape ({len(self.params)},) (full vector, "
+                f"names {self.params.names[:3]}...), got {x.shape}")
+        if not np.all(np.isfinite(x)):
+            k = int(np.flatnonzero(~np.isfinite(x))[0])
+            raise ParameterError(f"{self.name}: parameter {self.params.names[k]!r} is not finite")
+        return x
+
+    def _mount(self, x, m, R_nom) -> np.ndarray:
+        i = self._idx
+        t = [x[i[f"{m}.{s}"]] for s in ("tx", "ty", "tz")]
+        r = np.array([x[i[f"{m}.{s}"]] for s in ("rx", "ry", "rz")])
+        return make_T(R_nom @ so3_exp(r), t)
+
+    # ------------------------------------------------------------------ forward model
+    def _link_parts(self, x, i):
+        """Constant prefix C_i = [Tz(l)] Rx(alpha) [Ry(beta)] Tx(a) (4, 4), theta_i, d_i."""
+        ix = self._idx
+        C = np.eye(4)
+        if i in self.pre_z:
+            C = C @ _tz(x[ix[f"l{i}"]])
+        C = C @ _rot4(rot_x(x[ix[f"alpha{i}"]]))
+        if i in self.hayati:
+            C = C @ _rot4(rot_y(x[ix[f"beta{i}"]]))
+        C = C @ _tx(x[ix[f"a{i}"]])
+        return C, x[ix[f"theta{i}"]], x[ix[f"d{i}"]]
+
+    def _walk(self, q, x):
+        """Frames (N, n+2, 4, 4) in `left`: [base, link 1..n (n = flange), right]."""
+        N = q.shape[0]
+        out = np.empty((N, self.n_joints + 2, 4, 4))
+        TL, TR = self.nominal_transforms(x)
+        F = np.broadcast_to(TL, (N, 4, 4)).copy()
+        out[:, 0] = F
+        for i in range(1, self.n_joints + 1):
+            C, theta, d = self._link_parts(x, i)
+            # Rz(theta + q) Tz(d) = [Rz, (0, 0, d)] since Rz keeps the z axis
+            Rz = make_T(rot_z(theta + q[:, i - 1]), np.array([0.0, 0.0, d]))
+            F = F @ C @ Rz
+            out[:, i] = F
+        out[:, -1] = F @ TR
+        return out
+
+    def forward(self, q, x=None) -> np.ndarray:
+        """T_left_right (N, 4, 4) [m] for joint sets q (N, n) rad and full parameter vector x (n_params,)
+        (None = nominal)."""
+        q = self.check_joints(q)
+        x = self._x(x)
+        return self._walk(q, x)[:, -1]
+
+    def forward_all(self, q, x=None) -> np.ndarray:
+        """All frames (N, n+2, 4, 4) expressed in frame ``left``: index 0 = robot base (T_left_base),
+        i = link i (i = 1..n; n = flange), n+1 = ``right`` frame (T_left_right). For drawing the arm."""
+        q = self.check_joints(q)
+        x = self._x(x)
+        return self._walk(q, x)
+
+    def flange(self, q, x=None) -> np.ndarray:
+        """T_base_flange(q) (N, 4, 4): the arm alone, without the mounting transforms."""
+        F = self.forward_all(q, x)
+        TL, _ = self.nominal_transforms(x)
+        Li = np.linalg.inv(TL)
+        return Li @ F[:, self.n_joints]
+
+    # ------------------------------------------------------------------ Jacobians
+    def pose_jacobian(self, q, x=None) -> np.ndarray:
+        """(N, 6, n_params) d pose_error(T(x), T(x + dx)) / d dx at q (N, n) rad, x (n_params,).
+
+        Rows: [dt (m), dtheta (rad)] expressed in frame ``left`` (frames.pose_error convention);
+        columns: every parameter of ``params`` (free or not), in ``params.names`` order.
+        """
+        q = self.check_joints(q)
+        x = self._x(x)
+        N = q.shape[0]
+        n_par = len(self.params)
+        ix = self._idx
+        frames = self._walk(q, x)
+        p_end = frames[:, -1, :3, 3]  # (N, 3)
+        J = np.zeros((N, 6, n_par))
+
+        def rot_col(k, w, p):
+            J[:, :3, k] = np.cross(w, p_end - p)
+            J[:, 3:, k] = w
+
+        def trans_col(k, w):
+            J[:, :3, k] = w
+
+        # ---- left mount: T_left_base = [R_nom Exp(r), t], parent frame = left (identity)
+        TL, TR = self.nominal_transforms(x)
+        for a, s in enumerate(("tx", "ty", "tz")):
+            trans_col(ix[f"{self.left}.{s}"], np.broadcast_to(np.eye(3)[a], (N, 3)))
+        rL = np.array([x[ix[f"{self.left}.{s}"]] for s in ("rx", "ry", "rz")])
+        WL = TL[:3, :3] @ so3_right_jacobian(rL)  # columns = axes in left
+        for a, s in enumerate(("rx", "ry", "rz")):
+            rot_col(ix[f"{self.left}.{s}"], np.broadcast_to(WL[:, a], (N, 3)), np.broadcast_to(TL[:3, 3], (N, 3)))
+
+        # ---- joints
+        F = frames[:, 0]  # (N, 4, 4) frame i-1
+        for i in range(1, self.n_joints + 1):
+            R, o = F[:, :3, :3], F[:, :3, 3]
+            if i in self.pre_z:
+                trans_col(ix[f"l{i}"], R[:, :, 2])
+                o = o + R[:, :, 2] * x[ix[f"l{i}"]]
+            rot_col(ix[f"alpha{i}"], R[:, :, 0], o)
+            R = R @ rot_x(x[ix[f"alpha{i}"]])
+            if i in self.hayati:
+                rot_col(ix[f"beta{i}"], R[:, :, 1], o)
+                R = R @ rot_y(x[ix[f"beta{i}"]])
+            trans_col(ix[f"a{i}"], R[:, :, 0])
+            o = o + R[:, :, 0] * x[ix[f"a{i}"]]
+            rot_col(ix[f"theta{i}"], R[:, :, 2], o)  # z axis unchanged by Rz(theta + q)
+            trans_col(ix[f"d{i}"], R[:, :, 2])
+            F = frames[:, i]
+
+        # ---- right mount: T_flange_right = [R_nom Exp(r), t] in the flange frame F
+        Rf, of = F[:, :3, :3], F[:, :3, 3]
+        for a, s in enumerate(("tx", "ty", "tz")):
+            trans_col(ix[f"{self.right}.{s}"], Rf[:, :, a])
+        rR = np.array([x[ix[f"{self.right}.{s}"]] for s in ("rx", "ry", "rz")])
+        WR = Rf @ (TR[:3, :3] @ so3_right_jacobian(rR))  # (N, 3, 3)
+        p_right = of + np.einsum("nij,j->ni", Rf, TR[:3, 3])
+        for a, s in enumerate(("rx", "ry", "rz")):
+            rot_col(ix[f"{self.right}.{s}"], WR[:, :, a], p_right)
+        return J
+
+    def position_jacobian(self, q, x=None) -> np.ndarray:
+        """(N, 3, n_params): translation rows of :meth:`pose_jacobian` (m per unit parameter, in ``left``)."""
+        return self.pose_jacobian(q, x)[:, :3, :]
+
+
+# ----------------------------------------------------------------------------- YAML loader
+_TOP_KEYS = ("name", "description", "source", "notes", "units", "joints", "mounts", "joint_limits",
+             "configurations", "trials")
+_JOINT_KEYS = ("alpha", "a", "theta", "d", "beta", "l")
+_CONF_KEYS = ("q", "description", "thesis_positions", "thesis_measured_positions")
+_TRIAL_KEYS = ("description", "configurations", "units", "deviation", "reported")
+
+
+def _check_keys(sec, allowed):
+    for k in sec.keys():
+        if k not in allowed:
+            raise sec.error(str(k), f"unknown key (expected one of {', '.join(allowed)})")
+
+
+def _array(sec, key, ndim, last, what, default=None):
+    """Float array with ``ndim`` dimensions and last dimension ``last`` from a (nested) list;
+    ConfigError naming the file and the key otherwise."""
+    if default is not None and key not in sec:
+        return default
+    val = sec.get(key, list)
+    try:
+        arr = np.asarray(val, dtype=float)
+    except (TypeError, ValueError):
+        raise sec.error(key, f"expected {what}, got {val!r}") from None
+    if arr.ndim != ndim or arr.shape[-1] != last:
+        raise sec.error(key, f"expected {what}, got an array of shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise sec.error(key, f"expected {what} (finite numbers)")
+    return arr
+
+
+def _mount_from_section(sec, default_name, known, Lf, Af) -> tuple[str, np.ndarray]:
+    """Nominal mount (name, (4, 4) in m) from ``{name, xyz, rpy}``; R = Rz(yaw) Ry(pitch) Rx(roll)."""
+    from ..frames import T_from_xyz_rpy
+
+    _check_keys(sec, ("name", "xyz", "rpy"))
+    name = sec.get("name", str, default_name)
+    if name not in known:
+        raise sec.error("name", f"expected one of {', '.join(known)}, got {name!r}")
+    xyz = _array(sec, "xyz", 1, 3, "a list of 3 numbers [x, y, z]", default=np.zeros(3)) * Lf
+    rpy = _array(sec, "rpy", 1, 3, "a list of 3 numbers [roll, pitch, yaw]", default=np.zeros(3)) * Af
+    return name, T_from_xyz_rpy(xyz, rpy)
+
+
+def load_serial_robot(path: str | os.PathLike) -> SerialChain:
+    """Load a robot file (schema in the comment at the top of ``scenes/robots/rx90.yaml``).
+
+    Lengths/angles are in the file's ``units`` ({length: m|cm|mm, angle: rad|deg}, default m/rad)
+    and converted to m/rad. The chain's ``meta`` receives ``source``, ``description``, ``notes``,
+    ``configurations`` {name: {"q": (k, n) rad, "description", optional "thesis_positions" /
+    "thesis_measured_positions" (k, 3) m}} and ``trials`` {name: {"description", "configurations"
+    (name or None), "deviation" / "reported" {param name: SI value}}}.
+    Errors: :class:`ConfigError` naming the file and the key.
+    """
+    from ..config import Section, load_yaml
+
+    path = Path(path)
+    top = Section(load_yaml(path), path)
+    _check_keys(top, _TOP_KEYS)
+    name = top.get("name", str)
+    Lf, Af = top.units(default_length="m", default_angle="rad")
+    joints = top.get("joints", list)
+    if not joints:
+        raise top.error("joints", "expected a non-empty list of joints")
+    n = len(joints)
+    dh = np.zeros((n, 4))
+    pre_z, hayati = {}, []
+    for i, j in enumerate(joints, start=1):
+        if not isinstance(j, dict):
+            raise top.error(f"joints[{i - 1}]", f"expected a mapping with alpha, a, theta, d, got {j!r}")
+        js = Section(j, path, f"joints[{i - 1}]")
+        _check_keys(js, _JOINT_KEYS)
+        dh[i - 1] = [js.get("alpha", float) * Af, js.get("a", float) * Lf,
+                     js.get("theta", float, 0.0) * Af, js.get("d", float) * Lf]
+        if "beta" in js:
+            if js.get("beta", float) != 0.0:
+                raise js.error("beta", "the nominal Hayati beta must be 0 (put deviations in trials)")
+            if i == 1:
+                raise js.error("beta", "joint 1 cannot be a Hayati joint (its predecessor is the base mount)")
+            hayati.append(i)
+        if "l" in js:
+            pre_z[i] = js.get("l", float) * Lf
+    mounts = top.section("mounts", default={})
+    _check_keys(mounts, ("left", "right"))
+    left, TL = _mount_from_section(mounts.section("left", default={}), "T_world_base", KNOWN_LEFT, Lf, Af)
+    right, TR = _mount_from_section(mounts.section("right", default={}), "T_flange_tool", KNOWN_RIGHT, Lf, Af)
+    limits = None
+    if "joint_limits" in top:
+        limits = _array(top, "joint_limits", 2, 2, "a list of [min, max] pairs, one per joint") * Af
+        if limits.shape != (n, 2):
+            raise top.error("joint_limits", f"expected {n} [min, max] pairs (one per joint), got shape {limits.shape}")
+        if np.any(limits[:, 0] > limits[:, 1]):
+            raise top.error("joint_limits", "expected min <= max for every joint")
+    units_sec = top.section("units", default={})
+    meta = {k: top.get(k, str, "") for k in ("source", "description", "notes")}
+    meta["file"] = str(path)
+    meta["units_in_file"] = {"length": units_sec.get("length", str, "m"), "angle": units_sec.get("angle", str, "rad")}
+    chain = SerialChain.build(name, dh, hayati=hayati, pre_z=pre_z, left=left, right=right, T_left_base=TL,
+                              T_flange_right=TR, joint_limits=limits, meta=meta)
+    meta = chain.meta  # filled below (the chain holds its own copy)
+    # configurations (joint sets in the file's angle unit)
+    confs = {}
+    cs = top.section("configurations", default={})
+    for cname in list(cs.keys()):
+        c = cs.section(cname)
+        _check_keys(c, _CONF_KEYS)
+        q = _array(c, "q", 2, n, f"a list of joint sets of {n} numbers")
+        entry = {"q": q * Af, "description": c.get("description", str, "")}
+        for key in ("thesis_positions", "thesis_measured_positions"):
+            if key in c:
+                pos = _array(c, key, 2, 3, "a list of [x, y, z] positions")
+                if pos.shape != (q.shape[0], 3):
+                    raise c.error(key, f"expected {q.shape[0]} [x, y, z] rows (one per joint set), got {pos.shape}")
+                entry[key] = pos * Lf
+        confs[str(cname)] = entry
+    meta["configurations"] = confs
+    # trials: named deviation vectors (true X) and the thesis' reported estimates, in their own units
+    trials = {}
+    ts = top.section("trials", default={})
+    for tname in list(ts.keys()):
+        t = ts.section(tname)
+        _check_keys(t, _TRIAL_KEYS)
+        tLf, tAf = t.units(default_length=meta["units_in_file"]["length"], default_angle=meta["units_in_file"]["angle"])
+        conf = t.get("configurations", str, None)
+        if conf is not None and conf not in confs:
+            raise t.error("configurations", f"unknown configuration set {conf!r} (known: {', '.join(sorted(confs))})")
+        out = {"description": t.get("description", str, ""), "configurations": conf}
+        for key in ("deviation", "reported"):
+            if key not in t:
+                continue
+            dv = t.section(key)
+            vals = {}
+            for pname in list(dv.keys()):
+                try:
+                    k = chain.params.index(str(pname))
+                except ParameterError as exc:
+                    raise dv.error(str(pname), str(exc)) from None
+                vals[str(pname)] = dv.get(pname, float) * (tLf if chain.params.kinds[k] == "length" else tAf)
+            out[key] = vals
+        trials[str(tname)] = out
+    meta["trials"] = trials
+    return chain

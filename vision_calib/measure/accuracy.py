@@ -1,0 +1,152 @@
+"""Accuracy of the measurement chain against ground truth on rendered data (used by
+``benchmarks/bench_measure.py`` and a slow test).
+
+Chain per pose: TargetRenderer (ideal pinhole image, once) -> sensor.apply_effects (distortion, blur,
+noise; n_frames independent frames) -> detect -> undistort -> PnP -> average -> PoseMeasurement.
+Errors are ``frames.pose_error(T_true, T_measured)`` = [dt (m), dtheta (rad)] in the camera frame.
+Split: *bias* = error of the same pose measured on one noise-free frame (distortion, blur and
+quantisation only); *random part* = error - bias; compared with the CRLB
+``crlb_pose_cov(target, intr, T_true, sigma_px, n_frames)`` where sigma_px is the corner scatter
+measured across frames (pooled over the study).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from .. import frames
+from ..camera import CameraIntrinsics
+from .detect import DetectConfig, detect_batch
+from .pnp import crlb_pose_cov, project_pinhole
+from .pose import MeasureConfig, measure_pose
+
+COMPONENTS = ("tx", "ty", "tz", "rx", "ry", "rz")
+
+
+def random_view_pose(rng: np.random.Generator, target, intr: CameraIntrinsics, dist_range=(0.4, 0.8),
+                     tilt_deg: float = 35.0, min_visible: float = 0.9, max_tries: int = 100) -> np.ndarray:
+    """Random T_cam_target: board centre at distance U(dist_range) [m] near the optical axis (offset up to
+    a quarter of the field), board tilted by a random rotation of angle U(0, tilt_deg) about a random
+    axis, with at least ``min_visible`` of the target corners inside the image."""
+    x0, y0, x1, y1 = target.texture_extent_m()
+    centre = np.array([(x0 + x1) / 2, (y0 + y1) / 2, 0.0])
+    _, p = target.corner_points()
+    for _ in range(max_tries):
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        R = frames.T_from_xyz_rotvec(np.r_[0, 0, 0, axis * np.radians(rng.uniform(0, tilt_deg))])[:3, :3]
+        d = rng.uniform(*dist_range)
+        off = rng.uniform(-0.25, 0.25, 2) * np.array([intr.width / intr.fx, intr.height / intr.fy]) * d
+        T = frames.make_T(R, np.array([off[0], off[1], d]) - R @ centre)
+        uv = project_pinhole(T, p, intr)
+        inside = (uv[:, 0] > 5) & (uv[:, 0] < intr.width - 6) & (uv[:, 1] > 5) & (uv[:, 1] < intr.height - 6)
+        if inside.mean() >= min_visible:
+            return T
+    raise RuntimeError("random_view_pose: no pose with the target in view; widen dist_range or reduce tilt")
+
+
+def pose_seeds(seed: int, n: int) -> list[int]:
+    """n independent 63-bit seeds from a user seed (numpy SeedSequence)."""
+    return [int(s.generate_state(1, np.uint64)[0] >> np.uint64(1)) for s in np.random.SeedSequence(seed).spawn(n)]
+
+
+def measure_rendered_pose(renderer, effects, T_cam_target, n_frames: int, seed: int, intr: CameraIntrinsics,
+                          detect_config: DetectConfig = DetectConfig(), config: MeasureConfig = MeasureConfig(),
+                          pose_id=0, ideal=None):
+    """Render (unless ``ideal`` (H, W) is given), apply effects to n_frames frames, measure.
+    intr: the camera (with distortion) used by effects and measurement. Returns (PoseMeasurement, detections)."""
+    from ..sensor import apply_effects
+
+    target = renderer.target if renderer is not None else None
+    if ideal is None:
+        ideal = renderer.render(T_cam_target)
+    imgs = apply_effects(ideal, effects, n_frames, seed, intr)
+    dets = detect_batch(imgs, target, intr, detect_config)
+    return measure_pose(dets, target, intr, pose_id, config), dets
+
+
+def accuracy_study(target, intr: CameraIntrinsics, effects, n_poses: int = 50, n_frames: int = 10, seed: int = 0,
+                   modes=("corners", "poses"), dist_range=(0.4, 0.8), tilt_deg: float = 35.0,
+                   detect_config: DetectConfig = DetectConfig(), supersample: int = 2, renderer=None) -> dict:
+    """Pose error statistics over ``n_poses`` random poses (seeded), for each averaging mode.
+
+    Returns {"n_poses", "n_frames", "sigma_px" (pooled corner scatter), "effects": dict,
+    mode: {"rms", "bias_rms", "random_rms", "crlb_rms" (each (6,) [m, m, m, rad, rad, rad]),
+    "random_over_crlb" (6,), "n_valid", "errors" (P, 6), "bias" (P, 6)}}."""
+    from ..render import TargetRenderer
+
+    own = renderer is None
+    if own:
+        renderer = TargetRenderer(target, intr.without_distortion(), supersample=supersample)
+    try:
+        rng = np.random.default_rng(seed)
+        seeds = pose_seeds(seed, n_poses)
+        noiseless = dataclasses.replace(effects, full_well_e=0.0, read_noise_grey=0.0)
+        out = {"n_poses": n_poses, "n_frames": n_frames, "effects": effects.to_dict(), "intrinsics": intr.to_dict()}
+        acc = {m: {"err": [], "bias": [], "crlb": []} for m in modes}
+        sig2, dof = 0.0, 0.0
+        from ..sensor import apply_effects
+
+        for k in range(n_poses):
+            T = random_view_pose(rng, target, intr, dist_range, tilt_deg)
+            ideal = renderer.render(T)
+            dets0 = detect_batch(apply_effects(ideal, noiseless, 1, seeds[k], intr), target, intr, detect_config)
+            dets = detect_batch(apply_effects(ideal, effects, n_frames, seeds[k], intr), target, intr, detect_config)
+            crlb = np.diag(crlb_pose_cov(target, intr, T, 1.0, n_frames))
+            for mode in modes:
+                cfg = MeasureConfig(mode=mode)
+                m0 = measure_pose(dets0, target, intr, k, cfg)
+                m = measure_pose(dets, target, intr, k, cfg)
+                if not (m.valid and m0.valid):
+                    continue
+                acc[mode]["err"].append(frames.pose_error(T, m.T_cam_target))
+                acc[mode]["bias"].append(frames.pose_error(T, m0.T_cam_target))
+                acc[mode]["crlb"].append(crlb)
+                if mode == modes[0] and np.isfinite(m.sigma_px) and m.n_frames_used > 1:
+                    n_obs = sum(d.n_corners for d in dets if d.valid)
+                    sig2 += m.sigma_px**2 * 2 * (n_obs - m.n_corners)
+                    dof += 2 * (n_obs - m.n_corners)
+        sigma = float(np.sqrt(sig2 / dof)) if dof > 0 else float("nan")
+        out["sigma_px"] = sigma
+        for mode in modes:
+            e = np.array(acc[mode]["err"]).reshape(-1, 6)
+            b = np.array(acc[mode]["bias"]).reshape(-1, 6)
+            c = np.array(acc[mode]["crlb"]).reshape(-1, 6) * sigma**2
+            r = e - b
+            crlb_rms = np.sqrt(c.mean(0))
+            random_rms = np.sqrt((r**2).mean(0))
+            out[mode] = {
+                "n_valid": int(len(e)),
+                "rms": np.sqrt((e**2).mean(0)),
+                "bias_rms": np.sqrt((b**2).mean(0)),
+                "mean": e.mean(0),
+                "random_rms": random_rms,
+                "crlb_rms": crlb_rms,
+                "random_over_crlb": random_rms / crlb_rms,
+                "errors": e,
+                "bias": b,
+            }
+        return out
+    finally:
+        if own:
+            renderer.close()
+
+
+def format_study(res: dict, modes=("corners", "poses")) -> str:
+    """Human-readable table: per component rms / bias / random / CRLB in mm and deg."""
+    scale = np.array([1e3, 1e3, 1e3, *(3 * [np.degrees(1.0)])])
+    lines = [f"poses={res['n_poses']} frames={res['n_frames']} corner sigma={res['sigma_px']:.4f} px"]
+    head = "  {:<8}{:<10}" + "{:>10}" * 6
+    lines.append(head.format("mode", "stat", "tx[mm]", "ty[mm]", "tz[mm]", "rx[deg]", "ry[deg]", "rz[deg]"))
+    for mode in modes:
+        if mode not in res:
+            continue
+        s = res[mode]
+        for key in ("rms", "bias_rms", "random_rms", "crlb_rms"):
+            v = s[key] * scale
+            lines.append(head.format(mode, key, *[f"{x:.4f}" for x in v]))
+        lines.append(head.format(mode, "rand/CRLB", *[f"{x:.3f}" for x in s["random_over_crlb"]]))
+        lines.append(f"  {mode}: valid {s['n_valid']}/{res['n_poses']}")
+    return "\n".join(lines)

@@ -1,0 +1,256 @@
+"""Corner detection for ChArUco boards and AprilTag grids (cv2.aruco), never raising on bad input.
+
+Corner ids follow ``TargetSpec.corner_points()``: ChArUco corners use OpenCV's ChArUco corner
+ids; AprilTag-grid corners are ``4 * marker_id + k`` with k the OpenCV marker corner index.
+``uv_px`` are *distorted* pixel coordinates as seen in the image (OpenCV pixel-centre convention:
+the centre of the top-left pixel is (0, 0)).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from ..camera import CameraIntrinsics
+from ..errors import ConfigError
+
+
+@dataclass(frozen=True)
+class DetectConfig:
+    """refine: marker corner refinement "apriltag" | "subpix" | "contour" | "none" (AprilTag grids;
+    ChArUco corners are always refined by OpenCV's interpolation + cornerSubPix).
+    apriltag_offset_px: added to u and v of corners refined with "apriltag": OpenCV 4.14's
+    AprilTag quad refinement returns corners in the pixel-*corner* convention, +0.46 px (blur
+    0..0.6 px) to +0.49 px (blur 1.2 px) off the pixel-centre convention (measured on synthetic
+    renders, benchmarks/bench_measure.py); -0.5 restores the OpenCV pixel-centre convention.
+    extra_subpix: run cv2.cornerSubPix again on the final corners (window ``subpix_win`` px
+    half-size, eps 1e-4 px); None = auto: on for ChArUco (measured on TargetRenderer images,
+    1024 x 768, 0.4-0.8 m, blur 0.6 px: corner RMS 0.076 -> 0.062 px with win 5; OpenCV's own
+    ChArUco refinement stops at 0.1 px steps and uses small windows), off for AprilTag grids
+    (L-corners: cornerSubPix leaves ~0.18 px per-corner bias). min_corners: fewer detected target
+    corners -> invalid Detection.
+    refine "auto" (default, measured): "apriltag" for AprilTag grids (corner std 0.05 px vs 0.18 px
+    for subpix), "none" for ChArUco markers (the ChArUco corners do not change; AprilTag refinement
+    of the markers costs 175 ms/frame vs 9 ms at 1024 x 768)."""
+
+    refine: str = "auto"
+    apriltag_offset_px: float = -0.5
+    extra_subpix: bool | None = None
+    subpix_win: int = 5
+    min_corners: int = 4
+
+    def __post_init__(self):
+        if self.refine not in ("auto", "apriltag", "subpix", "contour", "none"):
+            raise ConfigError(f"DetectConfig.refine must be auto|apriltag|subpix|contour|none, got {self.refine!r}")
+
+    def refine_for(self, kind: str) -> str:
+        """The marker refinement actually used for a target kind."""
+        if self.refine != "auto":
+            return self.refine
+        return "apriltag" if kind == "apriltag_grid" else "none"
+
+    def extra_subpix_for(self, kind: str) -> bool:
+        """Whether the extra cornerSubPix pass runs for a target kind."""
+        return (kind == "charuco") if self.extra_subpix is None else bool(self.extra_subpix)
+        if self.min_corners < 1 or self.subpix_win < 1:
+            raise ConfigError("DetectConfig.min_corners and subpix_win must be >= 1")
+
+
+@dataclass(frozen=True, eq=False)
+class Detection:
+    """Detected target corners in one frame.
+
+    valid: usable for PnP; reason: why not ("" when valid). ids: (K,) int corner ids.
+    uv_px: (K, 2) float64 distorted pixel coordinates. image_size: (width, height) px or None
+    (unreadable). frame_index: index of the frame in its pose batch. diagnostics: dict
+    (n_markers, marker_ids, time_s, source, ...)."""
+
+    valid: bool
+    reason: str
+    ids: np.ndarray
+    uv_px: np.ndarray
+    image_size: tuple[int, int] | None
+    frame_index: int = 0
+    diagnostics: dict = field(default_factory=dict)
+
+    @property
+    def n_corners(self) -> int:
+        return int(len(self.ids))
+
+    def to_dict(self) -> dict:
+        return {
+            "valid": bool(self.valid),
+            "reason": self.reason,
+            "frame_index": int(self.frame_index),
+            "image_size": None if self.image_size is None else [int(x) for x in self.image_size],
+            "ids": [int(i) for i in self.ids],
+            "uv_px": np.asarray(self.uv_px, dtype=float).tolist(),
+            "diagnostics": _jsonable(self.diagnostics),
+        }
+
+
+def _jsonable(d):
+    if isinstance(d, dict):
+        return {str(k): _jsonable(v) for k, v in d.items()}
+    if isinstance(d, (list, tuple)):
+        return [_jsonable(v) for v in d]
+    if isinstance(d, np.ndarray):
+        return d.tolist()
+    if isinstance(d, np.generic):
+        return d.item()
+    return d
+
+
+def _invalid(reason, frame_index, image_size=None, **diag) -> Detection:
+    return Detection(False, reason, np.zeros(0, dtype=int), np.zeros((0, 2)), image_size, frame_index, diag)
+
+
+# ----------------------------------------------------------------------------- image loading
+def load_gray(image) -> tuple[np.ndarray | None, str]:
+    """Image path or array -> (uint8 (H, W) grey image, "") or (None, reason). Never raises."""
+    src = ""
+    try:
+        if isinstance(image, (str, Path)):
+            src = str(image)
+            if not Path(src).is_file():
+                return None, f"image file not found: {src}"
+            img = cv2.imread(src, cv2.IMREAD_UNCHANGED)
+            if img is None:
+                return None, f"unreadable or corrupt image file: {src}"
+        else:
+            img = np.asarray(image)
+        if img.size == 0 or img.ndim not in (2, 3):
+            return None, f"empty or malformed image (shape {img.shape}) {src}".strip()
+        if img.ndim == 3:
+            if img.shape[2] == 1:
+                img = img[..., 0]
+            elif img.shape[2] in (3, 4):
+                img = cv2.cvtColor(img, cv2.COLOR_BGRA2GRAY if img.shape[2] == 4 else cv2.COLOR_BGR2GRAY)
+            else:
+                return None, f"image with {img.shape[2]} channels not supported {src}".strip()
+        if img.dtype == np.uint16:
+            img = (img >> 8).astype(np.uint8)
+        elif img.dtype != np.uint8:
+            f = img.astype(np.float64)
+            if not np.all(np.isfinite(f)):
+                return None, f"image contains NaN/inf values {src}".strip()
+            img = np.clip(np.rint(f), 0, 255).astype(np.uint8)
+        return np.ascontiguousarray(img), ""
+    except Exception as exc:  # corrupt data must not escape a batch
+        return None, f"could not read image {src}: {exc}".strip()
+
+
+# ----------------------------------------------------------------------------- detectors (thread-local cache)
+_local = threading.local()
+
+_REFINE = {
+    "apriltag": cv2.aruco.CORNER_REFINE_APRILTAG,
+    "subpix": cv2.aruco.CORNER_REFINE_SUBPIX,
+    "contour": cv2.aruco.CORNER_REFINE_CONTOUR,
+    "none": cv2.aruco.CORNER_REFINE_NONE,
+}
+
+
+def _detector(target, config: DetectConfig):
+    cache = getattr(_local, "cache", None)
+    if cache is None:
+        cache = _local.cache = {}
+    key = (target, config)
+    hit = cache.get(key)
+    if hit is not None:
+        return hit
+    params = cv2.aruco.DetectorParameters()
+    params.cornerRefinementMethod = _REFINE[config.refine_for(target.kind)]
+    params.cornerRefinementWinSize = 3
+    if target.kind == "charuco":
+        cp = cv2.aruco.CharucoParameters()
+        det = cv2.aruco.CharucoDetector(target.cv_board(), cp, params)
+    elif target.kind == "apriltag_grid":
+        det = cv2.aruco.ArucoDetector(target.cv_dictionary(), params)
+    else:
+        raise ConfigError(f"unknown target kind {target.kind!r} (charuco | apriltag_grid)")
+    ids, _ = target.corner_points()
+    cache[key] = (det, frozenset(int(i) for i in ids))
+    return cache[key]
+
+
+# ----------------------------------------------------------------------------- detection
+def detect(image, target, intrinsics: CameraIntrinsics | None = None, frame_index: int = 0,
+           config: DetectConfig = DetectConfig()) -> Detection:
+    """Detect the target's corners in one image (path or (H, W)[, C] array). Never raises on bad
+    images: returns ``Detection(valid=False, reason=...)``. intrinsics: when given, the image
+    size must match (width, height)."""
+    t0 = time.perf_counter()
+    source = str(image) if isinstance(image, (str, Path)) else "array"
+    img, why = load_gray(image)
+    if img is None:
+        return _invalid(why, frame_index, source=source)
+    size = (int(img.shape[1]), int(img.shape[0]))
+    if intrinsics is not None and size != intrinsics.size:
+        return _invalid(f"image size {size[0]}x{size[1]} does not match the camera intrinsics "
+                        f"{intrinsics.width}x{intrinsics.height} ({source})", frame_index, size, source=source)
+    det, target_ids = _detector(target, config)
+    diag = {"source": source}
+    try:
+        if target.kind == "charuco":
+            ch_corners, ch_ids, m_corners, m_ids = det.detectBoard(img)
+            n_markers = 0 if m_ids is None else len(m_ids)
+            diag["n_markers"] = n_markers
+            diag["marker_ids"] = [] if m_ids is None else sorted(int(i) for i in m_ids.ravel())
+            if ch_ids is None or len(ch_ids) == 0:
+                diag["time_s"] = time.perf_counter() - t0
+                reason = ("target not visible: no marker of the target dictionary detected" if n_markers == 0
+                          else f"no ChArUco corner interpolated from {n_markers} marker(s)")
+                return _invalid(reason, frame_index, size, **diag)
+            ids = ch_ids.ravel().astype(int)
+            uv = ch_corners.reshape(-1, 2).astype(np.float64)
+        else:
+            m_corners, m_ids, _rej = det.detectMarkers(img)
+            all_ids = [] if m_ids is None else [int(i) for i in m_ids.ravel()]
+            diag["n_markers"] = len(all_ids)
+            diag["marker_ids"] = sorted(all_ids)
+            ids_l, uv_l = [], []
+            for mid, c in zip(all_ids, m_corners):
+                cid = 4 * mid + np.arange(4)
+                if int(cid[0]) in target_ids:
+                    ids_l.append(cid)
+                    uv_l.append(c.reshape(4, 2))
+            if not ids_l:
+                diag["time_s"] = time.perf_counter() - t0
+                reason = ("target not visible: no marker of the target dictionary detected" if not all_ids
+                          else f"detected marker ids {sorted(all_ids)} do not belong to the target "
+                               f"(wrong dictionary or wrong board?)")
+                return _invalid(reason, frame_index, size, **diag)
+            ids = np.concatenate(ids_l)
+            uv = np.concatenate(uv_l).astype(np.float64)
+            if config.refine_for(target.kind) == "apriltag":
+                uv += config.apriltag_offset_px
+        keep = np.array([int(i) in target_ids for i in ids], dtype=bool)
+        ids, uv = ids[keep], uv[keep]
+        if config.extra_subpix_for(target.kind) and len(ids):
+            crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-4)
+            w = int(config.subpix_win)
+            pts = uv.astype(np.float32).reshape(-1, 1, 2)
+            cv2.cornerSubPix(img, pts, (w, w), (-1, -1), crit)
+            uv = pts.reshape(-1, 2).astype(np.float64)
+    except cv2.error as exc:
+        return _invalid(f"OpenCV detection error: {exc}".splitlines()[0], frame_index, size, **diag)
+    order = np.argsort(ids, kind="stable")
+    ids, uv = ids[order], uv[order]
+    diag["n_corners"] = int(len(ids))
+    diag["time_s"] = time.perf_counter() - t0
+    if len(ids) < config.min_corners:
+        return Detection(False, f"too few corners: {len(ids)} < {config.min_corners}", ids, uv, size, frame_index, diag)
+    return Detection(True, "", ids, uv, size, frame_index, diag)
+
+
+def detect_batch(images, target, intrinsics: CameraIntrinsics | None = None,
+                 config: DetectConfig = DetectConfig()) -> list[Detection]:
+    """Detect in every frame of a pose: images is a (N, H, W) array or a sequence of paths/arrays.
+    Returns N Detections (frame_index = position); never raises on a bad frame."""
+    return [detect(im, target, intrinsics, i, config) for i, im in enumerate(images)]

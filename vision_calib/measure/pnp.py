@@ -1,0 +1,106 @@
+"""Undistortion, planar PnP, reprojection Jacobian, pose covariance and Cramér–Rao bound.
+
+Pose perturbations use the ``frames.pose_error`` convention on T_cam_target: a 6-vector
+``delta = [dt (m), dtheta (rad)]`` acts as ``frames.perturb_pose(T_cam_target, delta)``, i.e.
+``p_cam' = dR(dtheta) R p_target + t + dt`` (rotation about the camera origin, in camera axes).
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from .. import frames
+from ..camera import CameraIntrinsics
+
+_UNDIST_CRIT = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-12)
+
+
+def undistort_px(uv_px: np.ndarray, intr: CameraIntrinsics) -> np.ndarray:
+    """Distorted pixels (K, 2) -> ideal pinhole pixels (K, 2) with the same K (P = K), iterative."""
+    uv = np.asarray(uv_px, dtype=np.float64).reshape(-1, 1, 2)
+    if len(uv) == 0 or not any(intr.dist):
+        return uv.reshape(-1, 2).copy()
+    K = intr.K
+    return cv2.undistortPointsIter(uv, K, intr.dist_array, None, K, _UNDIST_CRIT).reshape(-1, 2)
+
+
+def target_lookup(target) -> dict[int, np.ndarray]:
+    """{corner id: p_target (3,) m} from ``target.corner_points()``."""
+    ids, p = target.corner_points()
+    return {int(i): np.asarray(q, dtype=float) for i, q in zip(ids, p)}
+
+
+def project_pinhole(T_cam_target: np.ndarray, p_target: np.ndarray, intr: CameraIntrinsics) -> np.ndarray:
+    """Ideal (undistorted) projection of target points (K, 3) m -> (K, 2) px."""
+    pc = frames.transform_points(T_cam_target, p_target)
+    return np.stack([intr.fx * pc[:, 0] / pc[:, 2] + intr.cx, intr.fy * pc[:, 1] / pc[:, 2] + intr.cy], axis=1)
+
+
+def reprojection_jacobian(T_cam_target: np.ndarray, p_target: np.ndarray, intr: CameraIntrinsics) -> np.ndarray:
+    """d(uv_px)/d(delta) (2K, 6) of the ideal pinhole projection, rows (u0, v0, u1, v1, ...),
+    delta = [dt (m), dtheta (rad)] applied by ``frames.perturb_pose`` to T_cam_target."""
+    p_target = np.asarray(p_target, dtype=float)
+    q = p_target @ T_cam_target[:3, :3].T  # R p, (K, 3)
+    pc = q + T_cam_target[:3, 3]
+    x, y, z = pc[:, 0], pc[:, 1], pc[:, 2]
+    K = len(pc)
+    dproj = np.zeros((K, 2, 3))
+    dproj[:, 0, 0] = intr.fx / z
+    dproj[:, 0, 2] = -intr.fx * x / z**2
+    dproj[:, 1, 1] = intr.fy / z
+    dproj[:, 1, 2] = -intr.fy * y / z**2
+    dpc = np.concatenate([np.broadcast_to(np.eye(3), (K, 3, 3)), -frames.skew(q)], axis=2)  # (K, 3, 6)
+    return np.einsum("kij,kjl->kil", dproj, dpc).reshape(2 * K, 6)
+
+
+def solve_pnp_planar(p_target: np.ndarray, uv_undist_px: np.ndarray, intr: CameraIntrinsics,
+                     method: str = "ippe") -> tuple[np.ndarray, np.ndarray]:
+    """Pose of a planar target from >= 4 correspondences: IPPE (or SQPnP) then Levenberg–Marquardt
+    (cv2.solvePnPRefineLM) on ideal pixels (no distortion).
+
+    p_target: (K, 3) m; uv_undist_px: (K, 2) undistorted px. Returns (T_cam_target (4, 4),
+    residuals (K, 2) px = observed - projected). Raises cv2.error / ValueError on failure
+    (callers turn that into a rejection)."""
+    obj = np.ascontiguousarray(p_target, dtype=np.float64).reshape(-1, 1, 3)
+    img = np.ascontiguousarray(uv_undist_px, dtype=np.float64).reshape(-1, 1, 2)
+    K = intr.K
+    zero = np.zeros(5)
+    flag = {"ippe": cv2.SOLVEPNP_IPPE, "sqpnp": cv2.SOLVEPNP_SQPNP}[method]
+    n, rvecs, tvecs, errs = cv2.solvePnPGeneric(obj, img, K, zero, flags=flag)
+    if n == 0:
+        raise ValueError("solvePnP found no solution")
+    best = int(np.argmin(np.asarray(errs).ravel())) if errs is not None and len(errs) else 0
+    rvec, tvec = rvecs[best].copy(), tvecs[best].copy()
+    rvec, tvec = cv2.solvePnPRefineLM(obj, img, K, zero, rvec, tvec,
+                                      (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 50, 1e-12))
+    T = frames.T_from_rvec_tvec(rvec.ravel(), tvec.ravel())
+    if not np.all(np.isfinite(T)) or T[2, 3] <= 0:
+        raise ValueError("PnP solution behind the camera or not finite")
+    res = uv_undist_px - project_pinhole(T, p_target, intr)
+    return T, res
+
+
+def pose_cov_from_jacobian(J: np.ndarray, sigma_px: float, weights: np.ndarray | None = None) -> np.ndarray:
+    """sigma^2 (J^T W J)^-1 (6, 6). J: (2K, 6); weights: (K,) observations per corner (or None)."""
+    if weights is not None:
+        w = np.repeat(np.asarray(weights, dtype=float), 2)
+        JtJ = J.T @ (J * w[:, None])
+    else:
+        JtJ = J.T @ J
+    return sigma_px**2 * np.linalg.pinv(JtJ)
+
+
+def crlb_pose_cov(target, intrinsics: CameraIntrinsics, T_cam_target: np.ndarray, sigma_px: float,
+                  n_frames: int = 1) -> np.ndarray:
+    """Cramér–Rao bound (6, 6) on T_cam_target in the pose_error convention, for i.i.d. Gaussian
+    corner noise of std ``sigma_px`` (per coordinate, ideal pixel space) on every target corner in
+    front of the camera and inside the image, averaged over ``n_frames`` independent frames."""
+    _, p = target.corner_points()
+    p = np.asarray(p, dtype=float)
+    pc = frames.transform_points(T_cam_target, p)
+    uv = project_pinhole(T_cam_target, p, intrinsics)
+    inside = (pc[:, 2] > 0) & (uv[:, 0] >= -0.5) & (uv[:, 0] <= intrinsics.width - 0.5) \
+        & (uv[:, 1] >= -0.5) & (uv[:, 1] <= intrinsics.height - 0.5)
+    J = reprojection_jacobian(T_cam_target, p[inside], intrinsics)
+    return pose_cov_from_jacobian(J, sigma_px) / n_frames

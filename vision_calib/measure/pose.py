@@ -1,0 +1,198 @@
+"""Pose measurement over the N frames of one robot pose: undistort, PnP, average, covariance.
+
+Two averaging modes (``MeasureConfig.mode``):
+- ``"corners"`` (default): average each corner's undistorted position over the frames where it
+  was detected, then one PnP; covariance sigma^2 (J^T W J)^-1 with W = frames per corner.
+- ``"poses"``: PnP per frame, then the SE(3) mean (``frames.mean_pose``); covariance
+  sigma^2 (sum_f J_f^T J_f)^-1.
+sigma_px is the pooled per-coordinate scatter of the corners across frames when >= 2 frames
+are valid, else the reprojection residual std (2K - 6 degrees of freedom).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from .. import frames
+from ..camera import CameraIntrinsics
+from ..errors import ConfigError
+from .detect import DetectConfig, Detection, _jsonable, detect_batch
+from .pnp import (project_pinhole, reprojection_jacobian, solve_pnp_planar,
+                  target_lookup, undistort_px)
+
+
+@dataclass(frozen=True)
+class MeasureConfig:
+    """mode: "corners" | "poses". min_corners: PnP needs at least this many corners (per frame
+    for "poses", averaged for "corners"). max_rms_px: reject when the final reprojection RMS (over
+    all frames' corners, px) exceeds it. pnp_method: "ippe" | "sqpnp"."""
+
+    mode: str = "corners"
+    min_corners: int = 4
+    max_rms_px: float = 1.5
+    pnp_method: str = "ippe"
+
+    def __post_init__(self):
+        if self.mode not in ("corners", "poses"):
+            raise ConfigError(f"MeasureConfig.mode must be 'corners' or 'poses', got {self.mode!r}")
+        if self.pnp_method not in ("ippe", "sqpnp"):
+            raise ConfigError(f"MeasureConfig.pnp_method must be 'ippe' or 'sqpnp', got {self.pnp_method!r}")
+        if self.min_corners < 4:
+            raise ConfigError(f"MeasureConfig.min_corners must be >= 4 (planar PnP), got {self.min_corners}")
+        if not self.max_rms_px > 0:
+            raise ConfigError(f"MeasureConfig.max_rms_px must be > 0, got {self.max_rms_px}")
+
+
+@dataclass(frozen=True, eq=False)
+class PoseMeasurement:
+    """Measured pose of the target in the camera for one robot pose.
+
+    T_cam_target: (4, 4) (NaN when invalid). cov: (6, 6) covariance of the pose error
+    [dt (m), dtheta (rad)] of T_cam_target (frames.pose_error convention; NaN when invalid).
+    n_frames_used: frames with a valid detection that entered the average. n_corners: distinct
+    corner ids used. reprojection_rms_px: RMS of the 2-D reprojection residual of the final pose
+    over all used frames' corners. sigma_px: corner noise std used for cov. frames: per-frame
+    diagnostics (dicts: frame_index, valid, reason, n_corners, rms_px)."""
+
+    pose_id: int | str
+    valid: bool
+    reason: str
+    T_cam_target: np.ndarray
+    cov: np.ndarray
+    n_frames_used: int
+    n_corners: int
+    reprojection_rms_px: float
+    sigma_px: float = float("nan")
+    mode: str = "corners"
+    frames: tuple = field(default_factory=tuple)
+
+    @property
+    def std(self) -> np.ndarray:
+        """(6,) standard deviations [m, m, m, rad, rad, rad]."""
+        return np.sqrt(np.diag(self.cov))
+
+    def to_dict(self) -> dict:
+        return {
+            "pose_id": self.pose_id if isinstance(self.pose_id, str) else int(self.pose_id),
+            "valid": bool(self.valid),
+            "reason": self.reason,
+            "mode": self.mode,
+            "T_cam_target": np.asarray(self.T_cam_target, dtype=float).tolist(),
+            "cov": np.asarray(self.cov, dtype=float).tolist(),
+            "n_frames_used": int(self.n_frames_used),
+            "n_corners": int(self.n_corners),
+            "reprojection_rms_px": float(self.reprojection_rms_px),
+            "sigma_px": float(self.sigma_px),
+            "frames": _jsonable(list(self.frames)),
+        }
+
+
+def _invalid(pose_id, reason, mode, frames_diag, n_used=0, n_corners=0, rms=float("nan")) -> PoseMeasurement:
+    nan4 = np.full((4, 4), np.nan)
+    return PoseMeasurement(pose_id, False, reason, nan4, np.full((6, 6), np.nan), n_used, n_corners, rms,
+                           float("nan"), mode, tuple(frames_diag))
+
+
+def _rms(res: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.sum(res**2, axis=1)))) if len(res) else float("nan")
+
+
+def measure_pose(detections: Sequence[Detection], target, intrinsics: CameraIntrinsics, pose_id=0,
+                 config: MeasureConfig = MeasureConfig()) -> PoseMeasurement:
+    """Average the frames of one pose into a PoseMeasurement; never raises on bad frames
+    (invalid frames are skipped and recorded; an unusable pose gives valid=False + reason)."""
+    lookup = target_lookup(target)
+    fdiag = []
+    obs = []  # (frame_index, ids, uv_undist)
+    for d in detections:
+        fd = {"frame_index": int(d.frame_index), "valid": bool(d.valid), "reason": d.reason,
+              "n_corners": int(d.n_corners)}
+        fdiag.append(fd)
+        if not d.valid:
+            continue
+        keep = np.array([int(i) in lookup for i in d.ids], dtype=bool)
+        if keep.sum() < config.min_corners:
+            fd.update(valid=False, reason=f"too few corners: {int(keep.sum())} < {config.min_corners}")
+            continue
+        uv_u = undistort_px(d.uv_px[keep], intrinsics)
+        if not np.all(np.isfinite(uv_u)):
+            fd.update(valid=False, reason="undistortion produced non-finite coordinates")
+            continue
+        obs.append((len(fdiag) - 1, d.ids[keep].astype(int), uv_u))
+    if not obs:
+        reasons = sorted({f["reason"] for f in fdiag if f["reason"]})
+        return _invalid(pose_id, "no valid frame" + (f" ({'; '.join(reasons)})" if reasons else " (no frames)"),
+                        config.mode, fdiag)
+
+    # per-id statistics (undistorted px)
+    all_ids = np.unique(np.concatenate([o[1] for o in obs]))
+    pos = {int(i): k for k, i in enumerate(all_ids)}
+    sums = np.zeros((len(all_ids), 2))
+    cnt = np.zeros(len(all_ids))
+    for _, ids, uv in obs:
+        idx = [pos[int(i)] for i in ids]
+        np.add.at(sums, idx, uv)
+        np.add.at(cnt, idx, 1)
+    mean_uv = sums / cnt[:, None]
+    ss = 0.0
+    for _, ids, uv in obs:
+        idx = [pos[int(i)] for i in ids]
+        ss += float(np.sum((uv - mean_uv[idx]) ** 2))
+    dof_scatter = 2 * float(np.sum(cnt - 1))
+    sigma_scatter = float(np.sqrt(ss / dof_scatter)) if dof_scatter > 0 else float("nan")
+    p_all = np.array([lookup[int(i)] for i in all_ids])
+
+    try:
+        if config.mode == "corners":
+            if len(all_ids) < config.min_corners:
+                return _invalid(pose_id, f"too few corners: {len(all_ids)} < {config.min_corners}", config.mode,
+                                fdiag, len(obs), len(all_ids))
+            T, res_mean = solve_pnp_planar(p_all, mean_uv, intrinsics, config.pnp_method)
+        else:
+            Ts = []
+            for fi, ids, uv in obs:
+                Tf, rf = solve_pnp_planar(np.array([lookup[int(i)] for i in ids]), uv, intrinsics, config.pnp_method)
+                fdiag[fi]["frame_pnp_rms_px"] = _rms(rf)
+                fdiag[fi]["frame_T_cam_target"] = Tf.tolist()
+                Ts.append(Tf)
+            T = frames.mean_pose(np.array(Ts))
+    except Exception as exc:  # cv2.error, ValueError, LinAlgError: a rejection, not a crash
+        return _invalid(pose_id, f"PnP failed: {str(exc).splitlines()[0]}", config.mode, fdiag, len(obs), len(all_ids))
+
+    # final-pose residuals over every used frame
+    proj = project_pinhole(T, p_all, intrinsics)
+    all_res = []
+    J_all = reprojection_jacobian(T, p_all, intrinsics)
+    for fi, ids, uv in obs:
+        idx = [pos[int(i)] for i in ids]
+        r = uv - proj[idx]
+        fdiag[fi]["rms_px"] = _rms(r)
+        all_res.append(r)
+    all_res = np.concatenate(all_res)
+    rms = _rms(all_res)
+    n_res = 2 * len(all_res)
+    if len(obs) >= 2 and np.isfinite(sigma_scatter):
+        sigma = sigma_scatter
+    else:
+        sigma = float(np.sqrt(np.sum(all_res**2) / max(n_res - 6, 1)))
+    Jr = J_all.reshape(len(all_ids), 2, 6)
+    JtJ = np.einsum("k,kij,kil->jl", cnt, Jr, Jr)  # sum over frames of J_f^T J_f == J^T diag(cnt) J
+    cov = sigma**2 * np.linalg.pinv(JtJ)
+    if not rms <= config.max_rms_px:
+        return PoseMeasurement(pose_id, False, f"reprojection RMS {rms:.3f} px > {config.max_rms_px} px",
+                               np.full((4, 4), np.nan), np.full((6, 6), np.nan), len(obs), len(all_ids), rms,
+                               sigma, config.mode, tuple(fdiag))
+    for fd in fdiag:
+        fd.setdefault("rms_px", float("nan"))
+    return PoseMeasurement(pose_id, True, "", T, cov, len(obs), len(all_ids), rms, sigma, config.mode, tuple(fdiag))
+
+
+def measure_images(images, target, intrinsics: CameraIntrinsics, pose_id=0,
+                   detect_config: DetectConfig = DetectConfig(),
+                   config: MeasureConfig = MeasureConfig()) -> tuple[PoseMeasurement, list[Detection]]:
+    """Detect + measure one pose from its frames ((N, H, W) uint8 array or paths)."""
+    dets = detect_batch(images, target, intrinsics, detect_config)
+    return measure_pose(dets, target, intrinsics, pose_id, config), dets
