@@ -50,8 +50,8 @@ class Measurements:
 
 def pose_cov_from_sigmas(n: int, sigma_t_m: float, sigma_r_rad: float) -> np.ndarray:
     """(n, 6, 6) diagonal covariances [sigma_t² x3, sigma_r² x3]; tiny floor keeps them invertible."""
-    st = max(float(sigma_t_m), 1e-9)
-    sr = max(float(sigma_r_rad), 1e-9)
+    st = max(float(sigma_t_m), 1e-6)  # floor 1 um / 1 urad: noise-free data keeps a well-conditioned weighting
+    sr = max(float(sigma_r_rad), 1e-6)
     return np.broadcast_to(np.diag([st**2] * 3 + [sr**2] * 3), (n, 6, 6)).copy()
 
 
