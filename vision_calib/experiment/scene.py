@@ -257,7 +257,8 @@ def scene_poses(scene: Scene, rng: np.random.Generator, n: int | None = None, wh
             raise ConfigError(f"{scene.path}: {which}.configurations: unknown set {conf!r} (robot file has {sorted(confs)})")
         q = confs[conf]["q"]
         return q if n is None else q[:n]
-    return setup.sample_poses(rng, n or 30)
+    # validation poses are evaluated through the kinematics only: they need not see the target
+    return setup.sample_poses(rng, n or 30, check_view=(which == "poses"))
 
 
 def true_parameters(scene: Scene, rng: np.random.Generator, base_free=None) -> np.ndarray:

@@ -186,14 +186,16 @@ class SerialSetup(Setup):
         err = F.pose_error(self._chain_T(poses_val, x_true), self._chain_T(poses_val, x))
         return accuracy_stats(err)
 
-    def sample_poses(self, rng, n, max_tries=200) -> np.ndarray:
+    def sample_poses(self, rng, n, max_tries=200, check_view=True) -> np.ndarray:
+        """n joint sets uniform in q_center ± q_spread within the joint limits; with check_view, only
+        those where the whole target is in view (identification poses must see it)."""
         c = np.asarray(self.q_center, float)
         s = np.asarray(self.q_spread, float)
         out = []
         for _ in range(max_tries):
             q = c + rng.uniform(-1, 1, size=(max(4 * n, 64), c.size)) * s
             q = q[self.chain.within_limits(q)]
-            if self.camera is not None and self.target_outline is not None:
+            if check_view and self.camera is not None and self.target_outline is not None:
                 q = q[self.visible(self.T_cam_target(q, self.params.nominal), self.target_outline)]
             out.extend(q)
             if len(out) >= n:
@@ -277,7 +279,7 @@ class H4Setup(Setup):
         resid = P - np.outer(P @ Vt[0], Vt[0])
         return float(np.sqrt(np.mean(np.sum(resid**2, axis=1))))
 
-    def sample_poses(self, rng, n) -> np.ndarray:
+    def sample_poses(self, rng, n, check_view=True) -> np.ndarray:
         from ..kinematics.h4 import random_workspace_poses
 
         return random_workspace_poses(n, rng, center=self.robot.center, size=self.robot.size)

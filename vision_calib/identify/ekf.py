@@ -41,7 +41,7 @@ Gauss-Newton step on the least-squares cost damped by ``P0^-1`` (a Levenberg-Mar
 passes converge to the LSE solution itself (no prior bias at the fixed point; the data are never
 counted twice). The reported covariance is the final P of the last pass ((JᵀJ + P0^-1)^-1, i.e.
 the LSE covariance up to the (std / prior std)² damping). ``converged``: pass 1 -- every iterated
-update converged; later passes -- the last pass moved every parameter by < 1e-6 posterior std.
+update converged; later passes -- the last pass moved every parameter by < 1e-3 posterior std.
 """
 
 from __future__ import annotations
@@ -209,7 +209,7 @@ def solve_ekf(
             z = zi
         if p > 0:
             d = np.abs(z - z_lin_pass) / np.sqrt(np.clip(np.diag(P), 1e-300, None))
-            all_conv = bool(np.all(d < 1e-6))  # last pass moved less than 1e-6 posterior std
+            all_conv = bool(np.all(d < 1e-3))  # last pass moved less than 1e-3 posterior std
         converged = all_conv
         pass_estimates.append(x_of(z))
     x = x_of(z)

@@ -152,12 +152,21 @@ def measure_pose(detections: Sequence[Detection], target, intrinsics: CameraIntr
                                 fdiag, len(obs), len(all_ids))
             T, res_mean = solve_pnp_planar(p_all, mean_uv, intrinsics, config.pnp_method)
         else:
-            Ts = []
+            Ts, kept = [], []
             for fi, ids, uv in obs:
-                Tf, rf = solve_pnp_planar(np.array([lookup[int(i)] for i in ids]), uv, intrinsics, config.pnp_method)
+                try:
+                    Tf, rf = solve_pnp_planar(np.array([lookup[int(i)] for i in ids]), uv, intrinsics,
+                                              config.pnp_method)
+                except Exception as exc:  # one bad frame is skipped, not fatal
+                    fdiag[fi].update(valid=False, reason=f"PnP failed: {str(exc).splitlines()[0]}")
+                    continue
                 fdiag[fi]["frame_pnp_rms_px"] = _rms(rf)
                 fdiag[fi]["frame_T_cam_target"] = Tf.tolist()
                 Ts.append(Tf)
+                kept.append((fi, ids, uv))
+            if not Ts:
+                raise ValueError("no frame gave a PnP solution")
+            obs = kept
             T = frames.mean_pose(np.array(Ts))
     except Exception as exc:  # cv2.error, ValueError, LinAlgError: a rejection, not a crash
         return _invalid(pose_id, f"PnP failed: {str(exc).splitlines()[0]}", config.mode, fdiag, len(obs), len(all_ids))
@@ -166,8 +175,10 @@ def measure_pose(detections: Sequence[Detection], target, intrinsics: CameraIntr
     proj = project_pinhole(T, p_all, intrinsics)
     all_res = []
     J_all = reprojection_jacobian(T, p_all, intrinsics)
+    cnt = np.zeros(len(all_ids))  # observations per corner in the frames actually used
     for fi, ids, uv in obs:
         idx = [pos[int(i)] for i in ids]
+        np.add.at(cnt, idx, 1)
         r = uv - proj[idx]
         fdiag[fi]["rms_px"] = _rms(r)
         all_res.append(r)
