@@ -228,6 +228,7 @@ def test_truth_variant_cross_model(tmp_path):
     ({"sweep": {"variant": ["Z"]}}, "sweep.variant"),
     ({"sweep": {"n_poses": [0]}}, "sweep.n_poses"),
     ({"sweep": {"n_poses": [100]}}, "sweep.n_poses"),
+    ({"sweep": {"n_poses": [4, 12]}}, "sweep.n_poses"),  # 16 equations for 19 parameters
     ({"sweep": {"noise_grey": [1.0]}}, "sweep.noise_grey"),
     ({"sweep": {"residual": ["pose"]}}, "sweep.residual"),
     ({"sweep": {"sigma_mm,sigma_deg": [[0.1]]}}, "sweep.sigma_mm,sigma_deg"),

@@ -162,7 +162,8 @@ def load_scene(path) -> Scene:
                 raise top.error("variant", str(exc)) from None
         params = _apply_free(robot.params, ident)
         setup = H4Setup(name=name, params=params, camera=camera, mount=mount,
-                        meta={"sigma_q_rad": measurement["sigma_q_rad"], "model": model, "variant": variant},
+                        meta={"sigma_q_rad": measurement["sigma_q_rad"], "model": model, "variant": variant,
+                              "robot_path": str(robot_path)},
                         robot=robot)
         default_method, default_residual = "igm", "joint"
     else:
@@ -201,7 +202,7 @@ def load_scene(path) -> Scene:
             ids, pts = tspec.corner_points()
             lo, hi = pts.min(axis=0), pts.max(axis=0)
             outline = np.array([[lo[0], lo[1], 0], [hi[0], lo[1], 0], [hi[0], hi[1], 0], [lo[0], hi[1], 0]], float)
-        setup = SerialSetup(name=name, params=params, camera=camera, mount=mount, meta={},
+        setup = SerialSetup(name=name, params=params, camera=camera, mount=mount, meta={"robot_path": str(robot_path)},
                             chain=chain.with_params(params), q_center=center, q_spread=spread, target_outline=outline)
         default_method, default_residual = "lse", "pose"
 

@@ -273,6 +273,12 @@ def _check_cells(spec: StudySpec) -> None:
         n = s.get("n_poses")
         if n is not None and base.poses["kind"] == "grid81" and n > 81:
             raise ConfigError(f"{_axis_where(spec, 'n_poses')}: {n} poses asked, the scene's grid has 81")
+        m = {"joint": 4, "pose": 6, "position": 3}[res or sc.identification["residual"]]
+        n_free = sc.setup.params.n_free
+        if n is not None and n * m < n_free:
+            raise ConfigError(f"{_axis_where(spec, 'n_poses')}: {n} poses give {n * m} equations "
+                              f"({m} per pose) for {n_free} free parameters in cell {cell}: use at least "
+                              f"{-(-n_free // m)} poses")
     for p in spec.parameters or ():
         if p not in names:
             import difflib

@@ -77,7 +77,10 @@ def identify(problem, method: str, fix_unidentifiable: bool = True):
     if method == "ekf":
         # 3 passes: one sequential pass on an ill-conditioned problem (H4) stays several std from
         # the LSE optimum (tests/identify/test_ekf.py); later passes relinearise at the estimate.
-        return solve_ekf(problem, passes=3, fix_unidentifiable=fix_unidentifiable)
+        res = solve_ekf(problem, passes=3, fix_unidentifiable=fix_unidentifiable)
+        if not res.converged:  # slow (ill-conditioned) case: restart with more passes
+            res = solve_ekf(problem, passes=8, fix_unidentifiable=fix_unidentifiable)
+        return res
     return solve_lse(problem, fix_unidentifiable=fix_unidentifiable)
 
 

@@ -1,0 +1,104 @@
+"""End-to-end: render + effects + measure + identify; export a recorded folder and process it;
+real-world damage to the folder (missing, corrupt, blank, odd-size images, extra files)."""
+
+import json
+import shutil
+
+import cv2
+import numpy as np
+import pytest
+
+from vision_calib.cli import main
+from vision_calib.experiment.process import process_folder
+from vision_calib.experiment.simulate import run_simulation
+
+pytestmark = pytest.mark.slow
+H4 = "scenes/h4_vision.yaml"
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    d = tmp_path_factory.mktemp("e2e")
+    rep = run_simulation(H4, out_dir=d / "sim", seed=4, n_poses=24, frames=2, export_recording=d / "rec", workers=2)
+    return d, rep
+
+
+def test_simulate_writes_report_plots_and_loadable_model(exported):
+    d, rep = exported
+    out = json.loads((d / "sim" / "report.json").read_text())
+    assert out["version"] and out["seed"] == 4
+    for key in ("identifiability", "parameters", "accuracy", "measurements", "timings_s"):
+        assert key in out
+    assert out["measurements"]["n_valid"] == 24
+    b, a = out["accuracy"]["before"], out["accuracy"]["after"]
+    assert a["V2_rad"] < 0.2 * b["V2_rad"]
+    for f in ("residuals.png", "parameters.png", "error_map.png", "calibrated_model.yaml"):
+        assert (d / "sim" / f).stat().st_size > 0
+    from vision_calib.io.model_export import load_calibrated_model
+
+    robot = load_calibrated_model(d / "sim" / "calibrated_model.yaml")
+    ident = {p["name"]: p["identified"] for p in out["parameters"]}
+    np.testing.assert_allclose(robot.params.values()["h4.L"], ident["h4.L"], rtol=0, atol=1e-12)
+    X = robot.pose_grid()[:3]
+    assert np.all(np.isfinite(robot.igm(X)))
+
+
+def test_process_of_the_export_gives_the_same_parameters(exported, tmp_path):
+    d, rep = exported
+    out = process_folder(d / "rec", tmp_path / "proc")
+    sim = {p["name"]: p for p in rep["parameters"]}
+    for p in out["parameters"]:
+        s = sim[p["name"]]
+        assert abs(p["identified"] - s["identified"]) <= 1e-9 * max(1.0, abs(s["identified"])), p["name"]
+    assert (tmp_path / "proc" / "report.json").exists() and (tmp_path / "proc" / "measurements.json").exists()
+
+
+def test_damaged_folder_skips_bad_poses_with_reasons(exported, tmp_path):
+    d, _ = exported
+    rec = tmp_path / "rec"
+    shutil.copytree(d / "rec", rec)
+    shutil.rmtree(rec / "images" / "001")                                   # images missing
+    (rec / "images" / "002" / "00.png").write_bytes(b"\x89PNG\r\n garbage")  # corrupt PNG
+    (rec / "images" / "002" / "01.png").write_bytes(b"")                     # empty file
+    for f in (rec / "images" / "003").glob("*.png"):                        # target not visible
+        cv2.imwrite(str(f), np.full((768, 1024), 128, np.uint8))
+    for f in (rec / "images" / "004").glob("*.png"):                        # wrong size vs intrinsics
+        cv2.imwrite(str(f), np.full((480, 640), 128, np.uint8))
+    (rec / "images" / "notes.txt").write_text("operator notes")             # extra files
+    (rec / "images" / "005" / "thumbs.db").write_bytes(b"x")
+    out = process_folder(rec, tmp_path / "out")
+    rej = {r["pose_id"]: r["reason"] for r in out["measurements"]["rejected"]}
+    assert set(rej) == {"001", "002", "003", "004"}, rej
+    assert "no images" in rej["001"]
+    assert out["measurements"]["n_valid"] == 20
+    assert any("notes.txt" in f for f in out["measurements"]["extra_files_ignored"])
+    assert out["identification"]["converged"]
+
+
+def test_too_few_usable_poses_fails_clearly_and_keeps_measurements(exported, tmp_path, capsys):
+    d, _ = exported
+    rec = tmp_path / "rec"
+    shutil.copytree(d / "rec", rec)
+    for sub in sorted((rec / "images").iterdir())[2:]:
+        shutil.rmtree(sub)
+    assert main(["process", str(rec), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "usable poses" in err or "equations" in err
+    kept = json.loads((tmp_path / "out" / "measurements.json").read_text())
+    assert kept["n_valid"] == 2
+
+
+def test_missing_poses_csv_names_the_file(exported, tmp_path, capsys):
+    d, _ = exported
+    rec = tmp_path / "rec"
+    shutil.copytree(d / "rec", rec)
+    (rec / "poses.csv").unlink()
+    assert main(["process", str(rec), "--out", str(tmp_path / "out")]) == 2
+    assert "poses.csv: file not found" in capsys.readouterr().err
+    # NaN joint value
+    shutil.copy(d / "rec" / "poses.csv", rec / "poses.csv")
+    lines = (rec / "poses.csv").read_text().splitlines()
+    lines[3] = lines[3].rsplit(",", 1)[0] + ",nan"
+    (rec / "poses.csv").write_text("\n".join(lines) + "\n")
+    assert main(["process", str(rec), "--out", str(tmp_path / "out")]) == 2
+    assert "line 4" in capsys.readouterr().err
