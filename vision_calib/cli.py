@@ -64,6 +64,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scheduler", default=None, help="Dask scheduler address (tcp://host:port)")
     p.add_argument("--json", action="store_true")
 
+    p = sub.add_parser("import-visp", help="convert a ViSP eye-to-hand folder into a recorded folder")
+    p.add_argument("src")
+    p.add_argument("--out", required=True)
+    p.add_argument("--tag-size-m", type=float, default=None, help="tag side [m] (default: from apriltag-data.txt)")
+    p.add_argument("--tag-id", type=int, default=None, help="tag id (default: detected in the first image)")
+
     p = sub.add_parser("target", help="export a printable target image")
     p.add_argument("target", help="target YAML (see targets/)")
     p.add_argument("--out", required=True, help="PNG or PDF file")
@@ -113,6 +119,12 @@ def _dispatch(args) -> int:
 
         res = run_study(args.spec, out_dir=args.out, workers=args.workers, scheduler=args.scheduler, progress=not args.json)
         print(to_json(res) if args.json else res["summary_text"])
+        return 0
+    if args.command == "import-visp":
+        from .io.visp import import_visp_eye_to_hand
+
+        path = import_visp_eye_to_hand(args.src, args.out, tag_m=args.tag_size_m, tag_id=args.tag_id)
+        print(f"wrote recorded folder {path}")
         return 0
     if args.command == "target":
         from .targets import load_target, export_printable

@@ -2,7 +2,6 @@
 
 import csv
 import json
-import os
 from pathlib import Path
 
 import numpy as np
@@ -96,6 +95,8 @@ def test_common_random_numbers_noise_scaling(tmp_path):
     spec = write_spec(tmp_path, settings={"n_poses": 40}, outputs=["parameters"], parameters=["h4.L", "h4.alpha1"],
                       sweep={"sigma_mm,sigma_deg": [[0.01, 0.0015], [0.02, 0.003]]})
     S.run_study(spec, tmp_path / "out", workers=1)
+    assert (tmp_path / "out" / "param_std_vs_sigma_mm.png").exists()  # linked axes: one plot per group
+    assert not (tmp_path / "out" / "param_std_vs_sigma_deg.png").exists()
     rows = read_csv(tmp_path / "out" / "results.csv")
     assert "err:h4.R" not in rows[0] and "after_position_rms_mm" not in rows[0]
     for p in ("err:h4.L", "err:h4.alpha1"):
@@ -219,6 +220,18 @@ def test_truth_variant_cross_model(tmp_path):
     h = [r for r in cross if r["variant"] == "H"]
     assert all(np.isfinite(r["err:B_T_C.x"]) for r in d) and all(r["err:h4.L"] is None for r in d)
     assert np.mean([r["after_V2_rad"] for r in d]) > 1.2 * np.mean([r["after_V2_rad"] for r in h])
+
+
+@pytest.mark.slow
+def test_images_mode_runs_end_to_end(tmp_path):
+    """mode images: rendered + measured runs (experiment.simulate); the sensor axis is applied."""
+    spec = write_spec(tmp_path, mode="images", repetitions=1, settings={"n_poses": 6, "frames": 1},
+                      sweep={"noise_grey": [0.5, 8.0]}, outputs=["accuracy", "parameters"])
+    res = S.run_study(spec, tmp_path / "out", workers=1, plots=False)
+    assert res["n_failed"] == 0
+    lo, hi = _rows(tmp_path / "out")[0], _rows(tmp_path / "out")[1]
+    assert {lo["noise_grey"], hi["noise_grey"]} == {0.5, 8.0} and lo["seed"] == hi["seed"]
+    assert lo["n_free"] == 19 and np.isfinite(lo["err:h4.L"]) and lo["err:h4.L"] != hi["err:h4.L"]
 
 
 @pytest.mark.parametrize("change, key", [

@@ -61,7 +61,7 @@ def process_folder(folder, out_dir, method=None, progress=False) -> dict:
     cov = np.array([pms[i].cov for i in ok]).reshape(-1, 6, 6)
     labels = tuple(str(pms[i].pose_id) for i in ok)
     if rec.pose_kind == "flange_pose":
-        return _process_handeye(rec, out, T, cov, labels, ok, meas_block, t0)
+        return _process_handeye(rec, out, [pms[i] for i in ok], ok, meas_block, t0)
 
     if rec.scene_path is None:
         raise ConfigError(f"{rec.folder / 'recording.yaml'}: scene: needed to know the robot model (joint poses)")
@@ -141,16 +141,20 @@ def _summary(report) -> str:
     return "\n".join(lines)
 
 
-def _process_handeye(rec, out, T, cov, labels, ok, meas_block, t0) -> dict:
+def _process_handeye(rec, out, pms_ok, ok, meas_block, t0) -> dict:
     """Flange poses known: identify the camera mount and the target mount only."""
-    from ..identify.handeye_problem import handeye_report, solve_handeye
+    from ..identify.handeye_problem import handeye_report, solve_handeye, stack_measurements
 
     if len(ok) < 3:
         raise IdentifiabilityError(f"{rec.folder}: only {len(ok)} usable poses; hand-eye identification needs "
                                    "at least 3 (with rotations about two different axes)")
+    # one image with few corners per pose: each pose's sigma_px is a poor estimate, pool it over the poses
+    T, cov, labels, _ = stack_measurements(pms_ok, pool_sigma=rec.frames_per_pose == 1)
     G = rec.poses[ok]
     mount = "fixed" if rec.camera_mount in ("fixed", "base") else "eye_in_hand"
-    result, A, B, problem = solve_handeye(G, T, mount, pose_cov=cov, labels=labels)
+    # PnP covariances miss the robot's own pose error: scale the covariance by the a-posteriori
+    # variance factor (whitened cost / degrees of freedom), reported as such
+    result, A, B, problem = solve_handeye(G, T, mount, pose_cov=cov, labels=labels, scale_cov_by_residual=True)
     he = handeye_report(result, A, B, problem)
     report = {
         "version": REPORT_VERSION,
@@ -163,7 +167,14 @@ def _process_handeye(rec, out, T, cov, labels, ok, meas_block, t0) -> dict:
         "residuals": _residual_stats(result.residuals, "pose"),
         "timings_s": {"total": time.perf_counter() - t0},
     }
-    report["summary_text"] = _summary(report) + "\n" + he.get("summary_text", "")
+    lines = []
+    for name in (he["A"], he["B"]) if mount == "eye_in_hand" else ("T_base_cam", "T_flange_target"):
+        t = he["transforms"][name]
+        lines.append(f"{name}: xyz = " + ", ".join(f"{v * 1e3:.1f}" for v in t["xyz_m"]) + " mm (std "
+                     + ", ".join(f"{v * 1e3:.2f}" for v in t["std_xyz_m"]) + "); rpy = "
+                     + ", ".join(f"{v:.2f}" for v in t["rpy_deg"]) + " deg (std "
+                     + ", ".join(f"{v:.2f}" for v in t["std_rot_deg"]) + ")")
+    report["summary_text"] = _summary(report) + "\n" + "\n".join(lines)
     write_json_atomic(out / "report.json", report)
     return report
 

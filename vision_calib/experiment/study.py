@@ -9,8 +9,14 @@ Spec file (YAML; paths relative to the spec file)::
                                      # | images (render + measure, experiment.simulate.run_simulation)
     repetitions: 100                 # Monte Carlo runs per sweep point (> 0)
     seed: 0                          # study seed (int)
+    description: free text           # optional, ignored
     truth: scene                     # scene: one true robot (the scene's truth.seed) for every run
                                      # | per_run: a new random truth per repetition (seeded by the run seed)
+    truth_variant: H                 # optional, H4 + synthetic: measurements come from this variant's
+                                     # robot (e.g. model 31 with deviations on all its free parameters)
+                                     # while each cell identifies its own variant/model (model error);
+                                     # accuracy and V1..V3 are evaluated across models, err: columns
+                                     # only for parameter names both models share
     settings: {n_poses: 71}          # optional constants applied to every run (same keys as sweep)
     sweep:                           # cartesian product of the axes (may be empty: one cell)
       n_poses: [6, 15, 71]
@@ -39,7 +45,8 @@ Outputs (in ``out_dir``):
   the spec hash; on start, runs whose file exists with the same hash are reused, not recomputed.
   The hash covers the scene/robot/target files and every spec entry except ``name``, ``sweep``
   and ``repetitions`` (which only select which runs exist: adding repetitions or sweep values
-  reuses what was computed).
+  reuses what was computed). It does not cover the package's code: delete ``runs/`` after a
+  code change that alters the numbers.
 - ``results.csv`` / ``results.parquet``: tidy table, one row per run: ``study``, the sweep axes,
   ``repetition``, ``seed``, ``error`` (message of a run that failed with a VisionCalibError, else
   empty), ``converged``, ``iterations``, ``seconds`` (identification time), ``n_free``; with
@@ -80,7 +87,7 @@ import numpy as np
 
 from ..config import Section, load_yaml
 from ..errors import ConfigError, ParameterError, VisionCalibError
-from ..io.atomic import to_json, write_bytes_atomic, write_json_atomic, write_text_atomic
+from ..io.atomic import write_bytes_atomic, write_json_atomic, write_text_atomic
 
 RUN_FORMAT = "study-run-1"
 MODES = ("synthetic", "images")
@@ -374,16 +381,17 @@ def _cell_scene(spec: StudySpec, cell: dict, base):
 
 
 @functools.lru_cache(maxsize=4)
-def _load_scene_cached(path: str):
+def _load_scene_cached(path: str, spec_hash: str):
     from .scene import load_scene
 
     return load_scene(path)
 
 
 @functools.lru_cache(maxsize=32)
-def _scene_for(scene_path: str, variant, model):
-    """Scene of a cell in a worker (cached per process; values were validated by load_study)."""
-    return scene_with(_load_scene_cached(scene_path), variant, model)
+def _scene_for(scene_path: str, variant, model, spec_hash: str = ""):
+    """Scene of a cell in a worker (cached per process and spec hash, which covers the scene's
+    files; values were validated by load_study)."""
+    return scene_with(_load_scene_cached(scene_path, spec_hash), variant, model)
 
 
 # ----------------------------------------------------------------------------- one run
@@ -393,7 +401,7 @@ def run_cell(spec: StudySpec, cell: dict, repetition: int) -> dict:
     s = {**spec.settings, **cell}
     seed = run_seed(spec.seed, repetition)
     row = {"study": spec.name, **cell, "repetition": int(repetition), "seed": seed, "error": ""}
-    scene = _scene_for(str(spec.scene_path), s.get("variant"), s.get("model"))
+    scene = _scene_for(str(spec.scene_path), s.get("variant"), s.get("model"), spec.hash)
     try:
         out = (_run_images if spec.mode == "images" else _run_synthetic)(spec, scene, s, seed)
     except (VisionCalibError, np.linalg.LinAlgError) as exc:
@@ -459,7 +467,7 @@ def _run_synthetic_other_truth(spec, scene, s, seed, poses, base, rep, residual)
     from .synthetic import STREAM_TRUTH, identify, parameters_table, rngs
 
     _, rn, rv = rngs(seed)
-    tscene = _scene_for(str(spec.scene_path), spec.truth_variant, None)
+    tscene = _scene_for(str(spec.scene_path), spec.truth_variant, None, spec.hash)
     tsetup, setup = tscene.setup, scene.setup
     tseed = seed if spec.truth == "per_run" else tscene.truth["seed"]
     x_true = true_parameters(tscene, np.random.default_rng([tseed, STREAM_TRUTH]))
@@ -761,8 +769,8 @@ def summary_text(spec: StudySpec, res: dict) -> str:
             elif c == "cond":
                 cells.append(f"{v['mean']:.3g}")
             else:
-                sd = v["std"] * f if math.isfinite(v["std"]) else float("nan")
-                cells.append(f"{v['mean'] * f:.3g} ± {sd:.2g}")
+                sd = f" ± {v['std'] * f:.2g}" if math.isfinite(v["std"]) else ""
+                cells.append(f"{v['mean'] * f:.3g}{sd}")
         body.append(cells)
     widths = [max(len(h), *(len(b[i]) for b in body)) if body else len(h) for i, h in enumerate(head)]
     lines.append("  ".join(h.rjust(w) for h, w in zip(head, widths)))
@@ -792,7 +800,8 @@ def write_plots(spec: StudySpec, table: list[dict], cols, out: Path) -> list[str
     ok = [r for r in table if not r.get("error")]
     if not ok:
         return paths
-    for axis in spec.axes:
+    for names, _ in spec.sweep:
+        axis = names[0]  # linked axes (one group) are plotted against the group's first axis
         values = []
         for r in ok:
             if r[axis] not in values:
@@ -801,7 +810,7 @@ def write_plots(spec: StudySpec, table: list[dict], cols, out: Path) -> list[str
         if numeric:
             values = sorted(values)
         xs = np.array(values, float) if numeric else np.arange(len(values), dtype=float)
-        others = [a for a in spec.axes if a != axis]
+        others = [a for a in spec.axes if a not in names]
         series = {}
         for r in ok:
             series.setdefault(tuple(r[a] for a in others), []).append(r)

@@ -72,3 +72,85 @@ def read_visp_pose_yaml(path) -> np.ndarray:
         raise DataError(f"{path}: key 'data' must hold 6 numbers (t [m], theta-u [rad]), got {v.size}")
     frames.check_finite(f"{path}: data", v)
     return frames.T_from_xyz_rotvec(v)
+
+
+def _detect_tag_id(image_path, dictionary: str) -> int:
+    import cv2
+
+    img = cv2.imread(str(image_path), cv2.IMREAD_GRAYSCALE)
+    if img is None:
+        raise DataError(f"{image_path}: unreadable image")
+    det = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dictionary)))
+    _, ids, _ = det.detectMarkers(img)
+    if ids is None or len(ids) != 1:
+        raise DataError(f"{image_path}: expected exactly one {dictionary} tag, found "
+                        f"{0 if ids is None else len(ids)}; give the tag id explicitly")
+    return int(ids[0][0])
+
+
+def import_visp_eye_to_hand(src, dst, tag_m: float | None = None, tag_id: int | None = None,
+                            dictionary: str = "DICT_APRILTAG_36h11"):
+    """Convert a ViSP hand-eye folder (``*_camera.xml``, ``*_pose_rPe_N.yaml`` flange poses in the
+    base as t + theta-u, ``*_image-N.png``) into a recorded folder (DESIGN.md §5) with flange poses:
+    fixed camera, one AprilTag on the flange. tag_m: tag side [m] (default: read from
+    ``apriltag-data.txt`` 'size: 0.048 m'). Returns the destination Path."""
+    import csv
+    import io
+    import re
+    import shutil
+
+    import yaml
+
+    from .atomic import write_text_atomic
+
+    src, dst = Path(src), Path(dst)
+    cams = sorted(src.glob("*camera*.xml"))
+    if not cams:
+        raise DataError(f"{src}: no ViSP camera XML (*camera*.xml)")
+    intr = read_visp_camera_xml(cams[0])
+    poses = {}
+    for p in src.glob("*pose_rPe_*.yaml"):
+        m = re.search(r"_(\d+)\.yaml$", p.name)
+        if m:
+            poses[int(m.group(1))] = read_visp_pose_yaml(p)
+    if not poses:
+        raise DataError(f"{src}: no ViSP flange poses (*_pose_rPe_N.yaml)")
+    images = {}
+    for p in src.glob("*image-*.png"):
+        m = re.search(r"-(\d+)\.png$", p.name)
+        if m:
+            images[int(m.group(1))] = p
+    if tag_m is None:
+        info = src / "apriltag-data.txt"
+        m = re.search(r"size:\s*([0-9.eE+-]+)\s*m", info.read_text()) if info.is_file() else None
+        if not m:
+            raise DataError(f"{src}: tag size unknown: give tag_m (no 'size: <x> m' in apriltag-data.txt)")
+        tag_m = float(m.group(1))
+    if tag_id is None:
+        tag_id = _detect_tag_id(images[min(images)], dictionary) if images else 0
+    dst.mkdir(parents=True, exist_ok=True)
+    doc = {
+        "format": "vision_calib.recording/1",
+        "source": f"imported from ViSP folder {src}",
+        "units": {"length": "m", "angle": "rad"},
+        "camera": intr.to_dict(),
+        "camera_mount": "fixed",
+        "target": {"kind": "apriltag_grid", "name": f"tag36h11_{tag_id}", "rows": 1, "cols": 1,
+                   "dictionary": dictionary, "tag_m": float(tag_m), "spacing_m": 0.01, "first_id": int(tag_id),
+                   "margin_m": 0.01},
+        "poses": "flange_pose",
+        "frames_per_pose": 1,
+    }
+    write_text_atomic(dst / "recording.yaml", yaml.safe_dump(doc, sort_keys=False))
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(["pose_id", "x", "y", "z", "qx", "qy", "qz", "qw"])
+    for k in sorted(poses):
+        xyz, q = frames.xyz_quat_from_T(poses[k])
+        w.writerow([str(k)] + [repr(float(v)) for v in (*xyz, *q)])
+    write_text_atomic(dst / "poses.csv", buf.getvalue())
+    for k, p in images.items():
+        d = dst / "images" / str(k)
+        d.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(p, d / "00.png")
+    return dst
