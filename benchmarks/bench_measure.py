@@ -82,26 +82,41 @@ def run_sweep(n_poses, seed):
     renderer = TargetRenderer(CHARUCO, INTR.without_distortion(), supersample=2)
     try:
         ideals = [renderer.render(T) for T in Ts]
-        print(f"  {'read noise':>10} {'frames':>6} | {'corners: t[mm]':>14} {'r[deg]':>8} | {'poses: t[mm]':>12} "
-              f"{'r[deg]':>8} | {'sigma_px':>8} {'valid':>6}")
+        clean = SensorEffects(full_well_e=0.0, read_noise_grey=0.0)
+        bias = {}
+        for mode in ("corners", "poses"):
+            bias[mode] = [frames.pose_error(T, measure_pose(detect_batch(apply_effects(im, clean, 1, 0, INTR), CHARUCO,
+                                                                        INTR), CHARUCO, INTR, 0,
+                                                           MeasureConfig(mode=mode)).T_cam_target)
+                          for T, im in zip(Ts, ideals)]
+        print("  total = pose error vs truth; random = total - error of the noise-free frame (bias)")
+        print(f"  {'read noise':>10} {'frames':>6} | {'total t[mm]':>11} {'r[deg]':>7} | {'corners random t[mm]':>20} "
+              f"{'r[deg]':>7} | {'poses random t[mm]':>18} {'r[deg]':>7} | {'sigma_px':>8} {'valid':>6}")
         for rn in noise_levels:
             for nf in frame_counts:
-                errs = {"corners": [], "poses": []}
+                tot, rnd = [], {"corners": [], "poses": []}
                 sig = []
                 for k, T in enumerate(Ts):
                     ms = _sweep_pose(ideals[k], CHARUCO, rn, nf, seeds[k])
                     for mode, m in zip(("corners", "poses"), ms):
                         if m.valid:
-                            errs[mode].append(frames.pose_error(T, m.T_cam_target))
+                            e = frames.pose_error(T, m.T_cam_target)
+                            rnd[mode].append(e - bias[mode][k])
+                            if mode == "corners":
+                                tot.append(e)
                     if ms[0].valid and nf > 1:
                         sig.append(ms[0].sigma_px)
-                row = []
-                for mode in ("corners", "poses"):
-                    e = np.array(errs[mode]).reshape(-1, 6) * SCALE
-                    row += [np.sqrt(np.mean(e[:, :3] ** 2)), np.sqrt(np.mean(e[:, 3:] ** 2))]
+
+                def rms2(a):
+                    a = np.array(a).reshape(-1, 6) * SCALE
+                    return np.sqrt(np.mean(a[:, :3] ** 2)), np.sqrt(np.mean(a[:, 3:] ** 2))
+
+                t0_, r0_ = rms2(tot)
+                t1_, r1_ = rms2(rnd["corners"])
+                t2_, r2_ = rms2(rnd["poses"])
                 sig_s = f"{np.mean(sig):8.4f}" if sig else f"{'-':>8}"
-                print(f"  {rn:10.1f} {nf:6d} | {row[0]:14.4f} {row[1]:8.4f} | {row[2]:12.4f} {row[3]:8.4f} | "
-                      f"{sig_s} {len(errs['corners']):3d}/{n_poses}", flush=True)
+                print(f"  {rn:10.1f} {nf:6d} | {t0_:11.4f} {r0_:7.4f} | {t1_:20.5f} {r1_:7.5f} | {t2_:18.5f} "
+                      f"{r2_:7.5f} | {sig_s} {len(tot):3d}/{n_poses}", flush=True)
     finally:
         renderer.close()
 
