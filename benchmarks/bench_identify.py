@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 from vision_calib.experiment.scene import load_scene, scene_poses
-from vision_calib.experiment.synthetic import identifiability_report, rngs, true_parameters, STREAM_TRUTH
+from vision_calib.experiment.synthetic import identifiability_report, rngs, scene_truth
 from vision_calib.identify import solve_lse, solve_lse_fd
 
 
@@ -26,8 +26,7 @@ def _problem(scene_path, n_poses, seed=0):
     rp, rn, _ = rngs(seed)
     poses = scene_poses(scene, rp, n_poses)
     rep, _ = identifiability_report(scene, poses)
-    base = setup.params.mask(rep.base_parameters)
-    x_true = true_parameters(scene, np.random.default_rng([scene.truth["seed"], STREAM_TRUTH]), base)
+    x_true = scene_truth(scene)
     params = setup.params.only_free(rep.base_parameters)
     meas = setup.synthetic_measurements(poses, x_true, rn, scene.measurement["sigma_t_m"], scene.measurement["sigma_r_rad"])
     return scene, setup.problem(meas, params=params), poses, x_true, params

@@ -87,12 +87,10 @@ def process_folder(folder, out_dir, method=None, progress=False) -> dict:
         raise IdentifiabilityError(f"{rec.folder}: only {len(ok)} usable poses of {len(pms)} (see measurements.json "
                                    "for the reasons); identification needs more")
     t1 = time.perf_counter()
-    result, problem, params = identify_measurements(scene, meas, method, residual)
+    result, problem, params, rep = identify_measurements(scene, meas, method, residual)
     t_id = time.perf_counter() - t1
-    from ..identify import analyze
     from .synthetic import parameters_table, report_to_json
 
-    rep = analyze(setup.problem(meas, residual))
     r = result.residuals
     res_stats = _residual_stats(r, problem.residual_kind)
     ps = setup.params

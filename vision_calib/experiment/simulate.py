@@ -15,9 +15,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataError
-from .scene import SCENES_DIR, Scene, load_scene, scene_poses, true_parameters
+from .scene import SCENES_DIR, Scene, load_scene, scene_poses
 from .setup import Measurements
-from .synthetic import STREAM_TRUTH, identifiability_report, identify, parameters_table, report_to_json, rngs
+from .synthetic import identifiability_report, identify, parameters_table, report_to_json, rngs, scene_truth
 
 DEFAULT_SCENE = SCENES_DIR / "h4_vision.yaml"
 REPORT_VERSION = "1.0"
@@ -151,7 +151,7 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
     validation = scene_poses(scene, rv, which="validation")
     rep, _ = identifiability_report(scene, poses, residual)
     base = setup.params.mask(rep.base_parameters)
-    x_true = true_parameters(scene, np.random.default_rng([scene.truth["seed"], STREAM_TRUTH]), base)
+    x_true = scene_truth(scene)
     T_true = setup.T_cam_target(poses, x_true)
     q_true = setup.joints(poses, x_true)
     labels = [f"{i:03d}" for i in range(len(poses))]
@@ -171,7 +171,7 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
     meas, ok = _to_measurements(setup, poses, pms, q_true)
     rejected = [{"pose_id": pm.pose_id, "reason": pm.reason} for pm in pms if not pm.valid]
     t = time.perf_counter()
-    result, problem, params = identify_measurements(scene, meas, method, residual, base)
+    result, problem, params, _ = identify_measurements(scene, meas, method, residual, base)
     timings["identify"] = time.perf_counter() - t
 
     # measurement accuracy vs ground truth (only in simulation)
@@ -229,13 +229,17 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
 
 
 def identify_measurements(scene: Scene, meas: Measurements, method, residual, base=None):
-    """Identification of the scene's (identifiable) free parameters from measurements."""
+    """Identification of the scene's identifiable free parameters from measurements: (result, problem,
+    params, identifiability report or None when ``base`` (n,) bool was given)."""
     from ..errors import IdentifiabilityError
     from ..identify import analyze
 
+    from .synthetic import BASE_SELECTION
+
     setup = scene.setup
+    rep = None
     if base is None:
-        rep = analyze(setup.problem(meas, residual))
+        rep = analyze(setup.problem(meas, residual), selection=BASE_SELECTION)
         base = setup.params.mask(rep.base_parameters)
     params = setup.params.only_free([n for n, b in zip(setup.params.names, base) if b])
     problem = setup.problem(meas, residual, params=params)
@@ -243,7 +247,7 @@ def identify_measurements(scene: Scene, meas: Measurements, method, residual, ba
         raise IdentifiabilityError(
             f"{scene.name}: only {problem.n_obs} usable poses ({problem.n_obs * problem.m} equations) for "
             f"{params.n_free} identifiable parameters: need at least {int(np.ceil(params.n_free / problem.m))} poses")
-    return identify(problem, method), problem, params
+    return identify(problem, method), problem, params, rep
 
 
 def apply_overrides(scene: Scene, overrides: dict) -> Scene:
