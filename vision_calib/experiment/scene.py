@@ -17,6 +17,7 @@ in that unit)::
     camera: {width, height, fx, fy, cx, cy, dist}  or  {width, height, focal_mm, pixel_um, dist}
     target: ../targets/charuco_h4.yaml
     effects: {noise_grey: 2.0, blur_px: 0.6, ...}   # sensor effects (see vision_calib.sensor)
+    render: {supersample: 3}         # anti-aliasing: render at s x resolution, box-average
     truth: {seed: 1, sigma_length_mm: 0.5, sigma_angle_deg: 0.05, deviations: {name: value}, trial: name,
             perturb: base|free}
     poses: {kind: grid81 | random | configurations, count: 81, center: [..], spread: [..], configurations: name}
@@ -56,6 +57,7 @@ class Scene:
     validation: dict
     measurement: dict
     identification: dict
+    render: dict = field(default_factory=lambda: {"supersample": 2})
     raw: dict = field(repr=False, default_factory=dict)
 
     @property
@@ -137,6 +139,8 @@ def load_scene(path) -> Scene:
     camera = _camera(top.section("camera"))
     target_path = top.path_value("target", None)
     effects = dict(top.get("effects", dict, {}))
+    rs = top.section("render", default={})
+    render = {"supersample": rs.positive("supersample", int, 2)}
     meas = top.section("measurement", default={})
     measurement = {
         "frames": meas.positive("frames", int, 10),
@@ -235,7 +239,8 @@ def load_scene(path) -> Scene:
     validation = {"kind": vs.get("kind", str, "random", choices=("random", "configurations")),
                   "count": vs.positive("count", int, 50), "configurations": vs.get("configurations", str, None)}
     assert Lf in LENGTH_UNITS.values() and Af in ANGLE_UNITS.values()
-    return Scene(path, name, setup, target_path, effects, truth, poses, validation, measurement, identification, top.data)
+    return Scene(path, name, setup, target_path, effects, truth, poses, validation, measurement, identification,
+                 render, top.data)
 
 
 def scene_poses(scene: Scene, rng: np.random.Generator, n: int | None = None, which: str = "poses") -> np.ndarray:
