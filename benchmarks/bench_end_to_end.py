@@ -11,6 +11,8 @@ Target: the 81-pose run (810 rendered frames) in under 60 s on 2 cores.
 
 from __future__ import annotations
 
+import vision_calib.cli  # noqa: F401  (single-threaded BLAS, as the CLI runs)
+
 import argparse
 import resource
 import tempfile

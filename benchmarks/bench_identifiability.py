@@ -11,6 +11,8 @@
 
 from __future__ import annotations
 
+import vision_calib.cli  # noqa: F401  (single-threaded BLAS, as the CLI runs)
+
 import numpy as np
 
 from vision_calib.experiment.scene import SCENES_DIR, load_scene

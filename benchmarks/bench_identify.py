@@ -10,6 +10,8 @@ identifications in < 2 s on a 2-core machine.
 
 from __future__ import annotations
 
+import vision_calib.cli  # noqa: F401  (single-threaded BLAS, as the CLI runs)
+
 import argparse
 import time
 

@@ -230,12 +230,14 @@ def analyze(
     tol: float | None = None,
     normalize: bool = False,
     selection: str = "pivot",
+    jacobian: np.ndarray | None = None,
 ) -> IdentifiabilityReport:
     """Identifiability of the free parameters of ``problem`` at ``x`` (n,) (default nominal).
 
     tol: relative rank tolerance (fraction of s_max); default max(N, n) * eps * 1e3.
     normalize: divide each scaled column by its norm before the analysis.
     selection: "pivot" (QR with column pivoting) or "order" (prefer earlier parameters).
+    jacobian: (n_obs, m, n) Jacobian at x already validated by :func:`check_problem` (skips a recompute).
     Raises IdentifiabilityError when there are fewer scalar equations than free parameters,
     ParameterError when nothing is free, DataError on non-finite data (naming the poses).
     """
@@ -250,7 +252,7 @@ def analyze(
             f"{N} scalar equations ({problem.n_obs} poses x {problem.m} components) for {n} free parameters: "
             f"need at least {n} equations (more poses or fewer free parameters)"
         )
-    _, J = check_problem(problem, x)
+    J = check_problem(problem, x)[1] if jacobian is None else jacobian
     scale = params.scale[params.free_index]
     A = whitened_free_jacobian(problem, J) * scale[None, :]
     col_norms = np.linalg.norm(A, axis=0)

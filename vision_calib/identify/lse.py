@@ -56,8 +56,8 @@ def prepare(
         raise ParameterError("no free parameter left to identify (every parameter is fixed)")
     problem = problem.with_params(params)
     x0 = params.nominal.copy() if x0 is None else np.asarray(x0, float).reshape(-1).copy()
-    check_problem(problem, x0)
-    report = analyze(problem, x0)
+    _, J0 = check_problem(problem, x0)
+    report = analyze(problem, x0, jacobian=J0)
     warnings: tuple[str, ...] = ()
     if report.non_identifiable:
         if fix_unidentifiable:
