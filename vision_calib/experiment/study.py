@@ -640,8 +640,36 @@ def run_study(spec, out_dir, workers: int | None = None, scheduler=None, progres
            "n_runs": len(plan), "n_computed": len(todo), "n_reused": n_reused,
            "n_failed": sum(1 for row in table if row.get("error")), "wall_seconds": wall, "files": files,
            "summary": summary}
+    res["parameter_spread"] = parameter_spread(spec, table)
     res["summary_text"] = summary_text(spec, res)
     return res
+
+
+def parameter_spread(spec: StudySpec, table: list[dict]) -> list[dict]:
+    """Per cell: geometric mean, over the parameters identified in every run of every cell (so the
+    cells compare like with like), of the predicted std and of the Monte Carlo RMS error (SI), and
+    the ratio of the predicted std to the first cell's."""
+    rows_ok = [r for r in table if not r.get("error")]
+    if not rows_ok:
+        return []
+    names = sorted(k[4:] for k in rows_ok[0] if k.startswith("std:"))
+    names = [n for n in names
+             if all(r.get(f"std:{n}") is not None and math.isfinite(r[f"std:{n}"]) and r[f"std:{n}"] > 0 for r in rows_ok)]
+    if not names:
+        return []
+    groups: dict = {}
+    for r in rows_ok:
+        groups.setdefault(tuple(r[a] for a in spec.axes), []).append(r)
+    out = []
+    for key, rows in groups.items():
+        pred = np.array([[r[f"std:{n}"] for n in names] for r in rows]).mean(axis=0)
+        mc = np.sqrt(np.array([[r[f"err:{n}"] ** 2 for n in names] for r in rows]).mean(axis=0))
+        out.append({**dict(zip(spec.axes, key)), "n_params": len(names),
+                    "predicted_std_geomean": float(np.exp(np.mean(np.log(pred)))),
+                    "mc_rms_error_geomean": float(np.exp(np.mean(np.log(np.maximum(mc, 1e-300)))))})
+    for o in out:
+        o["predicted_std_vs_first"] = o["predicted_std_geomean"] / out[0]["predicted_std_geomean"]
+    return out
 
 
 # ----------------------------------------------------------------------------- tables
@@ -775,6 +803,14 @@ def summary_text(spec: StudySpec, res: dict) -> str:
     widths = [max(len(h), *(len(b[i]) for b in body)) if body else len(h) for i, h in enumerate(head)]
     lines.append("  ".join(h.rjust(w) for h, w in zip(head, widths)))
     lines.extend("  ".join(c.rjust(w) for c, w in zip(b, widths)) for b in body)
+    spread = res.get("parameter_spread") or []
+    if spread:
+        lines.append("parameter spread (geometric mean over the identified parameters; SI units):")
+        for o in spread:
+            cell = " ".join(f"{a}={_fmt(o[a])}" for a in spec.axes)
+            lines.append(f"  {cell}: predicted std {o['predicted_std_geomean']:.3g}, Monte Carlo RMS error "
+                         f"{o['mc_rms_error_geomean']:.3g} ({o['n_params']} parameters); predicted std x"
+                         f"{o['predicted_std_vs_first']:.3g} of the first cell")
     return "\n".join(lines)
 
 
