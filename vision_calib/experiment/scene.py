@@ -5,7 +5,8 @@ in that unit)::
 
     name: h4_vision
     robot: robots/h4.yaml            # robot file, relative to the scene file
-    mount: base | eye_in_hand | fixed
+    mount: base | eye_in_hand | fixed   # fixed: also a robot file with T_world_base/T_flange_tool mounts
+                                     # (a fixed device in the world frame measuring the tool frame)
     units: {length: m, angle: deg}
     model: "12"                      # H4 only: "12" | "31"
     variant: D                       # H4 only: A..H (paper table 2), optional
@@ -188,9 +189,11 @@ def load_scene(path) -> Scene:
                 T_base_cam = _xyz_rpy(ms, "camera_in_base", Lf, Af)
                 T_flange_target = _xyz_rpy(ms, "target_in_flange", Lf, Af)
                 chain = _remount(chain, "T_cam_base", "T_flange_target", F.inv_T(T_base_cam), T_flange_target)
-            elif chain.mount_names != ("T_cam_base", "T_flange_target"):
+            elif chain.mount_names not in (("T_cam_base", "T_flange_target"), ("T_world_base", "T_flange_tool")):
                 raise ms.error("camera_in_base", f"fixed camera needs mounts camera_in_base and target_in_flange "
                                f"(the robot file has {chain.mount_names})")
+            # (T_world_base, T_flange_tool): a fixed measuring device (tracker, camera) whose frame is the
+            # world frame, measuring the tool frame -- the thesis' chapter 3-4 setup
         params = _apply_free(chain.params, ident)
         ps = top.section("poses", default={})
         n = chain.n_joints

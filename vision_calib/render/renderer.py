@@ -57,17 +57,36 @@ _LIVE: set[int] = set()  # ids of open TargetRenderers (see TargetRenderer.close
 DEFAULT_MAX_TEXTURE_PX = 4096
 
 
-def _quad(extent, z_front: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _quad(extent, z_front: bool, uv_max=(1.0, 1.0)) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Two triangles covering extent (x0, y0, x1, y1) [m] at z = 0; vertices (4, 3), faces (2, 3),
-    uv (4, 2). Winding is counter-clockwise seen from -z (front, printed face) or from +z (back)."""
+    uv (4, 2). uv_max = (W / W_padded, H / H_padded): the part of the (padded) texture holding the
+    board (its top-left corner, see :func:`_pad_for_mipmaps`). Winding is counter-clockwise seen from
+    -z (front, printed face) or from +z (back)."""
     x0, y0, x1, y1 = extent
     v = np.array([[x0, y0, 0.0], [x1, y0, 0.0], [x1, y1, 0.0], [x0, y1, 0.0]])
     # pyrender flips the texture rows on upload: texture row 0 (y = y0) is at v = 1.
-    uv = np.array([[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]])
+    um, vm = uv_max
+    uv = np.array([[0.0, 1.0], [um, 1.0], [um, 1.0 - vm], [0.0, 1.0 - vm]])
     # Seen from -z (looking along +z: x right, y down on the screen) the order 0, 1, 2 (TL, TR, BR) is
     # clockwise on the screen, so the front face uses 0, 2, 1 (OpenGL front = counter-clockwise).
     f = np.array([[0, 2, 1], [0, 3, 2]]) if z_front else np.array([[0, 1, 2], [0, 2, 3]])
     return v, f, uv
+
+
+def _pad_for_mipmaps(tex: np.ndarray, levels_below: int = 3) -> tuple[np.ndarray, tuple[float, float]]:
+    """Pad texture (H, W) on the right and bottom (edge replicated) to multiples of 2^k,
+    k = floor(log2(max(H, W))) - levels_below, so that every mipmap level down to a few texels has
+    exactly half the size of the one above. Returns (padded (H', W'), (W / W', H / H')).
+
+    Why: Mesa llvmpipe samples a mip level whose parent has an odd size with a scale error (a level
+    of floor(n / 2) texels is addressed as if it had n / 2), which shifts rendered corners by up to
+    ~0.1 px across the board (measured, see the module docstring)."""
+    H, W = tex.shape
+    m = 1 << max(0, int(np.floor(np.log2(max(H, W)))) - levels_below)
+    Hp, Wp = -(-H // m) * m, -(-W // m) * m
+    if (Hp, Wp) != (H, W):
+        tex = cv2.copyMakeBorder(tex, 0, Hp - H, 0, Wp - W, cv2.BORDER_REPLICATE)
+    return tex, (W / Wp, H / Hp)
 
 
 class TargetRenderer:
@@ -125,12 +144,13 @@ class TargetRenderer:
                 f"TargetRenderer: texture {self.texture_shape[1]}x{self.texture_shape[0]} px exceeds "
                 f"GL_MAX_TEXTURE_SIZE {max_tex}; lower texture_px_per_m ({self.texture_px_per_m:.0f} px/m)"
             )
-        tex = target.texture(self.texture_px_per_m)
+        tex, uv_max = _pad_for_mipmaps(target.texture(self.texture_px_per_m))
+        self.texture_padded_shape = tex.shape
 
         self._scene = pyrender.Scene(bg_color=np.array([background, background, background, 255.0]) / 255.0,
                                      ambient_light=np.ones(3))
         extent = target.texture_extent_m()
-        v, f, uv = _quad(extent, z_front=True)
+        v, f, uv = _quad(extent, z_front=True, uv_max=uv_max)
         front_mat = pyrender.MetallicRoughnessMaterial(
             baseColorFactor=np.ones(4), metallicFactor=0.0, roughnessFactor=1.0,
             baseColorTexture=pyrender.Texture(source=tex, source_channels="R"),
@@ -169,6 +189,8 @@ class TargetRenderer:
         self._r._platform.make_current()
         GL.glBindTexture(GL.GL_TEXTURE_2D, texture._texid)
         GL.glTexParameterf(GL.GL_TEXTURE_2D, GL.GL_TEXTURE_LOD_BIAS, float(lod_bias))
+        for wrap in (GL.GL_TEXTURE_WRAP_S, GL.GL_TEXTURE_WRAP_T):  # no wrap-around at the board's edges
+            GL.glTexParameteri(GL.GL_TEXTURE_2D, wrap, GL.GL_CLAMP_TO_EDGE)
         used = 1.0
         if anisotropy > 1:
             try:
