@@ -237,3 +237,40 @@ def inverse_error_map(T):
     G[..., :3, 3:] = -Rt @ skew(T[..., :3, 3])
     G[..., 3:, 3:] = -Rt
     return G
+
+
+# ----------------------------------------------------------------------------- SO(3) exponential and Jacobians
+def so3_exp(r) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) of rotation vectors r (..., 3) rad (Rodrigues)."""
+    r = np.asarray(r, dtype=float)
+    th = np.linalg.norm(r, axis=-1)[..., None, None]
+    K = skew(r)
+    small = th < 1e-8
+    ths = np.where(small, 1.0, th)
+    a = np.where(small, 1.0 - th**2 / 6.0, np.sin(ths) / ths)
+    b = np.where(small, 0.5 - th**2 / 24.0, (1.0 - np.cos(ths)) / ths**2)
+    return np.eye(3) + a * K + b * (K @ K)
+
+
+def so3_right_jacobian(r) -> np.ndarray:
+    """Right Jacobian (..., 3, 3) of Exp at r (..., 3): Exp(r + dr) ~= Exp(r) Exp(Jr(r) dr)."""
+    r = np.asarray(r, dtype=float)
+    th = np.linalg.norm(r, axis=-1)[..., None, None]
+    K = skew(r)
+    small = th < 1e-6
+    ths = np.where(small, 1.0, th)
+    b = np.where(small, 0.5 - th**2 / 24.0, (1.0 - np.cos(ths)) / ths**2)
+    c = np.where(small, 1.0 / 6.0 - th**2 / 120.0, (ths - np.sin(ths)) / ths**3)
+    return np.eye(3) - b * K + c * (K @ K)
+
+
+def so3_right_jacobian_inv(r) -> np.ndarray:
+    """Inverse right Jacobian (..., 3, 3) of Exp at rotation vectors r (..., 3) rad."""
+    r = np.asarray(r, dtype=float)
+    th = np.linalg.norm(r, axis=-1)[..., None, None]
+    K = skew(r)
+    small = th < 1e-6
+    ths = np.where(small, 1.0, th)
+    # 1/th^2 - (1 + cos th) / (2 th sin th), series 1/12 + th^2/720 near 0
+    c = np.where(small, 1.0 / 12.0 + th**2 / 720.0, 1.0 / ths**2 - (1.0 + np.cos(ths)) / (2.0 * ths * np.sin(ths)))
+    return np.eye(3) + 0.5 * K + c * (K @ K)

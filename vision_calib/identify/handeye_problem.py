@@ -42,7 +42,8 @@ import numpy as np
 from .. import frames
 from ..errors import ConfigError, DataError
 from ..kinematics.params import DEFAULT_SCALE, ParameterSet
-from ..kinematics.serial import MOUNT_SUFFIXES, so3_exp, so3_right_jacobian
+from ..frames import so3_exp, so3_right_jacobian
+from ..kinematics.serial import MOUNT_SUFFIXES
 from .problem import IdentificationProblem, IdentificationResult
 
 #: unknown transforms (A, B) named after the frames, per mount

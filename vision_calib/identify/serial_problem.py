@@ -22,7 +22,7 @@ from typing import Mapping
 import numpy as np
 
 from ..errors import DataError, ParameterError
-from ..frames import perturb_pose, pose_error
+from ..frames import perturb_pose, pose_error, so3_right_jacobian_inv  # noqa: F401 (re-exported)
 from ..kinematics.serial import SerialChain
 from .problem import IdentificationProblem
 
@@ -30,20 +30,6 @@ POSE_COMPONENTS = ("dt_x", "dt_y", "dt_z", "dtheta_x", "dtheta_y", "dtheta_z")
 #: default measurement noise when neither obs_cov nor sigmas are given (1 mm, 1 mrad)
 DEFAULT_SIGMA_T_M = 1e-3
 DEFAULT_SIGMA_R_RAD = 1e-3
-
-
-def so3_right_jacobian_inv(r) -> np.ndarray:
-    """Inverse right Jacobian (..., 3, 3) of Exp at rotation vectors r (..., 3) rad."""
-    from ..frames import skew
-
-    r = np.asarray(r, dtype=float)
-    th = np.linalg.norm(r, axis=-1)[..., None, None]
-    K = skew(r)
-    small = th < 1e-6
-    ths = np.where(small, 1.0, th)
-    # 1/th^2 - (1 + cos th) / (2 th sin th), series 1/12 + th^2/720 near 0
-    c = np.where(small, 1.0 / 12.0 + th**2 / 720.0, 1.0 / ths**2 - (1.0 + np.cos(ths)) / (2.0 * ths * np.sin(ths)))
-    return np.eye(3) + 0.5 * K + c * (K @ K)
 
 
 def _check_poses(T, n, name="T_meas") -> np.ndarray:

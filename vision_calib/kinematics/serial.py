@@ -59,7 +59,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataError, ParameterError
-from ..frames import make_T, rot_x, rot_y, rot_z, skew
+from ..frames import make_T, rot_x, rot_y, rot_z, skew, so3_exp, so3_right_jacobian  # noqa: F401 (re-exported)
 from .params import DEFAULT_SCALE, ParameterSet
 
 #: suffixes of the 6 mount parameters, in vector order
@@ -68,31 +68,6 @@ MOUNT_SUFFIXES = ("tx", "ty", "tz", "rx", "ry", "rz")
 #: mount names a scene may use (left = parent of the robot base, right = child of the flange)
 KNOWN_LEFT = ("T_world_base", "T_target_base", "T_cam_base")
 KNOWN_RIGHT = ("T_flange_tool", "T_flange_cam", "T_flange_target")
-
-
-# ----------------------------------------------------------------------------- SO(3) helpers
-def so3_exp(r) -> np.ndarray:
-    """Rotation matrices (..., 3, 3) of rotation vectors r (..., 3) rad (Rodrigues)."""
-    r = np.asarray(r, dtype=float)
-    th = np.linalg.norm(r, axis=-1)[..., None, None]
-    K = skew(r)
-    small = th < 1e-8
-    ths = np.where(small, 1.0, th)
-    a = np.where(small, 1.0 - th**2 / 6.0, np.sin(ths) / ths)
-    b = np.where(small, 0.5 - th**2 / 24.0, (1.0 - np.cos(ths)) / ths**2)
-    return np.eye(3) + a * K + b * (K @ K)
-
-
-def so3_right_jacobian(r) -> np.ndarray:
-    """Right Jacobian (..., 3, 3) of Exp at r (..., 3): Exp(r + dr) ~= Exp(r) Exp(Jr(r) dr)."""
-    r = np.asarray(r, dtype=float)
-    th = np.linalg.norm(r, axis=-1)[..., None, None]
-    K = skew(r)
-    small = th < 1e-6
-    ths = np.where(small, 1.0, th)
-    b = np.where(small, 0.5 - th**2 / 24.0, (1.0 - np.cos(ths)) / ths**2)
-    c = np.where(small, 1.0 / 6.0 - th**2 / 120.0, (ths - np.sin(ths)) / ths**3)
-    return np.eye(3) - b * K + c * (K @ K)
 
 
 def _tz(v):

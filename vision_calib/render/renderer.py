@@ -73,17 +73,25 @@ def _quad(extent, z_front: bool, uv_max=(1.0, 1.0)) -> tuple[np.ndarray, np.ndar
     return v, f, uv
 
 
-def _pad_for_mipmaps(tex: np.ndarray, levels_below: int = 3) -> tuple[np.ndarray, tuple[float, float]]:
-    """Pad texture (H, W) on the right and bottom (edge replicated) to multiples of 2^k,
-    k = floor(log2(max(H, W))) - levels_below, so that every mipmap level down to a few texels has
-    exactly half the size of the one above. Returns (padded (H', W'), (W / W', H / H')).
-
-    Why: Mesa llvmpipe samples a mip level whose parent has an odd size with a scale error (a level
-    of floor(n / 2) texels is addressed as if it had n / 2), which shifts rendered corners by up to
-    ~0.1 px across the board (measured, see the module docstring)."""
-    H, W = tex.shape
+def _mip_padded_shape(shape, levels_below: int = 3) -> tuple[int, int]:
+    """(H', W') >= shape (H, W): each side rounded up to a multiple of 2^k,
+    k = floor(log2(max(H, W))) - levels_below, so that every mipmap level down to ~2^levels_below
+    texels on the larger side has exactly half the size of the level above."""
+    H, W = shape
     m = 1 << max(0, int(np.floor(np.log2(max(H, W)))) - levels_below)
-    Hp, Wp = -(-H // m) * m, -(-W // m) * m
+    return -(-H // m) * m, -(-W // m) * m
+
+
+def _pad_for_mipmaps(tex: np.ndarray) -> tuple[np.ndarray, tuple[float, float]]:
+    """Pad texture (H, W) on the right and bottom (edge replicated) to :func:`_mip_padded_shape`.
+    Returns (padded (H', W'), (W / W', H / H')), the second for :func:`_quad`.
+
+    Why: Mesa llvmpipe (22.3) samples the mip level below an odd-sized one with a scale error
+    (measured: a texture of 4096 x 2821 texels shifts rendered ChArUco corners by 0.026 px in v on
+    average and 0.11 px RMS at supersample 2, see the module docstring); uploading exact box-filtered
+    mip levels does not help, even level sizes do."""
+    H, W = tex.shape
+    Hp, Wp = _mip_padded_shape((H, W))
     if (Hp, Wp) != (H, W):
         tex = cv2.copyMakeBorder(tex, 0, Hp - H, 0, Wp - W, cv2.BORDER_REPLICATE)
     return tex, (W / Wp, H / Hp)
@@ -138,10 +146,12 @@ class TargetRenderer:
         self._r._platform.make_current()
         max_tex = int(GL.glGetIntegerv(GL.GL_MAX_TEXTURE_SIZE))
         self.texture_shape = target.texture_shape(self.texture_px_per_m)
-        if max(self.texture_shape) > max_tex:
+        padded = _mip_padded_shape(self.texture_shape)
+        if max(padded) > max_tex:
             self.close()
             raise ConfigError(
-                f"TargetRenderer: texture {self.texture_shape[1]}x{self.texture_shape[0]} px exceeds "
+                f"TargetRenderer: texture {self.texture_shape[1]}x{self.texture_shape[0]} px (padded to "
+                f"{padded[1]}x{padded[0]} for mipmapping) exceeds "
                 f"GL_MAX_TEXTURE_SIZE {max_tex}; lower texture_px_per_m ({self.texture_px_per_m:.0f} px/m)"
             )
         tex, uv_max = _pad_for_mipmaps(target.texture(self.texture_px_per_m))
