@@ -87,6 +87,23 @@ def test_local_run_tables_match_library(tmp_path):
     assert (out / "after_position_rms_mm_vs_n_poses.png").stat().st_size > 1000
     assert (out / "param_std_vs_n_poses.png").exists()
     assert "n_poses" in res["summary_text"] and "±" in res["summary_text"]
+    # parameters.csv: per (cell, parameter) truth, noise-free value and Monte Carlo statistics
+    prow = {(p["n_poses"], p["parameter"]): p for p in read_csv(out / "parameters.csv")}
+    x_true = o["x_true"]
+    ps = scene.setup.params
+    for n in ("h4.L", "q0_1", "B_T_C.x"):
+        p = prow[("20", n)]
+        assert p["identifiable"] == "yes"
+        dev = x_true[ps.index(n)] - ps.nominal[ps.index(n)]
+        np.testing.assert_allclose(float(p["true_deviation"]), dev, rtol=1e-12)
+        # random truth on the identifiable parameters only: exact data give it back
+        np.testing.assert_allclose(float(p["noise_free"]), dev, rtol=1e-5, atol=1e-10)
+    dev_L = x_true[ps.index("h4.L")] - ps.nominal[ps.index("h4.L")]
+    assert dev_L != 0
+    np.testing.assert_allclose(float(prow[("20", "h4.L")]["identified_mean"]), dev_L + v.mean(), rtol=1e-9)
+    np.testing.assert_allclose(float(prow[("20", "h4.L")]["mc_std"]), v.std(ddof=1), rtol=1e-9)
+    assert ("20", "M_T_E.z") not in prow  # fixed, no true deviation: not listed
+    assert "[n_poses=12]" in res["summary_text"]  # two cells: the parameter table is printed
 
 
 def test_common_random_numbers_noise_scaling(tmp_path):

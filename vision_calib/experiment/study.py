@@ -28,7 +28,10 @@ Sweep/settings keys: ``n_poses`` (int > 0: subset drawn at random from the scene
 ``sigma_mm``, ``sigma_deg`` (pose noise per component, >= 0), ``method`` (lse|ekf|igm; igm = H4
 only), ``residual`` (pose|position for serial scenes, joint for H4), ``variant`` (H4 paper table 2,
 A..H: the scene's robot is replaced by ``robot.variant(letter)`` of the model-12 robot, E..H
-are model 31, the free mask follows), ``model`` ("12"|"31", H4), and for mode images only
+are model 31, the free mask follows), ``model`` ("12"|"31", H4), ``trial`` (serial scenes whose
+robot file has ``trials``, e.g. the thesis' chapter 3-4 experiments: the truth is the trial's
+deviation vector, and when the scene's poses are ``kind: configurations`` they become the trial's
+own configuration set), and for mode images only
 ``noise_grey``, ``blur_px`` (sensor effects) and ``frames`` (frames per pose).
 
 Reproducibility. A run = (cell, repetition) is a pure function of the spec, the cell's values and
@@ -57,6 +60,15 @@ Outputs (in ``out_dir``):
   identifiable parameters at the nominal over the run's poses, ``identify.analyze``); with
   ``parameters``: wide columns ``err:<name>`` (identified - true, SI: m or rad) and
   ``std:<name>`` (predicted std, SI) for every parameter (NaN where fixed / not in the model).
+- ``parameters.csv`` (mode synthetic, ``truth: scene``, with ``parameters``): one row per (cell,
+  parameter) for the free parameters and those with a true deviation: ``true_deviation``
+  (x_true - nominal, SI), ``identifiable`` (yes/no: in the cell's base set), ``noise_free``
+  (deviation identified from exact measurements on the poses of repetition 0: what the
+  identifiable parameters converge to when the truth has non-identifiable parts, e.g. d2 absorbs
+  d3), ``identified_mean``, ``mc_std`` (Monte Carlo std), ``predicted_std`` (mean), ``mc_rms_error``
+  (RMS of identified - true), ``note`` (coupling of a non-identifiable parameter, or why it is
+  fixed) and ``thesis_reported`` (the robot file's ``reported`` estimate of a ``trial`` truth).
+  The summary text prints it when the sweep has ``trial`` or the study has at most 2 cells.
 - ``summary.csv``: long table, one row per (cell, metric): the axes, ``metric``, ``n`` (finite
   values), ``mean``, ``std`` (ddof 1), ``rms``, ``p05``, ``p50``, ``p95``. For ``err:`` metrics
   with ``truth: scene`` the std is the Monte Carlo std of the identified parameter.
@@ -92,7 +104,7 @@ from ..io.atomic import write_bytes_atomic, write_json_atomic, write_text_atomic
 RUN_FORMAT = "study-run-1"
 MODES = ("synthetic", "images")
 OUTPUTS = ("parameters", "accuracy", "criteria", "condition")
-AXES_ALL = ("n_poses", "sigma_mm", "sigma_deg", "method", "residual", "variant", "model")
+AXES_ALL = ("n_poses", "sigma_mm", "sigma_deg", "method", "residual", "variant", "model", "trial")
 AXES_IMAGES = ("noise_grey", "blur_px", "frames")
 ACCURACY_KEYS = ("position_rms_mm", "position_max_mm", "rotation_rms_deg")
 CRITERIA_KEYS = ("V1_rad", "V2_rad", "V3_m")
@@ -145,6 +157,10 @@ def _convert(spec_path, key, axis, value, mode):
     if axis in AXES_IMAGES and mode != "images":
         raise ConfigError(f"{where}: {axis!r} is an image setting: it needs mode: images (this study is {mode})")
     try:
+        if axis == "trial":
+            if not isinstance(value, str) or not value:
+                raise ValueError
+            return value  # checked against the robot file's trials in _check_cells
         if axis in ("n_poses", "frames"):
             if isinstance(value, bool) or int(value) != value or int(value) <= 0:
                 raise ValueError
@@ -155,7 +171,8 @@ def _convert(spec_path, key, axis, value, mode):
                 raise ValueError
             return v
     except (TypeError, ValueError):
-        kind = "a positive integer" if axis in ("n_poses", "frames") else "a finite number >= 0"
+        kind = ("a trial name" if axis == "trial" else "a positive integer" if axis in ("n_poses", "frames")
+                else "a finite number >= 0")
         raise ConfigError(f"{where}: {axis} expects {kind}, got {value!r}") from None
     v = str(value)
     choices = {"method": ("lse", "ekf", "igm"), "residual": ("pose", "position", "joint"),
@@ -368,16 +385,38 @@ def scene_with(scene, variant: str | None = None, model: str | None = None):
     return replace(scene, setup=setup, truth=truth)
 
 
+def scene_with_trial(scene, trial: str | None):
+    """The serial scene with its truth replaced by the robot file's trial ``trial`` (its deviation
+    vector); when the scene's poses are ``kind: configurations``, they become the trial's own
+    configuration set (the thesis' experiment = a deviation vector on its configurations).
+    ConfigError naming the scene if the scene is not serial or the trial is unknown."""
+    if trial is None:
+        return scene
+    trials = scene.setup.chain.meta.get("trials", {}) if scene.kind == "serial" else {}
+    if trial not in trials:
+        raise ConfigError(f"{scene.path}: unknown trial {trial!r} (robot file has {sorted(trials) or 'no trials'})")
+    poses = scene.poses
+    conf = trials[trial].get("configurations")
+    if poses["kind"] == "configurations" and conf:
+        if conf not in scene.setup.chain.meta.get("configurations", {}):
+            raise ConfigError(f"{scene.path}: trial {trial!r} names configurations {conf!r} that the robot file lacks")
+        poses = {**poses, "configurations": conf}
+    return replace(scene, truth={**scene.truth, "trial": trial}, poses=poses)
+
+
 def _cell_scene(spec: StudySpec, cell: dict, base):
     s = {**spec.settings, **cell}
     scene = base
-    if s.get("variant") is None and s.get("model") is None:
-        return scene
+    if s.get("variant") is not None or s.get("model") is not None:
+        try:
+            scene = scene_with(scene, s.get("variant"), s.get("model"))
+        except ConfigError as exc:
+            key = "variant" if s.get("variant") is not None else "model"
+            raise ConfigError(f"{_axis_where(spec, key)}: {exc}") from None
     try:
-        return scene_with(scene, s.get("variant"), s.get("model"))
+        return scene_with_trial(scene, s.get("trial"))
     except ConfigError as exc:
-        key = "variant" if s.get("variant") is not None else "model"
-        raise ConfigError(f"{_axis_where(spec, key)}: {exc}") from None
+        raise ConfigError(f"{_axis_where(spec, 'trial')}: {exc}") from None
 
 
 @functools.lru_cache(maxsize=4)
@@ -388,10 +427,10 @@ def _load_scene_cached(path: str, spec_hash: str):
 
 
 @functools.lru_cache(maxsize=32)
-def _scene_for(scene_path: str, variant, model, spec_hash: str = ""):
+def _scene_for(scene_path: str, variant, model, spec_hash: str = "", trial=None):
     """Scene of a cell in a worker (cached per process and spec hash, which covers the scene's
     files; values were validated by load_study)."""
-    return scene_with(_load_scene_cached(scene_path, spec_hash), variant, model)
+    return scene_with_trial(scene_with(_load_scene_cached(scene_path, spec_hash), variant, model), trial)
 
 
 # ----------------------------------------------------------------------------- one run
@@ -401,7 +440,7 @@ def run_cell(spec: StudySpec, cell: dict, repetition: int) -> dict:
     s = {**spec.settings, **cell}
     seed = run_seed(spec.seed, repetition)
     row = {"study": spec.name, **cell, "repetition": int(repetition), "seed": seed, "error": ""}
-    scene = _scene_for(str(spec.scene_path), s.get("variant"), s.get("model"), spec.hash)
+    scene = _scene_for(str(spec.scene_path), s.get("variant"), s.get("model"), spec.hash, s.get("trial"))
     try:
         out = (_run_images if spec.mode == "images" else _run_synthetic)(spec, scene, s, seed)
     except (VisionCalibError, np.linalg.LinAlgError) as exc:
@@ -641,8 +680,157 @@ def run_study(spec, out_dir, workers: int | None = None, scheduler=None, progres
            "n_failed": sum(1 for row in table if row.get("error")), "wall_seconds": wall, "files": files,
            "summary": summary}
     res["parameter_spread"] = parameter_spread(spec, table)
+    res["parameters"] = parameter_table(spec, table)
+    if res["parameters"]:
+        files["parameters_csv"] = write_parameter_table(spec, res["parameters"], out)
     res["summary_text"] = summary_text(spec, res)
     return res
+
+
+PARAMETER_COLUMNS = ("parameter", "kind", "true_deviation", "identifiable", "noise_free", "identified_mean", "mc_std",
+                     "predicted_std", "mc_rms_error", "n", "note", "thesis_reported")
+
+
+def _cell_reference(spec: StudySpec, cell: dict):
+    """(scene, x_true (n,), identifiability report, noise-free identified vector (n,) or None) of a
+    cell, on the poses of repetition 0."""
+    from .scene import scene_poses
+    from .synthetic import identifiability_report, rngs, run_synthetic, scene_truth
+
+    s = {**spec.settings, **cell}
+    scene = _scene_for(str(spec.scene_path), s.get("variant"), s.get("model"), spec.hash, s.get("trial"))
+    residual = s.get("residual") or scene.identification["residual"]
+    seed = run_seed(spec.seed, 0)
+    poses = scene_poses(scene, rngs(seed)[0], s.get("n_poses"))
+    rep, _ = identifiability_report(scene, poses, residual)
+    x_true = scene_truth(scene)
+    try:
+        ref = run_synthetic(scene, method="igm" if scene.kind == "h4" else "lse", residual=residual, poses=poses,
+                            validation=poses[:1], seed=seed, base=scene.setup.params.mask(rep.base_parameters),
+                            x_true=x_true, sigma_t_m=0.0, sigma_r_rad=0.0)
+        x_ref = ref["result"].identified
+    except (VisionCalibError, np.linalg.LinAlgError):
+        x_ref = None
+    return scene, x_true, rep, x_ref
+
+
+def _fixed_note(scene, name: str) -> str:
+    if scene.kind == "serial":
+        for a, b, why in scene.setup.chain.redundant_pairs():
+            if name in (a, b):
+                other = b if name == a else a
+                return f"fixed: redundant with {other} ({why})"
+    return "fixed (not free in the scene)"
+
+
+def parameter_table(spec: StudySpec, table: list[dict]) -> list[dict]:
+    """Per (cell, parameter) rows of ``parameters.csv`` (see the module docstring); SI units.
+    Empty unless mode synthetic, ``truth: scene``, no ``truth_variant`` and ``parameters`` output."""
+    if spec.mode != "synthetic" or spec.truth != "scene" or spec.truth_variant is not None \
+            or "parameters" not in spec.outputs:
+        return []
+    groups = _group(spec, table)
+    out = []
+    for cell in study_cells(spec):
+        rows = [r for r in groups.get(tuple(cell[a] for a in spec.axes), []) if not r.get("error")]
+        scene, x_true, rep, x_ref = _cell_reference(spec, cell)
+        ps = scene.setup.params
+        dev = x_true - ps.nominal
+        trial = scene.truth.get("trial")
+        reported = {}
+        if trial and scene.kind == "serial":
+            reported = scene.setup.chain.meta.get("trials", {}).get(trial, {}).get("reported", {}) or {}
+        couplings = {c["parameter"]: c for c in rep.couplings}
+        names = [n for i, n in enumerate(ps.names) if ps.free[i] or abs(dev[i]) > 0 or n in reported]
+        if spec.parameters is not None:
+            names = [n for n in names if n in spec.parameters]
+        for n in names:
+            i = ps.index(n)
+            err = np.array([_value(r, f"err:{n}") for r in rows])
+            std = np.array([_value(r, f"std:{n}") for r in rows])
+            err, std = err[np.isfinite(err)], std[np.isfinite(std)]
+            ident = n in rep.base_parameters
+            if n in couplings:
+                comb = couplings[n]["combination_si"]
+                note = ("no effect on the measurements" if not comb else
+                        f"not identifiable: {n} acts as " + " ".join(f"{v:+.3g}*{k}" for k, v in comb.items()))
+            elif not ps.free[i]:
+                note = _fixed_note(scene, n)
+            else:
+                note = ""
+            out.append({
+                **cell, "parameter": n, "kind": ps.kinds[i], "true_deviation": float(dev[i]),
+                "identifiable": "yes" if ident else "no",
+                "noise_free": float(x_ref[i] - ps.nominal[i]) if x_ref is not None else float("nan"),
+                "identified_mean": float(dev[i] + err.mean()) if err.size else float("nan"),
+                "mc_std": float(err.std(ddof=1)) if err.size > 1 else float("nan"),
+                "predicted_std": float(std.mean()) if std.size else float("nan"),
+                "mc_rms_error": float(np.sqrt(np.mean(err**2))) if err.size else float("nan"),
+                "n": int(err.size), "note": note,
+                "thesis_reported": float(reported[n]) if n in reported else float("nan"),
+            })
+    return out
+
+
+def write_parameter_table(spec: StudySpec, prows: list[dict], out: Path) -> str:
+    """``parameters.csv`` (SI units; empty cells for NaN)."""
+    cols = [*spec.axes, *PARAMETER_COLUMNS]
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(cols)
+    for r in prows:
+        w.writerow(["" if isinstance(r[c], float) and math.isnan(r[c]) else repr(r[c]) if isinstance(r[c], float)
+                    else r[c] for c in cols])
+    return str(write_text_atomic(out / "parameters.csv", buf.getvalue()))
+
+
+def parameter_text(spec: StudySpec, prows: list[dict]) -> list[str]:
+    """Compact per-parameter lines: one block per value of the axes other than ``method``, one
+    line per parameter (lengths in mm, angles in mrad), one column per method."""
+    if not prows:
+        return []
+    axes = [a for a in spec.axes if a != "method"]
+    methods = []
+    for r in prows:
+        m = r.get("method", "")
+        if m not in methods:
+            methods.append(m)
+    blocks: dict = {}
+    for r in prows:
+        blocks.setdefault(tuple(r[a] for a in axes), {}).setdefault(r["parameter"], {})[r.get("method", "")] = r
+    has_thesis = any(math.isfinite(r["thesis_reported"]) for r in prows)
+
+    def f(v):
+        return "-" if not math.isfinite(v) else f"{v * 1e3:.4g}"
+
+    lines = ["parameters: deviation from nominal, mm / mrad (true, noise-free = the value the identifiable "
+             "parameters take with exact data, identified mean ± Monte Carlo std)"]
+    for key, params in blocks.items():
+        title = " ".join(f"{a}={_fmt(v)}" for a, v in zip(axes, key)) or "all cells"
+        head = ["param", "true", "ident", "noise-free"] + [f"{m or 'identified'} mean ± std" for m in methods]
+        head += ["thesis"] if has_thesis else []
+        head += ["note"]
+        body = []
+        for n, by_m in params.items():
+            r0 = next(iter(by_m.values()))
+            row = [n, f(r0["true_deviation"]), r0["identifiable"], f(r0["noise_free"])]
+            for m in methods:
+                r = by_m.get(m)
+                if r is None or not math.isfinite(r["identified_mean"]):
+                    row.append("-")
+                else:
+                    sd = f" ± {r['mc_std'] * 1e3:.2g}" if math.isfinite(r["mc_std"]) else ""
+                    row.append(f"{r['identified_mean'] * 1e3:.4g}{sd}")
+            if has_thesis:
+                row.append(f(r0["thesis_reported"]))
+            row.append(r0["note"].split(" (")[0])
+            body.append(row)
+        widths = [max(len(h), *(len(b[i]) for b in body)) for i, h in enumerate(head)]
+        lines.append(f"[{title}]")
+        lines.append("  " + "  ".join(h.rjust(w) if i < len(head) - 1 else h for i, (h, w) in enumerate(zip(head, widths))))
+        lines.extend("  " + "  ".join(c.rjust(w) if i < len(head) - 1 else c for i, (c, w) in enumerate(zip(b, widths)))
+                     for b in body)
+    return lines
 
 
 def parameter_spread(spec: StudySpec, table: list[dict]) -> list[dict]:
@@ -811,6 +999,8 @@ def summary_text(spec: StudySpec, res: dict) -> str:
             lines.append(f"  {cell}: predicted std {o['predicted_std_geomean']:.3g}, Monte Carlo RMS error "
                          f"{o['mc_rms_error_geomean']:.3g} ({o['n_params']} parameters); predicted std x"
                          f"{o['predicted_std_vs_first']:.3g} of the first cell")
+    if res.get("parameters") and ("trial" in spec.axes or len(res["summary"]) <= 2):
+        lines.extend(parameter_text(spec, res["parameters"]))
     return "\n".join(lines)
 
 
@@ -906,4 +1096,4 @@ def write_plots(spec: StudySpec, table: list[dict], cols, out: Path) -> list[str
 
 
 __all__ = ["StudySpec", "load_study", "run_study", "run_cell", "study_cells", "run_seed", "cell_key", "scene_with",
-           "summary_rows", "cell_summary"]
+           "scene_with_trial", "summary_rows", "cell_summary", "parameter_table"]
