@@ -171,6 +171,8 @@ def main(argv=None) -> int:
     except VisionCalibError as exc:
         print(f"vision-calib: error: {exc}", file=sys.stderr)
         return exc.exit_code
+    except BrokenPipeError:  # output piped into `head` & co.
+        return 0
     except KeyboardInterrupt:
         print("vision-calib: interrupted (results already written are kept)", file=sys.stderr)
         return 130

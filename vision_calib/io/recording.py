@@ -18,6 +18,7 @@ recording.yaml::
     camera_mount: eye_in_hand | fixed | base
     target: {kind: charuco, rows: .., cols: .., dictionary: .., square_m: .., marker_m: .., ...}
     scene: /path/to/scene.yaml              # robot model + free parameters (relative to this file or absolute)
+    scene_name: h4_vision                   # fallback: the shipped scenes/<scene_name>.yaml
     poses: joints | flange_pose
     frames_per_pose: 10
 """
@@ -82,6 +83,7 @@ def write_recording(folder, scene, poses, joints, frames: int) -> Path:
         "camera_mount": setup.mount,
         "target": _target_dict(load_target(scene.target_path)),
         "scene": str(Path(scene.path).resolve()),
+        "scene_name": scene.name,  # fallback when the folder moves to another machine: scenes/<name>.yaml
         "poses": "joints",
         "frames_per_pose": int(frames),
     }
@@ -115,7 +117,18 @@ def read_recording(folder) -> Recording:
     mount = top.get("camera_mount", str, choices=("eye_in_hand", "fixed", "base"))
     tsec = top.section("target")
     target = target_from_dict(tsec.data, where=tsec.where())
-    scene_path = top.path_value("scene", None)
+    scene_path = None
+    if "scene" in top:
+        p = Path(top.get("scene", str))
+        p = p if p.is_absolute() else ypath.parent / p
+        if not p.is_file():
+            from ..experiment.scene import SCENES_DIR
+
+            alt = SCENES_DIR / f"{top.get('scene_name', str, '')}.yaml"
+            if not alt.is_file():
+                raise top.error("scene", f"file not found: {p} (nor {alt})")
+            p = alt
+        scene_path = p
     pose_kind = top.get("poses", str, "joints", choices=("joints", "flange_pose"))
     frames = top.positive("frames_per_pose", int, 10)
 

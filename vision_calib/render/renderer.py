@@ -17,15 +17,23 @@ Conventions (proved in ``tests/render/test_renderer.py``):
   high-res pixel u_s covering [(u_s) / s - 0.5, (u_s + 1) / s - 0.5] of the final image, i.e.
   cx_s = s (cx + 0.5) - 0.5; then each s x s block is averaged (``cv2.resize`` INTER_AREA, an exact
   box filter for an integer factor).
-- The texture is drawn with exact per-texel area coverage (edges not quantised to texels), uploaded
-  with mipmaps and sampled trilinearly (GL_LINEAR_MIPMAP_LINEAR / GL_LINEAR) with a LOD bias of -1
-  (each high-res sample uses half the footprint: the s x s box average does the rest) and, for
-  s >= 2, 16x anisotropic filtering where the driver has it. Measured on Mesa llvmpipe against a CPU
-  reference (s = 8 warp of the same texture), cornerSubPix corner shift RMS / max [px] at
-  1024 x 768: s = 1: 0.075 / 0.22 (aliased), s = 2: 0.012 / 0.023, s = 3: 0.005 / 0.012, s = 4:
-  0.004 / 0.009 (cornerSubPix's own bias is 0.04 RMS); with pyrender's defaults (bias 0, no
-  anisotropy) s = 2 gave 0.036 / 0.079. Reproduce with
-  ``python -m vision_calib.render.bench``.
+- The texture is drawn with exact per-texel area coverage (edges not quantised to texels), padded
+  (edge replicated) to power-of-two sides, uploaded with mipmaps and sampled trilinearly
+  (GL_LINEAR_MIPMAP_LINEAR / GL_LINEAR) with a LOD bias of -1 (each high-res sample uses half the
+  footprint: the s x s box average does the rest) and 16x anisotropic filtering where the driver has it.
+  The power-of-two padding matters: Mesa llvmpipe's anisotropic sampler is exact only for
+  power-of-two textures (see :func:`_pad_for_mipmaps`); without it the H4 board (texture 4096 x 2821)
+  rendered at s = 2 had its corners shifted by +0.022 px in v on average (a v scale error: up to
+  0.09 px at the top edge of the board), which biased solvePnP by 0.12 deg / 0.45 mm (tz) RMS.
+- Measured on Mesa 22.3 llvmpipe, 1024 x 768, cornerSubPix corner shift against a CPU reference
+  (s = 8 homography warp of the same texture), mean (du, dv) / RMS / max [px], and single-thread speed
+  (``LP_NUM_THREADS=1 python -m vision_calib.render.bench``):
+  A5 board, 0.3-0.6 m: s = 1: (+0.000, +0.003) / 0.030 / 0.061, ~40 frames/s; s = 2: (0.000, 0.001)
+  / 0.012 / 0.030, ~10 frames/s; s = 4: (0.000, 0.000) / 0.004 / 0.009, ~2.6 frames/s.
+  H4 board, 0.6-0.76 m, f = 1013 px: s = 1: (0.000, 0.000) / 0.034 / 0.085; s = 2: (0.000, 0.000)
+  / 0.014 / 0.042; s = 4: (0.000, 0.000) / 0.008 / 0.027 (before the padding: s = 2: (0.000, +0.022)
+  / 0.073 / 0.226, s = 4: (0.000, -0.006) / 0.016 / 0.044). cornerSubPix's own bias against
+  ``cv2.projectPoints`` is ~0.05 px RMS on these boards, larger than the renderer's error for s >= 2.
 - Only the printed face (the side of -z_target, where the camera is when R_cam_target ~= I) carries
   the pattern; the back face is a uniform grey (``back_grey``).
 """
@@ -103,9 +111,9 @@ class TargetRenderer:
     of empty pixels. occluders: optional list of ``(trimesh.Trimesh, T_cam_mesh (4, 4))`` or
     ``(mesh, T_cam_mesh, grey)``, flat grey objects (default grey 40) fixed in the camera frame unless
     ``occluder_poses`` is given to :meth:`render`. texture_px_per_m: texture resolution [texels/m]
-    (default: larger board side = 4096 texels). texture_lod_bias: mipmap LOD bias (default -1),
-    anisotropy: max anisotropic filtering (default 16 for s >= 2, 1 = off for s = 1, where it biases
-    corners; ignored if the driver lacks it).
+    (default: larger board side = 4096 texels; the texture is padded to power-of-two sides).
+    texture_lod_bias: mipmap LOD bias (default -1). anisotropy: max anisotropic filtering (default 16;
+    1 = off; ignored if the driver lacks it).
     back_grey: grey level of the board's back face.
     znear, zfar: clip distances [m]. One OpenGL context is kept; call :meth:`close` or use ``with``.
     """
@@ -189,7 +197,7 @@ class TargetRenderer:
         # Warm-up render uploads the texture (pyrender does it lazily), then set its sampling.
         self._render_raw()
         if anisotropy is None:
-            anisotropy = 16.0 if s >= 2 else 1.0
+            anisotropy = 16.0
         self.anisotropy = self._configure_texture(front_mat.baseColorTexture, texture_lod_bias, anisotropy)
 
     def _configure_texture(self, texture, lod_bias: float, anisotropy: float) -> float:
