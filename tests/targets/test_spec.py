@@ -31,8 +31,7 @@ def test_shipped_targets_load_and_fit():
     a5 = load_target(ROOT / "targets" / "charuco_a5.yaml")
     w, h = a5.outline_m()
     assert w <= 0.210 and h <= 0.148  # A5 landscape
-    h4 = load_target(ROOT / "targets" / "charuco_h4.yaml")
-    assert 0.12 <= h4.pattern_size_m()[0] <= 0.16
+    # charuco_h4 must stay in view over the H4 workspace: tests/experiment/test_scenes.py
     for p in SHIPPED:
         s = load_target(p)
         ids, P = s.corner_points()

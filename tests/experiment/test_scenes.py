@@ -1,0 +1,32 @@
+"""Shipped scenes load, and their targets are seen where the scene says."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from vision_calib.experiment.scene import SCENES_DIR, load_scene, scene_poses
+from vision_calib.targets import load_target
+
+
+@pytest.mark.parametrize("path", sorted(Path(SCENES_DIR).glob("*.yaml")), ids=lambda p: p.stem)
+def test_shipped_scenes_load(path):
+    scene = load_scene(path)
+    assert scene.setup.params.n_free > 0
+
+
+def test_h4_board_fully_in_view_on_the_81_pose_grid():
+    scene = load_scene(SCENES_DIR / "h4_vision.yaml")
+    setup = scene.setup
+    T = setup.T_cam_target(setup.robot.pose_grid(), setup.params.nominal)
+    w, h = load_target(scene.target_path).pattern_size_m()
+    outline = np.array([[0, 0, 0], [w, 0, 0], [w, h, 0], [0, h, 0]], float)
+    assert setup.visible(T, outline, margin_px=15).all()
+
+
+def test_serial_random_poses_see_the_target():
+    scene = load_scene(SCENES_DIR / "rx90_eye_in_hand.yaml")
+    q = scene_poses(scene, np.random.default_rng(0), 20)
+    T = scene.setup.T_cam_target(q, scene.setup.params.nominal)
+    assert scene.setup.visible(T, scene.setup.target_outline).all()
+    assert scene.setup.chain.within_limits(q).all()
