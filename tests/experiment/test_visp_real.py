@@ -2,6 +2,7 @@
 imported into our recorded-folder format and processed as a hand-eye problem."""
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -9,9 +10,7 @@ import pytest
 
 from vision_calib.cli import main
 
-DATA = Path(__file__).resolve().parents[3] / "shared" / "data" / "real" / "visp_eye_to_hand_apriltag"
-if not DATA.is_dir():
-    DATA = Path("/work/shared/data/real/visp_eye_to_hand_apriltag")
+DATA = Path(os.environ["VISION_CALIB_SHARED_DATA"]) / "real" / "visp_eye_to_hand_apriltag"  # tests/conftest.py
 pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason="real ViSP data not available")
 
 

@@ -2,6 +2,7 @@
 
 import json
 from types import SimpleNamespace
+import os
 from pathlib import Path
 
 import numpy as np
@@ -254,7 +255,7 @@ def test_bad_input_messages():
 
 
 # ----------------------------------------------------------------------------- real data (ViSP)
-DATA = Path("/work/shared/data/real/visp_eye_to_hand_apriltag")
+DATA = Path(os.environ["VISION_CALIB_SHARED_DATA"]) / "real" / "visp_eye_to_hand_apriltag"  # tests/conftest.py
 
 
 @pytest.mark.skipif(not DATA.is_dir(), reason="real ViSP data not available")

@@ -1,5 +1,6 @@
 """Real images (ViSP eye-to-hand example, Franka + one AprilTag 36h11 of 48 mm, id 10), read in place."""
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -12,7 +13,7 @@ from vision_calib.measure import DetectConfig, MeasureConfig, measure_images
 from vision_calib.measure.handeye import hand_eye_consistency
 from vision_calib.targets.spec import TargetSpec
 
-DATA = Path("/work/shared/data/real/visp_eye_to_hand_apriltag")
+DATA = Path(os.environ["VISION_CALIB_SHARED_DATA"]) / "real" / "visp_eye_to_hand_apriltag"  # tests/conftest.py
 pytestmark = pytest.mark.skipif(not DATA.is_dir(), reason="real ViSP data not available")
 
 TAG = TargetSpec(kind="apriltag_grid", name="franka_tag36h11_10", rows=1, cols=1, dictionary="DICT_APRILTAG_36h11",

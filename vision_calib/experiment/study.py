@@ -31,7 +31,15 @@ A..H: the scene's robot is replaced by ``robot.variant(letter)`` of the model-12
 are model 31, the free mask follows), ``model`` ("12"|"31", H4), ``trial`` (serial scenes whose
 robot file has ``trials``, e.g. the thesis' chapter 3-4 experiments: the truth is the trial's
 deviation vector, and when the scene's poses are ``kind: configurations`` they become the trial's
-own configuration set), and for mode images only
+own configuration set), ``pose_selection`` (mode synthetic: ``random`` = the default, a random
+subset of ``n_poses`` drawn per repetition; ``D`` | ``E`` = the ``n_poses`` poses of the scene's
+pose pool -- the whole grid81 / configuration set, or for ``kind: random`` the scene's ``count``
+poses drawn with repetition 0's pose stream -- that maximise log det (D-optimal, Borm-Menq O1) or
+the smallest singular value (E, O3) of the scaled whitened identification Jacobian of the
+identifiable parameters, ``identify.pose_selection.select_poses``; computed at the nominal
+geometry with exact measurements weighted by the cell's noise sigmas, so it never sees the truth
+or the noise draws: the subset is the same in every repetition, the noise still varies), and for
+mode images only
 ``noise_grey``, ``blur_px`` (sensor effects) and ``frames`` (frames per pose).
 
 Reproducibility. A run = (cell, repetition) is a pure function of the spec, the cell's values and
@@ -104,7 +112,9 @@ from ..io.atomic import write_bytes_atomic, write_json_atomic, write_text_atomic
 RUN_FORMAT = "study-run-1"
 MODES = ("synthetic", "images")
 OUTPUTS = ("parameters", "accuracy", "criteria", "condition")
-AXES_ALL = ("n_poses", "sigma_mm", "sigma_deg", "method", "residual", "variant", "model", "trial")
+AXES_ALL = ("n_poses", "sigma_mm", "sigma_deg", "method", "residual", "variant", "model", "trial", "pose_selection")
+#: pose_selection values: random subset (default) or optimal design (identify.pose_selection criterion)
+POSE_SELECTIONS = ("random", "D", "E")
 AXES_IMAGES = ("noise_grey", "blur_px", "frames")
 ACCURACY_KEYS = ("position_rms_mm", "position_max_mm", "rotation_rms_deg")
 CRITERIA_KEYS = ("V1_rad", "V2_rad", "V3_m")
@@ -176,9 +186,11 @@ def _convert(spec_path, key, axis, value, mode):
         raise ConfigError(f"{where}: {axis} expects {kind}, got {value!r}") from None
     v = str(value)
     choices = {"method": ("lse", "ekf", "igm"), "residual": ("pose", "position", "joint"),
-               "variant": tuple("ABCDEFGH"), "model": ("12", "31")}[axis]
+               "variant": tuple("ABCDEFGH"), "model": ("12", "31"), "pose_selection": POSE_SELECTIONS}[axis]
     if axis == "variant":
         v = v.upper()
+    if axis == "pose_selection":
+        v = v.upper() if v.upper() in ("D", "E") else v.lower() if v.lower() == "random" else v
     if v not in choices:
         raise ConfigError(f"{where}: unknown {axis} {value!r} (expected one of {', '.join(choices)})")
     return v
@@ -291,6 +303,9 @@ def _check_cells(spec: StudySpec) -> None:
             if res not in ok:
                 raise ConfigError(f"{_axis_where(spec, 'residual')}: residual {res!r} does not apply to the "
                                   f"{sc.kind} scene {base.path.name} (use {' or '.join(ok)})")
+        if s.get("pose_selection", "random") != "random" and spec.mode != "synthetic":
+            raise ConfigError(f"{_axis_where(spec, 'pose_selection')}: pose_selection {s['pose_selection']!r} "
+                              f"needs mode: synthetic (this study is {spec.mode}; use random)")
         if s.get("method") == "igm" and sc.kind != "h4":
             raise ConfigError(f"{_axis_where(spec, 'method')}: method 'igm' is the H4 inverse-model method "
                               f"(scene {base.path.name} is {sc.kind}; use lse or ekf)")
@@ -433,6 +448,49 @@ def _scene_for(scene_path: str, variant, model, spec_hash: str = "", trial=None)
     return scene_with_trial(scene_with(_load_scene_cached(scene_path, spec_hash), variant, model), trial)
 
 
+@functools.lru_cache(maxsize=32)
+def _selected_poses(scene_path: str, variant, model, spec_hash: str, trial, residual: str, n, criterion: str,
+                    sigma_t_m: float, sigma_r_rad: float, pool_seed: int) -> np.ndarray:
+    """Poses (n, .) chosen by ``criterion`` from the scene's pose pool (cached per process): the
+    pool is ``scene_poses(scene, rngs(pool_seed)[0])`` (all of a grid / configuration set), the
+    problem is built at the nominal geometry from exact measurements weighted by the given pose
+    sigmas and restricted to the parameters identifiable from the whole pool."""
+    from ..identify import analyze
+    from ..identify.pose_selection import select_poses
+    from .scene import scene_poses
+    from .setup import pose_cov_from_sigmas
+    from .synthetic import BASE_SELECTION, rngs
+
+    scene = _scene_for(scene_path, variant, model, spec_hash, trial)
+    setup = scene.setup
+    pool = scene_poses(scene, rngs(pool_seed)[0])
+    meas = setup.synthetic_measurements(pool, setup.params.nominal, np.random.default_rng(0))
+    meas = replace(meas, cov=pose_cov_from_sigmas(len(pool), sigma_t_m, sigma_r_rad))
+    problem = setup.problem(meas, residual)
+    rep = analyze(problem, selection=BASE_SELECTION)
+    problem = problem.with_params(problem.params.only_free(rep.base_parameters))
+    idx = select_poses(problem, len(pool) if n is None else int(n), criterion)
+    out = np.asarray(pool)[idx]
+    out.setflags(write=False)
+    return out
+
+
+def _cell_poses(spec: StudySpec, scene, s: dict, seed: int, residual: str) -> np.ndarray:
+    """Identification poses of a run: a random subset (pose stream of the run seed) or, with
+    ``pose_selection`` D/E, the cell's deterministic optimal subset of the scene's pose pool."""
+    from .scene import scene_poses
+    from .synthetic import rngs
+
+    crit = s.get("pose_selection", "random")
+    if crit == "random":
+        return scene_poses(scene, rngs(seed)[0], s.get("n_poses"))
+    st = scene.measurement["sigma_t_m"] if s.get("sigma_mm") is None else s["sigma_mm"] * 1e-3
+    sr = scene.measurement["sigma_r_rad"] if s.get("sigma_deg") is None else float(np.radians(s["sigma_deg"]))
+    return np.array(_selected_poses(str(spec.scene_path), s.get("variant"), s.get("model"), spec.hash,
+                                    s.get("trial"), residual, s.get("n_poses"), crit, float(st), float(sr),
+                                    run_seed(spec.seed, 0)))
+
+
 # ----------------------------------------------------------------------------- one run
 def run_cell(spec: StudySpec, cell: dict, repetition: int) -> dict:
     """One run (cell x repetition): a pure function of its arguments. Returns the row dict
@@ -470,12 +528,11 @@ def run_cell(spec: StudySpec, cell: dict, repetition: int) -> dict:
 
 def _run_synthetic(spec: StudySpec, scene, s: dict, seed: int) -> dict:
     """Synthetic run (experiment.synthetic.run_synthetic) -> the fields run_cell records."""
-    from .scene import scene_poses, true_parameters
-    from .synthetic import STREAM_TRUTH, identifiability_report, parameters_table, rngs, run_synthetic
+    from .scene import true_parameters
+    from .synthetic import STREAM_TRUTH, identifiability_report, parameters_table, run_synthetic
 
     residual = s.get("residual") or scene.identification["residual"]
-    rp, _, _ = rngs(seed)
-    poses = scene_poses(scene, rp, s.get("n_poses"))
+    poses = _cell_poses(spec, scene, s, seed, residual)
     rep, _ = identifiability_report(scene, poses, residual)
     base = scene.setup.params.mask(rep.base_parameters)
     if spec.truth_variant is not None:
@@ -694,14 +751,13 @@ PARAMETER_COLUMNS = ("parameter", "kind", "true_deviation", "identifiable", "noi
 def _cell_reference(spec: StudySpec, cell: dict):
     """(scene, x_true (n,), identifiability report, noise-free identified vector (n,) or None) of a
     cell, on the poses of repetition 0."""
-    from .scene import scene_poses
-    from .synthetic import identifiability_report, rngs, run_synthetic, scene_truth
+    from .synthetic import identifiability_report, run_synthetic, scene_truth
 
     s = {**spec.settings, **cell}
     scene = _scene_for(str(spec.scene_path), s.get("variant"), s.get("model"), spec.hash, s.get("trial"))
     residual = s.get("residual") or scene.identification["residual"]
     seed = run_seed(spec.seed, 0)
-    poses = scene_poses(scene, rngs(seed)[0], s.get("n_poses"))
+    poses = _cell_poses(spec, scene, s, seed, residual)
     rep, _ = identifiability_report(scene, poses, residual)
     x_true = scene_truth(scene)
     try:
