@@ -20,11 +20,44 @@ from pathlib import Path
 from .errors import VisionCalibError  # noqa: E402
 
 
+def _count(text: str) -> int:
+    """argparse type: an integer >= 1."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {v}")
+    return v
+
+
+def _seed(text: str) -> int:
+    """argparse type: an integer >= 0."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {v}")
+    return v
+
+
+def _sigma(text: str) -> float:
+    """argparse type: a finite number >= 0."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (v >= 0 and v < float("inf")):
+        raise argparse.ArgumentTypeError(f"expected a finite number >= 0, got {text}")
+    return v
+
+
 def _add_common(p, poses=True):
     p.add_argument("scene", help="scene YAML file (see scenes/)")
     if poses:
-        p.add_argument("--poses", type=int, default=None, help="number of identification poses (default: scene's)")
-    p.add_argument("--seed", type=int, default=None, help="random seed (default: scene's, else 0)")
+        p.add_argument("--poses", type=_count, default=None, help="number of identification poses (default: scene's)")
+    p.add_argument("--seed", type=_seed, default=None, help="random seed (default: scene's, else 0)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
 
 
@@ -42,20 +75,20 @@ def build_parser() -> argparse.ArgumentParser:
     _add_common(p)
     p.add_argument("--method", choices=["lse", "ekf", "igm"], default=None)
     p.add_argument("--residual", choices=["pose", "position", "joint"], default=None)
-    p.add_argument("--sigma-mm", type=float, default=None, help="translation noise per component [mm]")
-    p.add_argument("--sigma-deg", type=float, default=None, help="rotation noise per component [deg]")
+    p.add_argument("--sigma-mm", type=_sigma, default=None, help="translation noise per component [mm]")
+    p.add_argument("--sigma-deg", type=_sigma, default=None, help="rotation noise per component [deg]")
 
     p = sub.add_parser("simulate", help="end-to-end: render + effects + measure + identify + evaluate")
     _add_common(p)
     p.add_argument("--out", required=True, help="output folder (report.json, plots, calibrated model)")
-    p.add_argument("--frames", type=int, default=None, help="frames per pose (default: scene's)")
+    p.add_argument("--frames", type=_count, default=None, help="frames per pose (default: scene's)")
     p.add_argument("--method", choices=["lse", "ekf", "igm"], default=None)
     p.add_argument("--export-recording", default=None, metavar="DIR", help="also write a recorded folder")
-    p.add_argument("--workers", type=int, default=None, help="processes for rendering/measurement (default: cores)")
+    p.add_argument("--workers", type=_count, default=None, help="processes for rendering/measurement (default: cores)")
 
     p = sub.add_parser("demo", help="the default scene end to end (README's main command)")
     p.add_argument("--out", default="out/demo", help="output folder (default out/demo)")
-    p.add_argument("--seed", type=int, default=None)
+    p.add_argument("--seed", type=_seed, default=None)
     p.add_argument("--json", action="store_true")
 
     p = sub.add_parser("process", help="measure -> identify -> report on a recorded image folder")
@@ -67,20 +100,20 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("study", help="parameter sweep x Monte Carlo (local processes or a Dask cluster)")
     p.add_argument("spec", help="study YAML (see scenes/studies/)")
     p.add_argument("--out", required=True)
-    p.add_argument("--workers", type=int, default=None)
+    p.add_argument("--workers", type=_count, default=None)
     p.add_argument("--scheduler", default=None, help="Dask scheduler address (tcp://host:port)")
     p.add_argument("--json", action="store_true")
 
     p = sub.add_parser("import-visp", help="convert a ViSP eye-to-hand folder into a recorded folder")
     p.add_argument("src")
     p.add_argument("--out", required=True)
-    p.add_argument("--tag-size-m", type=float, default=None, help="tag side [m] (default: from apriltag-data.txt)")
-    p.add_argument("--tag-id", type=int, default=None, help="tag id (default: detected in the first image)")
+    p.add_argument("--tag-size-m", type=_sigma, default=None, help="tag side [m] (default: from apriltag-data.txt)")
+    p.add_argument("--tag-id", type=_seed, default=None, help="tag id (default: detected in the first image)")
 
     p = sub.add_parser("target", help="export a printable target image")
     p.add_argument("target", help="target YAML (see targets/)")
     p.add_argument("--out", required=True, help="PNG or PDF file")
-    p.add_argument("--dpi", type=int, default=300)
+    p.add_argument("--dpi", type=_count, default=300)
     return ap
 
 
@@ -102,7 +135,7 @@ def _dispatch(args) -> int:
             sigma_mm=args.sigma_mm, sigma_deg=args.sigma_deg, seed=args.seed,
         )
         print(to_json(out) if args.json else _summary_synthetic(out))
-        return 0
+        return _status(out["converged"])
     if args.command in ("simulate", "demo"):
         from .experiment.simulate import run_simulation, DEFAULT_SCENE
 
@@ -114,13 +147,13 @@ def _dispatch(args) -> int:
             workers=getattr(args, "workers", None), progress=not args.json,
         )
         print(to_json(report) if args.json else report["summary_text"])
-        return 0
+        return _status(report["identification"]["converged"])
     if args.command == "process":
         from .experiment.process import process_folder
 
         report = process_folder(args.folder, out_dir=args.out, method=args.method, progress=not args.json)
         print(to_json(report) if args.json else report["summary_text"])
-        return 0
+        return _status(report["identification"]["converged"])
     if args.command == "study":
         from .experiment.study import run_study
 
@@ -140,6 +173,18 @@ def _dispatch(args) -> int:
         print(f"wrote {path}")
         return 0
     raise AssertionError(args.command)
+
+
+#: exit code when the outputs were written but the identification did not converge
+EXIT_NOT_CONVERGED = 3
+
+
+def _status(converged: bool) -> int:
+    if converged:
+        return 0
+    print("vision-calib: warning: the identification did not converge (outputs written, flagged converged=false)",
+          file=sys.stderr)
+    return EXIT_NOT_CONVERGED
 
 
 def _summary_identifiability(out: dict) -> str:
@@ -173,6 +218,10 @@ def main(argv=None) -> int:
         return exc.exit_code
     except BrokenPipeError:  # output piped into `head` & co.
         return 0
+    except OSError as exc:  # output folder not writable, a file where a folder should be, ...
+        where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
+        print(f"vision-calib: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print("vision-calib: interrupted (results already written are kept)", file=sys.stderr)
         return 130

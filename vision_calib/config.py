@@ -31,7 +31,11 @@ def load_yaml(path: str | os.PathLike) -> dict:
         with open(p, encoding="utf-8") as fh:
             data = yaml.safe_load(fh)
     except yaml.YAMLError as exc:
-        raise ConfigError(f"{p}: invalid YAML ({exc})") from None
+        raise ConfigError(f"{p}: invalid YAML ({' '.join(str(exc).split())})") from None
+    except UnicodeDecodeError:
+        raise ConfigError(f"{p}: not a UTF-8 text file") from None
+    except OSError as exc:
+        raise ConfigError(f"{p}: cannot read ({exc.strerror})") from None
     if not isinstance(data, dict):
         raise ConfigError(f"{p}: expected a mapping at the top level, got {type(data).__name__}")
     return data
@@ -76,6 +80,8 @@ class Section:
                 raise self.error(key, f"expected true/false, got {val!r}")
             if typ in (list, dict) and not isinstance(val, typ):
                 raise self.error(key, f"expected a {'list' if typ is list else 'mapping'}, got {val!r}")
+            if typ is int and isinstance(val, float) and not val.is_integer():
+                raise self.error(key, f"expected an integer, got {val!r}")
             try:
                 val = typ(val)
             except (TypeError, ValueError):
@@ -91,6 +97,27 @@ class Section:
         if val is not None and val is not default and not val > 0:
             raise self.error(key, f"expected a positive value, got {val!r}")
         return val
+
+    def nonnegative(self, key: str, typ=float, default: Any = _MISSING):
+        val = self.get(key, typ, default)
+        if val is not None and val is not default and not val >= 0:
+            raise self.error(key, f"expected a value >= 0, got {val!r}")
+        return val
+
+    def floats(self, key: str, n: int | None = None, default: Any = _MISSING):
+        """A list of finite numbers (n of them when n is given) as a float64 array."""
+        import numpy as np
+
+        val = self.get(key, list, default)
+        if val is default:
+            return val
+        try:
+            arr = np.asarray(val, dtype=float)
+        except (TypeError, ValueError):
+            raise self.error(key, f"expected a list of numbers, got {val!r}") from None
+        if arr.ndim != 1 or (n is not None and arr.size != n) or not np.all(np.isfinite(arr)):
+            raise self.error(key, f"expected a list of {n if n is not None else ''} finite numbers, got {val!r}".replace("  ", " "))
+        return arr
 
     def section(self, key: str, default: Any = _MISSING) -> "Section":
         if key not in self.data or self.data[key] is None:

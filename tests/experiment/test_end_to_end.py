@@ -102,3 +102,37 @@ def test_missing_poses_csv_names_the_file(exported, tmp_path, capsys):
     (rec / "poses.csv").write_text("\n".join(lines) + "\n")
     assert main(["process", str(rec), "--out", str(tmp_path / "out")]) == 2
     assert "line 4" in capsys.readouterr().err
+
+
+def test_recording_contradicting_the_scene_is_refused(exported, tmp_path, capsys):
+    d, _ = exported
+    rec = tmp_path / "rec"
+    shutil.copytree(d / "rec", rec)
+    y = (rec / "recording.yaml").read_text()
+    (rec / "recording.yaml").write_text(y.replace("camera_mount: base", "camera_mount: fixed"))
+    assert main(["process", str(rec), "--out", str(tmp_path / "out")]) == 2
+    assert "camera_mount" in capsys.readouterr().err
+
+
+def test_export_into_a_used_folder_is_refused_before_rendering(exported, capsys):
+    d, _ = exported
+    assert main(["simulate", H4, "--out", str(d / "again"), "--poses", "20", "--export-recording", str(d / "rec")]) == 2
+    assert "new or empty folder" in capsys.readouterr().err
+
+
+def test_failed_identification_keeps_the_measurements(tmp_path, capsys):
+    # a sensor so noisy that no target is detected: measurement runs, identification cannot
+    from vision_calib.experiment.scene import SCENES_DIR
+
+    text = (SCENES_DIR / "rx90_eye_in_hand.yaml").read_text()
+    text = text.replace("robot: robots/rx90.yaml", f"robot: {SCENES_DIR / 'robots/rx90.yaml'}")
+    text = text.replace("target: ../targets/charuco_a5.yaml", f"target: {SCENES_DIR.parent / 'targets/charuco_a5.yaml'}")
+    text = text.replace("effects: {noise_grey: 2.0, blur_px: 0.6}", "effects: {noise_grey: 300.0, blur_px: 6.0}")
+    scene = tmp_path / "noisy.yaml"
+    scene.write_text(text)
+    out = tmp_path / "out"
+    assert main(["simulate", str(scene), "--out", str(out), "--poses", "8", "--frames", "1", "--workers", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "usable poses" in err and "rejected" in err
+    kept = json.loads((out / "measurements.json").read_text())
+    assert kept["n_poses"] == 8 and kept["n_valid"] < 6

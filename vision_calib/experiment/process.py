@@ -15,10 +15,10 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ConfigError, DataError, IdentifiabilityError
-from ..io.atomic import write_json_atomic
+from ..io.atomic import write_json_atomic, write_text_atomic
 from ..io.recording import read_recording
 from .setup import Measurements
-from .simulate import REPORT_VERSION, identify_measurements, summary_text
+from .simulate import REPORT_VERSION, identify_measurements, rejection_summary, summary_text
 
 
 def measure_recording(rec, progress=False):
@@ -37,7 +37,8 @@ def measure_recording(rec, progress=False):
             out.append(PoseMeasurement(pid, False, f"no images in images/{pid}/", np.full((4, 4), np.nan),
                                        np.full((6, 6), np.nan), 0, 0, float("nan")))
             continue
-        pm, _ = measure_images([str(f) for f in files], rec.target, rec.camera, pose_id=pid, config=MeasureConfig())
+        pm, _ = measure_images([str(f) for f in files], rec.target, rec.camera, pose_id=pid,
+                               config=MeasureConfig(mode=rec.averaging))
         out.append(pm)
     return out
 
@@ -69,6 +70,9 @@ def process_folder(folder, out_dir, method=None, progress=False) -> dict:
 
     scene = load_scene(rec.scene_path)
     setup = scene.setup
+    if rec.camera_mount != setup.mount:
+        raise ConfigError(f"{rec.folder / 'recording.yaml'}: camera_mount: {rec.camera_mount!r} but the scene "
+                          f"{scene.path} has mount {setup.mount!r}")
     if setup.camera is not None and setup.camera.size != rec.camera.size:
         raise DataError(f"{rec.folder}: recording camera {rec.camera.size} differs from the scene's {setup.camera.size}")
     from dataclasses import replace
@@ -79,15 +83,23 @@ def process_folder(folder, out_dir, method=None, progress=False) -> dict:
     n_joints = setup.chain.n_joints if setup.kind == "serial" else 4
     if rec.poses.shape[1] != n_joints:
         raise DataError(f"{rec.folder / 'poses.csv'}: {rec.poses.shape[1]} joint columns, the robot has {n_joints}")
+    if setup.kind == "serial" and setup.chain.joint_limits is not None:
+        lim = setup.chain.joint_limits
+        bad = np.argwhere((rec.poses < lim[:, 0]) | (rec.poses > lim[:, 1]))
+        if bad.size:
+            k, j = (int(v) for v in bad[0])
+            raise DataError(
+                f"{rec.folder / 'poses.csv'}: pose {rec.pose_ids[k]!r} joint q{j + 1} = {np.degrees(rec.poses[k, j]):.4g} deg "
+                f"is outside the robot's limits [{np.degrees(lim[j, 0]):.4g}, {np.degrees(lim[j, 1]):.4g}] deg "
+                f"(wrong angle unit in recording.yaml 'units'?)")
     meas = Measurements(q, q, T, cov, labels)
     method = method or scene.identification["method"]
     residual = scene.identification["residual"]
-    n_min = 2
-    if len(ok) < n_min:
-        raise IdentifiabilityError(f"{rec.folder}: only {len(ok)} usable poses of {len(pms)} (see measurements.json "
-                                   "for the reasons); identification needs more")
+    if len(ok) < 2:
+        raise IdentifiabilityError(f"{rec.folder}: only {len(ok)} usable poses of {len(pms)} "
+                                   f"({rejection_summary(pms)}); identification needs more")
     t1 = time.perf_counter()
-    result, problem, params, rep = identify_measurements(scene, meas, method, residual)
+    result, problem, params, rep = identify_measurements(scene, meas, method, residual, context=rejection_summary(pms))
     t_id = time.perf_counter() - t1
     from .synthetic import parameters_table, report_to_json
 
@@ -102,6 +114,7 @@ def process_folder(folder, out_dir, method=None, progress=False) -> dict:
         "settings": {"poses": len(pms), "frames": rec.frames_per_pose, "method": method, "residual": residual,
                      "camera": rec.camera.to_dict()},
         "measurements": meas_block,
+        "warnings": list(rec.notes),
         "identifiability": report_to_json(rep),
         "parameters": parameters_table(ps.names, ps.nominal, None, result),
         "identification": result.to_dict(),
@@ -126,6 +139,7 @@ def _summary(report) -> str:
     m = report["measurements"]
     ident = report["identification"]
     lines = [f"{report['folder']}: {m['n_valid']} of {m['n_poses']} poses usable, {m['n_rejected']} rejected"]
+    lines += [f"warning: {w}" for w in report.get("warnings", [])]
     for rj in m["rejected"][:10]:
         lines.append(f"  pose {rj['pose_id']}: {rj['reason']}")
     idf = report.get("identifiability")
@@ -173,6 +187,7 @@ def _process_handeye(rec, out, pms_ok, ok, meas_block, t0) -> dict:
                      + ", ".join(f"{v:.2f}" for v in t["rpy_deg"]) + " deg (std "
                      + ", ".join(f"{v:.2f}" for v in t["std_rot_deg"]) + ")")
     report["summary_text"] = _summary(report) + "\n" + "\n".join(lines)
+    write_text_atomic(out / "summary.txt", report["summary_text"] + "\n")
     write_json_atomic(out / "report.json", report)
     return report
 

@@ -85,9 +85,7 @@ def _camera(sec: Section) -> CameraIntrinsics:
     if "focal_mm" in sec:
         cam = CameraIntrinsics.from_focal_mm(sec.get("width", int), sec.get("height", int), sec.positive("focal_mm"),
                                              sec.positive("pixel_um"))
-        d = sec.get("dist", list, [0, 0, 0, 0, 0])
-        if len(d) != 5:
-            raise sec.error("dist", f"expected 5 coefficients (k1, k2, p1, p2, k3), got {d!r}")
+        d = sec.floats("dist", 5, np.zeros(5))
         return CameraIntrinsics(cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy, tuple(float(v) for v in d))
     return CameraIntrinsics.from_dict(sec.data, where=sec.where())
 
@@ -146,9 +144,9 @@ def load_scene(path) -> Scene:
     measurement = {
         "frames": meas.positive("frames", int, 10),
         "averaging": meas.get("averaging", str, "corners", choices=("corners", "poses")),
-        "sigma_t_m": meas.get("sigma_mm", float, 0.2) * 1e-3,
-        "sigma_r_rad": np.radians(meas.get("sigma_deg", float, 0.03)),
-        "sigma_q_rad": np.radians(meas.get("sigma_q_deg", float, 0.0)),
+        "sigma_t_m": meas.nonnegative("sigma_mm", float, 0.2) * 1e-3,
+        "sigma_r_rad": np.radians(meas.nonnegative("sigma_deg", float, 0.03)),
+        "sigma_q_rad": np.radians(meas.nonnegative("sigma_q_deg", float, 0.0)),
     }
     ident = top.section("identification", default={})
 
@@ -197,8 +195,8 @@ def load_scene(path) -> Scene:
         params = _apply_free(chain.params, ident)
         ps = top.section("poses", default={})
         n = chain.n_joints
-        center = np.asarray(ps.get("center", list, [0.0] * n), float) * Af
-        spread = np.asarray(ps.get("spread", list, [20.0] * n), float) * Af
+        center = ps.floats("center", n, np.zeros(n)) * Af
+        spread = ps.floats("spread", n, np.full(n, 20.0)) * Af
         if center.shape != (n,) or spread.shape != (n,):
             raise ps.error("center", f"center and spread need {n} joint values each")
         outline = None
@@ -221,7 +219,7 @@ def load_scene(path) -> Scene:
         identification["method"] = "igm"
     tr = top.section("truth", default={})
     truth = {
-        "seed": tr.get("seed", int, 0),
+        "seed": tr.nonnegative("seed", int, 0),
         "sigma_length_m": tr.get("sigma_length_mm", float, 0.5) * 1e-3,
         "sigma_angle_rad": np.radians(tr.get("sigma_angle_deg", float, 0.05)),
         "perturb": tr.get("perturb", str, "base", choices=("base", "free")),
@@ -234,10 +232,10 @@ def load_scene(path) -> Scene:
         except ParameterError as exc:
             raise tr.error(f"deviations.{k}", str(exc)) from None
         f = Lf if setup.params.kinds[i] == "length" else Af
-        truth["deviations"][str(k)] = float(v) * f
+        truth["deviations"][str(k)] = tr.section("deviations").get(k, float) * f
     ps = top.section("poses", default={})
     poses = {"kind": ps.get("kind", str, "random", choices=("random", "grid81", "configurations")),
-             "count": ps.get("count", int, None), "configurations": ps.get("configurations", str, None)}
+             "count": ps.positive("count", int, None), "configurations": ps.get("configurations", str, None)}
     vs = top.section("validation", default={})
     validation = {"kind": vs.get("kind", str, "random", choices=("random", "configurations")),
                   "count": vs.positive("count", int, 50), "configurations": vs.get("configurations", str, None)}
@@ -251,11 +249,15 @@ def scene_poses(scene: Scene, rng: np.random.Generator, n: int | None = None, wh
     spec = scene.poses if which == "poses" else scene.validation
     setup = scene.setup
     kind = spec["kind"]
+    if n is not None and int(n) < 1:
+        raise ConfigError(f"{scene.path}: asked for {n} {which}: need at least 1")
     n = n or spec.get("count")
     if kind == "grid81":
         if setup.kind != "h4":
             raise ConfigError(f"{scene.path}: {which}.kind: grid81 is the H4 pose grid (this scene is serial)")
         X = setup.robot.pose_grid()
+        if n is not None and n > len(X):
+            raise ConfigError(f"{scene.path}: {which}: {n} poses asked, the grid has {len(X)}")
         if n is not None and n < len(X):
             X = X[np.sort(rng.choice(len(X), size=n, replace=False))]
         return X
@@ -265,6 +267,8 @@ def scene_poses(scene: Scene, rng: np.random.Generator, n: int | None = None, wh
         if conf not in confs:
             raise ConfigError(f"{scene.path}: {which}.configurations: unknown set {conf!r} (robot file has {sorted(confs)})")
         q = confs[conf]["q"]
+        if n is not None and n > len(q):
+            raise ConfigError(f"{scene.path}: {which}: {n} poses asked, configuration set {conf!r} has {len(q)}")
         return q if n is None else q[:n]
     # validation poses are evaluated through the kinematics only: they need not see the target
     return setup.sample_poses(rng, n or 30, check_view=(which == "poses"))

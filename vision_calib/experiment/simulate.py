@@ -123,6 +123,17 @@ def measure_poses(scene: Scene, T_cam_targets, labels, seed: int, frames: int, w
     return results, stage
 
 
+def rejection_summary(pms) -> str:
+    """'k of n poses rejected: reason (count); ...' for a list of PoseMeasurement."""
+    from collections import Counter
+
+    bad = [pm.reason for pm in pms if not pm.valid]
+    if not bad:
+        return f"0 of {len(pms)} poses rejected"
+    top = "; ".join(f"{r} ({c})" for r, c in Counter(bad).most_common(3))
+    return f"{len(bad)} of {len(pms)} poses rejected: {top}"
+
+
 def _to_measurements(setup, poses, pms, x_true_joints) -> tuple[Measurements, list[int]]:
     ok = [i for i, pm in enumerate(pms) if pm.valid]
     T = np.array([pms[i].T_cam_target for i in ok]).reshape(-1, 4, 4)
@@ -139,6 +150,12 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
 
     t_start = time.perf_counter()
     scene = scene if isinstance(scene, Scene) else load_scene(scene)
+    if out_dir is not None:
+        Path(out_dir).mkdir(parents=True, exist_ok=True)  # fail now, not after rendering
+    if export_recording is not None:
+        ex = Path(export_recording)
+        if ex.exists() and (not ex.is_dir() or any(ex.iterdir())):
+            raise DataError(f"{ex}: --export-recording needs a new or empty folder (frames of another run would mix in)")
     if overrides:
         scene = apply_overrides(scene, overrides)
     setup = scene.setup
@@ -173,8 +190,16 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
 
     meas, ok = _to_measurements(setup, poses, pms, q_true)
     rejected = [{"pose_id": pm.pose_id, "reason": pm.reason} for pm in pms if not pm.valid]
+    if out_dir is not None:  # kept even if identification fails below
+        from ..io.atomic import write_json_atomic
+
+        write_json_atomic(Path(out_dir) / "measurements.json",
+                          {"version": REPORT_VERSION, "scene": scene.name, "seed": seed, "n_poses": len(pms),
+                           "n_valid": len(ok), "n_rejected": len(rejected), "rejected": rejected,
+                           "poses": [pm.to_dict() for pm in pms]})
     t = time.perf_counter()
-    result, problem, params, _ = identify_measurements(scene, meas, method, residual, base)
+    result, problem, params, _ = identify_measurements(scene, meas, method, residual, base,
+                                                       context=rejection_summary(pms))
     timings["identify"] = time.perf_counter() - t
 
     # measurement accuracy vs ground truth (only in simulation)
@@ -231,7 +256,7 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
     return report
 
 
-def identify_measurements(scene: Scene, meas: Measurements, method, residual, base=None):
+def identify_measurements(scene: Scene, meas: Measurements, method, residual, base=None, context: str = ""):
     """Identification of the scene's identifiable free parameters from measurements: (result, problem,
     params, identifiability report or None when ``base`` (n,) bool was given)."""
     from ..errors import IdentifiabilityError
@@ -242,14 +267,20 @@ def identify_measurements(scene: Scene, meas: Measurements, method, residual, ba
     setup = scene.setup
     rep = None
     if base is None:
-        rep = analyze(setup.problem(meas, residual), selection=BASE_SELECTION)
+        if len(meas.T_cam_target) == 0:
+            raise IdentifiabilityError(f"{scene.name}: no usable pose" + (f" ({context})" if context else ""))
+        try:
+            rep = analyze(setup.problem(meas, residual), selection=BASE_SELECTION)
+        except IdentifiabilityError as exc:
+            raise IdentifiabilityError(f"{scene.name}: {exc}" + (f" ({context})" if context else "")) from None
         base = setup.params.mask(rep.base_parameters)
     params = setup.params.only_free([n for n, b in zip(setup.params.names, base) if b])
     problem = setup.problem(meas, residual, params=params)
     if problem.n_obs * problem.m < params.n_free:
         raise IdentifiabilityError(
             f"{scene.name}: only {problem.n_obs} usable poses ({problem.n_obs * problem.m} equations) for "
-            f"{params.n_free} identifiable parameters: need at least {int(np.ceil(params.n_free / problem.m))} poses")
+            f"{params.n_free} identifiable parameters: need at least {int(np.ceil(params.n_free / problem.m))} poses"
+            + (f" ({context})" if context else ""))
     return identify(problem, method), problem, params, rep
 
 

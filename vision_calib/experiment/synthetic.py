@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 
-from ..errors import IdentifiabilityError
+from ..errors import ConfigError, IdentifiabilityError
 from ..identify import analyze, solve_ekf, solve_lse
 from .scene import Scene, load_scene, scene_poses, true_parameters
 from .setup import Measurements
@@ -123,6 +123,8 @@ def run_synthetic(scene, method=None, residual=None, n_poses=None, sigma_t_m=Non
     scene = _scene(scene)
     setup = scene.setup
     method = method or scene.identification["method"]
+    if method == "igm" and setup.kind != "h4":
+        raise ConfigError(f"{scene.path}: method 'igm' is the H4 inverse-model method; use lse or ekf for a serial arm")
     residual = residual or scene.identification["residual"]
     st = scene.measurement["sigma_t_m"] if sigma_t_m is None else sigma_t_m
     sr = scene.measurement["sigma_r_rad"] if sigma_r_rad is None else sigma_r_rad

@@ -36,6 +36,8 @@ def calibrated_model_dict(setup, x, std=None, free=None) -> dict:
     d = {"format": FORMAT, "kind": setup.kind, "units": {"length": "m", "angle": "rad"}}
     if setup.kind == "h4":
         d["model"] = setup.robot.model
+        d["variant"] = setup.meta.get("variant")  # E..H share one arm length: the loader needs it
+        d["shared_L"] = bool(setup.robot.shared_L)
         d["robot"] = str(Path(setup.meta.get("robot_path", "")).resolve()) if setup.meta.get("robot_path") else None
         d["tilts"] = {"R_BC0": setup.robot.R_BC0.tolist(), "R_ME0": setup.robot.R_ME0.tolist()}
     else:
@@ -70,6 +72,11 @@ def load_calibrated_model(path):
         from ..kinematics.h4 import load_h4_robot
 
         robot = load_h4_robot(robot_path, model=str(top.get("model", str, "12")))
+        variant = top.get("variant", str, None)
+        if variant:
+            robot = robot.variant(variant)
+        elif top.get("shared_L", bool, False) and not robot.shared_L:
+            robot = robot._share_L()
         tilts = top.section("tilts", default={})
         from dataclasses import replace
 

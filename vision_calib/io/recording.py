@@ -21,6 +21,7 @@ recording.yaml::
     scene_name: h4_vision                   # fallback: the shipped scenes/<scene_name>.yaml
     poses: joints | flange_pose
     frames_per_pose: 10
+    averaging: corners                      # how the frames of a pose are averaged (measure.MeasureConfig.mode)
 """
 
 from __future__ import annotations
@@ -58,6 +59,8 @@ class Recording:
     images: dict
     frames_per_pose: int
     extra_files: tuple[str, ...] = ()
+    averaging: str = "corners"
+    notes: tuple[str, ...] = ()
 
 
 def _target_dict(spec) -> dict:
@@ -86,6 +89,7 @@ def write_recording(folder, scene, poses, joints, frames: int) -> Path:
         "scene_name": scene.name,  # fallback when the folder moves to another machine: scenes/<name>.yaml
         "poses": "joints",
         "frames_per_pose": int(frames),
+        "averaging": scene.measurement["averaging"],
     }
     write_text_atomic(folder / "recording.yaml", yaml.safe_dump(doc, sort_keys=False))
     joints = np.asarray(joints, float)
@@ -118,6 +122,7 @@ def read_recording(folder) -> Recording:
     tsec = top.section("target")
     target = target_from_dict(tsec.data, where=tsec.where())
     scene_path = None
+    notes = []
     if "scene" in top:
         p = Path(top.get("scene", str))
         p = p if p.is_absolute() else ypath.parent / p
@@ -127,15 +132,17 @@ def read_recording(folder) -> Recording:
             alt = SCENES_DIR / f"{top.get('scene_name', str, '')}.yaml"
             if not alt.is_file():
                 raise top.error("scene", f"file not found: {p} (nor {alt})")
+            notes.append(f"recording.yaml scene {p} not found: used the shipped scene {alt} (same name)")
             p = alt
         scene_path = p
     pose_kind = top.get("poses", str, "joints", choices=("joints", "flange_pose"))
     frames = top.positive("frames_per_pose", int, 10)
+    averaging = top.get("averaging", str, "corners", choices=("corners", "poses"))
 
     cpath = folder / "poses.csv"
     if not cpath.is_file():
         raise DataError(f"{cpath}: file not found (one row per robot pose: pose_id then joint values)")
-    with open(cpath, newline="", encoding="utf-8") as fh:
+    with open(cpath, newline="", encoding="utf-8-sig") as fh:  # -sig: spreadsheets write a BOM
         rows = [r for r in csv.reader(fh) if r and any(c.strip() for c in r)]
     if len(rows) < 2:
         raise DataError(f"{cpath}: no pose rows")
@@ -186,4 +193,5 @@ def read_recording(folder) -> Recording:
             else:
                 extra.append(str(d.relative_to(folder)))
     assert Lf in LENGTH_UNITS.values() and Af in ANGLE_UNITS.values()
-    return Recording(folder, camera, mount, target, scene_path, pose_kind, tuple(ids), poses, images, frames, tuple(extra))
+    return Recording(folder, camera, mount, target, scene_path, pose_kind, tuple(ids), poses, images, frames,
+                     tuple(extra), averaging, tuple(notes))

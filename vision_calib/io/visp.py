@@ -63,7 +63,7 @@ def read_visp_pose_yaml(path) -> np.ndarray:
     try:
         d = yaml.safe_load(path.read_text())
     except (OSError, yaml.YAMLError) as exc:
-        raise DataError(f"{path}: cannot read ViSP pose YAML ({exc})") from None
+        raise DataError(f"{path}: cannot read ViSP pose YAML ({' '.join(str(exc).split())})") from None
     try:
         v = np.asarray(d["data"], dtype=float).reshape(-1)
     except (TypeError, KeyError, ValueError) as exc:
@@ -126,6 +126,8 @@ def import_visp_eye_to_hand(src, dst, tag_m: float | None = None, tag_id: int | 
         if not m:
             raise DataError(f"{src}: tag size unknown: give tag_m (no 'size: <x> m' in apriltag-data.txt)")
         tag_m = float(m.group(1))
+    if not tag_m > 0:
+        raise DataError(f"tag size must be > 0 m, got {tag_m}")
     if tag_id is None:
         tag_id = _detect_tag_id(images[min(images)], dictionary) if images else 0
     dst.mkdir(parents=True, exist_ok=True)
