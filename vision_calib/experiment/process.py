@@ -148,6 +148,7 @@ def _summary(report) -> str:
                      + (f"; not identifiable: {', '.join(idf['non_identifiable'])}" if idf["non_identifiable"] else ""))
     lines.append(f"identification ({ident['method']}): converged={ident['converged']} iterations={ident['iterations']} "
                  f"cost {ident['cost_initial']:.4g} -> {ident['cost_final']:.4g}")
+    lines += [f"warning: {w}" for w in ident.get("warnings", [])]
     lines.append("residual RMS: " + "; ".join(f"{k} " + ", ".join(f"{v:.4g}" for v in vals)
                                               for k, vals in report["residuals"].items()))
     return "\n".join(lines)

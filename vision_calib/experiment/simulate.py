@@ -281,7 +281,33 @@ def identify_measurements(scene: Scene, meas: Measurements, method, residual, ba
             f"{scene.name}: only {problem.n_obs} usable poses ({problem.n_obs * problem.m} equations) for "
             f"{params.n_free} identifiable parameters: need at least {int(np.ceil(params.n_free / problem.m))} poses"
             + (f" ({context})" if context else ""))
-    return identify(problem, method), problem, params, rep
+    result = identify(problem, method)
+    from dataclasses import replace as _replace
+
+    extra = tuple(plausibility_warnings(params, result))
+    if extra:
+        result = _replace(result, warnings=tuple(result.warnings) + extra)
+    return result, problem, params, rep
+
+
+def plausibility_warnings(params, result, rel: float = 0.2, length_floor_m: float = 0.05,
+                          angle_limit_rad: float = 0.2) -> list[str]:
+    """Warnings for identified deviations too large to be calibration corrections: a length moved
+    by more than ``rel`` of max(|nominal|, length_floor_m), an angle by more than angle_limit_rad.
+    Typical causes: wrong units in a file, a wrong target size, a wrong robot model."""
+    out = []
+    for i in np.flatnonzero(result.free):
+        dev = result.identified[i] - params.nominal[i]
+        name = params.names[i]
+        if params.kinds[i] == "length":
+            lim = rel * max(abs(params.nominal[i]), length_floor_m)
+            if abs(dev) > lim:
+                out.append(f"{name} moved by {dev * 1e3:+.1f} mm from its nominal {params.nominal[i] * 1e3:.1f} mm: "
+                           "too large for a calibration correction (units, target size, robot model?)")
+        elif abs(dev) > angle_limit_rad:
+            out.append(f"{name} moved by {np.degrees(dev):+.2f} deg: too large for a calibration correction "
+                       "(units, robot model?)")
+    return out
 
 
 def apply_overrides(scene: Scene, overrides: dict) -> Scene:
@@ -326,6 +352,7 @@ def summary_text(report: dict) -> str:
                  + (f"; not identifiable: {', '.join(idf['non_identifiable'])}" if idf["non_identifiable"] else ""))
     lines.append(f"identification: converged={ident['converged']} iterations={ident['iterations']} "
                  f"cost {ident['cost_initial']:.4g} -> {ident['cost_final']:.4g}")
+    lines += [f"warning: {w}" for w in ident.get("warnings", [])]
     lines.append(f"validation ({b['n_poses']} poses): position RMS {b['position_rms_mm']:.3f} -> {a['position_rms_mm']:.3f} mm, "
                  f"max {b['position_max_mm']:.3f} -> {a['position_max_mm']:.3f} mm, rotation RMS "
                  f"{b['rotation_rms_deg']:.4f} -> {a['rotation_rms_deg']:.4f} deg")
