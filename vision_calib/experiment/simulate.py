@@ -101,13 +101,14 @@ def measure_poses(scene: Scene, T_cam_targets, labels, seed: int, frames: int, w
 
         bar = tqdm(total=len(jobs), desc="render+measure", unit="pose", leave=False)
     init = (str(scene.target_path), cam, supersample or scene.render["supersample"])
-    if workers == 1:
-        _worker_init(*init)
-        it = map(_worker_pose, jobs)
-        ex = None
-    else:
-        ex = ProcessPoolExecutor(workers, mp_context=mp.get_context("fork"), initializer=_worker_init, initargs=init)
-        it = ex.map(_worker_pose, jobs, chunksize=1)
+    # Rendering always runs in worker processes started by a fork server: the calling process may
+    # hold an OpenGL context or library threads (a renderer of its own, torch), and a plain fork of
+    # such a process can deadlock in the child. The server preloads our modules, so workers start fast.
+    ctx = mp.get_context("forkserver")
+    ctx.set_forkserver_preload(["vision_calib.experiment.simulate", "vision_calib.render", "vision_calib.sensor",
+                                "vision_calib.measure"])
+    ex = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_worker_init, initargs=init)
+    it = ex.map(_worker_pose, jobs, chunksize=1)
     try:
         for i, pm, t in it:
             results[i] = pm
@@ -116,8 +117,7 @@ def measure_poses(scene: Scene, T_cam_targets, labels, seed: int, frames: int, w
             if bar is not None:
                 bar.update(1)
     finally:
-        if ex is not None:
-            ex.shutdown()
+        ex.shutdown()
         if bar is not None:
             bar.close()
     return results, stage
