@@ -75,7 +75,10 @@ def _worker_pose(job):
     t3 = time.perf_counter()
     pm, _ = measure_images(frames, _W["target"], _W["intr"], pose_id=pose_id, config=MeasureConfig(mode=averaging))
     t4 = time.perf_counter()
-    return i, pm, {"render": t1 - t0, "effects": t2 - t1, "write": t3 - t2, "measure": t4 - t3}
+    import resource
+
+    rss_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # Linux: KiB
+    return i, pm, {"render": t1 - t0, "effects": t2 - t1, "write": t3 - t2, "measure": t4 - t3, "rss_mib": rss_mib}
 
 
 def measure_poses(scene: Scene, T_cam_targets, labels, seed: int, frames: int, workers: int | None = None,
@@ -112,6 +115,7 @@ def measure_poses(scene: Scene, T_cam_targets, labels, seed: int, frames: int, w
     try:
         for i, pm, t in it:
             results[i] = pm
+            stage["worker_peak_rss_mib"] = max(stage.get("worker_peak_rss_mib", 0.0), t.pop("rss_mib"))
             for k, v in t.items():
                 stage[k] += v
             if bar is not None:
@@ -181,6 +185,7 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
     if export_recording is not None:
         image_dir = Path(export_recording) / "images"
     pms, stage = measure_poses(scene, T_true, labels, seed, frames, workers, image_dir, progress)
+    timings["worker_peak_rss_mib"] = stage.pop("worker_peak_rss_mib", float("nan"))
     timings.update({f"{k}_cpu": v for k, v in stage.items()})
     timings["render_measure_wall"] = time.perf_counter() - t - timings["setup"]
     if export_recording is not None:
