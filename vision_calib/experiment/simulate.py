@@ -267,7 +267,7 @@ def identify_measurements(scene: Scene, meas: Measurements, method, residual, ba
     from ..errors import IdentifiabilityError
     from ..identify import analyze
 
-    from .synthetic import BASE_SELECTION
+    from .synthetic import BASE_SELECTION, base_problem_of
 
     setup = scene.setup
     rep = None
@@ -279,13 +279,7 @@ def identify_measurements(scene: Scene, meas: Measurements, method, residual, ba
         except IdentifiabilityError as exc:
             raise IdentifiabilityError(f"{scene.name}: {exc}" + (f" ({context})" if context else "")) from None
         base = setup.params.mask(rep.base_parameters)
-    params = setup.params.only_free([n for n, b in zip(setup.params.names, base) if b])
-    problem = setup.problem(meas, residual, params=params)
-    if problem.n_obs * problem.m < params.n_free:
-        raise IdentifiabilityError(
-            f"{scene.name}: only {problem.n_obs} usable poses ({problem.n_obs * problem.m} equations) for "
-            f"{params.n_free} identifiable parameters: need at least {int(np.ceil(params.n_free / problem.m))} poses"
-            + (f" ({context})" if context else ""))
+    problem, params = base_problem_of(scene, meas, residual, base, context)
     result = identify(problem, method)
     from dataclasses import replace as _replace
 

@@ -74,6 +74,20 @@ def identifiability_json(scene, residual=None, n_poses=None, seed=None, all_para
     return out
 
 
+def base_problem_of(scene: Scene, meas, residual: str, base, context: str = ""):
+    """(problem, params) identifying only the parameters of the ``base`` mask (n,) bool from
+    measurements; IdentifiabilityError when the usable poses give fewer equations than that."""
+    setup = scene.setup
+    params = setup.params.only_free([n for n, b in zip(setup.params.names, base) if b])
+    problem = setup.problem(meas, residual, params=params)
+    if problem.n_obs * problem.m < params.n_free:
+        raise IdentifiabilityError(
+            f"{scene.name}: only {problem.n_obs} usable poses ({problem.n_obs * problem.m} equations) for "
+            f"{params.n_free} identifiable parameters: need at least {int(np.ceil(params.n_free / problem.m))} poses"
+            + (f" ({context})" if context else ""))
+    return problem, params
+
+
 def identify(problem, method: str, fix_unidentifiable: bool = True):
     """Run one identification method on a problem ("lse" and "igm" = least squares on the
     problem's residuals, "ekf" = extended Kalman filter)."""
@@ -140,13 +154,7 @@ def run_synthetic(scene, method=None, residual=None, n_poses=None, sigma_t_m=Non
     if x_true is None:
         x_true = scene_truth(scene)
     meas = setup.synthetic_measurements(poses, x_true, rn, st, sr, scene.measurement["sigma_q_rad"])
-    params = setup.params.only_free([n for n, b in zip(setup.params.names, base) if b])
-    problem = setup.problem(meas, residual, params=params)
-    if problem.n_obs * problem.m < params.n_free:
-        raise IdentifiabilityError(
-            f"{scene.name}: {problem.n_obs} poses give {problem.n_obs * problem.m} equations for "
-            f"{params.n_free} identifiable parameters; use at least "
-            f"{int(np.ceil(params.n_free / problem.m))} poses")
+    problem, params = base_problem_of(scene, meas, residual, base)
     result = identify(problem, method)
     seconds = time.perf_counter() - t0
     meas_val = None
