@@ -8,7 +8,6 @@ same seed gives the same report whatever the number of workers.
 
 from __future__ import annotations
 
-import os
 import time
 from pathlib import Path
 
@@ -22,8 +21,6 @@ from .synthetic import identifiability_report, identify, parameters_table, repor
 DEFAULT_SCENE = SCENES_DIR / "h4_vision.yaml"
 REPORT_VERSION = "1.0"
 
-_W = {}  # per-process worker state
-
 
 def effects_from_scene(scene: Scene):
     """SensorEffects from the scene's ``effects`` mapping (short names noise_grey / blur_px accepted)."""
@@ -33,99 +30,6 @@ def effects_from_scene(scene: Scene):
     alias = {"noise_grey": "read_noise_grey", "blur_px": "blur_sigma_px"}
     d = {alias.get(k, k): v for k, v in d.items()}
     return SensorEffects.from_dict(d, where=f"{scene.path}: effects")
-
-
-def _worker_init(target_path, intrinsics, supersample):
-    os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
-    os.environ.setdefault("EGL_PLATFORM", "surfaceless")
-    # one Mesa llvmpipe thread per worker: several threaded workers oversubscribe the cores
-    # (measured: 20 frames/s with Mesa's threads vs 47 frames/s with one, 2 workers, 2 cores)
-    os.environ.setdefault("LP_NUM_THREADS", "1")
-    import torch
-
-    torch.set_num_threads(1)
-    from ..render import TargetRenderer
-    from ..targets import load_target
-
-    target = load_target(target_path)
-    _W["target"] = target
-    _W["intr"] = intrinsics
-    _W["renderer"] = TargetRenderer(target, intrinsics.without_distortion(), supersample=supersample)
-
-
-def _worker_pose(job):
-    """Render, add effects, (optionally) write PNGs, measure one pose -> (index, PoseMeasurement, timings)."""
-    from ..measure import MeasureConfig, measure_images
-    from ..sensor import apply_effects
-
-    i, pose_id, T_cam_target, effects, n_frames, seed, averaging, image_dir = job
-    t0 = time.perf_counter()
-    ideal = _W["renderer"].render(T_cam_target)
-    t1 = time.perf_counter()
-    frames = apply_effects(ideal, effects, n_frames, seed, _W["intr"])
-    t2 = time.perf_counter()
-    if image_dir is not None:
-        import cv2
-
-        d = Path(image_dir) / str(pose_id)
-        d.mkdir(parents=True, exist_ok=True)
-        for k, fr in enumerate(frames):
-            ok, buf = cv2.imencode(".png", fr)
-            (d / f"{k:02d}.png").write_bytes(buf.tobytes())
-    t3 = time.perf_counter()
-    pm, _ = measure_images(frames, _W["target"], _W["intr"], pose_id=pose_id, config=MeasureConfig(mode=averaging))
-    t4 = time.perf_counter()
-    import resource
-
-    rss_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # Linux: KiB
-    return i, pm, {"render": t1 - t0, "effects": t2 - t1, "write": t3 - t2, "measure": t4 - t3, "rss_mib": rss_mib}
-
-
-def measure_poses(scene: Scene, T_cam_targets, labels, seed: int, frames: int, workers: int | None = None,
-                  image_dir=None, progress: bool = False, supersample: int | None = None):
-    """Render + effects + measure every pose. Returns (list of PoseMeasurement in pose order,
-    timings {stage: total seconds})."""
-    from concurrent.futures import ProcessPoolExecutor
-    import multiprocessing as mp
-
-    if scene.target_path is None:
-        raise DataError(f"{scene.path}: the scene has no target: image simulation needs one")
-    effects = effects_from_scene(scene)
-    cam = scene.setup.camera
-    jobs = [(i, labels[i], T_cam_targets[i], effects, frames,
-             int(np.random.default_rng([seed, 5, i]).integers(2**31 - 1)), scene.measurement["averaging"], image_dir)
-            for i in range(len(T_cam_targets))]
-    workers = max(1, min(workers or os.cpu_count() or 1, len(jobs)))
-    results = [None] * len(jobs)
-    stage = {"render": 0.0, "effects": 0.0, "write": 0.0, "measure": 0.0}
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=len(jobs), desc="render+measure", unit="pose", leave=False)
-    init = (str(scene.target_path), cam, supersample or scene.render["supersample"])
-    # Rendering always runs in worker processes started by a fork server: the calling process may
-    # hold an OpenGL context or library threads (a renderer of its own, torch), and a plain fork of
-    # such a process can deadlock in the child. The server preloads our modules, so workers start fast.
-    ctx = mp.get_context("forkserver")
-    ctx.set_forkserver_preload(["vision_calib.experiment.simulate", "vision_calib.render", "vision_calib.sensor",
-                                "vision_calib.measure"])
-    ex = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_worker_init, initargs=init)
-    it = ex.map(_worker_pose, jobs, chunksize=1)
-    try:
-        for i, pm, t in it:
-            results[i] = pm
-            stage["worker_peak_rss_mib"] = max(stage.get("worker_peak_rss_mib", 0.0), t.pop("rss_mib"))
-            for k, v in t.items():
-                stage[k] += v
-            if bar is not None:
-                bar.update(1)
-    finally:
-        ex.shutdown()
-        if bar is not None:
-            bar.close()
-    return results, stage
-
 
 def rejection_summary(pms) -> str:
     """'k of n poses rejected: reason (count); ...' for a list of PoseMeasurement."""
@@ -184,7 +88,13 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
     image_dir = None
     if export_recording is not None:
         image_dir = Path(export_recording) / "images"
-    pms, stage = measure_poses(scene, T_true, labels, seed, frames, workers, image_dir, progress)
+    if scene.target_path is None:
+        raise DataError(f"{scene.path}: the scene has no target: image simulation needs one")
+    from .image_chain import ImageChain, measure_poses
+
+    chain = ImageChain(str(scene.target_path), setup.camera, effects_from_scene(scene), scene.render["supersample"],
+                       scene.measurement["averaging"])
+    pms, stage = measure_poses(chain, T_true, labels, seed, frames, workers, image_dir, progress)
     timings["worker_peak_rss_mib"] = stage.pop("worker_peak_rss_mib", float("nan"))
     timings.update({f"{k}_cpu": v for k, v in stage.items()})
     timings["render_measure_wall"] = time.perf_counter() - t - timings["setup"]
