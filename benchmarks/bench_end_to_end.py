@@ -20,9 +20,10 @@ import time
 
 import numpy as np
 
-from vision_calib.experiment.scene import load_scene, scene_poses
+from vision_calib.rig import load_scene, scene_poses
 from vision_calib.experiment.simulate import DEFAULT_SCENE, run_simulation
-from vision_calib.experiment.synthetic import identifiability_report, rngs, run_synthetic
+from vision_calib.experiment.steps import analyze_setup, rngs
+from vision_calib.experiment.synthetic import run_synthetic
 
 
 def _peak_mb():
@@ -58,7 +59,7 @@ def main(argv=None):
     rp, _, rv = rngs(0)
     poses = scene_poses(scene, rp, 71)
     validation = scene_poses(scene, rv, which="validation")
-    rep0, _ = identifiability_report(scene, poses)
+    rep0, _ = analyze_setup(scene.setup, poses)
     base = scene.setup.params.mask(rep0.base_parameters)
     t0 = time.perf_counter()
     pos = []

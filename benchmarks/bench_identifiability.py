@@ -15,10 +15,11 @@ import vision_calib.cli  # noqa: F401  (single-threaded BLAS, as the CLI runs)
 
 import numpy as np
 
-from vision_calib.experiment.scene import SCENES_DIR, load_scene
-from vision_calib.experiment.study import scene_with
-from vision_calib.experiment.synthetic import identifiability_json, identifiability_report, rngs
-from vision_calib.experiment.scene import scene_poses
+from vision_calib.rig import SCENES_DIR, load_scene
+from vision_calib.study import scene_with
+from vision_calib.experiment.steps import analyze_setup, rngs
+from vision_calib.experiment.synthetic import identifiability_json
+from vision_calib.rig import scene_poses
 from vision_calib.identify import analyze
 from vision_calib.identify.serial_problem import serial_problem
 from vision_calib.kinematics.h4 import random_workspace_poses
@@ -54,7 +55,7 @@ def h4_figures():
     _line("H4 model 12 + 8 external parameters", identifiability_json(scene, all_params=True))
     s31 = scene_with(scene, model="31")
     rp, _, _ = rngs(0)
-    rep, _ = identifiability_report(s31, scene_poses(s31, rp), all_params=True)
+    rep, _ = analyze_setup(s31.setup, scene_poses(s31, rp), all_params=True)
     print(f"H4 model 31 + 8 external parameters: {rep.n_params} parameters, rank {rep.rank}; not identifiable: "
           f"{', '.join(rep.non_identifiable)}")
     for c in rep.couplings:

@@ -17,8 +17,8 @@ import time
 
 import numpy as np
 
-from vision_calib.experiment.scene import load_scene, scene_poses
-from vision_calib.experiment.synthetic import identifiability_report, rngs, scene_truth
+from vision_calib.rig import load_scene, scene_poses
+from vision_calib.experiment.steps import analyze_setup, rngs, scene_truth
 from vision_calib.identify import solve_lse, solve_lse_fd
 
 
@@ -27,10 +27,10 @@ def _problem(scene_path, n_poses, seed=0):
     setup = scene.setup
     rp, rn, _ = rngs(seed)
     poses = scene_poses(scene, rp, n_poses)
-    rep, _ = identifiability_report(scene, poses)
+    rep, _ = analyze_setup(scene.setup, poses)
     x_true = scene_truth(scene)
     params = setup.params.only_free(rep.base_parameters)
-    meas = setup.synthetic_measurements(poses, x_true, rn, scene.measurement["sigma_t_m"], scene.measurement["sigma_r_rad"])
+    meas = setup.synthetic_measurements(poses, x_true, rn, scene.measurement.sigma_t_m, scene.measurement.sigma_r_rad)
     return scene, setup.problem(meas, params=params), poses, x_true, params
 
 
@@ -58,7 +58,7 @@ def bench_monte_carlo(scene_path, n_poses=71, runs=100):
     scene, _, poses, x_true, params = _problem(scene_path, n_poses)
     setup = scene.setup
     rng = np.random.default_rng(123)
-    st, sr = scene.measurement["sigma_t_m"], scene.measurement["sigma_r_rad"]
+    st, sr = scene.measurement.sigma_t_m, scene.measurement.sigma_r_rad
     t0 = time.perf_counter()
     n_conv = 0
     for _ in range(runs):

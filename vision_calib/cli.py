@@ -152,7 +152,7 @@ def _dispatch(args) -> int:
         print(to_json(report) if args.json else report["summary_text"])
         return _status(report["identification"]["converged"])
     if args.command == "study":
-        from .experiment.study import run_study
+        from .study import run_study
 
         res = run_study(args.spec, out_dir=args.out, workers=args.workers, scheduler=args.scheduler, progress=not args.json)
         print(to_json(res) if args.json else res["summary_text"])

@@ -122,7 +122,7 @@ def test_export_into_a_used_folder_is_refused_before_rendering(exported, capsys)
 
 def test_failed_identification_keeps_the_measurements(tmp_path, capsys):
     # a sensor so noisy that no target is detected: measurement runs, identification cannot
-    from vision_calib.experiment.scene import SCENES_DIR
+    from vision_calib.rig import SCENES_DIR
 
     text = (SCENES_DIR / "rx90_eye_in_hand.yaml").read_text()
     text = text.replace("robot: robots/rx90.yaml", f"robot: {SCENES_DIR / 'robots/rx90.yaml'}")

@@ -6,8 +6,8 @@ import sys
 import numpy as np
 import pytest
 
-from vision_calib.experiment.scene import SCENES_DIR, load_scene
-from vision_calib.experiment.study import scene_with
+from vision_calib.rig import SCENES_DIR, load_scene
+from vision_calib.study import scene_with
 from vision_calib.io.model_export import load_calibrated_model, write_calibrated_model
 
 

@@ -5,7 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vision_calib.experiment.scene import SCENES_DIR, load_scene, scene_poses
+from vision_calib.rig import SCENES_DIR, load_scene, scene_poses
 from vision_calib.targets import load_target
 
 

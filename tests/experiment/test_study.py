@@ -9,8 +9,8 @@ import pytest
 import yaml
 
 from vision_calib.errors import ConfigError
-from vision_calib.experiment import study as S
-from vision_calib.experiment.scene import load_scene
+from vision_calib import study as S
+from vision_calib.rig import load_scene
 from vision_calib.experiment.synthetic import run_synthetic
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -67,11 +67,11 @@ def test_local_run_tables_match_library(tmp_path):
     r = rows[4]
     o = run_synthetic(scene, n_poses=20, seed=int(r["seed"]))
     assert int(r["seed"]) == S.run_seed(5, 1)
-    np.testing.assert_allclose(float(r["after_position_rms_mm"]), o["after"]["position_rms_mm"], rtol=1e-9)
-    np.testing.assert_allclose(float(r["after_V2_rad"]), o["after"]["V2_rad"], rtol=1e-9)
-    i = o["result"].names.index("h4.L")
-    np.testing.assert_allclose(float(r["err:h4.L"]), o["result"].identified[i] - o["x_true"][i], rtol=1e-7, atol=1e-13)
-    np.testing.assert_allclose(float(r["std:h4.L"]), o["result"].std[i], rtol=1e-9)
+    np.testing.assert_allclose(float(r["after_position_rms_mm"]), o.after["position_rms_mm"], rtol=1e-9)
+    np.testing.assert_allclose(float(r["after_V2_rad"]), o.after["V2_rad"], rtol=1e-9)
+    i = o.result.names.index("h4.L")
+    np.testing.assert_allclose(float(r["err:h4.L"]), o.result.identified[i] - o.x_true[i], rtol=1e-7, atol=1e-13)
+    np.testing.assert_allclose(float(r["std:h4.L"]), o.result.std[i], rtol=1e-9)
     assert r["err:M_T_E.z"] == ""  # fixed parameter: no error recorded
     # parquet holds the same numbers
     import pyarrow.parquet as pq
@@ -89,7 +89,7 @@ def test_local_run_tables_match_library(tmp_path):
     assert "n_poses" in res["summary_text"] and "±" in res["summary_text"]
     # parameters.csv: per (cell, parameter) truth, noise-free value and Monte Carlo statistics
     prow = {(p["n_poses"], p["parameter"]): p for p in read_csv(out / "parameters.csv")}
-    x_true = o["x_true"]
+    x_true = o.x_true
     ps = scene.setup.params
     for n in ("h4.L", "q0_1", "B_T_C.x"):
         p = prow[("20", n)]
@@ -135,7 +135,7 @@ def test_resume_computes_only_missing_runs(tmp_path, monkeypatch):
         p.unlink()
     calls = []
     real = S.run_cell
-    monkeypatch.setattr(S, "run_cell", lambda spec, cell, rep: calls.append((dict(cell), rep)) or real(spec, cell, rep))
+    monkeypatch.setattr(S.run, "run_cell", lambda spec, cell, rep: calls.append((dict(cell), rep)) or real(spec, cell, rep))
     res = S.run_study(spec_path, out, workers=1, plots=False)
     assert (res["n_computed"], res["n_reused"]) == (2, 4)
     assert sorted(S.cell_key(c, r) + ".json" for c, r in calls) == sorted(p.name for p in gone)
@@ -165,12 +165,12 @@ def test_interrupted_study_resumes(tmp_path, monkeypatch):
             raise KeyboardInterrupt
         return real(spec, cell, rep)
 
-    monkeypatch.setattr(S, "run_cell", flaky)
+    monkeypatch.setattr(S.run, "run_cell", flaky)
     with pytest.raises(KeyboardInterrupt):
         S.run_study(spec_path, out, workers=1, plots=False)
     assert len(list((out / "runs").glob("*.json"))) == 3
     assert not (out / "results.csv").exists()
-    monkeypatch.setattr(S, "run_cell", real)
+    monkeypatch.setattr(S.run, "run_cell", real)
     res = S.run_study(spec_path, out, workers=1, plots=False)
     assert (res["n_computed"], res["n_reused"]) == (3, 3)
     ref = S.run_study(spec_path, tmp_path / "fresh", workers=1, plots=False)
@@ -316,21 +316,21 @@ def test_pose_selection_axis(tmp_path):
     # D cell: same poses in every repetition, the noise differs
     scene = load_scene(SCENE)
     s_d = {"n_poses": 8, "pose_selection": "D"}
-    p0 = S._cell_poses(spec, scene, s_d, S.run_seed(spec.seed, 0), "joint")
-    p1 = S._cell_poses(spec, scene, s_d, S.run_seed(spec.seed, 1), "joint")
+    p0 = S.cells.cell_poses(spec, scene, s_d, S.run_seed(spec.seed, 0), "joint")
+    p1 = S.cells.cell_poses(spec, scene, s_d, S.run_seed(spec.seed, 1), "joint")
     np.testing.assert_array_equal(p0, p1)
     assert rows[2]["err:h4.L"] != rows[3]["err:h4.L"]
     # the subset is the D-optimal selection of the nominal, noise-free problem, better than the random subsets
-    from vision_calib.experiment.synthetic import identifiability_report
+    from vision_calib.experiment.steps import analyze_setup
 
     grid = scene.setup.robot.pose_grid()
-    _, prob = identifiability_report(scene, grid)
+    _, prob = analyze_setup(scene.setup, grid)
     assert all(any(np.allclose(p, g) for g in grid) for p in p0)
     idx = np.array([int(np.flatnonzero(np.all(np.isclose(grid, p), axis=1))[0]) for p in p0])
     assert np.unique(idx).size == 8
     ld = design_criterion(prob, idx, "D")
     for r in range(2):
-        pr = S._cell_poses(spec, scene, {"n_poses": 8}, S.run_seed(spec.seed, r), "joint")
+        pr = S.cells.cell_poses(spec, scene, {"n_poses": 8}, S.run_seed(spec.seed, r), "joint")
         ir = np.array([int(np.flatnonzero(np.all(np.isclose(grid, p), axis=1))[0]) for p in pr])
         assert ld > design_criterion(prob, ir, "D")
     # reproducible: a second study directory gives the same table

@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 
 from vision_calib.cli import main
-from vision_calib.experiment.scene import load_scene, scene_poses
-from vision_calib.experiment.synthetic import (identifiability_json, identifiability_report, rngs, run_synthetic,
-                                               true_parameters, STREAM_TRUTH)
+from vision_calib.rig import load_scene, scene_poses
+from vision_calib.experiment.steps import STREAM_TRUTH, analyze_setup, rngs
+from vision_calib.experiment.synthetic import identifiability_json, run_synthetic
+from vision_calib.rig import true_parameters
 from vision_calib.identify import solve_ekf, solve_lse
 
 H4 = "scenes/h4_vision.yaml"
@@ -40,12 +41,12 @@ def test_h4_model12_externals_19_of_20():
 @pytest.mark.parametrize("scene,method", [(H4, "igm"), (RX90, "lse"), (RX90, "ekf"), (H4, "ekf")])
 def test_noise_free_recovery_of_every_identifiable_parameter(scene, method):
     out = run_synthetic(scene, method=method, n_poses=20, sigma_t_m=0.0, sigma_r_rad=0.0, seed=3)
-    res, x_true = out["result"], out["x_true"]
+    res, x_true = out.result, out.x_true
     free = res.free
-    ps = out["scene"].setup.params
+    ps = out.scene.setup.params
     rel = np.abs(res.identified[free] - x_true[free]) / np.maximum(np.abs(x_true[free]), ps.scale[free])
     assert rel.max() < 1e-9, dict(zip(np.array(ps.names)[free], rel))
-    assert out["after"]["position_rms_mm"] < 1e-6
+    assert out.after["position_rms_mm"] < 1e-6
 
 
 def _monte_carlo(scene_path, n_runs, n_poses, solver):
@@ -53,10 +54,10 @@ def _monte_carlo(scene_path, n_runs, n_poses, solver):
     setup = scene.setup
     rp, _, _ = rngs(0)
     poses = scene_poses(scene, rp, n_poses)
-    rep, _ = identifiability_report(scene, poses)
+    rep, _ = analyze_setup(scene.setup, poses)
     params = setup.params.only_free(rep.base_parameters)
-    x_true = true_parameters(scene, np.random.default_rng([scene.truth["seed"], STREAM_TRUTH]), params.free)
-    st, sr = scene.measurement["sigma_t_m"], scene.measurement["sigma_r_rad"]
+    x_true = true_parameters(scene, np.random.default_rng([scene.truth.seed, STREAM_TRUTH]), params.free)
+    st, sr = scene.measurement.sigma_t_m, scene.measurement.sigma_r_rad
     errs, stds = [], []
     for k in range(n_runs):
         meas = setup.synthetic_measurements(poses, x_true, np.random.default_rng([99, k]), st, sr)
@@ -82,8 +83,8 @@ def test_ekf_error_matches_predicted_std_over_100_runs():
 def test_ekf_reaches_the_lse_solution_within_its_std():
     a = run_synthetic(RX90, method="lse", n_poses=20, seed=5)
     b = run_synthetic(RX90, method="ekf", n_poses=20, seed=5)
-    f = a["result"].free
-    d = np.abs(a["result"].identified[f] - b["result"].identified[f]) / a["result"].std[f]
+    f = a.result.free
+    d = np.abs(a.result.identified[f] - b.result.identified[f]) / a.result.std[f]
     assert d.max() < 0.1
 
 

@@ -11,9 +11,10 @@ import pytest
 import yaml
 
 from vision_calib.errors import ConfigError
-from vision_calib.experiment import study as S
-from vision_calib.experiment.scene import load_scene, scene_poses
-from vision_calib.experiment.synthetic import identifiability_json, run_synthetic, scene_truth
+from vision_calib import study as S
+from vision_calib.rig import load_scene, scene_poses
+from vision_calib.experiment.steps import scene_truth
+from vision_calib.experiment.synthetic import identifiability_json, run_synthetic
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENE = ROOT / "scenes" / "thesis_arm_ch3.yaml"
@@ -59,10 +60,10 @@ def test_noise_free_recovers_identifiable_part(scene, trial):
     sc = S.scene_with_trial(scene, trial)
     ps = sc.setup.params
     o = run_synthetic(sc, sigma_t_m=0.0, sigma_r_rad=0.0)
-    assert o["result"].converged
-    assert o["before"]["position_rms_mm"] > 1.0
-    assert o["after"]["position_rms_mm"] < 1e-6  # every identifiable combination recovered
-    xi, xt = o["result"].identified, o["x_true"]
+    assert o.result.converged
+    assert o.before["position_rms_mm"] > 1.0
+    assert o.after["position_rms_mm"] < 1e-6  # every identifiable combination recovered
+    xi, xt = o.result.identified, o.x_true
     dev = sc.setup.chain.meta["trials"][trial]["deviation"]
     # the exact duplicates are absorbed by their partners
     assert xi[ps.index("d2")] - ps.nominal[ps.index("d2")] == pytest.approx(dev["d2"] + dev["d3"], abs=1e-9)
@@ -76,9 +77,9 @@ def test_truth_without_non_identifiable_parts_recovered_exactly(scene):
     dev = dict(scene.setup.chain.meta["trials"]["lse_essai_1"]["deviation"])
     for n in ("d3", "l5", "theta6", "d6"):
         dev[n] = 0.0
-    sc = replace(scene, truth={**scene.truth, "trial": None, "deviations": dev})
+    sc = replace(scene, truth=replace(scene.truth, trial=None, deviations=dev))
     o = run_synthetic(sc, sigma_t_m=0.0, sigma_r_rad=0.0)
-    res, xt = o["result"], o["x_true"]
+    res, xt = o.result, o.x_true
     ps = sc.setup.params
     assert int(res.free.sum()) == 15
     for i in np.flatnonzero(res.free):
@@ -89,14 +90,14 @@ def test_truth_without_non_identifiable_parts_recovered_exactly(scene):
 def test_lse_and_ekf_agree(scene):
     a = run_synthetic(scene, method="lse", seed=3)
     b = run_synthetic(scene, method="ekf", seed=3)
-    ra, rb = a["result"], b["result"]
+    ra, rb = a.result, b.result
     np.testing.assert_array_equal(ra.free, rb.free)
     f = ra.free
     d = np.abs(ra.identified[f] - rb.identified[f]) / ra.std[f]
     assert d.max() < 0.05
     np.testing.assert_allclose(rb.std[f], ra.std[f], rtol=0.05)
     # the noise (0.1 mm) moves the estimate: a real, not a trivial, agreement
-    assert np.max(np.abs(ra.identified[f] - a["x_true"][f]) / ra.std[f]) > 0.1
+    assert np.max(np.abs(ra.identified[f] - a.x_true[f]) / ra.std[f]) > 0.1
 
 
 def _spec(tmp_path, **kw):
@@ -119,7 +120,7 @@ def test_trial_axis_study(tmp_path, scene):
     # a row is run_synthetic on the trial's scene (its deviation vector, its configurations)
     r = next(r for r in rows if r["trial"] == "lse_essai_2" and r["method"] == "ekf" and r["repetition"] == "1")
     o = run_synthetic(S.scene_with_trial(scene, "lse_essai_2"), method="ekf", seed=int(r["seed"]))
-    np.testing.assert_allclose(float(r["after_position_rms_mm"]), o["after"]["position_rms_mm"], rtol=1e-9)
+    np.testing.assert_allclose(float(r["after_position_rms_mm"]), o.after["position_rms_mm"], rtol=1e-9)
     # same deviation vector, other identification configurations: other estimates
     r1 = next(x for x in rows if x["trial"] == "lse_essai_1" and x["method"] == "ekf" and x["repetition"] == "1")
     assert r1["before_position_rms_mm"] == r["before_position_rms_mm"]  # same truth, same validation joints

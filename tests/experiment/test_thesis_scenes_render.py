@@ -4,7 +4,7 @@ configured pose, so that rendering and identification can work on them."""
 import numpy as np
 import pytest
 
-from vision_calib.experiment.scene import SCENES_DIR, load_scene, scene_poses, true_parameters
+from vision_calib.rig import SCENES_DIR, load_scene, scene_poses, true_parameters
 from vision_calib.experiment.simulate import run_simulation
 from vision_calib.kinematics.serial import load_serial_robot
 from vision_calib.targets import load_target
@@ -25,7 +25,7 @@ def test_whole_board_in_view_in_all_configured_poses(name):
     q = scene_poses(scene, np.random.default_rng(0))
     assert len(q) == 10
     outline = _outline(scene)
-    x_true = true_parameters(scene, np.random.default_rng(scene.truth["seed"]))
+    x_true = true_parameters(scene, np.random.default_rng(scene.truth.seed))
     for x in (setup.params.nominal, x_true):  # nominal geometry and a perturbed (true) robot
         T = setup.T_cam_target(q, x)
         assert setup.visible(T, outline, margin_px=10.0, max_tilt_deg=60.0).all()

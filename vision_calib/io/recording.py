@@ -89,7 +89,7 @@ def write_recording(folder, scene, poses, joints, frames: int) -> Path:
         "scene_name": scene.name,  # fallback when the folder moves to another machine: scenes/<name>.yaml
         "poses": "joints",
         "frames_per_pose": int(frames),
-        "averaging": scene.measurement["averaging"],
+        "averaging": scene.measurement.averaging,
     }
     write_text_atomic(folder / "recording.yaml", yaml.safe_dump(doc, sort_keys=False))
     joints = np.asarray(joints, float)
@@ -127,7 +127,7 @@ def read_recording(folder) -> Recording:
         p = Path(top.get("scene", str))
         p = p if p.is_absolute() else ypath.parent / p
         if not p.is_file():
-            from ..experiment.scene import SCENES_DIR
+            from ..rig.scene import SCENES_DIR
 
             alt = SCENES_DIR / f"{top.get('scene_name', str, '')}.yaml"
             if not alt.is_file():

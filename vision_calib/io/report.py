@@ -1,4 +1,28 @@
-"""Writing a run's outputs: report.json (versioned), plots, calibrated model. All atomic."""
+"""The ONE builder of ``report.json`` (and its summary text), plus writing a run's outputs: report,
+plots, calibrated model. All writes atomic.
+
+report.json, version 2 (each value once)::
+
+    version: "2.0"
+    kind: simulation | process | process_handeye
+    verdict: {ok, converged, n_rejected_poses, warnings: n}      # what to read first
+    source: {scene: {name, path, robot_kind}} or {folder: ...}
+    seed: int                                                    # simulation only
+    settings: {...}                                              # poses, frames, method, residual, camera, ...
+    measurements: {n_poses, n_valid, n_rejected, rejected: [{pose_id, reason}], poses: [...], ...}
+    identifiability: IdentifiabilityReport.to_dict()             # absent for hand-eye
+    parameters: [{name, nominal, true, identified, std, free}]   # SI units; true = null on real data
+    identification: {method, converged, iterations, cost_initial, cost_final, seconds, residual_kind,
+                     correlation_warnings, warnings}             # no parameter values (they are above)
+    accuracy: {before: {...}, after: {...}}                      # validation poses, simulation only
+    residuals: {...}                                             # RMS per component (process)
+    warnings: [str]
+    timings_s: {...}
+    files: {report, model, residuals_plot, ...}
+
+Changes from version 1: the parameter table is only in ``parameters`` (``identification.parameters``
+is gone); ``scene`` / ``folder`` moved under ``source``; ``verdict`` added.
+"""
 
 from __future__ import annotations
 
@@ -6,49 +30,191 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import frames as F
 from .atomic import write_json_atomic, write_text_atomic
 from .model_export import write_calibrated_model
 
-
-def validation_errors_mm(setup, x, x_true, poses_val) -> tuple[np.ndarray, np.ndarray]:
-    """(positions (N, 3) m, position errors (N,) mm) of parameters x on validation poses."""
-    if setup.kind == "h4":
-        X = np.asarray(poses_val, float)
-        q = setup.robot.igm(X, x_true)
-        Xh = setup.robot.fgm(q, x, X0=X)
-        return X[:, :3], np.linalg.norm(Xh[:, :3] - X[:, :3], axis=1) * 1e3
-    T_true = setup.chain.forward(poses_val, x_true)
-    T = setup.chain.forward(poses_val, x)
-    return T_true[:, :3, 3], np.linalg.norm(F.pose_error(T_true, T)[:, :3], axis=1) * 1e3
+REPORT_VERSION = "2.0"
 
 
-def write_report(out_dir, report: dict, setup, result, problem, x_true=None, validation=None) -> Path:
-    """report.json + residuals.png + parameters.png (+ error_map.png with truth) + calibrated_model.yaml."""
-    from .plots import plot_error_map, plot_parameters, plot_residuals
+def parameters_table(names, nominal, x_true, result) -> list[dict]:
+    """Per-parameter rows: name, nominal, true (None on real data), identified, std, free (SI)."""
+    out = []
+    for i, n in enumerate(names):
+        std = result.std[i]
+        true = None if x_true is None or not np.isfinite(x_true[i]) else float(x_true[i])
+        out.append({"name": n, "nominal": float(nominal[i]), "true": true, "identified": float(result.identified[i]),
+                    "std": float(std) if np.isfinite(std) else None, "free": bool(result.free[i])})
+    return out
 
+
+def identification_block(result) -> dict:
+    """The result's summary without its parameter values (they are in ``parameters``)."""
+    d = result.to_dict()
+    d.pop("parameters", None)
+    return d
+
+
+def residual_stats(r, kind) -> dict:
+    """RMS per component of final residuals r (N, m) SI: mm / deg for pose residuals, deg for joints."""
+    if kind in ("pose", "position"):
+        d = {"translation_rms_mm": [float(v) for v in np.sqrt(np.mean(r[:, :3] ** 2, axis=0)) * 1e3]}
+        if r.shape[1] == 6:
+            d["rotation_rms_deg"] = [float(v) for v in np.degrees(np.sqrt(np.mean(r[:, 3:] ** 2, axis=0)))]
+        return d
+    return {"joint_rms_deg": [float(v) for v in np.degrees(np.sqrt(np.mean(r**2, axis=0)))]}
+
+
+def measurements_block(pms, **extra) -> dict:
+    """Per-pose measurement summary of a list of measure.PoseMeasurement."""
+    rejected = [{"pose_id": pm.pose_id, "reason": pm.reason} for pm in pms if not pm.valid]
+    return {"n_poses": len(pms), "n_valid": len(pms) - len(rejected), "n_rejected": len(rejected),
+            "rejected": rejected, **extra, "poses": [pm.to_dict() for pm in pms]}
+
+
+def build_report(kind: str, *, source: dict, settings: dict, result, measurements: dict | None = None,
+                 identifiability=None, parameters: list | None = None, accuracy: dict | None = None,
+                 residuals: dict | None = None, warnings=(), extra: dict | None = None, timings: dict | None = None,
+                 seed: int | None = None) -> dict:
+    """report.json content (see the module docstring) with its ``summary_text``. identifiability: an
+    IdentifiabilityReport (or None); accuracy: {"before": Evaluation, "after": Evaluation}."""
+    warnings = list(warnings)
+    n_rej = (measurements or {}).get("n_rejected", 0)
+    report = {
+        "version": REPORT_VERSION,
+        "kind": kind,
+        "verdict": {"ok": bool(result.converged), "converged": bool(result.converged), "n_rejected_poses": n_rej,
+                    "warnings": len(warnings) + len(result.warnings)},
+        "source": source,
+    }
+    if seed is not None:
+        report["seed"] = int(seed)
+    report["settings"] = settings
+    if measurements is not None:
+        report["measurements"] = measurements
+    if identifiability is not None:
+        report["identifiability"] = identifiability.to_dict()
+    if parameters is not None:
+        report["parameters"] = parameters
+    report["identification"] = identification_block(result)
+    if accuracy is not None:
+        report["accuracy"] = {k: v.to_dict() for k, v in accuracy.items()}
+    if residuals is not None:
+        report["residuals"] = residuals
+    report.update(extra or {})
+    report["warnings"] = warnings
+    if timings is not None:
+        report["timings_s"] = timings
+    report["summary_text"] = summary_text(report)
+    return report
+
+
+def _what(report) -> str:
+    src = report["source"]
+    if "scene" in src:
+        s = report["settings"]
+        return (f"scene {src['scene']['name']}" + (f"  seed {report['seed']}" if "seed" in report else "")
+                + f"  poses {s.get('poses')}  frames {s.get('frames')}  method {s.get('method')}")
+    return f"{src.get('folder')}"
+
+
+def summary_text(report: dict) -> str:
+    """One screen: the verdict first, then what was run, measured, identified and how accurate."""
+    v, ident = report["verdict"], report["identification"]
+    lines = [f"verdict: {'converged' if v['converged'] else 'NOT CONVERGED'}; {v['n_rejected_poses']} poses rejected; "
+             f"{v['warnings']} warnings", _what(report)]
+    m = report.get("measurements")
+    if m:
+        lines.append(f"measurement: {m['n_valid']} of {m['n_poses']} poses valid, {m['n_rejected']} rejected")
+        lines += [f"  pose {rj['pose_id']}: {rj['reason']}" for rj in m["rejected"][:10]]
+        acc = m.get("accuracy_vs_truth")
+        if acc:
+            lines.append("  pose error vs truth, RMS per component: t = "
+                         + ", ".join(f"{x:.3f}" for x in acc["translation_rms_mm"]) + " mm; r = "
+                         + ", ".join(f"{x:.4f}" for x in acc["rotation_rms_deg"]) + " deg")
+    lines += [f"warning: {w}" for w in report.get("warnings", [])]
+    idf = report.get("identifiability")
+    if idf:
+        lines.append(f"identifiability: {idf['n_params']} parameters, rank {idf['rank']}, "
+                     f"cond {idf['condition_number']:.3g}"
+                     + (f"; not identifiable: {', '.join(idf['non_identifiable'])}" if idf["non_identifiable"] else ""))
+    lines.append(f"identification ({ident['method']}): converged={ident['converged']} iterations={ident['iterations']} "
+                 f"cost {ident['cost_initial']:.4g} -> {ident['cost_final']:.4g}")
+    lines += [f"warning: {w}" for w in ident.get("warnings", [])]
+    if "residuals" in report:
+        lines.append("residual RMS: " + "; ".join(f"{k} " + ", ".join(f"{x:.4g}" for x in vals)
+                                                  for k, vals in report["residuals"].items()))
+    if "accuracy" in report:
+        b, a = report["accuracy"]["before"], report["accuracy"]["after"]
+        lines.append(f"validation ({b['n_poses']} poses): position RMS {b['position_rms_mm']:.3f} -> "
+                     f"{a['position_rms_mm']:.3f} mm, max {b['position_max_mm']:.3f} -> {a['position_max_mm']:.3f} mm, "
+                     f"rotation RMS {b['rotation_rms_deg']:.4f} -> {a['rotation_rms_deg']:.4f} deg")
+        if "V2_rad" in a:
+            imp = 100 * (1 - a["V2_rad"] / b["V2_rad"]) if b["V2_rad"] > 0 else float("nan")
+            lines.append(f"H4 criteria: V1 {b['V1_rad']:.3g} -> {a['V1_rad']:.3g} rad, V2 {b['V2_rad']:.3g} -> "
+                         f"{a['V2_rad']:.3g} rad ({imp:.1f} % better), V3 {b['V3_m'] * 1e3:.4f} -> "
+                         f"{a['V3_m'] * 1e3:.4f} mm")
+    if "synthetic_reference" in report:
+        r = report["synthetic_reference"]
+        lines.append(f"synthetic reference (no images, sigma {r['sigma_mm']:.3f} mm / {r['sigma_deg']:.4f} deg): "
+                     f"position RMS {r['accuracy_after']['position_rms_mm']:.3f} mm")
+    if "handeye" in report:
+        lines += _handeye_lines(report)
+    if "timings_s" in report and "total" in report["timings_s"]:
+        lines.append(f"time: {report['timings_s']['total']:.1f} s")
+    return "\n".join(lines)
+
+
+def _handeye_lines(report: dict) -> list[str]:
+    he = report["handeye"]
+    names = (he["A"], he["B"]) if report["settings"]["mount"] == "eye_in_hand" else ("T_base_cam", "T_flange_target")
+    lines = []
+    for name in names:
+        t = he["transforms"][name]
+        lines.append(f"{name}: xyz = " + ", ".join(f"{v * 1e3:.1f}" for v in t["xyz_m"]) + " mm (std "
+                     + ", ".join(f"{v * 1e3:.2f}" for v in t["std_xyz_m"]) + "); rpy = "
+                     + ", ".join(f"{v:.2f}" for v in t["rpy_deg"]) + " deg (std "
+                     + ", ".join(f"{v:.2f}" for v in t["std_rot_deg"]) + ")")
+    return lines
+
+
+def write_report(out_dir, report: dict, setup=None, result=None, problem=None, evaluations=None,
+                 plots: bool = True) -> Path:
+    """report.json + summary.txt (+ calibrated_model.yaml with a setup; + residuals.png,
+    parameters.png, and error_map.png with ``evaluations`` = {"before": Evaluation, "after": Evaluation})."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    files = {"report": "report.json", "model": "calibrated_model.yaml"}
-    write_calibrated_model(out / files["model"], setup, result.identified, result.std, result.free)
-    try:
-        r0 = problem.residual(setup.params.nominal)
-        plot_residuals(out / "residuals.png", r0, result.residuals, problem.residual_kind)
-        files["residuals_plot"] = "residuals.png"
-        free = result.free
-        ps = setup.params
-        plot_parameters(out / "parameters.png", [n for n, f in zip(ps.names, free) if f], ps.nominal[free],
-                        result.identified[free], result.std[free], None if x_true is None else x_true[free],
-                        [k for k, f in zip(ps.kinds, free) if f])
-        files["parameters_plot"] = "parameters.png"
-        if x_true is not None and validation is not None:
-            pos, eb = validation_errors_mm(setup, ps.nominal, x_true, validation)
-            _, ea = validation_errors_mm(setup, result.identified, x_true, validation)
-            plot_error_map(out / "error_map.png", pos, eb, ea)
-            files["error_map_plot"] = "error_map.png"
-    except Exception as exc:  # a plot must never cost the report
-        report.setdefault("warnings", []).append(f"plotting failed: {exc}")
+    files = {"report": "report.json"}
+    if setup is not None:
+        files["model"] = "calibrated_model.yaml"
+        write_calibrated_model(out / files["model"], setup, result.identified, result.std, result.free)
+    if plots and setup is not None:
+        try:
+            files.update(_write_plots(out, report, setup, result, problem, evaluations))
+        except Exception as exc:  # a plot must never cost the report
+            report.setdefault("warnings", []).append(f"plotting failed: {exc}")
     report["files"] = files
     write_text_atomic(out / "summary.txt", report.get("summary_text", "") + "\n")
     write_json_atomic(out / files["report"], report)
     return out / files["report"]
+
+
+def _write_plots(out: Path, report: dict, setup, result, problem, evaluations) -> dict:
+    from .plots import plot_error_map, plot_parameters, plot_residuals
+
+    files = {}
+    plot_residuals(out / "residuals.png", problem.residual(setup.params.nominal), result.residuals,
+                   problem.residual_kind)
+    files["residuals_plot"] = "residuals.png"
+    free, ps = result.free, setup.params
+    true = {p["name"]: p["true"] for p in report.get("parameters", [])}
+    x_true = np.array([np.nan if true.get(n) is None else true[n] for n in ps.names])
+    plot_parameters(out / "parameters.png", [n for n, f in zip(ps.names, free) if f], ps.nominal[free],
+                    result.identified[free], result.std[free],
+                    None if not np.isfinite(x_true[free]).any() else x_true[free],
+                    [k for k, f in zip(ps.kinds, free) if f])
+    files["parameters_plot"] = "parameters.png"
+    if evaluations:
+        b, a = evaluations["before"], evaluations["after"]
+        plot_error_map(out / "error_map.png", b.positions_m, b.position_errors_mm, a.position_errors_mm)
+        files["error_map_plot"] = "error_map.png"
+    return files

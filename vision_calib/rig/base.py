@@ -1,0 +1,236 @@
+"""The Setup protocol: what every robot kind provides to the pipelines, and the types it exchanges.
+
+A setup = a robot + the camera mount + the target mount, with ONE parameter set (robot + mounting
+parameters, by name) and the scene's free mask. Commanded poses are kind-specific arrays (serial:
+joint sets q (N, n) rad; H4: nacelle poses X (N, 4) = x, y, z [m], theta [rad]). Every kind turns
+commanded poses into the camera's view ``T_cam_target`` (for rendering), builds the identification
+problem from :class:`Measurements`, and evaluates a parameter vector on validation poses into one
+:class:`Evaluation`. Kinds are registered in :mod:`vision_calib.rig.registry` (the one place to touch
+when adding a robot kind).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import ClassVar
+
+import numpy as np
+
+from .. import frames as F
+from ..camera import CameraIntrinsics
+from ..errors import ConfigError, DataError
+from ..identify.problem import IdentificationProblem
+from ..kinematics.params import ParameterSet
+
+
+@dataclass(frozen=True)
+class Measurements:
+    """What the camera (and the encoders) gave for N robot poses.
+
+    poses: commanded poses (serial: q (N, n) rad; H4: X (N, 4)). joints: measured joint values
+    (N, n_joints) rad. T_cam_target: (N, 4, 4) measured camera poses. cov: (N, 6, 6) covariance of
+    each measured T_cam_target in the ``frames.pose_error`` convention (camera frame).
+    labels: (N,) pose ids.
+    """
+
+    poses: np.ndarray
+    joints: np.ndarray
+    T_cam_target: np.ndarray
+    cov: np.ndarray
+    labels: tuple = ()
+
+    def subset(self, idx) -> "Measurements":
+        idx = np.asarray(idx, dtype=int)
+        labels = tuple(self.labels[i] for i in idx) if self.labels else ()
+        return Measurements(self.poses[idx], self.joints[idx], self.T_cam_target[idx], self.cov[idx], labels)
+
+    @classmethod
+    def from_pose_measurements(cls, poses, joints, pms) -> tuple["Measurements", list[int]]:
+        """Measurements of the valid ``measure.PoseMeasurement`` of ``pms`` (one per commanded pose of
+        ``poses`` (N, .) and ``joints`` (N, n_joints) rad), and the indices of those poses."""
+        ok = [i for i, pm in enumerate(pms) if pm.valid]
+        T = np.array([pms[i].T_cam_target for i in ok]).reshape(-1, 4, 4)
+        cov = np.array([pms[i].cov for i in ok]).reshape(-1, 6, 6)
+        labels = tuple(str(pms[i].pose_id) for i in ok)
+        return cls(np.asarray(poses)[ok], np.asarray(joints)[ok], T, cov, labels), ok
+
+
+def pose_cov_from_sigmas(n: int, sigma_t_m: float, sigma_r_rad: float) -> np.ndarray:
+    """(n, 6, 6) diagonal covariances [sigma_t² x3, sigma_r² x3]; tiny floor keeps them invertible."""
+    st = max(float(sigma_t_m), 1e-6)  # floor 1 um / 1 urad: noise-free data keeps a well-conditioned weighting
+    sr = max(float(sigma_r_rad), 1e-6)
+    return np.broadcast_to(np.diag([st**2] * 3 + [sr**2] * 3), (n, 6, 6)).copy()
+
+
+#: the kind-independent fields of ``Evaluation.to_dict()`` (the rest are the kind's criteria)
+ACCURACY_FIELDS = ("position_rms_mm", "position_max_mm", "rotation_rms_deg", "rotation_max_deg", "n_poses")
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """Accuracy of a parameter vector on validation poses (true robot vs model).
+
+    positions_m: (N, 3) true positions of the evaluated frame (serial: chain end in the left mount's
+    frame; H4: nacelle point in the base frame). errors: (N, 6) pose errors [m, rad] (model - truth).
+    criteria: kind-specific figures (H4: V1_rad, V2_rad, V3_m of the paper, §6.1)."""
+
+    positions_m: np.ndarray
+    errors: np.ndarray
+    criteria: dict = field(default_factory=dict)
+
+    @property
+    def position_errors_mm(self) -> np.ndarray:
+        """(N,) norm of the position error [mm]."""
+        return np.linalg.norm(self.errors[:, :3], axis=1) * 1e3
+
+    def __getitem__(self, key: str) -> float:
+        """One figure of :meth:`to_dict`, e.g. ``evaluation["position_rms_mm"]``."""
+        return self.to_dict()[key]
+
+    def to_dict(self) -> dict:
+        """{position_rms_mm, position_max_mm, rotation_rms_deg, rotation_max_deg, n_poses, *criteria}."""
+        dp = self.position_errors_mm
+        dr = np.degrees(np.linalg.norm(self.errors[:, 3:], axis=1))
+        return {
+            "position_rms_mm": float(np.sqrt(np.mean(dp**2))),
+            "position_max_mm": float(dp.max()),
+            "rotation_rms_deg": float(np.sqrt(np.mean(dr**2))),
+            "rotation_max_deg": float(dr.max()),
+            "n_poses": int(len(self.errors)),
+            **{k: float(v) for k, v in self.criteria.items()},
+        }
+
+
+@dataclass(frozen=True)
+class Setup:
+    """Common interface of every robot kind (see the module docstring). ``params`` is the full
+    parameter set (robot + mounts) with the scene's free mask; ``mount`` says where the camera is
+    (``eye_in_hand`` | ``fixed`` | ``base``); ``meta``: kind-specific facts for reports."""
+
+    name: str
+    params: ParameterSet
+    camera: CameraIntrinsics | None
+    mount: str
+    meta: dict = field(default_factory=dict, compare=False, repr=False)
+
+    kind: ClassVar[str] = "abstract"
+    #: residual kinds the kind's problem builder accepts; the first is the default
+    residuals: ClassVar[tuple[str, ...]] = ()
+    #: identification methods; the first is the default
+    methods: ClassVar[tuple[str, ...]] = ("lse", "ekf")
+    #: pose-set kinds of ``poses.kind`` besides ``random`` and ``configurations``
+    pose_grids: ClassVar[tuple[str, ...]] = ()
+
+    # ------------------------------------------------------------------ to implement
+    @property
+    def n_joints(self) -> int:
+        raise NotImplementedError
+
+    def T_cam_target(self, poses, x) -> np.ndarray:
+        """(N, 4, 4) camera pose of the target for commanded poses under parameters x (n,)."""
+        raise NotImplementedError
+
+    def joints(self, poses, x) -> np.ndarray:
+        """(N, n_joints) rad: the joint readings of commanded poses under parameters x."""
+        raise NotImplementedError
+
+    def problem(self, meas: Measurements, residual: str | None = None,
+                params: ParameterSet | None = None) -> IdentificationProblem:
+        """Identification problem of measurements (free mask of ``params``, default the setup's)."""
+        raise NotImplementedError
+
+    def evaluate(self, x, x_true, validation, measurements: Measurements | None = None,
+                 truth: "Setup | None" = None) -> Evaluation:
+        """Accuracy of parameters x (n,) on validation poses against the true robot (``truth`` setup with
+        parameters x_true; default this setup). measurements: validation measurements, for criteria
+        that need them (H4 V1/V2)."""
+        raise NotImplementedError
+
+    def sample_poses(self, rng: np.random.Generator, n: int, check_view: bool = True) -> np.ndarray:
+        """n random commanded poses (with check_view: only poses where the target is in view)."""
+        raise NotImplementedError
+
+    def model_dict(self) -> dict:
+        """Kind-specific part of the calibrated-model file (what :func:`registry.load_model` needs to
+        rebuild the robot besides the parameter values)."""
+        raise NotImplementedError
+
+    # ------------------------------------------------------------------ optional, with defaults
+    def pose_grid(self, name: str) -> np.ndarray:
+        """The commanded poses of a named grid (``poses.kind``), e.g. the H4 81-pose grid."""
+        raise ConfigError(f"{self.name}: this {self.kind} setup has no pose grid {name!r}")
+
+    def configurations(self) -> dict:
+        """Named joint sets {name: {"q": (N, n) rad, ...}} of the robot file."""
+        return {}
+
+    def trials(self) -> dict:
+        """Named deviation vectors {name: {"deviation": {param: value}, ...}} of the robot file."""
+        return {}
+
+    def check_joints(self, q, where: str, ids=None) -> None:
+        """DataError naming ``where`` and the pose if joint readings q (N, n) rad are out of range."""
+        q = np.asarray(q, float)
+        if q.ndim != 2 or q.shape[1] != self.n_joints:
+            raise DataError(f"{where}: {q.shape[-1] if q.ndim else 0} joint values per pose, the robot has "
+                            f"{self.n_joints}")
+
+    def fixed_note(self, name: str) -> str:
+        """Why parameter ``name`` is fixed (for tables)."""
+        return "fixed (not free in the scene)"
+
+    def with_variant(self, variant: str | None = None, model: str | None = None) -> "Setup":
+        """The setup with another model variant (H4: paper table 2). Default: no variants."""
+        if variant is None and model is None:
+            return self
+        raise ConfigError(f"{self.name}: variant/model choices need a robot kind that has them (this one is {self.kind})")
+
+    def with_params(self, params: ParameterSet) -> "Setup":
+        """Same setup, other parameter set (free mask / nominal values)."""
+        return replace(self, params=params)
+
+    def with_camera(self, camera: CameraIntrinsics) -> "Setup":
+        return replace(self, camera=camera)
+
+    # ------------------------------------------------------------------ shared
+    def synthetic_measurements(self, poses, x_true, rng, sigma_t_m=0.0, sigma_r_rad=0.0, sigma_q_rad=0.0,
+                               labels=None) -> Measurements:
+        """Noise-free T_cam_target of the true robot ⊕ Gaussian noise (camera frame, per component)."""
+        poses = np.asarray(poses, float)
+        T = self.T_cam_target(poses, x_true)
+        n = len(T)
+        d = np.concatenate([rng.normal(scale=sigma_t_m, size=(n, 3)), rng.normal(scale=sigma_r_rad, size=(n, 3))], axis=1)
+        q = self.joints(poses, x_true)
+        if sigma_q_rad > 0:
+            q = q + rng.normal(scale=sigma_q_rad, size=q.shape)
+        labels = tuple(labels) if labels is not None else tuple(f"p{i:03d}" for i in range(n))
+        return Measurements(poses, q, F.perturb_pose(T, d), pose_cov_from_sigmas(n, sigma_t_m, sigma_r_rad), labels)
+
+    def visible(self, T_cam_target, target_outline_m, margin_px=10.0, max_tilt_deg=60.0) -> np.ndarray:
+        """(N,) bool: the whole target outline (K, 3) [m, target frame] projects inside the image
+        with ``margin_px``, in front of the camera, and the board normal is within max_tilt_deg of
+        the viewing ray."""
+        cam = self.camera
+        T = np.asarray(T_cam_target, float)
+        ok = np.ones(len(T), dtype=bool)
+        for i, Ti in enumerate(T):
+            p = F.transform_points(Ti, target_outline_m)
+            if np.any(p[:, 2] <= 0.05):
+                ok[i] = False
+                continue
+            uv = cam.project(p)
+            inside = (uv[:, 0] >= margin_px) & (uv[:, 0] <= cam.width - 1 - margin_px) & (uv[:, 1] >= margin_px) & (
+                uv[:, 1] <= cam.height - 1 - margin_px)
+            centre = p.mean(axis=0)
+            normal = Ti[:3, 2]
+            cosang = abs(normal @ centre) / np.linalg.norm(centre)
+            ok[i] = bool(inside.all() and cosang >= np.cos(np.radians(max_tilt_deg)))
+        return ok
+
+    def check_residual(self, residual: str | None) -> str:
+        """The residual kind to use (default: the kind's first); DataError if the kind has no such residual."""
+        residual = residual or self.residuals[0]
+        if residual not in self.residuals:
+            raise DataError(f"{self.kind} setups use {' or '.join(repr(r) for r in self.residuals)} residuals, "
+                            f"not {residual!r}")
+        return residual

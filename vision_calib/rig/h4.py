@@ -1,0 +1,187 @@
+"""The H4 parallel robot (``kinematics.h4.H4Robot``), camera on the base, target on the nacelle.
+
+Commanded poses are nacelle poses X (N, 4) = (x, y, z [m], theta [rad]) mapped to joints by the
+TRUE inverse model. Identification uses the paper's inverse-geometric-model method (joint residuals).
+Evaluation adds the paper's criteria (§6.1): V1 mean and V2 RMS joint residual on validation
+measurements [rad], V3 straightness of reconstructed straight-line motions [m].
+
+Scene keys of this kind: ``model`` ("12" | "31") and ``variant`` (paper table 2, A..H); pose grid
+``grid81`` (the paper's 81-pose grid on the robot file's workspace).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import ClassVar
+
+import numpy as np
+
+from ..errors import ConfigError, DataError, ParameterError
+from .base import Evaluation, Setup
+
+
+@dataclass(frozen=True)
+class H4Setup(Setup):
+    """H4 robot (``robot``: kinematics.h4.H4Robot) + base camera + nacelle target. ``sigma_q_rad``:
+    joint-reading noise of the IGM problem (0: measurement noise only). ``robot_path``, ``model``,
+    ``variant``: where the robot came from (for variants and the calibrated-model file)."""
+
+    robot: object = None
+    sigma_q_rad: float = 0.0
+    robot_path: str = ""
+    variant: str | None = None
+
+    kind: ClassVar[str] = "h4"
+    residuals: ClassVar[tuple[str, ...]] = ("joint",)
+    methods: ClassVar[tuple[str, ...]] = ("igm", "ekf", "lse")  # lse = igm (least squares on the IGM residuals)
+    mounts: ClassVar[tuple[str, ...]] = ("base",)
+    pose_grids: ClassVar[tuple[str, ...]] = ("grid81",)
+    scene_keys: ClassVar[tuple[str, ...]] = ("model", "variant")
+
+    @property
+    def n_joints(self) -> int:
+        return 4
+
+    @property
+    def model(self) -> str:
+        return self.robot.model
+
+    def T_cam_target(self, poses, x) -> np.ndarray:
+        return self.robot.camera_measurement(poses, x)
+
+    def joints(self, poses, x) -> np.ndarray:
+        return self.robot.igm(poses, x)
+
+    def problem(self, meas, residual=None, params=None):
+        from ..identify.h4_problem import h4_igm_problem
+
+        self.check_residual(residual)
+        robot = replace(self.robot, params=params or self.params)
+        return h4_igm_problem(robot, meas.joints, meas.T_cam_target, sigma_q_rad=self.sigma_q_rad or None,
+                              pose_cov=meas.cov, labels=meas.labels)
+
+    def evaluate(self, x, x_true, validation, measurements=None, truth=None) -> Evaluation:
+        """Nacelle pose error of the forward model (Newton on the IGM) with parameters x, from the joints
+        the TRUE robot (``truth``, default this setup, with x_true) needs for validation poses X (N, 4);
+        V1/V2 from validation measurements (joints - IGM of the measured camera poses under x), V3 from
+        the straight lines of :meth:`lines`."""
+        truth_robot = (truth or self).robot
+        X = np.asarray(validation, float)
+        Xh = self.robot.fgm(truth_robot.igm(X, x_true), x, X0=X)
+        err = np.zeros((len(X), 6))
+        err[:, :3] = Xh[:, :3] - X[:, :3]
+        err[:, 5] = np.angle(np.exp(1j * (Xh[:, 3] - X[:, 3])))
+        crit = {}
+        if measurements is not None:
+            r = np.angle(np.exp(1j * (measurements.joints - self.robot.igm_from_camera(measurements.T_cam_target, x))))
+            crit["V1_rad"], crit["V2_rad"] = float(np.mean(r)), float(np.sqrt(np.mean(r**2)))
+        crit["V3_m"] = float(np.mean([self._straightness(L, x, x_true, truth_robot) for L in self.lines()]))
+        return Evaluation(X[:, :3], err, crit)
+
+    def lines(self) -> list[np.ndarray]:
+        """Two straight-line motions through the workspace (paper §6.1, configurations 1 and 2):
+        X (50, 4) each, along a diagonal of the box at theta = 0 and theta = 10 deg."""
+        c, s = self.robot.center, self.robot.size
+        t = np.linspace(-0.45, 0.45, 50)[:, None]
+        d1 = np.array([s[0], s[1], 0.0])
+        d2 = np.array([s[0], -s[1], s[2]])
+        return [np.column_stack([c + t * d1, np.zeros(len(t))]),
+                np.column_stack([c + t * d2, np.full(len(t), np.radians(10.0))])]
+
+    def _straightness(self, line_X, x, x_true, truth_robot) -> float:
+        """RMS distance [m] of the forward-model positions (parameters x) of the joints that move the
+        TRUE robot along a straight line, to their least-squares line."""
+        P = self.robot.fgm(truth_robot.igm(line_X, x_true), x, X0=line_X)[:, :3]
+        P = P - P.mean(axis=0)
+        u = np.linalg.svd(P, full_matrices=False)[2][0]
+        return float(np.sqrt(np.mean(np.sum((P - np.outer(P @ u, u)) ** 2, axis=1))))
+
+    def sample_poses(self, rng, n, check_view=True) -> np.ndarray:
+        from ..kinematics.h4 import random_workspace_poses
+
+        return random_workspace_poses(n, rng, center=self.robot.center, size=self.robot.size)
+
+    def pose_grid(self, name: str) -> np.ndarray:
+        if name != "grid81":
+            return super().pose_grid(name)
+        return self.robot.pose_grid()
+
+    def with_params(self, params):
+        return replace(self, params=params, robot=replace(self.robot, params=params))
+
+    def check_joints(self, q, where: str, ids=None) -> None:
+        super().check_joints(q, where, ids)
+        bad = np.argwhere(~np.isfinite(np.asarray(q, float)))
+        if bad.size:
+            k, j = (int(v) for v in bad[0])
+            pid = list(ids)[k] if ids is not None else k
+            raise DataError(f"{where}: pose {pid!r} joint q{j + 1} is not finite")
+
+    def with_variant(self, variant: str | None = None, model: str | None = None) -> "H4Setup":
+        """The setup with its robot rebuilt from the robot file: ``variant`` A..H (paper table 2, built
+        from the model-12 robot: E..H are model 31) and/or ``model`` "12"|"31"; the free mask follows the
+        variant (or the model's default: D for 12, H for 31); names the current free mask fixes stay fixed.
+        ConfigError if the variant/model pair is impossible."""
+        from ..kinematics.h4 import load_h4_robot
+
+        if variant is None and model is None:
+            return self
+        model = model or (("31" if variant in tuple("EFGH") else "12") if variant else self.model)
+        robot = load_h4_robot(self.robot_path, model=model)
+        if variant is not None:
+            if model == "31" and variant in tuple("ABCD"):
+                raise ConfigError(f"{self.robot_path}: H4 variant {variant} is built on model 12, not model 31")
+            try:
+                robot = robot.variant(variant)
+            except ParameterError as exc:
+                raise ConfigError(f"{self.robot_path}: variant: {exc}") from None
+        fix = [n for n in self.meta.get("fix", ()) if n in robot.names]
+        params = robot.params.fix(fix) if fix else robot.params
+        return replace(self, params=params, robot=replace(robot, params=params), variant=variant)
+
+    def model_dict(self) -> dict:
+        return {"model": self.robot.model, "variant": self.variant, "shared_L": bool(self.robot.shared_L),
+                "tilts": {"R_BC0": self.robot.R_BC0.tolist(), "R_ME0": self.robot.R_ME0.tolist()}}
+
+    # ------------------------------------------------------------------ registry hooks
+    @staticmethod
+    def claims(robot_path: Path, doc: dict | None) -> bool:
+        """A YAML robot file with ``kind: h4``."""
+        return doc is not None and doc.get("kind") == "h4"
+
+    @classmethod
+    def from_scene(cls, ctx) -> "H4Setup":
+        from ..kinematics.h4 import load_h4_robot
+
+        top = ctx.top
+        model = str(top.get("model", str, "12", choices=("12", "31")))
+        robot = load_h4_robot(ctx.robot_path, model=model)
+        variant = top.get("variant", str, None)
+        if variant is not None:
+            try:
+                robot = robot.variant(variant)
+            except ParameterError as exc:
+                raise top.error("variant", str(exc)) from None
+        params = ctx.apply_free(robot.params)
+        return cls(name=ctx.name, params=params, camera=ctx.camera, mount=ctx.mount,
+                   meta={"robot_path": str(ctx.robot_path), "fix": tuple(ctx.fixed_names)},
+                   robot=replace(robot, params=params), sigma_q_rad=ctx.sigma_q_rad,
+                   robot_path=str(ctx.robot_path), variant=variant)
+
+    @staticmethod
+    def load_model(doc, robot_path: Path):
+        """The robot of a calibrated-model file (``io.model_export``), nominal values still to set."""
+        from ..kinematics.h4 import load_h4_robot
+
+        robot = load_h4_robot(robot_path, model=str(doc.get("model", str, "12")))
+        variant = doc.get("variant", str, None)
+        if variant:
+            robot = robot.variant(variant)
+        elif doc.get("shared_L", bool, False) and not robot.shared_L:
+            robot = robot.variant("E")  # the only variant sharing one arm length
+        tilts = doc.section("tilts", default={})
+        if "R_BC0" in tilts:
+            robot = replace(robot, R_BC0=np.asarray(tilts.get("R_BC0", list), float),
+                            R_ME0=np.asarray(tilts.get("R_ME0", list), float))
+        return robot

@@ -1,0 +1,69 @@
+"""The robot-kind registry: THE one place that knows which robot kinds exist.
+
+A robot kind is a :class:`~vision_calib.rig.base.Setup` subclass that also provides:
+
+- ``kind`` (its name, e.g. ``"serial"``), ``mounts`` (camera mounts it supports), ``residuals`` and
+  ``methods`` (first = default), ``pose_grids`` (named pose grids);
+- ``claims(robot_path, doc) -> bool``: whether a robot file is of this kind (``doc`` is the parsed
+  YAML mapping, or None for a non-YAML file such as a URDF);
+- ``from_scene(ctx) -> Setup``: build the setup of a scene (:class:`vision_calib.rig.scene.SceneContext`);
+- ``load_model(doc, robot_path)``: rebuild the robot of a calibrated-model file.
+
+Adding a robot kind = writing that class and calling :func:`register` on it (for the shipped kinds:
+one line below). Nothing else in the package branches on the kind.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..errors import ConfigError
+
+KINDS: dict = {}
+
+
+def register(cls):
+    """Register a Setup subclass as a robot kind (returns it, usable as a decorator)."""
+    for attr in ("kind", "mounts", "residuals", "methods", "claims", "from_scene", "load_model"):
+        if not hasattr(cls, attr):
+            raise TypeError(f"robot kind {cls.__name__} lacks {attr!r}")
+    KINDS[cls.kind] = cls
+    return cls
+
+
+def unregister(kind: str) -> None:
+    """Remove a registered kind (tests registering toy kinds clean up with it)."""
+    KINDS.pop(kind, None)
+
+
+def get_kind(name: str, where: str = "kind"):
+    """The Setup class of a kind name; ConfigError naming ``where`` and the known kinds."""
+    try:
+        return KINDS[name]
+    except KeyError:
+        raise ConfigError(f"{where}: unknown robot kind {name!r} (known: {', '.join(sorted(KINDS))})") from None
+
+
+def kind_of_robot_file(path: Path, where: str = "robot"):
+    """The Setup class whose ``claims`` accepts the robot file at ``path``."""
+    path = Path(path)
+    doc = None
+    if path.suffix.lower() in (".yaml", ".yml"):
+        from ..config import load_yaml
+
+        doc = load_yaml(path)
+    for cls in KINDS.values():
+        if cls.claims(path, doc):
+            return cls
+    raise ConfigError(f"{where}: {path}: no robot kind reads this file (known kinds: {', '.join(sorted(KINDS))})")
+
+
+def _register_shipped() -> None:
+    from .h4 import H4Setup
+    from .serial import SerialSetup
+
+    for cls in (H4Setup, SerialSetup):  # order matters for claims(): specific kinds first
+        register(cls)
+
+
+_register_shipped()

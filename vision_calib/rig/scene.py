@@ -1,0 +1,313 @@
+"""Scene files (``scenes/*.yaml``): robot + camera + target + truth + poses + identification,
+loaded ONCE into typed settings in SI units.
+
+Schema (lengths/angles in the scene's ``units``, default m and deg; keys with a unit suffix are in
+that unit). Unknown keys are errors (with the closest known key suggested)::
+
+    name: h4_vision
+    robot: robots/h4.yaml            # robot file, relative to the scene file; its kind (rig.registry)
+                                     # decides which kind-specific keys below apply
+    mount: base | eye_in_hand | fixed
+    units: {length: m, angle: deg}
+    camera: {width, height, fx, fy, cx, cy, dist}  or  {width, height, focal_mm, pixel_um, dist}
+    target: ../targets/charuco_h4.yaml
+    effects: {noise_grey: 2.0, blur_px: 0.6, ...}   # sensor effects (vision_calib.sensor.SensorEffects)
+    render: {supersample: 2}         # anti-aliasing: render at s x resolution, box-average
+    truth: {seed: 1, sigma_length_mm: 0.5, sigma_angle_deg: 0.05, deviations: {name: value}, trial: name}
+    poses: {kind: random | configurations | <grid of the kind>, count: 81, configurations: name, ...}
+    validation: {kind: random | configurations, count: 50, configurations: name}
+    measurement: {frames: 10, averaging: corners|poses, sigma_mm: 0.2, sigma_deg: 0.03, sigma_q_deg: 0}
+    identification: {method: ..., residual: ..., fix: [names], free: [names]}
+    # kind-specific keys: serial: mounts, poses.center, poses.spread; h4: model, variant
+
+``measurement.sigma_mm`` / ``sigma_deg`` are the pose noise of the *synthetic* (no image) mode; image
+runs measure their noise.
+"""
+
+from __future__ import annotations
+
+import difflib
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from .. import frames as F
+from ..camera import CameraIntrinsics
+from ..config import Section, load_yaml
+from ..errors import ConfigError, ParameterError
+from .base import Setup
+from .registry import kind_of_robot_file
+
+SCENES_DIR = Path(__file__).resolve().parents[2] / "scenes"
+TOP_KEYS = ("name", "robot", "mount", "units", "camera", "target", "effects", "render", "truth", "poses",
+            "validation", "measurement", "identification")
+#: scene effect names -> SensorEffects field names (short forms accepted in scenes and studies)
+EFFECT_ALIASES = {"noise_grey": "read_noise_grey", "blur_px": "blur_sigma_px"}
+
+
+def only(sec: Section, known) -> Section:
+    """ConfigError naming the file and key for a key of ``sec`` not in ``known`` (closest known key
+    suggested); returns ``sec``."""
+    known = list(known)
+    for k in sec.keys():
+        if k not in known:
+            close = difflib.get_close_matches(str(k), known, n=1)
+            hint = f"; did you mean {close[0]!r}?" if close else ""
+            raise sec.error(str(k), f"unknown key (known: {', '.join(known)}){hint}")
+    return sec
+
+
+@dataclass(frozen=True)
+class TruthSettings:
+    """How the true robot is drawn: seed, random deviation std per parameter kind [m, rad], explicit
+    deviations {name: SI value}, or a robot-file ``trial`` (its deviation vector replaces the draw)."""
+
+    seed: int = 0
+    sigma_length_m: float = 0.5e-3
+    sigma_angle_rad: float = float(np.radians(0.05))
+    deviations: dict = field(default_factory=dict)
+    trial: str | None = None
+
+
+@dataclass(frozen=True)
+class PoseSettings:
+    """A pose set: ``kind`` random | configurations | a pose grid of the robot kind; ``count`` poses
+    (None: all of a grid / set); ``configurations``: the robot file's named joint set."""
+
+    kind: str = "random"
+    count: int | None = None
+    configurations: str | None = None
+
+
+@dataclass(frozen=True)
+class MeasurementSettings:
+    """frames per pose, frame averaging mode, synthetic pose noise per component [m, rad] and joint
+    reading noise [rad]."""
+
+    frames: int = 10
+    averaging: str = "corners"
+    sigma_t_m: float = 0.2e-3
+    sigma_r_rad: float = float(np.radians(0.03))
+    sigma_q_rad: float = 0.0
+
+
+@dataclass(frozen=True)
+class IdentificationSettings:
+    method: str
+    residual: str
+
+
+@dataclass(frozen=True)
+class SceneContext:
+    """What a robot kind's ``from_scene`` gets: the scene file's top Section, the common settings
+    already read, and helpers for kind-specific keys."""
+
+    top: Section
+    name: str
+    mount: str
+    robot_path: Path
+    camera: CameraIntrinsics | None
+    target: object
+    Lf: float
+    Af: float
+    sigma_q_rad: float
+
+    @property
+    def ident(self) -> Section:
+        return self.top.section("identification", default={})
+
+    @property
+    def fixed_names(self) -> list[str]:
+        return [str(n) for n in self.ident.get("fix", list, [])]
+
+    def apply_free(self, params):
+        """params with the scene's ``identification.free`` (only these) then ``fix`` applied."""
+        free = self.ident.get("free", list, None)
+        try:
+            if free is not None:
+                params = params.only_free([str(n) for n in free])
+            if self.fixed_names:
+                params = params.fix(self.fixed_names)
+        except ParameterError as exc:
+            raise self.ident.error("free" if free is not None else "fix", str(exc)) from None
+        return params
+
+    def xyz_rpy(self, sec: Section, key: str) -> np.ndarray:
+        """(4, 4) transform of ``sec[key] = {xyz: [..], rpy: [..]}`` in the scene's units."""
+        s = only(sec.section(key), ("xyz", "rpy"))
+        xyz = s.floats("xyz", 3, np.zeros(3))
+        rpy = s.floats("rpy", 3, np.zeros(3))
+        return F.T_from_xyz_rpy(xyz * self.Lf, rpy * self.Af)
+
+    def only(self, sec: Section, known) -> Section:
+        return only(sec, known)
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A loaded scene: the setup (robot/camera model with the scene's free mask) and typed settings in
+    SI units. ``effects``: sensor.SensorEffects. ``raw``: the file's mapping (for hashing only)."""
+
+    path: Path
+    name: str
+    setup: Setup
+    target_path: Path | None
+    effects: object
+    truth: TruthSettings
+    poses: PoseSettings
+    validation: PoseSettings
+    measurement: MeasurementSettings
+    identification: IdentificationSettings
+    supersample: int = 2
+    raw: dict = field(repr=False, default_factory=dict)
+
+    @property
+    def kind(self) -> str:
+        return self.setup.kind
+
+    def with_setup(self, setup: Setup) -> "Scene":
+        """Same scene, other setup; truth deviations of names the new setup lacks are dropped."""
+        devs = {k: v for k, v in self.truth.deviations.items() if k in setup.params.names}
+        return replace(self, setup=setup, truth=replace(self.truth, deviations=devs))
+
+
+def _camera(sec: Section | None) -> CameraIntrinsics | None:
+    if sec is None:
+        return None
+    if "focal_mm" in sec:
+        only(sec, ("width", "height", "focal_mm", "pixel_um", "dist"))
+        cam = CameraIntrinsics.from_focal_mm(sec.get("width", int), sec.get("height", int), sec.positive("focal_mm"),
+                                             sec.positive("pixel_um"))
+        d = sec.floats("dist", 5, np.zeros(5))
+        return CameraIntrinsics(cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy, tuple(float(v) for v in d))
+    only(sec, ("width", "height", "fx", "fy", "cx", "cy", "dist"))
+    return CameraIntrinsics.from_dict(sec.data, where=sec.where())
+
+
+def _effects(sec: Section):
+    from ..sensor import SensorEffects
+
+    d = {EFFECT_ALIASES.get(k, k): v for k, v in sec.data.items()}
+    return SensorEffects.from_dict(d, where=sec.where())
+
+
+def _pose_settings(sec: Section, kinds, extra_keys=()) -> PoseSettings:
+    only(sec, ("kind", "count", "configurations") + tuple(extra_keys))
+    return PoseSettings(kind=sec.get("kind", str, "random", choices=kinds), count=sec.positive("count", int, None),
+                        configurations=sec.get("configurations", str, None))
+
+
+def _measurement(sec: Section) -> MeasurementSettings:
+    only(sec, ("frames", "averaging", "sigma_mm", "sigma_deg", "sigma_q_deg"))
+    return MeasurementSettings(
+        frames=sec.positive("frames", int, 10),
+        averaging=sec.get("averaging", str, "corners", choices=("corners", "poses")),
+        sigma_t_m=sec.nonnegative("sigma_mm", float, 0.2) * 1e-3,
+        sigma_r_rad=float(np.radians(sec.nonnegative("sigma_deg", float, 0.03))),
+        sigma_q_rad=float(np.radians(sec.nonnegative("sigma_q_deg", float, 0.0))),
+    )
+
+
+def _truth(sec: Section, setup: Setup, Lf: float, Af: float) -> TruthSettings:
+    only(sec, ("seed", "sigma_length_mm", "sigma_angle_deg", "deviations", "trial"))
+    devs = {}
+    dsec = sec.section("deviations", default={})
+    for k in dsec.keys():
+        try:
+            i = setup.params.index(str(k))
+        except ParameterError as exc:
+            raise dsec.error(str(k), str(exc)) from None
+        devs[str(k)] = dsec.get(k, float) * (Lf if setup.params.kinds[i] == "length" else Af)
+    trial = sec.get("trial", str, None)
+    if trial is not None and trial not in setup.trials():
+        raise sec.error("trial", f"unknown trial {trial!r} (robot file has {sorted(setup.trials()) or 'no trials'})")
+    return TruthSettings(seed=sec.nonnegative("seed", int, 0),
+                         sigma_length_m=sec.nonnegative("sigma_length_mm", float, 0.5) * 1e-3,
+                         sigma_angle_rad=float(np.radians(sec.nonnegative("sigma_angle_deg", float, 0.05))),
+                         deviations=devs, trial=trial)
+
+
+def load_scene(path) -> Scene:
+    """Load and validate a scene file; ConfigError naming the file and key on bad input."""
+    path = Path(path)
+    if not path.exists() and not path.is_absolute() and (SCENES_DIR / path).exists():
+        path = SCENES_DIR / path
+    top = Section(load_yaml(path), path)
+    robot_path = top.path_value("robot")
+    kind = kind_of_robot_file(robot_path, where=top.where("robot"))
+    only(top, TOP_KEYS + tuple(getattr(kind, "scene_keys", ())))
+    name = top.get("name", str, path.stem)
+    Lf, Af = top.units(default_length="m", default_angle="deg")
+    mount = top.get("mount", str, choices=kind.mounts)
+    camera = _camera(top.section("camera") if "camera" in top else None)
+    target_path = top.path_value("target", None)
+    target = None
+    if target_path is not None:
+        from ..targets import load_target
+
+        target = load_target(target_path)
+    measurement = _measurement(top.section("measurement", default={}))
+    rs = only(top.section("render", default={}), ("supersample",))
+    ctx = SceneContext(top, name, mount, robot_path, camera, target, Lf, Af, measurement.sigma_q_rad)
+    setup = kind.from_scene(ctx)
+    ident = only(top.section("identification", default={}), ("method", "residual", "fix", "free"))
+    method = ident.get("method", str, kind.methods[0], choices=kind.methods)
+    residual = ident.get("residual", str, kind.residuals[0], choices=kind.residuals)
+    pose_kinds = ("random", "configurations") + tuple(kind.pose_grids)
+    return Scene(
+        path=path, name=name, setup=setup, target_path=target_path,
+        effects=_effects(top.section("effects", default={})),
+        truth=_truth(top.section("truth", default={}), setup, Lf, Af),
+        poses=_pose_settings(top.section("poses", default={}), pose_kinds, getattr(kind, "pose_keys", ())),
+        validation=_pose_settings(top.section("validation", default={}), ("random", "configurations")),
+        measurement=measurement, identification=IdentificationSettings(method, residual),
+        supersample=rs.positive("supersample", int, 2), raw=top.data,
+    )
+
+
+def scene_poses(scene: Scene, rng: np.random.Generator, n: int | None = None, which: str = "poses") -> np.ndarray:
+    """Commanded poses of a scene: identification poses (``which="poses"``) or validation poses."""
+    spec = scene.poses if which == "poses" else scene.validation
+    setup = scene.setup
+    if n is not None and int(n) < 1:
+        raise ConfigError(f"{scene.path}: asked for {n} {which}: need at least 1")
+    n = n or spec.count
+    if spec.kind in setup.pose_grids:
+        X = setup.pose_grid(spec.kind)
+        if n is not None and n > len(X):
+            raise ConfigError(f"{scene.path}: {which}: {n} poses asked, the grid has {len(X)}")
+        if n is not None and n < len(X):
+            X = X[np.sort(rng.choice(len(X), size=n, replace=False))]
+        return X
+    if spec.kind == "configurations":
+        confs = setup.configurations()
+        if spec.configurations not in confs:
+            raise ConfigError(f"{scene.path}: {which}.configurations: unknown set {spec.configurations!r} "
+                              f"(robot file has {sorted(confs)})")
+        q = confs[spec.configurations]["q"]
+        if n is not None and n > len(q):
+            raise ConfigError(f"{scene.path}: {which}: {n} poses asked, configuration set "
+                              f"{spec.configurations!r} has {len(q)}")
+        return q if n is None else q[:n]
+    # validation poses are evaluated through the kinematics only: they need not see the target
+    return setup.sample_poses(rng, n or 30, check_view=(which == "poses"))
+
+
+def true_parameters(scene: Scene, rng: np.random.Generator, base_free=None) -> np.ndarray:
+    """Truth x_true (n,) = nominal + deviations. Seeded random deviations (sigma by kind) on the
+    parameters that are free and identifiable (``base_free`` mask; default the scene's free mask),
+    unless the scene names a robot-file trial (its deviation vector replaces the random draw);
+    the scene's explicit ``truth.deviations`` are applied last."""
+    ps = scene.setup.params
+    x = ps.nominal.copy()
+    mask = ps.free if base_free is None else np.asarray(base_free, bool)
+    sig = np.where(np.array(ps.kinds) == "length", scene.truth.sigma_length_m, scene.truth.sigma_angle_rad)
+    x[mask] += rng.normal(size=int(mask.sum())) * sig[mask]
+    devs = dict(scene.truth.deviations)
+    if scene.truth.trial:
+        devs.update(scene.setup.trials()[scene.truth.trial].get("deviation", {}))
+        x = ps.nominal.copy()  # a given deviation vector replaces the random draw
+    for k, v in devs.items():
+        x[ps.index(k)] = ps.nominal[ps.index(k)] + v
+    return x
