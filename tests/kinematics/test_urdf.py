@@ -187,6 +187,17 @@ def test_identifiability_reduces_the_per_joint_model_to_30_base_parameters():
     assert np.isfinite(rep.condition_number)
 
 
+def test_identifiable_count_with_a_prismatic_joint(tmp_path):
+    """Toy chain R-P-R, both mounts, full pose: 4 R + 2 P + 6 = 16 of 3 * 7 + 12 = 33."""
+    rng = np.random.default_rng(9)
+    ch, _ = _toy(tmp_path, left="T_cam_base", right="T_flange_target", T_left_base=_random_T(rng),
+                 T_flange_right=_random_T(rng, 0.1))
+    q = _random_q(ch, rng, 50)
+    rep = analyze(serial_problem(ch, q, ch.forward(q)), selection="order")
+    assert rep.n_params == 33 and rep.rank == 16
+    assert {"q0_2", "q0_3"} <= set(rep.non_identifiable)
+
+
 def test_recovers_base_parameters_within_predicted_std():
     """Deviations on the base set only (the dropped ones stay nominal, so the truth is the base
     solution); 1 mm / 1 mrad noise on 60 poses; every estimate within 4 predicted std, and the
