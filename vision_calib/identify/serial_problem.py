@@ -103,8 +103,9 @@ def serial_problem(
     Raises ParameterError if two exactly redundant parameters (``chain.redundant_pairs()``, e.g.
     a Hayati ``beta3`` and ``d3``) are both free.
     """
-    if not isinstance(chain, SerialChain):
-        raise ParameterError(f"serial_problem needs a SerialChain, got {type(chain).__name__}")
+    # duck-typed: SerialChain or any chain with the same protocol (e.g. kinematics.urdf.URDFChain)
+    if not all(hasattr(chain, a) for a in ("params", "forward", "pose_jacobian", "check_joints", "redundant_pairs")):
+        raise ParameterError(f"serial_problem needs a SerialChain-like chain, got {type(chain).__name__}")
     if residual not in ("pose", "position"):
         raise ParameterError(f"residual must be 'pose' or 'position', got {residual!r}")
     q = chain.check_joints(q)
