@@ -187,6 +187,7 @@ def write_report(out_dir, report: dict, setup=None, result=None, problem=None, e
     if setup is not None:
         files["model"] = "calibrated_model.yaml"
         write_calibrated_model(out / files["model"], setup, result.identified, result.std, result.free)
+        files.update(setup.export_model_files(out, result.identified))
     if plots and setup is not None:
         try:
             files.update(_write_plots(out, report, setup, result, problem, evaluations))

@@ -156,6 +156,11 @@ class Setup:
         raise NotImplementedError
 
     # ------------------------------------------------------------------ optional, with defaults
+    def export_model_files(self, out_dir, x) -> dict:
+        """Write kind-specific calibrated-model files (e.g. a URDF) into out_dir for parameters x (n,);
+        returns {file kind: file name}. Default: none (``calibrated_model.yaml`` is written for every kind)."""
+        return {}
+
     def pose_grid(self, name: str) -> np.ndarray:
         """The commanded poses of a named grid (``poses.kind``), e.g. the H4 81-pose grid."""
         raise ConfigError(f"{self.name}: this {self.kind} setup has no pose grid {name!r}")

@@ -61,8 +61,9 @@ def kind_of_robot_file(path: Path, where: str = "robot"):
 def _register_shipped() -> None:
     from .h4 import H4Setup
     from .serial import SerialSetup
+    from .urdf import URDFSetup
 
-    for cls in (H4Setup, SerialSetup):  # order matters for claims(): specific kinds first
+    for cls in (H4Setup, URDFSetup, SerialSetup):
         register(cls)
 
 

@@ -172,10 +172,7 @@ class SerialSetup(Setup):
     @classmethod
     def from_scene(cls, ctx) -> "SerialSetup":
         """The setup of a scene (``rig.scene.SceneContext``): robot file, mounts, pose sampling."""
-        from ..kinematics.serial import load_serial_robot
-
-        chain = load_serial_robot(ctx.robot_path)
-        chain = cls._mounted(chain, ctx)
+        chain = cls._mounted(cls.load_chain(ctx), ctx)
         params = ctx.apply_free(chain.params)
         ps = ctx.top.section("poses", default={})
         n = chain.n_joints
@@ -189,6 +186,13 @@ class SerialSetup(Setup):
         return cls(name=ctx.name, params=params, camera=ctx.camera, mount=ctx.mount,
                    meta={"robot_path": str(ctx.robot_path)}, chain=chain.with_params(params),
                    q_center=center, q_spread=spread, target_outline=outline)
+
+    @classmethod
+    def load_chain(cls, ctx):
+        """The robot file's chain (MDH robot YAML)."""
+        from ..kinematics.serial import load_serial_robot
+
+        return load_serial_robot(ctx.robot_path)
 
     @staticmethod
     def _mounted(chain, ctx):
@@ -204,12 +208,15 @@ class SerialSetup(Setup):
             raise ms.error(lk, f"a {ctx.mount} camera needs mounts {lk} and {rk} (the robot file has {chain.mount_names})")
         return chain
 
-    @staticmethod
-    def load_model(doc, robot_path: Path):
+    @classmethod
+    def load_model(cls, doc, robot_path: Path):
         """The robot of a calibrated-model file (``io.model_export``), nominal values still to set."""
         from ..kinematics.serial import load_serial_robot
 
-        chain = load_serial_robot(robot_path)
+        return cls._model_mounts(load_serial_robot(robot_path), doc)
+
+    @staticmethod
+    def _model_mounts(chain, doc):
         m = doc.section("mounts")
         chain = remount_chain(chain, m.get("left", str), m.get("right", str), np.eye(4), np.eye(4))
         return replace(chain, left_R_nominal=np.asarray(m.get("left_R_nominal", list), float),
