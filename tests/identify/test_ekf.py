@@ -91,7 +91,7 @@ def test_plain_ekf_converges_to_lse_with_passes():
     prob, _ = planar_problem(true_deviation(rng), n_poses=25, rng=rng)
     lse = solve_lse(prob)
     fi = lse.free
-    one = solve_ekf(prob, iterations_per_update=1)
+    one = solve_ekf(prob, iterations_per_update=1, passes=1)
     three = solve_ekf(prob, iterations_per_update=1, passes=3)
     d1 = np.max(np.abs(one.identified - lse.identified)[fi] / lse.std[fi])
     d3 = np.max(np.abs(three.identified - lse.identified)[fi] / lse.std[fi])
@@ -99,7 +99,7 @@ def test_plain_ekf_converges_to_lse_with_passes():
     assert np.allclose(three.std[fi], lse.std[fi], rtol=0.01)
     assert three.info["updates"] == 3 * 25
     # iterated update, one pass: same solution as LSE up to a small fraction of the std
-    it = solve_ekf(prob)
+    it = solve_ekf(prob, passes=1)
     assert np.max(np.abs(it.identified - lse.identified)[fi] / lse.std[fi]) < 0.05
     assert it.cost_final < it.cost_initial and it.residuals.shape == (25, 3)
 
@@ -131,7 +131,7 @@ def test_h4_passes_bring_ekf_to_lse():
     prob, _ = h4_problem("D", sigma_q_rad=1e-4, n_poses=40, seed=3)
     lse = solve_lse(prob)
     fi = lse.free
-    one = solve_ekf(prob)
+    one = solve_ekf(prob, passes=1)
     three = solve_ekf(prob, passes=3)
     d1 = np.max(np.abs(one.identified - lse.identified)[fi] / lse.std[fi])
     d3 = np.max(np.abs(three.identified - lse.identified)[fi] / lse.std[fi])
