@@ -245,14 +245,7 @@ def solve_lse(
     (:mod:`~vision_calib.identify.threads`).
     """
     t0 = time.perf_counter()
-    if jac not in ("analytic", "2-point", "3-point"):
-        raise ConfigError(f"solve_lse: jac={jac!r}; expected 'analytic', '2-point' or '3-point'")
-    if method == "auto":
-        method = "lm" if loss == "linear" else "trf"
-    if method not in ("lm", "trf", "dogbox"):
-        raise ConfigError(f"solve_lse: method={method!r}; expected 'lm', 'trf', 'dogbox' or 'auto'")
-    if method == "lm" and loss != "linear":
-        raise ConfigError(f"solve_lse: method 'lm' supports only loss='linear' (got {loss!r}); use method='trf'")
+    method = _lse_method(method, loss, jac)
     original = problem
     problem, x0, report, warnings = prepare(problem, x0, free, fix, fix_unidentifiable, selection)
     params = problem.params
@@ -287,16 +280,7 @@ def solve_lse(
     )
     x = x_of(sol.x)
     J = _jacobian_or_nan(problem, x)
-    Jw = whitened_free_jacobian(problem, J, W)
-    cov, full_rank = covariance_from_jacobian(Jw, s) if np.all(np.isfinite(Jw)) else (np.full((fi.size,) * 2, np.nan), True)
-    warnings = list(warnings)
-    if not full_rank:
-        warnings.append("Jacobian at the solution is rank deficient: covariance is a pseudo-inverse")
-    N = problem.n_obs * problem.m
-    if scale_cov_by_residual:
-        dof = N - fi.size
-        if dof > 0:
-            cov = cov * (2.0 * float(sol.cost) / dof)
+    cov, warnings = _lse_covariance(problem, J, W, s, sol.cost if scale_cov_by_residual else None, warnings)
     converged = bool(sol.status > 0)
     info = {
         "nfev": int(sol.nfev),
@@ -314,6 +298,35 @@ def solve_lse(
     message = f"scipy least_squares ({method}): {sol.message}"
     return finish_result("lse", original, problem, x0, x, cov, cost0, iterations, converged, warnings, t0, info, W,
                          status=status, message=message, J=J)
+
+
+def _lse_covariance(problem, J, W, s, cost, warnings):
+    """(cov (n_free, n_free) SI, warnings list) from J (n_obs, m, n) at the solution; NaN when J is not
+    finite; multiplied by 2 cost / dof when ``cost`` is given (a-posteriori variance factor)."""
+    Jw = whitened_free_jacobian(problem, J, W)
+    warnings = list(warnings)
+    if not np.all(np.isfinite(Jw)):
+        return np.full((s.size, s.size), np.nan), warnings
+    cov, full_rank = covariance_from_jacobian(Jw, s)
+    if not full_rank:
+        warnings.append("Jacobian at the solution is rank deficient: covariance is a pseudo-inverse")
+    dof = problem.n_obs * problem.m - s.size
+    if cost is not None and dof > 0:
+        cov = cov * (2.0 * float(cost) / dof)
+    return cov, warnings
+
+
+def _lse_method(method: str, loss: str, jac: str) -> str:
+    """Checked scipy method ("auto" -> lm for the linear loss, trf otherwise)."""
+    if jac not in ("analytic", "2-point", "3-point"):
+        raise ConfigError(f"solve_lse: jac={jac!r}; expected 'analytic', '2-point' or '3-point'")
+    if method == "auto":
+        method = "lm" if loss == "linear" else "trf"
+    if method not in ("lm", "trf", "dogbox"):
+        raise ConfigError(f"solve_lse: method={method!r}; expected 'lm', 'trf', 'dogbox' or 'auto'")
+    if method == "lm" and loss != "linear":
+        raise ConfigError(f"solve_lse: method 'lm' supports only loss='linear' (got {loss!r}); use method='trf'")
+    return method
 
 
 def _jacobian_or_nan(problem: IdentificationProblem, x) -> np.ndarray:
