@@ -1,18 +1,26 @@
-"""Identification speed: analytic Jacobian vs scipy least_squares with 2-point finite
-differences on the same residuals, measured in the same run; and 100 Monte Carlo
-identifications of the H4 model.
+"""Identification speed, every figure a ratio to a baseline measured in the same run.
 
-    .venv/bin/python benchmarks/bench_identify.py [--repeats 20]
+1. 7-axis MDH arm, 114 poses, 40 parameters (6 base mount + 7 x 4 MDH + 6 tool mount), full-pose
+   residuals, 5-fold cross-validation fits (train on 4/5 of the poses) through the Python API, in
+   the DEFAULT environment (a subprocess with OMP/OPENBLAS/MKL_NUM_THREADS removed: what a library
+   user gets), side by side with a plain scipy ``least_squares`` fit of the same model (same base
+   set, same whitened residuals, 2-point finite differences, default settings) in the same process;
+   also ours with the library's single-thread guard switched off (identify/threads.py), and the
+   same three in a subprocess with the variables set to 1 (what the CLI does). Target: ours at
+   least as fast as plain scipy in the default environment (issue 11).
+2. Analytic Jacobian vs 2-point finite differences through solve_lse on H4 model 12 and RX-90.
+3. 100 Monte Carlo identifications of the H4 model.
 
-Prints one table; targets: >= 5x faster than the finite-difference baseline, 100 H4 Monte Carlo
-identifications in < 2 s on a 2-core machine.
+    .venv/bin/python benchmarks/bench_identify.py [--repeats 20] [--skip-seven-axis]
 """
 
 from __future__ import annotations
 
-import vision_calib.cli  # noqa: F401  (single-threaded BLAS, as the CLI runs)
-
 import argparse
+import json
+import os
+import subprocess
+import sys
 import time
 
 import numpy as np
@@ -70,13 +78,121 @@ def bench_monte_carlo(scene_path, n_poses=71, runs=100):
             "converged": n_conv}
 
 
+# ----------------------------------------------------------------------------- 7-axis MDH, default threading
+BLAS_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def _seven_axis_data(seed=0, n_poses=114):
+    """A KUKA-iiwa-like 7R chain (no parallel axes) with nonzero tool offset; synthetic noisy poses."""
+    from vision_calib.frames import T_from_xyz_rpy
+    from vision_calib.identify.serial_problem import serial_problem, synthetic_pose_measurements
+    from vision_calib.kinematics.serial import SerialChain
+
+    h = np.pi / 2
+    dh = np.array([[0, 0, 0, 0.34], [-h, 0, 0, 0], [h, 0, 0, 0.40], [h, 0, 0, 0], [-h, 0, 0, 0.40],
+                   [-h, 0, 0, 0], [h, 0, 0, 0.126]])
+    chain = SerialChain.build("arm7", dh, T_left_base=T_from_xyz_rpy([0.5, 0.2, 0.0], [0, 0, 0.3]),
+                              T_flange_right=T_from_xyz_rpy([0.05, 0.0, 0.10], [0.2, 0, 0]))
+    rng = np.random.default_rng(seed)
+    q = rng.uniform(-2.0, 2.0, (n_poses, 7))
+    p = chain.params
+    x_true = p.nominal + p.scale * rng.uniform(-3, 3, len(p))
+    T = synthetic_pose_measurements(chain, q, x_true, 1e-4, 2e-4, rng)
+    return chain, serial_problem(chain, q, T, sigma_t_m=1e-4, sigma_r_rad=2e-4)
+
+
+def _plain_scipy_fit(problem, free_names):
+    """What a user writes without our library: scipy least_squares (defaults: trf, 2-point) on the
+    whitened residuals of the same model, parameters ``free_names`` from the nominal."""
+    from scipy.optimize import least_squares
+
+    p = problem.params
+    idx = np.array([p.index(n) for n in free_names])
+    x0 = p.nominal.copy()
+    L = np.linalg.cholesky(problem.obs_cov)
+
+    def fun(v):
+        x = x0.copy()
+        x[idx] = v
+        r = problem.residual(x)
+        return np.linalg.solve(L, r[:, :, None])[:, :, 0].ravel()
+
+    sol = least_squares(fun, x0[idx])
+    x = x0.copy()
+    x[idx] = sol.x
+    return x, sol
+
+
+def seven_axis_child(no_guard: bool) -> dict:
+    """Run in a subprocess: 5 folds, ours vs plain scipy FD; returns timings (s) and agreement."""
+    from vision_calib.identify import solve_lse
+    from vision_calib.identify import threads as _threads
+    from threadpoolctl import threadpool_info
+
+    if no_guard:
+        _threads._controller = False  # switch the library's single-thread guard off (comparison only)
+    chain, problem = _seven_axis_data()
+    folds = np.array_split(np.random.default_rng(1).permutation(problem.n_obs), 5)
+    t_ours = t_plain = 0.0
+    worst = 0.0
+    for fold in folds:
+        train = problem.subset(np.setdiff1d(np.arange(problem.n_obs), fold))
+        t0 = time.perf_counter()
+        res = solve_lse(train)
+        t_ours += time.perf_counter() - t0
+        free = [n for n, f in zip(res.names, res.free) if f]
+        t0 = time.perf_counter()
+        x_plain, _ = _plain_scipy_fit(train, free)
+        t_plain += time.perf_counter() - t0
+        worst = max(worst, float(np.max(np.abs(x_plain - res.identified)[res.free] / res.std[res.free])))
+    return {"n_params": len(chain.params), "n_free": int(res.free.sum()), "poses": problem.n_obs,
+            "train_poses": train.n_obs, "ours_s": t_ours, "plain_s": t_plain, "max_diff_std": worst,
+            "blas_threads": max((i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"), default=None), "env": {v: os.environ.get(v) for v in BLAS_VARS}}
+
+
+def _run_child(single: bool, no_guard: bool) -> dict:
+    env = {k: v for k, v in os.environ.items() if k not in BLAS_VARS}
+    if single:
+        env.update({v: "1" for v in BLAS_VARS})
+    here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env["PYTHONPATH"] = here + os.pathsep + env.get("PYTHONPATH", "")
+    cmd = [sys.executable, os.path.abspath(__file__), "--seven-axis-child"] + (["--no-guard"] if no_guard else [])
+    out = subprocess.run(cmd, env=env, capture_output=True, text=True, check=True, cwd=here)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def bench_seven_axis():
+    print("7-axis MDH, 5-fold cross-validation fits through the Python API (sums over the 5 folds, same process)")
+    print(f"{'environment':<44}{'guard':>7}{'BLAS thr':>9}{'ours s':>9}{'plain scipy FD s':>18}{'plain/ours':>11}"
+          f"{'max |diff|/std':>15}")
+    for single in (False, True):
+        for no_guard in (False, True):
+            r = _run_child(single, no_guard)
+            env = "OMP/OPENBLAS/MKL_NUM_THREADS=1" if single else "default (no *_NUM_THREADS set)"
+            print(f"{env:<44}{'off' if no_guard else 'on':>7}{str(r['blas_threads']):>9}{r['ours_s']:>9.3f}"
+                  f"{r['plain_s']:>18.3f}{r['plain_s'] / r['ours_s']:>10.1f}x{r['max_diff_std']:>15.2e}")
+    print(f"  ({r['poses']} poses, {r['train_poses']} per training fold, {r['n_params']} parameters, "
+          f"{r['n_free']} identified after fixing the non-identifiable ones; target: plain/ours >= 1 with the guard on)")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser()
     ap.add_argument("--repeats", type=int, default=20)
+    ap.add_argument("--skip-seven-axis", action="store_true")
+    ap.add_argument("--seven-axis-child", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--no-guard", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
+    if args.seven_axis_child:
+        print(json.dumps(seven_axis_child(args.no_guard)))
+        return
+    if not args.skip_seven_axis:
+        bench_seven_axis()
+        print()
     rows = [bench_analytic_vs_fd("scenes/h4_vision.yaml", 71, args.repeats),
             bench_analytic_vs_fd("scenes/rx90_eye_in_hand.yaml", 50, args.repeats)]
-    print("identification time, analytic Jacobian vs 2-point finite differences (median, same run)")
+    print("identification time through solve_lse, analytic Jacobian vs 2-point finite differences (median, same run;")
+    env = {v: os.environ[v] for v in BLAS_VARS if v in os.environ} or "default, no *_NUM_THREADS set"
+    print(f"README claims 13.9x for H4 and 10.2x for RX-90; this process: {env}; the library guard is on)")
     print(f"{'scene':<22}{'poses':>6}{'params':>7}{'analytic ms':>13}{'FD ms':>10}{'speed-up':>10}{'max |diff|/std':>16}")
     for r in rows:
         print(f"{r['scene']:<22}{r['poses']:>6}{r['params']:>7}{r['analytic_ms']:>13.2f}{r['fd_ms']:>10.2f}"

@@ -19,8 +19,10 @@ def test_base_rotation_and_first_joint_offset_are_confounded():
     prob = _problem(n_poses=20)
     rep = analyze(prob)
     assert rep.n_params == 9 and rep.rank == 8
-    # base.theta has the larger scale (2 mrad vs 1 mrad): pivoted QR keeps it and drops q0_1
+    # default selection "order": base.theta comes first in name order and is kept, q0_1 dropped
+    # (pivoted QR agrees here: base.theta has the larger scale, 2 mrad vs 1 mrad)
     assert rep.non_identifiable == ("q0_1",)
+    assert analyze(prob, selection="pivot").non_identifiable == ("q0_1",)
     assert set(rep.base_parameters) == set(prob.params.names) - {"q0_1"}
     c = rep.coupling_of("q0_1")
     # one scale of q0_1 (1 mrad) == 0.5 scale of base.theta (2 mrad); SI ratio 1
@@ -43,8 +45,9 @@ def test_selection_pivot_follows_scale_and_order_follows_names():
     prob = _problem(n_poses=20)
     p = prob.params.with_scale({"base.theta": 1e-3, "q0_1": 3e-3})
     prob2 = prob.with_params(p)
-    assert analyze(prob2).non_identifiable == ("base.theta",)
-    rep = analyze(prob2, selection="order")
+    assert analyze(prob2, selection="pivot").non_identifiable == ("base.theta",)
+    rep = analyze(prob2)  # default "order": the scale does not change the choice
+    assert rep.non_identifiable == analyze(prob2, selection="order").non_identifiable
     assert rep.non_identifiable == ("q0_1",)
     assert rep.coupling_of("q0_1")["combination_si"]["base.theta"] == pytest.approx(1.0, abs=1e-9)
     with pytest.raises(ParameterError):

@@ -33,15 +33,26 @@ essentially uninformative prior around x0).
 Passes. Pass 1 is the sequential filter above. Its weak point: with a broad prior the first
 poses fix the estimate only along the few directions they see, the estimate can wander far
 (tens of scales on the ill-conditioned H4 models) and those poses' information stays linearised
-there; on H4 variant D with 81 poses one pass differs from LSE by ~3 posterior std, while on
-the well-conditioned toy arm it agrees to < 0.01 std. Passes 2.. (``passes > 1``) fix this:
-each restarts ``P = P0`` with the prior mean at the previous pass's estimate ``z_p`` and
-linearises EVERY pose at ``z_p`` (one linear update per pose). Such a pass is exactly one
-Gauss-Newton step on the least-squares cost damped by ``P0^-1`` (a Levenberg-Marquardt step), so
-passes converge to the LSE solution itself (no prior bias at the fixed point; the data are never
-counted twice). The reported covariance is the final P of the last pass ((JᵀJ + P0^-1)^-1, i.e.
-the LSE covariance up to the (std / prior std)² damping). ``converged``: pass 1 -- every iterated
-update converged; later passes -- the last pass moved every parameter by < 1e-3 posterior std.
+there; on H4 variant D with 81 poses one pass differs from LSE by ~1-3 posterior std, while on
+the well-conditioned toy arm it agrees to < 0.01 std. Passes 2.. fix this: each restarts
+``P = P0`` with the prior mean at the previous pass's estimate ``z_p`` and linearises EVERY pose
+at ``z_p`` (one linear update per pose). Such a pass is exactly one Gauss-Newton step on the
+least-squares cost damped by ``P0^-1`` (a Levenberg-Marquardt step), so passes converge to the
+LSE solution itself (no prior bias at the fixed point; the data are never counted twice). The
+reported covariance is the final P of the last pass ((JᵀJ + P0^-1)^-1, i.e. the LSE covariance up
+to the (std / prior std)² damping).
+
+Convergence (what ``converged`` means). After every pass, at the pass's estimate ``z`` the
+undamped Gauss-Newton step to the least-squares optimum ``delta = -pinv(H) W r`` (all poses,
+whitened, scaled) is computed; ``distance = max_i |delta_i| / std_i`` (std = posterior std of the
+pass) is, to first order, how far the estimate still is from the LSE solution in posterior std
+(exact for a linear model). ``converged`` is ``distance < tol`` (default 1e-3) and everything
+finite. ``passes=None`` (default) runs passes until converged, at most ``max_passes`` (default
+20), and says so in ``message`` and ``warnings`` when it stops early (status 0); an integer
+``passes`` runs exactly that many and judges the result the same way (so one pass on an
+ill-conditioned problem honestly reports converged=False). ``info["distance_std"]`` holds the
+distance after each pass; ``info["first_pass_updates_converged"]`` whether every iterated update
+of pass 1 converged.
 """
 
 from __future__ import annotations
@@ -52,174 +63,268 @@ from typing import Iterable
 import numpy as np
 
 from ..errors import ConfigError, DataError, UnreachablePoseError
+from .identifiability import pose_labels
 from .lse import finish_result, prepare, whitened_cost
-from .problem import IdentificationProblem, IdentificationResult
+from .problem import STATUS_CONVERGED, STATUS_MAX_ITERATIONS, IdentificationProblem, IdentificationResult
+from .threads import single_threaded_blas
 
 STEP_TOL = 1e-9  # iterated update stops when ||z_{i+1} - z_i|| < STEP_TOL * max(1, ||z||) (scaled units)
+#: default convergence tolerance: distance to the least-squares optimum, in posterior std
+DEFAULT_TOL = 1e-3
+#: default largest number of passes when ``passes=None``
+DEFAULT_MAX_PASSES = 20
 
 
-def solve_ekf(
-    problem: IdentificationProblem,
-    x0=None,
-    passes: int = 1,
-    iterations_per_update: int = 5,
-    q_process: float = 0.0,
-    fix_unidentifiable: bool = True,
-    free: Iterable[str] | None = None,
-    fix: Iterable[str] = (),
-    order=None,
-) -> IdentificationResult:
-    """Identify the free parameters with an (iterated) EKF, one measurement update per pose.
+class _Model:
+    """The problem seen in scaled free variables z (x_free = x0_free + scale * z), whitened."""
 
-    x0: (n,) full starting vector (SI), default ``params.nominal`` (= prior mean of the first pass).
-    passes: number of passes over the data (>= 1). iterations_per_update: >= 1 (1 = plain EKF).
-    q_process: process noise variance per pose, in scaled units (fraction of scale², >= 0).
-    order: optional (n_obs,) permutation of the observations (default: given order).
-    Returns an IdentificationResult with method "ekf" and covariance = final P (SI, free parameters).
-    ``info``: passes, iterations_per_update, updates, pass_estimates ((passes, n) full vectors),
-    identifiability report.
-    """
-    t0 = time.perf_counter()
-    if int(passes) < 1:
-        raise ConfigError(f"solve_ekf: passes={passes}, expected >= 1")
+    def __init__(self, problem: IdentificationProblem, x0: np.ndarray, W: np.ndarray):
+        self.problem, self.W, self.x0 = problem, W, x0
+        self.fi = problem.params.free_index
+        self.s = problem.params.scale[self.fi]
+        self.x0_free = x0[self.fi]
+
+    def x_of(self, z) -> np.ndarray:
+        x = self.x0.copy()
+        x[self.fi] = self.x0_free + self.s * z
+        return x
+
+    def label(self, k) -> str:
+        return pose_labels(self.problem, [k])[0]
+
+    def pose_terms(self, k, z, need_jac=True):
+        """Whitened residual (m,) and scaled whitened Jacobian H (m, n) of pose k at z."""
+        x = self.x_of(z)
+        r = self.W[k] @ np.asarray(self.problem.residual(x, np.array([k])), float)[0]
+        if not np.all(np.isfinite(r)):
+            raise DataError(f"EKF: residual of pose {self.label(k)} is not finite at the current estimate")
+        if not need_jac:
+            return r, None
+        J = np.asarray(self.problem.jacobian(x, np.array([k])), float)[0]
+        return r, (self.W[k] @ J[:, self.fi]) * self.s[None, :]
+
+    def batch_terms(self, z):
+        """All poses at z: whitened residuals (n_obs, m), H (n_obs, m, n), full Jacobian (n_obs, m, n_params);
+        None when the model cannot be evaluated there or a value is not finite (the result says which)."""
+        x = self.x_of(z)
+        try:
+            r = np.asarray(self.problem.residual(x), float)
+            J = np.asarray(self.problem.jacobian(x), float)
+        except (UnreachablePoseError, DataError):
+            return None
+        with np.errstate(over="ignore", invalid="ignore"):
+            rw = np.einsum("kij,kj->ki", self.W, r)
+            H = np.einsum("kij,kjn->kin", self.W, J[:, :, self.fi]) * self.s[None, None, :]
+        if not (np.all(np.isfinite(rw)) and np.all(np.isfinite(H))):
+            return None
+        return rw, H, J
+
+
+def _gain(P, H):
+    PHt = P @ H.T
+    S = H @ PHt + np.eye(H.shape[0])
+    return -np.linalg.solve(S, PHt.T).T  # K = -P Hᵀ S^-1 (gain for y - h, H = -dh/dz)
+
+
+def _joseph(P, K, H):
+    IKH = np.eye(P.shape[0]) + K @ H  # I - K H_h with H_h = -H
+    P = IKH @ P @ IKH.T + K @ K.T  # Joseph form (R = I after whitening)
+    return 0.5 * (P + P.T)
+
+
+def _iterated_update(model: _Model, k, z_prior, P, n_iter):
+    """Iterated update of pose k with backtracking on c(z) = 0.5 |W r(z)|^2 + 0.5 (z - z_prior)ᵀ P^-1 (z - z_prior).
+    Returns (z, K, H at the final iterate, number of linear updates, converged)."""
+    cP = np.linalg.cholesky(P)
+
+    def post_cost(zz, rr):
+        d = np.linalg.solve(cP, zz - z_prior)
+        return 0.5 * float(rr @ rr + d @ d)
+
+    zi = z_prior.copy()
+    r, H = model.pose_terms(k, zi)
+    ci = post_cost(zi, r)
+    conv, n_up = False, 0
+    for _it in range(n_iter):
+        K = _gain(P, H)
+        step = z_prior + K @ (r + H @ (z_prior - zi)) - zi
+        n_up += 1
+        alpha, accepted = 1.0, False
+        for _ls in range(12):
+            z_try = zi + alpha * step
+            try:
+                r_try, _ = model.pose_terms(k, z_try, need_jac=False)
+                c_try = post_cost(z_try, r_try)
+            except (UnreachablePoseError, DataError):  # trial point outside the model's domain
+                c_try = np.inf
+            if c_try <= ci:
+                accepted = True
+                break
+            alpha *= 0.5
+        small = np.linalg.norm(alpha * step) < STEP_TOL * max(1.0, np.linalg.norm(zi))
+        if not accepted or small:
+            conv = True  # no descent left: at the minimum to rounding
+            if accepted:
+                zi = z_try
+            break
+        zi, r, ci = z_try, r_try, c_try
+        _, H = model.pose_terms(k, zi)
+    return zi, _gain(P, H), H, n_up, conv
+
+
+def _first_pass(model: _Model, P0, Q, obs_order, n_iter):
+    """Sequential (iterated) EKF over the poses from z = 0. Returns (z, P, updates, every update converged)."""
+    z, P = np.zeros(P0.shape[0]), P0.copy()
+    updates, all_conv = 0, True
+    for k in obs_order:
+        P = P + Q
+        if n_iter == 1:  # plain EKF (thesis eqs. 4.2-4.9), linearised at the prediction
+            r, H = model.pose_terms(k, z)
+            K = _gain(P, H)
+            zi = z + K @ r
+            updates += 1
+        else:
+            zi, K, H, n_up, conv = _iterated_update(model, k, z, P, n_iter)
+            updates += n_up
+            all_conv &= conv
+        if not np.all(np.isfinite(zi)):
+            raise DataError(f"EKF update diverged (non-finite state) at pose {model.label(k)}")
+        P = _joseph(P, K, H)
+        z = zi
+    return z, P, updates, all_conv
+
+
+def _relinearised_pass(z_lin, rw, H, P0, Q, obs_order):
+    """One pass with every pose linearised at z_lin (rw (n_obs, m), H (n_obs, m, n) there), prior mean z_lin."""
+    z, P = z_lin.copy(), P0.copy()
+    for k in obs_order:
+        P = P + Q
+        K = _gain(P, H[k])
+        z = z + K @ (rw[k] + H[k] @ (z - z_lin))
+        P = _joseph(P, K, H[k])
+    return z, P
+
+
+def _distance(rw, H, P) -> float:
+    """max_i |delta_i| / std_i with delta the undamped Gauss-Newton step to the LSE optimum (scaled units)."""
+    n = H.shape[-1]
+    delta = -np.linalg.lstsq(H.reshape(-1, n), rw.ravel(), rcond=None)[0]
+    std = np.sqrt(np.clip(np.diag(P), 1e-300, None))
+    d = float(np.max(np.abs(delta) / std)) if n else 0.0
+    return d if np.isfinite(d) else float("inf")
+
+
+def _check_options(passes, max_passes, tol, iterations_per_update, q_process):
+    if passes is not None and int(passes) < 1:
+        raise ConfigError(f"solve_ekf: passes={passes}, expected >= 1 (or None: until converged)")
+    if int(max_passes) < 1:
+        raise ConfigError(f"solve_ekf: max_passes={max_passes}, expected >= 1")
+    if not (np.isfinite(tol) and tol > 0):
+        raise ConfigError(f"solve_ekf: tol={tol}, expected a finite value > 0 (posterior std)")
     if int(iterations_per_update) < 1:
         raise ConfigError(f"solve_ekf: iterations_per_update={iterations_per_update}, expected >= 1")
     if not (np.isfinite(q_process) and q_process >= 0):
         raise ConfigError(f"solve_ekf: q_process={q_process}, expected a finite value >= 0")
-    original = problem
-    problem, x0, report, warnings = prepare(problem, x0, free, fix, fix_unidentifiable)
+
+
+def _prior_cov(problem: IdentificationProblem, s) -> np.ndarray:
     params = problem.params
-    fi = params.free_index
-    n = fi.size
-    s = params.scale[fi]
-    W = problem.whitening()
     if problem.prior_std is None:
         prior = 100.0 * params.scale
     else:
         prior = np.asarray(problem.prior_std, float).reshape(-1)
         if prior.shape != (len(params),):
             raise DataError(f"prior_std has shape {prior.shape}, expected ({len(params)},)")
-    prior_z = prior[fi] / s
-    if not np.all(np.isfinite(prior_z) & (prior_z > 0)):
-        bad = [params.free_names[i] for i in np.flatnonzero(~(np.isfinite(prior_z) & (prior_z > 0)))]
+    prior_z = prior[params.free_index] / s
+    ok = np.isfinite(prior_z) & (prior_z > 0)
+    if not np.all(ok):
+        bad = [params.free_names[i] for i in np.flatnonzero(~ok)]
         raise DataError(f"prior_std must be finite and > 0 for free parameters; bad: {bad}")
-    P0 = np.diag(prior_z**2)
+    return np.diag(prior_z**2)
+
+
+@single_threaded_blas
+def solve_ekf(
+    problem: IdentificationProblem,
+    x0=None,
+    passes: int | None = None,
+    iterations_per_update: int = 5,
+    q_process: float = 0.0,
+    fix_unidentifiable: bool = True,
+    free: Iterable[str] | None = None,
+    fix: Iterable[str] = (),
+    order=None,
+    max_passes: int = DEFAULT_MAX_PASSES,
+    tol: float = DEFAULT_TOL,
+    selection: str = "order",
+) -> IdentificationResult:
+    """Identify the free parameters with an (iterated) EKF, one measurement update per pose.
+
+    x0: (n,) full starting vector (SI), default ``params.nominal`` (= prior mean of the first pass).
+    passes: None (default) = passes until converged, at most ``max_passes``; an int = exactly that many.
+    tol: convergence tolerance, distance to the LSE optimum in posterior std (see module docstring).
+    iterations_per_update: >= 1 (1 = plain EKF). q_process: process noise variance per pose, in
+    scaled units (fraction of scale², >= 0). order: optional (n_obs,) permutation of the observations.
+    selection: base-set choice ("order" default, or "pivot"), as in :func:`~vision_calib.identify.lse.solve_lse`.
+    Returns an IdentificationResult with method "ekf", covariance = final P (SI, free parameters),
+    converged/status/message as defined in the module docstring. ``info``: passes (run), updates,
+    distance_std (per pass), pass_estimates ((passes, n) full vectors), identifiability report, ...
+    """
+    t0 = time.perf_counter()
+    _check_options(passes, max_passes, tol, iterations_per_update, q_process)
+    original = problem
+    problem, x0, report, warnings = prepare(problem, x0, free, fix, fix_unidentifiable, selection)
+    model = _Model(problem, x0, problem.whitening())
+    n = model.fi.size
+    P0 = _prior_cov(problem, model.s)
     Q = q_process * np.eye(n)
     obs_order = np.arange(problem.n_obs) if order is None else np.asarray(order, int).reshape(-1)
     if obs_order.size == 0 or obs_order.min() < 0 or obs_order.max() >= problem.n_obs:
         raise ConfigError(f"solve_ekf: order must hold observation indices in [0, {problem.n_obs}), got {order!r}")
-    x0_free = x0[fi]
-
-    def x_of(z):
-        x = x0.copy()
-        x[fi] = x0_free + s * z
-        return x
-
-    cost0 = whitened_cost(problem, x0, W)
-    labels = problem.labels
-
-    def pose_terms(k, z_lin, need_jac=True):
-        x = x_of(z_lin)
-        r = W[k] @ np.asarray(problem.residual(x, np.array([k])), float)[0]
-        if not np.all(np.isfinite(r)):
-            lab = labels[k] if labels else f"#{int(k)}"
-            raise DataError(f"EKF: residual of pose {lab} is not finite at the current estimate")
-        if not need_jac:
-            return r, None
-        H = (W[k] @ np.asarray(problem.jacobian(x, np.array([k])), float)[0][:, fi]) * s[None, :]
-        return r, H
-
-    def gain(P, H):
-        PHt = P @ H.T
-        S = H @ PHt + np.eye(H.shape[0])
-        return -np.linalg.solve(S, PHt.T).T  # K = -P Hᵀ S^-1 (gain for y - h, H = -dh/dz)
-
-    z = np.zeros(n)
-    P = P0.copy()
-    eye = np.eye(n)
-    updates = 0
-    pass_estimates = []
-    converged = True
-    n_iter = int(iterations_per_update)
-    for p in range(int(passes)):
-        P = P0.copy()
-        all_conv = True
-        z_lin_pass = z.copy()  # passes >= 2: every pose linearised here (prior mean too)
-        for k in obs_order:
-            P = P + Q
-            z_prior = z.copy()
-            if p > 0:
-                # damped Gauss-Newton pass: fixed linearisation point for all poses
-                r, H = pose_terms(k, z_lin_pass)
-                K = gain(P, H)
-                zi = z_prior + K @ (r + H @ (z_prior - z_lin_pass))
-                updates += 1
-            elif n_iter == 1:
-                # plain EKF (thesis eqs. 4.2-4.9), linearised at the prediction
-                r, H = pose_terms(k, z_prior)
-                K = gain(P, H)
-                zi = z_prior + K @ r
-                updates += 1
-            else:
-                # iterated EKF with backtracking on the pose's posterior cost
-                # c(z) = 0.5 |W r(z)|^2 + 0.5 (z - z_prior)ᵀ P^-1 (z - z_prior)
-                cP = np.linalg.cholesky(P)
-
-                def post_cost(zz, rr):
-                    d = np.linalg.solve(cP, zz - z_prior)
-                    return 0.5 * float(rr @ rr + d @ d)
-
-                zi = z_prior.copy()
-                r, H = pose_terms(k, zi)
-                ci = post_cost(zi, r)
-                conv = False
-                for _it in range(n_iter):
-                    K = gain(P, H)
-                    z_gn = z_prior + K @ (r + H @ (z_prior - zi))
-                    step = z_gn - zi
-                    updates += 1
-                    alpha, accepted = 1.0, False
-                    for _ls in range(12):
-                        z_try = zi + alpha * step
-                        try:
-                            r_try, _ = pose_terms(k, z_try, need_jac=False)
-                            c_try = post_cost(z_try, r_try)
-                        except (UnreachablePoseError, DataError):  # trial point outside the model's domain
-                            c_try = np.inf
-                        if c_try <= ci:
-                            accepted = True
-                            break
-                        alpha *= 0.5
-                    small = np.linalg.norm(alpha * step) < STEP_TOL * max(1.0, np.linalg.norm(zi))
-                    if not accepted or small:
-                        conv = True  # no descent left: at the minimum to rounding
-                        if accepted:
-                            zi = z_try
-                        break
-                    zi, r, ci = z_try, r_try, c_try
-                    _, H = pose_terms(k, zi)
-                all_conv &= conv
-                K = gain(P, H)  # gain at the final linearisation point
-            if not np.all(np.isfinite(zi)):
-                lab = labels[k] if labels else f"#{int(k)}"
-                raise DataError(f"EKF update diverged (non-finite state) at pose {lab}")
-            IKH = eye + K @ H  # I - K H_h with H_h = -H
-            P = IKH @ P @ IKH.T + K @ K.T  # Joseph form (R = I after whitening)
-            P = 0.5 * (P + P.T)
-            z = zi
-        if p > 0:
-            d = np.abs(z - z_lin_pass) / np.sqrt(np.clip(np.diag(P), 1e-300, None))
-            all_conv = bool(np.all(d < 1e-3))  # last pass moved less than 1e-3 posterior std
-        converged = all_conv
-        pass_estimates.append(x_of(z))
-    x = x_of(z)
-    cov = P * np.outer(s, s)
+    cost0 = whitened_cost(problem, x0, model.W)
+    z, P, updates, first_conv = _first_pass(model, P0, Q, obs_order, int(iterations_per_update))
+    pass_estimates, distances, J = [model.x_of(z)], [], None
+    limit = int(max_passes) if passes is None else int(passes)
+    while True:
+        terms = model.batch_terms(z)
+        if terms is None:  # not finite / not evaluable at the estimate: finish_result names the cause
+            distances.append(float("inf"))
+            break
+        rw, H, J = terms
+        distances.append(_distance(rw, H, P))
+        if (passes is None and distances[-1] < tol) or len(pass_estimates) >= limit:
+            break
+        z, P = _relinearised_pass(z, rw, H, P0, Q, obs_order)
+        updates += obs_order.size
+        pass_estimates.append(model.x_of(z))
+    converged, message = _verdict(distances[-1], tol, len(pass_estimates), passes, max_passes)
+    if not converged:
+        warnings = tuple(warnings) + (f"EKF {message}",)
     info = {
-        "passes": int(passes),
+        "passes": len(pass_estimates),
+        "max_passes": int(max_passes),
+        "tol": float(tol),
+        "distance_std": [float(d) for d in distances],
+        "first_pass_updates_converged": bool(first_conv),
         "iterations_per_update": int(iterations_per_update),
         "updates": updates,
         "q_process": float(q_process),
         "pass_estimates": np.array(pass_estimates),
         "identifiability": report,
     }
-    return finish_result("ekf", original, problem, x0, x, cov, cost0, updates, converged, warnings, t0, info, W)
+    status = STATUS_CONVERGED if converged else STATUS_MAX_ITERATIONS
+    return finish_result("ekf", original, problem, x0, model.x_of(z), P * np.outer(model.s, model.s), cost0, updates,
+                         converged, warnings, t0, info, model.W, status=status, message=message, J=J)
+
+
+def _verdict(distance, tol, n_passes, passes, max_passes) -> tuple[bool, str]:
+    where = f"{distance:.3g} posterior std from the least-squares optimum (tol {tol:g})"
+    if distance < tol:
+        return True, f"converged after {n_passes} pass(es): the estimate is {where}"
+    if not np.isfinite(distance):
+        return False, f"stopped after {n_passes} pass(es): the model is not finite at the estimate"
+    if passes is None:
+        return False, (f"stopped at max_passes={max_passes} without converging: the estimate is still {where}; "
+                       "raise max_passes or use solve_lse")
+    return False, (f"ran the requested {n_passes} pass(es) without converging: the estimate is {where} "
+                   "(passes=None iterates until converged)")

@@ -18,10 +18,12 @@ Singular values ``s`` of A (descending). Rank = number of ``s_i > tol * s_max`` 
 is relative (dimensionless); default ``tol = max(N, n) * eps * 1e3`` (eps = float64 machine
 epsilon), i.e. 1e3 times the usual LAPACK/numpy rank tolerance, enough to ignore the rounding
 of analytic kinematic Jacobians while keeping any genuinely (even weakly) observable parameter.
-The base set is chosen by QR with column pivoting (``selection="pivot"``, LAPACK geqp3: the
-column with the largest remaining norm first) or greedily in parameter order
-(``selection="order"``: a parameter is kept when its column is not in the span of the kept
-ones, so earlier names are preferred; deterministic when columns tie). The dropped parameters
+The base set is chosen greedily in parameter order (``selection="order"``, the default
+everywhere in ``identify/``: a parameter is kept when its column is not in the span of the kept
+ones, so earlier names are preferred and the dropped set depends only on which combinations the
+poses cannot see, not on the poses' numbers: the same set over folds / subsets of one robot's
+data) or by QR with column pivoting (``selection="pivot"``, LAPACK geqp3: the column with the
+largest remaining norm first; its choice among tied columns changes with the poses). The dropped parameters
 are ``non_identifiable``. For each dropped column ``a_j`` the least-squares fit
 ``a_j ~= A_base @ c`` (== ``R11^-1 R12`` of the pivoted QR) gives the linear combination of
 base parameters it is confounded with, in scaled units: a deviation of one ``scale_j`` of the
@@ -47,6 +49,7 @@ import scipy.linalg
 
 from ..errors import DataError, IdentifiabilityError, ParameterError
 from .problem import IdentificationProblem
+from .threads import single_threaded_blas
 
 #: |coefficient| below this fraction of the largest one is pruned from a reported coupling
 COUPLING_PRUNE_REL = 1e-6
@@ -133,7 +136,8 @@ class IdentifiabilityReport:
 
 
 # ----------------------------------------------------------------------------- helpers
-def _labels(problem: IdentificationProblem, idx) -> list[str]:
+def pose_labels(problem: IdentificationProblem, idx) -> list[str]:
+    """Labels of observations ``idx`` (k,) ("#k" when the problem has none)."""
     return [str(problem.labels[i]) if problem.labels else f"#{int(i)}" for i in idx]
 
 
@@ -158,25 +162,25 @@ def check_problem(problem: IdentificationProblem, x=None) -> tuple[np.ndarray, n
         raise DataError(f"{len(problem.labels)} labels for {n_obs} observations")
     bad = np.flatnonzero(~np.all(np.isfinite(cov), axis=(1, 2)))
     if bad.size:
-        raise DataError(f"measurement covariance is not finite for poses {_labels(problem, bad)}")
+        raise DataError(f"measurement covariance is not finite for poses {pose_labels(problem, bad)}")
     eig_min = np.linalg.eigvalsh(0.5 * (cov + np.swapaxes(cov, 1, 2)))[:, 0]
     bad = np.flatnonzero(eig_min <= 0)
     if bad.size:
-        raise DataError(f"measurement covariance is not positive definite for poses {_labels(problem, bad)}")
+        raise DataError(f"measurement covariance is not positive definite for poses {pose_labels(problem, bad)}")
     r = np.asarray(problem.residual(x), float)
     if r.shape != (n_obs, m):
         raise DataError(f"residual has shape {r.shape}, expected ({n_obs}, {m}) from obs_cov")
     bad = np.flatnonzero(~np.all(np.isfinite(r), axis=1))
     if bad.size:
         raise DataError(
-            f"residual (measured - model) is not finite (NaN/inf measurement?) for poses {_labels(problem, bad)}"
+            f"residual (measured - model) is not finite (NaN/inf measurement?) for poses {pose_labels(problem, bad)}"
         )
     J = np.asarray(problem.jacobian(x), float)
     if J.shape != (n_obs, m, n):
         raise DataError(f"jacobian has shape {J.shape}, expected ({n_obs}, {m}, {n})")
     bad = np.flatnonzero(~np.all(np.isfinite(J), axis=(1, 2)))
     if bad.size:
-        raise DataError(f"jacobian is not finite for poses {_labels(problem, bad)}")
+        raise DataError(f"jacobian is not finite for poses {pose_labels(problem, bad)}")
     return r, J
 
 
@@ -224,19 +228,21 @@ def _select_base(A: np.ndarray, rank: int, tol_abs: float, selection: str) -> np
 
 
 # ----------------------------------------------------------------------------- main API
+@single_threaded_blas
 def analyze(
     problem: IdentificationProblem,
     x=None,
     tol: float | None = None,
     normalize: bool = False,
-    selection: str = "pivot",
+    selection: str = "order",
     jacobian: np.ndarray | None = None,
 ) -> IdentifiabilityReport:
     """Identifiability of the free parameters of ``problem`` at ``x`` (n,) (default nominal).
 
     tol: relative rank tolerance (fraction of s_max); default max(N, n) * eps * 1e3.
     normalize: divide each scaled column by its norm before the analysis.
-    selection: "pivot" (QR with column pivoting) or "order" (prefer earlier parameters).
+    selection: "order" (default: prefer earlier parameters, stable over pose subsets) or "pivot"
+        (QR with column pivoting).
     jacobian: (n_obs, m, n) Jacobian at x already validated by :func:`check_problem` (skips a recompute).
     Raises IdentifiabilityError when there are fewer scalar equations than free parameters,
     ParameterError when nothing is free, DataError on non-finite data (naming the poses).
@@ -324,14 +330,15 @@ def analyze(
     )
 
 
-def base_problem(problem: IdentificationProblem, report: IdentifiabilityReport | None = None, x=None):
+def base_problem(problem: IdentificationProblem, report: IdentifiabilityReport | None = None, x=None,
+                 selection: str = "order"):
     """Fix the non-identifiable parameters at their current value (``params.nominal``).
 
     Returns (problem with those parameters fixed, report, warnings) where warnings is a tuple of
     strings naming every fixed parameter and what it is confounded with. ``report`` defaults to
-    ``analyze(problem, x)``.
+    ``analyze(problem, x, selection=selection)``.
     """
-    report = analyze(problem, x) if report is None else report
+    report = analyze(problem, x, selection=selection) if report is None else report
     if not report.non_identifiable:
         return problem, report, ()
     warnings = []

@@ -24,9 +24,10 @@ from typing import Iterable
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..errors import ConfigError, ParameterError
-from .identifiability import analyze, base_problem, check_problem, whitened_free_jacobian
-from .problem import IdentificationProblem, IdentificationResult
+from ..errors import ConfigError, DataError, ParameterError, VisionCalibError
+from .identifiability import analyze, base_problem, check_problem, pose_labels, whitened_free_jacobian
+from .problem import STATUS_CONVERGED, STATUS_NOT_FINITE, IdentificationProblem, IdentificationResult
+from .threads import single_threaded_blas
 
 #: |correlation| above which a pair of free parameters is reported
 CORRELATION_WARN = 0.95
@@ -39,12 +40,16 @@ def prepare(
     free: Iterable[str] | None = None,
     fix: Iterable[str] = (),
     fix_unidentifiable: bool = True,
+    selection: str = "order",
 ):
     """Common set-up of the solvers.
 
     Returns (problem with the final free set, x0 (n,), report, warnings). ``free``: names that
     are exactly the free ones (None = keep the problem's mask); ``fix``: names fixed in addition.
-    Unknown names raise ParameterError; bad data DataError; too few equations IdentifiabilityError.
+    selection: how the base set is chosen ("order": earlier names kept, the same whatever the
+    poses; "pivot": column-pivoted QR), see :func:`~vision_calib.identify.identifiability.analyze`.
+    Unknown names raise ParameterError; bad data (non-finite residual, Jacobian, covariance or
+    cost at x0) DataError naming the poses; too few equations IdentifiabilityError.
     """
     params = problem.params
     if free is not None:
@@ -56,13 +61,14 @@ def prepare(
         raise ParameterError("no free parameter left to identify (every parameter is fixed)")
     problem = problem.with_params(params)
     x0 = params.nominal.copy() if x0 is None else np.asarray(x0, float).reshape(-1).copy()
-    _, J0 = check_problem(problem, x0)
-    report = analyze(problem, x0, jacobian=J0)
+    r0, J0 = check_problem(problem, x0)
+    check_start_cost(problem, r0)
+    report = analyze(problem, x0, jacobian=J0, selection=selection)
     warnings: tuple[str, ...] = ()
     if report.non_identifiable:
         if fix_unidentifiable:
             problem, report, warnings = base_problem(problem, report)
-            report = analyze(problem, x0)
+            report = analyze(problem, x0, jacobian=J0, selection=selection)
         else:
             warnings = (
                 "parameters not identifiable from these poses were left free (fix_unidentifiable=False): "
@@ -70,6 +76,52 @@ def prepare(
                 + "; their covariance is a pseudo-inverse and their values are arbitrary along the null space",
             )
     return problem, x0, report, warnings
+
+
+def check_start_cost(problem: IdentificationProblem, r0: np.ndarray) -> None:
+    """DataError naming the poses whose whitened squared residual at the start overflows (e.g. a joint
+    reading of 1e300: finite residual, infinite cost); r0 (n_obs, m) already checked finite."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        chi2 = pose_chi2(problem, r0)
+    bad = np.flatnonzero(~np.isfinite(chi2))
+    if bad.size:
+        raise DataError(
+            f"whitened residual at the starting point overflows (cost = inf) for poses {pose_labels(problem, bad)}: "
+            "a measurement or joint value is absurdly large"
+        )
+
+
+def pose_chi2(problem: IdentificationProblem, r: np.ndarray, W: np.ndarray | None = None) -> np.ndarray:
+    """(n_obs,) squared norm of each pose's whitened residual ``|W_k r_k|^2`` (dimensionless)."""
+    W = problem.whitening() if W is None else W
+    return np.sum(np.einsum("kij,kj->ki", W, np.asarray(r, float)) ** 2, axis=1)
+
+
+def final_check(problem, x, cov, W, J=None) -> tuple[np.ndarray | None, str]:
+    """Residuals (n_obs, m) at the solution x (n,) (None if they cannot be evaluated) and "" when x, the
+    residuals, the cost, J (n_obs, m, n) (if given) and cov are all finite; else the cause, naming the
+    parameters or poses (pose labels)."""
+    params = problem.params
+    if not np.all(np.isfinite(x)):
+        return None, f"parameters are not finite at the solution: {[params.names[i] for i in np.flatnonzero(~np.isfinite(x))]}"
+    try:
+        r = np.asarray(problem.residual(x), float)
+    except VisionCalibError as exc:
+        return None, f"the residual cannot be evaluated at the solution: {exc}"
+    bad = np.flatnonzero(~np.all(np.isfinite(r), axis=1))
+    if bad.size:
+        return r, f"residual is not finite at the solution for poses {pose_labels(problem, bad)}"
+    with np.errstate(over="ignore", invalid="ignore"):
+        bad = np.flatnonzero(~np.isfinite(pose_chi2(problem, r, W)))
+    if bad.size:
+        return r, f"cost is infinite at the solution (whitened residual overflows) for poses {pose_labels(problem, bad)}"
+    if J is not None:
+        bad = np.flatnonzero(~np.all(np.isfinite(J), axis=(1, 2)))
+        if bad.size:
+            return r, f"Jacobian is not finite at the solution for poses {pose_labels(problem, bad)}"
+    if not np.all(np.isfinite(cov)):
+        return r, "covariance is not finite at the solution"
+    return r, ""
 
 
 def covariance_from_jacobian(Jw_free: np.ndarray, scale_free: np.ndarray) -> tuple[np.ndarray, bool]:
@@ -104,15 +156,31 @@ def whitened_cost(problem: IdentificationProblem, x, W=None) -> float:
     return 0.5 * float(np.sum(rw**2))
 
 
-def finish_result(method, original, problem, x0, x, cov, cost0, iterations, converged, warnings, t0, info, W=None):
-    """Build the IdentificationResult (shared by LSE and EKF)."""
+def finish_result(method, original, problem, x0, x, cov, cost0, iterations, converged, warnings, t0, info, W=None,
+                  status=None, message="", J=None):
+    """Build the IdentificationResult (shared by LSE and EKF).
+
+    status/message: the solver's verdict (status default: 1 when converged else 0). Whatever the solver
+    says, non-finite parameters, residuals, cost, Jacobian J (n_obs, m, n) (if given) or covariance at
+    the solution give converged=False, status -2 and a message naming the cause (and the poses).
+    """
     params = problem.params
     fi = params.free_index
+    W = problem.whitening() if W is None else W
+    status = (STATUS_CONVERGED if converged else 0) if status is None else int(status)
+    r, bad = final_check(problem, np.asarray(x, float), cov, W, J)
+    warnings = list(warnings)
+    if bad:
+        converged, status, message = False, STATUS_NOT_FINITE, bad
+        warnings.append(f"result not usable: {bad}")
+    if r is None:
+        r = np.full((problem.n_obs, problem.m), np.nan)
     std = np.full(len(params), np.nan)
     std[fi] = np.sqrt(np.clip(np.diag(cov), 0, None))
-    W = problem.whitening() if W is None else W
-    r = np.asarray(problem.residual(x), float)
-    cost = 0.5 * float(np.sum(np.einsum("kij,kj->ki", W, r) ** 2))
+    with np.errstate(over="ignore", invalid="ignore"):
+        chi2_k = pose_chi2(problem, r, W)
+        cost = 0.5 * float(np.sum(chi2_k))
+    dof = problem.n_obs * problem.m - fi.size
     return IdentificationResult(
         method=method,
         names=params.names,
@@ -132,10 +200,16 @@ def finish_result(method, original, problem, x0, x, cov, cost0, iterations, conv
         warnings=tuple(warnings),
         seconds=time.perf_counter() - t0,
         info=dict(info, x0=np.asarray(x0, float).copy()),
+        status=status,
+        message=str(message),
+        dof=int(dof),
+        chi2_dof=2.0 * cost / dof if dof > 0 and np.isfinite(cost) else float("nan"),
+        pose_chi2=chi2_k,
     )
 
 
 # ----------------------------------------------------------------------------- LSE
+@single_threaded_blas
 def solve_lse(
     problem: IdentificationProblem,
     x0=None,
@@ -151,6 +225,7 @@ def solve_lse(
     scale_cov_by_residual: bool = False,
     free: Iterable[str] | None = None,
     fix: Iterable[str] = (),
+    selection: str = "order",
 ) -> IdentificationResult:
     """Weighted non-linear least squares on the free parameters of ``problem``.
 
@@ -159,20 +234,20 @@ def solve_lse(
     loss, f_scale: scipy robust loss on the whitened residuals (f_scale in noise-std units).
     jac: "analytic" (problem.jacobian) or "2-point"/"3-point" (finite-difference baseline).
     free / fix: parameter names (exactly free / additionally fixed).
-    Returns an IdentificationResult with method "lse"; ``info`` holds nfev, njev, scipy status/message,
-    the identifiability report (``info["identifiability"]``), jac mode, loss.
+    selection: base-set choice when parameters are not identifiable: "order" (default; the earlier
+    names are kept, the same set whatever the poses) or "pivot" (column-pivoted QR).
+    Bad input raises a clear error before solving (scipy style): non-finite residual/Jacobian/
+    covariance or an overflowing cost at x0 -> DataError naming the poses.
+    Returns an IdentificationResult with method "lse": converged/status/message (non-finite values at
+    the solution -> converged False, status -2, message naming the cause and poses), chi2_dof;
+    ``info`` holds nfev, njev, scipy status/message, the identifiability report
+    (``info["identifiability"]``), jac mode, loss. Small problems run with single-threaded BLAS
+    (:mod:`~vision_calib.identify.threads`).
     """
     t0 = time.perf_counter()
-    if jac not in ("analytic", "2-point", "3-point"):
-        raise ConfigError(f"solve_lse: jac={jac!r}; expected 'analytic', '2-point' or '3-point'")
-    if method == "auto":
-        method = "lm" if loss == "linear" else "trf"
-    if method not in ("lm", "trf", "dogbox"):
-        raise ConfigError(f"solve_lse: method={method!r}; expected 'lm', 'trf', 'dogbox' or 'auto'")
-    if method == "lm" and loss != "linear":
-        raise ConfigError(f"solve_lse: method 'lm' supports only loss='linear' (got {loss!r}); use method='trf'")
+    method = _lse_method(method, loss, jac)
     original = problem
-    problem, x0, report, warnings = prepare(problem, x0, free, fix, fix_unidentifiable)
+    problem, x0, report, warnings = prepare(problem, x0, free, fix, fix_unidentifiable, selection)
     params = problem.params
     fi = params.free_index
     s = params.scale[fi]
@@ -204,17 +279,9 @@ def solve_lse(
         gtol=gtol,
     )
     x = x_of(sol.x)
-    Jw = whitened_free_jacobian(problem, problem.jacobian(x), W)
-    cov, full_rank = covariance_from_jacobian(Jw, s)
-    warnings = list(warnings)
-    if not full_rank:
-        warnings.append("Jacobian at the solution is rank deficient: covariance is a pseudo-inverse")
-    N = problem.n_obs * problem.m
-    if scale_cov_by_residual:
-        dof = N - fi.size
-        if dof > 0:
-            cov = cov * (2.0 * float(sol.cost) / dof)
-    converged = bool(sol.status > 0 and np.all(np.isfinite(sol.x)))
+    J = _jacobian_or_nan(problem, x)
+    cov, warnings = _lse_covariance(problem, J, W, s, sol.cost if scale_cov_by_residual else None, warnings)
+    converged = bool(sol.status > 0)
     info = {
         "nfev": int(sol.nfev),
         "njev": None if sol.njev is None else int(sol.njev),
@@ -227,7 +294,50 @@ def solve_lse(
         "scale_cov_by_residual": bool(scale_cov_by_residual),
     }
     iterations = sol.njev if sol.njev is not None else sol.nfev
-    return finish_result("lse", original, problem, x0, x, cov, cost0, iterations, converged, warnings, t0, info, W)
+    status = 1 if sol.status > 0 else (0 if sol.status == 0 else -1)
+    message = f"scipy least_squares ({method}): {sol.message}"
+    return finish_result("lse", original, problem, x0, x, cov, cost0, iterations, converged, warnings, t0, info, W,
+                         status=status, message=message, J=J)
+
+
+def _lse_covariance(problem, J, W, s, cost, warnings):
+    """(cov (n_free, n_free) SI, warnings list) from J (n_obs, m, n) at the solution; NaN when J is not
+    finite; multiplied by 2 cost / dof when ``cost`` is given (a-posteriori variance factor)."""
+    Jw = whitened_free_jacobian(problem, J, W)
+    warnings = list(warnings)
+    if not np.all(np.isfinite(Jw)):
+        return np.full((s.size, s.size), np.nan), warnings
+    cov, full_rank = covariance_from_jacobian(Jw, s)
+    if not full_rank:
+        warnings.append("Jacobian at the solution is rank deficient: covariance is a pseudo-inverse")
+    dof = problem.n_obs * problem.m - s.size
+    if cost is not None and dof > 0:
+        cov = cov * (2.0 * float(cost) / dof)
+    return cov, warnings
+
+
+def _lse_method(method: str, loss: str, jac: str) -> str:
+    """Checked scipy method ("auto" -> lm for the linear loss, trf otherwise)."""
+    if jac not in ("analytic", "2-point", "3-point"):
+        raise ConfigError(f"solve_lse: jac={jac!r}; expected 'analytic', '2-point' or '3-point'")
+    if method == "auto":
+        method = "lm" if loss == "linear" else "trf"
+    if method not in ("lm", "trf", "dogbox"):
+        raise ConfigError(f"solve_lse: method={method!r}; expected 'lm', 'trf', 'dogbox' or 'auto'")
+    if method == "lm" and loss != "linear":
+        raise ConfigError(f"solve_lse: method 'lm' supports only loss='linear' (got {loss!r}); use method='trf'")
+    return method
+
+
+def _jacobian_or_nan(problem: IdentificationProblem, x) -> np.ndarray:
+    """Jacobian (n_obs, m, n) at x, all NaN when x is not finite or the model cannot be evaluated there."""
+    shape = (problem.n_obs, problem.m, len(problem.params))
+    if not np.all(np.isfinite(x)):
+        return np.full(shape, np.nan)
+    try:
+        return np.asarray(problem.jacobian(x), float)
+    except VisionCalibError:
+        return np.full(shape, np.nan)
 
 
 def solve_lse_fd(problem: IdentificationProblem, x0=None, jac: str = "2-point", **kwargs) -> IdentificationResult:

@@ -51,6 +51,7 @@ import numpy as np
 from ..errors import DataError, IdentifiabilityError, ParameterError
 from .identifiability import check_problem
 from .problem import IdentificationProblem
+from .threads import single_threaded_blas
 
 CRITERIA = ("D", "O1", "E")
 #: relative eigenvalue threshold below which M(S) is treated as rank deficient (seeding phase)
@@ -188,6 +189,7 @@ def _value(A, sel, c) -> float:
     return _lam_min(M) if c == "E" else _logdet(M)
 
 
+@single_threaded_blas
 def select_poses(problem: IdentificationProblem, n: int, criterion: str = "D", x=None, start=None,
                  exchange: bool = True, max_exchanges: int | None = None, restarts: int = 4) -> np.ndarray:
     """Choose ``n`` of the problem's observations maximising an observability criterion (module doc).

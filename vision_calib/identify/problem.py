@@ -20,6 +20,13 @@ import numpy as np
 
 from ..kinematics.params import ParameterSet
 
+#: IdentificationResult.status: the solver met its convergence criterion
+STATUS_CONVERGED = 1
+#: IdentificationResult.status: stopped at the iteration / evaluation / pass limit before converging
+STATUS_MAX_ITERATIONS = 0
+#: IdentificationResult.status: non-finite parameters, residuals, cost, Jacobian or covariance at the end
+STATUS_NOT_FINITE = -2
+
 ResidualFn = Callable[..., np.ndarray]  # (x (n,), idx=None) -> (k, m)
 JacobianFn = Callable[..., np.ndarray]  # (x (n,), idx=None) -> (k, m, n)
 
@@ -91,6 +98,13 @@ class IdentificationResult:
     deviation (NaN for fixed parameters). covariance: (n_free, n_free) for free parameters
     in ``free`` order. residuals: (n_obs, m) final residuals (measured - model, SI).
     cost_initial/final: 0.5 * sum of squared whitened residuals.
+    converged: the solver met its criterion AND everything at the solution is finite.
+    status: STATUS_CONVERGED (1), STATUS_MAX_ITERATIONS (0) or STATUS_NOT_FINITE (-2) (scipy
+    ``least_squares`` style); message: the reason in words (names the poses / parameters at fault).
+    dof: N - n_free (scalar equations minus free parameters). chi2_dof: 2 cost_final / dof, the
+    a-posteriori variance factor (about 1 when the model and obs_cov are right; NaN when dof <= 0).
+    pose_chi2: (n_obs,) squared norm of each pose's whitened final residual (see
+    :func:`~vision_calib.identify.adequacy.model_adequacy`).
     """
 
     method: str
@@ -111,6 +125,11 @@ class IdentificationResult:
     warnings: tuple[str, ...] = ()
     seconds: float = 0.0
     info: dict = field(default_factory=dict)
+    status: int = STATUS_CONVERGED
+    message: str = ""
+    dof: int = 0
+    chi2_dof: float = float("nan")
+    pose_chi2: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def deviation(self) -> np.ndarray:
@@ -144,4 +163,8 @@ class IdentificationResult:
             ],
             "correlation_warnings": list(self.correlation_warnings),
             "warnings": list(self.warnings),
+            "status": int(self.status),
+            "message": self.message,
+            "dof": int(self.dof),
+            "chi2_dof": float(self.chi2_dof) if np.isfinite(self.chi2_dof) else None,
         }

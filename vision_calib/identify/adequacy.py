@@ -1,0 +1,146 @@
+"""Is the fitted model adequate, and which poses are outliers? (numpy/scipy only)
+
+:func:`model_adequacy` reads an :class:`IdentificationResult`: the whitened final cost gives
+``chi2 = 2 cost_final`` (sum of squared whitened residuals), which for a right model and right
+``obs_cov`` follows a chi-square law with ``dof = N - n_free`` degrees of freedom (N scalar
+equations, n_free identified parameters; linearised). ``chi2 / dof`` (the a-posteriori variance
+factor) should then lie in the central ``1 - level`` interval of ``chi2(dof) / dof``; above it the
+model misses something or ``obs_cov`` is optimistic, below it ``obs_cov`` is pessimistic.
+
+:func:`fit_rejecting_outliers` is the robust-outlier procedure for the pipelines:
+
+1. LSE with a robust loss (scipy ``soft_l1`` by default, or ``cauchy``) on the whitened residuals,
+   ``f_scale = 1`` (noise std units);
+2. robust scale of the whitened residual components ``s = 1.4826 * median |W r|`` (1 when obs_cov is
+   right; ``scale=<float>`` imposes one, ``scale=1.0`` trusts obs_cov), robust refit with ``f_scale = s``;
+3. a pose is rejected when ``|W_k r_k|^2 / s^2 > chi2.ppf(1 - level / n_obs, m)``: a chi-square test
+   with m degrees of freedom per pose at the family-wise false-alarm level ``level`` (Bonferroni over
+   the n_obs poses: on clean data, the probability that ANY pose is rejected is at most ``level``,
+   a little less since fitted residuals are smaller than the noise);
+4. plain LSE (linear loss) from the caller's ``x0`` on the kept poses.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from scipy.stats import chi2 as chi2_dist
+
+from ..errors import ConfigError, DataError
+from .lse import pose_chi2, solve_lse
+from .problem import IdentificationProblem, IdentificationResult
+
+#: default significance level of the adequacy test and family-wise false-alarm level of the outlier test
+DEFAULT_LEVEL = 0.01
+#: robust losses accepted by :func:`fit_rejecting_outliers`
+ROBUST_LOSSES = ("soft_l1", "cauchy", "huber", "arctan")
+
+
+def model_adequacy(result: IdentificationResult, level: float = DEFAULT_LEVEL, n_worst: int = 5) -> dict:
+    """Chi-square adequacy verdict of ``result`` (JSON-ready dict).
+
+    Keys: chi2 (= 2 cost_final), dof, chi2_dof, expected_chi2_dof [low, high] (central 1 - level
+    interval of chi2(dof)/dof), p_value (P[chi2(dof) >= chi2]), level, verdict ("consistent",
+    "too large", "too small" or "not available"), explanation (a sentence), worst_poses: up to
+    ``n_worst`` {label, chi2, p_value} with the largest whitened squared residual norm (p_value under
+    chi2(m), m = residual components per pose), largest first.
+    """
+    if not 0 < level < 1:
+        raise ConfigError(f"model_adequacy: level={level}, expected 0 < level < 1")
+    dof = int(result.dof)
+    chi2 = 2.0 * float(result.cost_final)
+    out = {"chi2": chi2 if np.isfinite(chi2) else None, "dof": dof, "level": float(level),
+           "chi2_dof": float(result.chi2_dof) if np.isfinite(result.chi2_dof) else None,
+           "expected_chi2_dof": None, "p_value": None, "worst_poses": []}
+    m = int(result.residuals.shape[1]) if np.ndim(result.residuals) == 2 else 0
+    if result.pose_chi2 is not None and m:
+        pc = np.asarray(result.pose_chi2, float)
+        order = np.argsort(-np.where(np.isfinite(pc), pc, np.inf))[: max(0, int(n_worst))]
+        out["worst_poses"] = [
+            {"label": str(result.labels[k]) if result.labels else f"#{int(k)}",
+             "chi2": float(pc[k]) if np.isfinite(pc[k]) else None,
+             "p_value": float(chi2_dist.sf(pc[k], m)) if np.isfinite(pc[k]) else 0.0}
+            for k in order
+        ]
+    if dof <= 0 or not np.isfinite(chi2):
+        why = "no redundancy (dof <= 0)" if dof <= 0 else "the cost is not finite"
+        out.update(verdict="not available", explanation=f"no chi-square test: {why}")
+        return out
+    lo, hi = chi2_dist.ppf(level / 2, dof) / dof, chi2_dist.isf(level / 2, dof) / dof
+    out["expected_chi2_dof"] = [float(lo), float(hi)]
+    out["p_value"] = float(chi2_dist.sf(chi2, dof))
+    v = chi2 / dof
+    if v > hi:
+        out.update(verdict="too large", explanation=(
+            f"chi2/dof = {v:.3g} > {hi:.3g}: the residuals are larger than obs_cov predicts: a model error "
+            "(missing parameter, wrong structure), outlier poses, or optimistic measurement covariance"))
+    elif v < lo:
+        out.update(verdict="too small", explanation=(
+            f"chi2/dof = {v:.3g} < {lo:.3g}: the residuals are smaller than obs_cov predicts: the measurement "
+            "covariance is pessimistic (predicted std are too large)"))
+    else:
+        out.update(verdict="consistent", explanation=(
+            f"chi2/dof = {v:.3g} within [{lo:.3g}, {hi:.3g}] (level {level:g}): residuals agree with obs_cov"))
+    return out
+
+
+def _robust_scale(problem: IdentificationProblem, res: IdentificationResult) -> float:
+    """1.4826 * median |whitened residual component| (= 1 for N(0, 1) components)."""
+    rw = np.einsum("kij,kj->ki", problem.whitening(), res.residuals)
+    s = 1.4826 * float(np.median(np.abs(rw)))
+    if not (np.isfinite(s) and s > 0):
+        raise DataError(f"robust scale of the whitened residuals is {s}: cannot test poses for outliers")
+    return s
+
+
+def fit_rejecting_outliers(
+    problem: IdentificationProblem,
+    x0=None,
+    level: float = DEFAULT_LEVEL,
+    loss: str = "soft_l1",
+    scale="auto",
+    max_reject_fraction: float = 0.3,
+    **lse_kwargs,
+) -> tuple[IdentificationResult, list[tuple[str, str]]]:
+    """Robust fit, chi-square rejection of outlier poses, plain LSE without them (module docstring).
+
+    x0: (n,) starting vector (SI), default nominal. level: family-wise false-alarm level of the pose
+    test. loss: scipy robust loss. scale: "auto" (robust scale of the whitened residuals) or a float
+    (noise-std units; 1.0 trusts obs_cov). max_reject_fraction: more rejected poses than this
+    fraction raise DataError (the model or obs_cov is wrong, not a few outliers). lse_kwargs go to
+    every :func:`~vision_calib.identify.lse.solve_lse` call (free, fix, selection, ...).
+    Returns (result of the plain LSE on the kept poses, rejected [(label, reason)]); the result's
+    ``info["outliers"]`` records the test and its warnings name the rejected poses.
+    """
+    if loss not in ROBUST_LOSSES:
+        raise ConfigError(f"fit_rejecting_outliers: loss={loss!r}; expected one of {', '.join(ROBUST_LOSSES)}")
+    if not 0 < level < 1:
+        raise ConfigError(f"fit_rejecting_outliers: level={level}, expected 0 < level < 1")
+    for key in ("loss", "f_scale", "method"):
+        if key in lse_kwargs:
+            raise ConfigError(f"fit_rejecting_outliers: {key!r} is chosen by the procedure, do not pass it")
+    robust = solve_lse(problem, x0, loss=loss, f_scale=1.0, **lse_kwargs)
+    if scale == "auto":
+        s = _robust_scale(problem, robust)
+        robust = solve_lse(problem, robust.identified, loss=loss, f_scale=s, **lse_kwargs)
+    else:
+        s = float(scale)
+        if not (np.isfinite(s) and s > 0):
+            raise ConfigError(f"fit_rejecting_outliers: scale={scale!r}; expected 'auto' or a float > 0")
+    n_obs, m = problem.n_obs, problem.m
+    d = pose_chi2(problem, robust.residuals) / s**2
+    thr = float(chi2_dist.isf(level / n_obs, m))
+    bad = np.flatnonzero(~(d <= thr))  # NaN fails too
+    labels = [str(problem.labels[k]) if problem.labels else f"#{int(k)}" for k in range(n_obs)]
+    rejected = [(labels[k], f"whitened residual norm^2 {d[k]:.4g} > {thr:.4g} (chi-square, {m} dof, family-wise "
+                 f"false-alarm level {level:g} over {n_obs} poses, robust scale {s:.3g}, loss {loss})") for k in bad]
+    if bad.size > max_reject_fraction * n_obs:
+        raise DataError(f"{bad.size} of {n_obs} poses fail the outlier test (more than {max_reject_fraction:.0%}): "
+                        f"the model or the measurement covariance is wrong, not a few outliers; first: {labels[bad[0]]}")
+    keep = np.setdiff1d(np.arange(n_obs), bad)
+    final = solve_lse(problem.subset(keep) if bad.size else problem, x0, **lse_kwargs)
+    info = dict(final.info, outliers={"level": float(level), "loss": loss, "scale": s, "threshold": thr,
+                                      "pose_chi2_robust": d, "rejected": [lab for lab, _ in rejected]})
+    warnings = final.warnings + tuple(f"pose {lab} rejected as an outlier: {why}" for lab, why in rejected)
+    return dataclasses.replace(final, info=info, warnings=warnings), rejected
