@@ -15,7 +15,6 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse  # noqa: E402
 import sys  # noqa: E402
-from pathlib import Path
 
 from .errors import VisionCalibError  # noqa: E402
 
@@ -58,6 +57,12 @@ def _add_common(p, poses=True):
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
 
 
+def _add_run_options(p):
+    p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    p.add_argument("--fix-unidentifiable", action="store_true",
+                   help="accept a pose set that loses parameters varied poses identify (they stay at nominal)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="vision-calib", description="Vision-based geometric calibration of robots.")
     sub = ap.add_subparsers(dest="command", required=True)
@@ -82,16 +87,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--method", choices=["lse", "ekf", "igm"], default=None)
     p.add_argument("--export-recording", default=None, metavar="DIR", help="also write a recorded folder")
     p.add_argument("--workers", type=_count, default=None, help="processes for rendering/measurement (default: cores)")
+    _add_run_options(p)
 
     p = sub.add_parser("demo", help="the default scene end to end (README's main command)")
     p.add_argument("--out", default="out/demo", help="output folder (default out/demo)")
     p.add_argument("--seed", type=_seed, default=None)
+    p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.add_argument("--json", action="store_true")
 
     p = sub.add_parser("process", help="measure -> identify -> report on a recorded image folder")
     p.add_argument("folder")
     p.add_argument("--out", required=True)
     p.add_argument("--method", choices=["lse", "ekf", "igm"], default=None)
+    _add_run_options(p)
     p.add_argument("--json", action="store_true")
 
     p = sub.add_parser("study", help="parameter sweep x Monte Carlo (local processes or a Dask cluster)")
@@ -99,6 +107,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True)
     p.add_argument("--workers", type=_count, default=None)
     p.add_argument("--scheduler", default=None, help="Dask scheduler address (tcp://host:port)")
+    p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.add_argument("--json", action="store_true")
 
     p = sub.add_parser("import-visp", help="convert a ViSP eye-to-hand folder into a recorded folder")
@@ -132,7 +141,7 @@ def _dispatch(args) -> int:
             sigma_mm=args.sigma_mm, sigma_deg=args.sigma_deg, seed=args.seed,
         )
         print(to_json(out) if args.json else _summary_synthetic(out))
-        return _status(out["converged"])
+        return _status({"ok": out["converged"], "message": "the identification did not converge"})
     if args.command in ("simulate", "demo"):
         from .experiment.simulate import run_simulation, DEFAULT_SCENE
 
@@ -141,20 +150,23 @@ def _dispatch(args) -> int:
             scene, out_dir=args.out, seed=args.seed,
             n_poses=getattr(args, "poses", None), frames=getattr(args, "frames", None),
             method=getattr(args, "method", None), export_recording=getattr(args, "export_recording", None),
-            workers=getattr(args, "workers", None), progress=not args.json,
+            workers=getattr(args, "workers", None), progress=not args.json, plots=not args.no_plots,
+            fix_unidentifiable=getattr(args, "fix_unidentifiable", False),
         )
         print(to_json(report) if args.json else report["summary_text"])
-        return _status(report["identification"]["converged"])
+        return _status(report["verdict"])
     if args.command == "process":
         from .experiment.process import process_folder
 
-        report = process_folder(args.folder, out_dir=args.out, method=args.method, progress=not args.json)
+        report = process_folder(args.folder, out_dir=args.out, method=args.method, progress=not args.json,
+                                plots=not args.no_plots, fix_unidentifiable=args.fix_unidentifiable)
         print(to_json(report) if args.json else report["summary_text"])
-        return _status(report["identification"]["converged"])
+        return _status(report["verdict"])
     if args.command == "study":
         from .study import run_study
 
-        res = run_study(args.spec, out_dir=args.out, workers=args.workers, scheduler=args.scheduler, progress=not args.json)
+        res = run_study(args.spec, out_dir=args.out, workers=args.workers, scheduler=args.scheduler,
+                        progress=not args.json, plots=not args.no_plots)
         print(to_json(res) if args.json else res["summary_text"])
         return 0
     if args.command == "import-visp":
@@ -172,14 +184,16 @@ def _dispatch(args) -> int:
     raise AssertionError(args.command)
 
 
-#: exit code when the outputs were written but the identification did not converge
+#: exit code when the outputs were written but the result is not good (not converged, not finite)
 EXIT_NOT_CONVERGED = 3
 
 
-def _status(converged: bool) -> int:
-    if converged:
+def _status(verdict: dict) -> int:
+    """0 for a good result; 3 (outputs kept, no calibrated model) otherwise, with the reason on stderr."""
+    if verdict["ok"]:
         return 0
-    print("vision-calib: warning: the identification did not converge (outputs written, flagged converged=false)",
+    why = verdict.get("message") or "the identification did not converge"
+    print(f"vision-calib: error: the result is not good ({why}); outputs written without a calibrated model",
           file=sys.stderr)
     return EXIT_NOT_CONVERGED
 

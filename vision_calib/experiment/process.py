@@ -20,6 +20,7 @@ from ..io.recording import read_recording
 from ..io.report import (REPORT_VERSION, build_report, measurements_block, parameters_table, residual_stats,
                          write_report)
 from ..rig import Measurements, load_scene
+from .checks import check_motion
 from .steps import check_method, identify_measurements, rejection_summary
 
 
@@ -61,7 +62,7 @@ def _recording_setup(rec):
     return scene, setup.with_camera(rec.camera)
 
 
-def process_folder(folder, out_dir, method=None, progress=False, plots=True) -> dict:
+def process_folder(folder, out_dir, method=None, progress=False, plots=True, fix_unidentifiable=False) -> dict:
     """Process a recorded folder; writes DIR/measurements.json, DIR/report.json (+ plots, model)."""
     t0 = time.perf_counter()
     rec = read_recording(folder)
@@ -81,7 +82,12 @@ def process_folder(folder, out_dir, method=None, progress=False, plots=True) -> 
         raise IdentifiabilityError(f"{rec.folder}: only {len(ok)} usable poses of {len(pms)} "
                                    f"({rejection_summary(pms)}); identification needs more")
     t1 = time.perf_counter()
-    result, problem, _, rep = identify_measurements(setup, meas, method, residual, context=rejection_summary(pms))
+    where = str(rec.folder)
+    motion = check_motion(setup, meas, where, "the recording's target.square_m (or marker/tag size), camera.fx/fy, "
+                          "and units.length of poses.csv")
+    ident = identify_measurements(setup, meas, method, residual, context=rejection_summary(pms), where=where,
+                                  fix_unidentifiable=fix_unidentifiable)
+    result, problem, rep = ident.result, ident.problem, ident.analysis
     t_id = time.perf_counter() - t1
     ps = setup.params
     report = build_report(
@@ -90,7 +96,8 @@ def process_folder(folder, out_dir, method=None, progress=False, plots=True) -> 
         settings={"poses": len(pms), "frames": rec.frames_per_pose, "method": method, "residual": residual,
                   "camera": rec.camera.to_dict()},
         measurements=mblock, warnings=rec.notes, identifiability=rep,
-        parameters=parameters_table(ps.names, ps.nominal, None, result), result=result,
+        parameters=parameters_table(ps.names, ps.nominal, None, result), result=result, identified=ident,
+        motion=motion,
         residuals=residual_stats(result.residuals, problem.residual_kind),
         timings={"measure": t_meas, "identify": t_id, "total": time.perf_counter() - t0})
     write_report(out, report, setup, result, problem, plots=plots)

@@ -20,6 +20,7 @@ from ..io.atomic import write_json_atomic
 from ..io.report import REPORT_VERSION, build_report, measurements_block, parameters_table, write_report
 from ..rig import Measurements, Scene, SCENES_DIR, load_scene, scene_poses
 from .image_chain import ImageChain, measure_poses
+from .checks import check_motion
 from .steps import check_method, identify_measurements, rejection_summary, rngs, run_analysis_and_truth
 from .synthetic import run_synthetic
 
@@ -67,7 +68,8 @@ def _check_outputs(out_dir, export_recording) -> None:
 
 
 def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, method=None, export_recording=None,
-                   workers=None, progress=False, overrides=None, plots=True, pool=None) -> dict:
+                   workers=None, progress=False, overrides=None, plots=True, pool=None,
+                   fix_unidentifiable=False) -> dict:
     """The whole simulated experiment; writes ``out_dir/report.json`` (+ plots, calibrated model)
     when out_dir is given and returns the report dict (with ``summary_text``). pool: an image worker
     pool to reuse (``image_chain``), else one is started for this run."""
@@ -90,7 +92,6 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
     poses = scene_poses(scene, rp, n_poses)
     validation = scene_poses(scene, rv, which="validation")
     rep, x_true = run_analysis_and_truth(scene, poses, residual)  # the run's one identifiability analysis
-    base = setup.params.mask(rep.base_parameters)
     T_true = setup.T_cam_target(poses, x_true)
     q_true = setup.joints(poses, x_true)
     labels = [f"{i:03d}" for i in range(len(poses))]
@@ -115,7 +116,10 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
         write_json_atomic(Path(out_dir) / "measurements.json",
                           {"version": REPORT_VERSION, "scene": scene.name, "seed": seed, **mblock})
     t = time.perf_counter()
-    result, problem, _, _ = identify_measurements(setup, meas, method, residual, base, context=rejection_summary(pms))
+    motion = check_motion(setup, meas, f"{scene.path}", f"the target's square size ({scene.target_path})")
+    ident = identify_measurements(setup, meas, method, residual, rep, context=rejection_summary(pms),
+                                  where=str(scene.path), fix_unidentifiable=fix_unidentifiable)
+    result, problem = ident.result, ident.problem
     timings["identify"] = time.perf_counter() - t
 
     t = time.perf_counter()
@@ -127,7 +131,8 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
              "after": setup.evaluate(result.identified, x_true, validation, meas_val)}
     # reference: the same experiment with synthetic pose measurements of the same noise level
     ref = run_synthetic(scene, method=method, residual=residual, sigma_t_m=st, sigma_r_rad=sr, seed=seed,
-                        poses=poses, validation=validation, base=base, x_true=x_true)
+                        poses=poses, validation=validation, base=setup.params.mask(rep.base_parameters),
+                        x_true=x_true)
     timings["evaluate"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t_start
 
@@ -140,7 +145,7 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
                   "averaging": scene.measurement.averaging, "camera": setup.camera.to_dict(),
                   "effects": scene.effects.to_dict(), "validation_poses": int(len(validation))},
         measurements=mblock, identifiability=rep, parameters=parameters_table(ps.names, ps.nominal, x_true, result),
-        result=result, accuracy=evals, timings=timings,
+        result=result, identified=ident, motion=motion, accuracy=evals, timings=timings,
         extra={"synthetic_reference": {"sigma_mm": st * 1e3, "sigma_deg": float(np.degrees(sr)),
                                        "accuracy_after": ref.after.to_dict()}})
     if out_dir is not None:

@@ -71,19 +71,37 @@ def measurements_block(pms, **extra) -> dict:
             "rejected": rejected, **extra, "poses": [pm.to_dict() for pm in pms]}
 
 
+def result_is_finite(result) -> bool:
+    """Whether the identified values, their std (where free) and the final cost are finite."""
+    free = np.asarray(result.free, bool)
+    return bool(np.all(np.isfinite(result.identified)) and np.all(np.isfinite(np.asarray(result.std)[free]))
+                and np.isfinite(result.cost_final))
+
+
+def verdict(result, measurements: dict | None = None, identified=None, warnings=()) -> dict:
+    """What to read first: ok (converged with finite values: only then is a calibrated model written),
+    the poses rejected (measurement + outliers), the adequacy verdict and the warning count."""
+    finite = result_is_finite(result)
+    n_out = len(identified.rejected) if identified is not None else 0
+    return {"ok": bool(result.converged and finite), "converged": bool(result.converged), "finite": finite,
+            "n_rejected_poses": (measurements or {}).get("n_rejected", 0) + n_out, "n_outliers": n_out,
+            "adequacy": identified.adequacy.get("verdict") if identified is not None else None,
+            "message": getattr(result, "message", ""), "warnings": len(warnings) + len(result.warnings)}
+
+
 def build_report(kind: str, *, source: dict, settings: dict, result, measurements: dict | None = None,
                  identifiability=None, parameters: list | None = None, accuracy: dict | None = None,
                  residuals: dict | None = None, warnings=(), extra: dict | None = None, timings: dict | None = None,
-                 seed: int | None = None) -> dict:
+                 seed: int | None = None, identified=None, motion: dict | None = None) -> dict:
     """report.json content (see the module docstring) with its ``summary_text``. identifiability: an
-    IdentifiabilityReport (or None); accuracy: {"before": Evaluation, "after": Evaluation}."""
+    IdentifiabilityReport (or None); accuracy: {"before": Evaluation, "after": Evaluation}; identified:
+    ``experiment.steps.Identified`` of a measured-data fit (outliers, adequacy, variance factor);
+    motion: the motion-consistency check (``experiment.checks``)."""
     warnings = list(warnings)
-    n_rej = (measurements or {}).get("n_rejected", 0)
     report = {
         "version": REPORT_VERSION,
         "kind": kind,
-        "verdict": {"ok": bool(result.converged), "converged": bool(result.converged), "n_rejected_poses": n_rej,
-                    "warnings": len(warnings) + len(result.warnings)},
+        "verdict": verdict(result, measurements, identified, warnings),
         "source": source,
     }
     if seed is not None:
@@ -96,6 +114,12 @@ def build_report(kind: str, *, source: dict, settings: dict, result, measurement
     if parameters is not None:
         report["parameters"] = parameters
     report["identification"] = identification_block(result)
+    if identified is not None:
+        report["outliers"] = [{"pose_id": lab, "reason": why} for lab, why in identified.rejected]
+        report["adequacy"] = identified.adequacy
+        report["variance_factor"] = identified.variance_factor
+    if motion:
+        report["motion_check"] = motion
     if accuracy is not None:
         report["accuracy"] = {k: v.to_dict() for k, v in accuracy.items()}
     if residuals is not None:
@@ -120,8 +144,11 @@ def _what(report) -> str:
 def summary_text(report: dict) -> str:
     """One screen: the verdict first, then what was run, measured, identified and how accurate."""
     v, ident = report["verdict"], report["identification"]
-    lines = [f"verdict: {'converged' if v['converged'] else 'NOT CONVERGED'}; {v['n_rejected_poses']} poses rejected; "
-             f"{v['warnings']} warnings", _what(report)]
+    state = "ok" if v["ok"] else ("NOT FINITE" if not v.get("finite", True) else "NOT CONVERGED")
+    adequacy = f"; model adequacy: {v['adequacy']}" if v.get("adequacy") else ""
+    lines = [f"verdict: {state}; {v['n_rejected_poses']} poses rejected ({v.get('n_outliers', 0)} as outliers)"
+             f"{adequacy}; {v['warnings']} warnings" + (f" -- {v['message']}" if not v["ok"] and v.get("message") else ""),
+             _what(report)]
     m = report.get("measurements")
     if m:
         lines.append(f"measurement: {m['n_valid']} of {m['n_poses']} poses valid, {m['n_rejected']} rejected")
@@ -184,7 +211,7 @@ def write_report(out_dir, report: dict, setup=None, result=None, problem=None, e
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     files = {"report": "report.json"}
-    if setup is not None:
+    if setup is not None and report["verdict"]["ok"]:  # never a calibrated model from a failed fit
         files["model"] = "calibrated_model.yaml"
         write_calibrated_model(out / files["model"], setup, result.identified, result.std, result.free)
         files.update(setup.export_model_files(out, result.identified))

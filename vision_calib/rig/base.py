@@ -156,6 +156,15 @@ class Setup:
         raise NotImplementedError
 
     # ------------------------------------------------------------------ optional, with defaults
+    def predict_from_joints(self, joints, x) -> np.ndarray:
+        """(N, 4, 4) T_cam_target the model with parameters x predicts from joint readings (N, n_joints)
+        rad. Default: commanded poses are joint sets (serial kinds)."""
+        return self.T_cam_target(joints, x)
+
+    def generic_poses(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        """n varied commanded poses for the structural identifiability of the kind (no view check)."""
+        return self.sample_poses(rng, n, check_view=False)
+
     def export_model_files(self, out_dir, x) -> dict:
         """Write kind-specific calibrated-model files (e.g. a URDF) into out_dir for parameters x (n,);
         returns {file kind: file name}. Default: none (``calibrated_model.yaml`` is written for every kind)."""

@@ -53,6 +53,10 @@ class H4Setup(Setup):
     def joints(self, poses, x) -> np.ndarray:
         return self.robot.igm(poses, x)
 
+    def predict_from_joints(self, joints, x) -> np.ndarray:
+        """Camera view of the nacelle poses the forward model (Newton on the IGM) gives for joints (N, 4)."""
+        return self.robot.camera_measurement(self.robot.fgm(joints, x), x)
+
     def problem(self, meas, residual=None, params=None):
         from ..identify.h4_problem import h4_igm_problem
 

@@ -123,6 +123,13 @@ class SerialSetup(Setup):
             f"{self.name}: could not draw {n} joint sets with the target in view around q_center ± q_spread "
             f"(found {len(out)}); widen poses.spread_deg or check the mounts")
 
+    def generic_poses(self, rng, n) -> np.ndarray:
+        """Joint sets uniform within the joint limits (+-180 deg where the robot has none)."""
+        lim = self.chain.joint_limits
+        lo, hi = (np.full(self.n_joints, -np.pi), np.full(self.n_joints, np.pi)) if lim is None else \
+            (np.maximum(lim[:, 0], -np.pi), np.minimum(lim[:, 1], np.pi))
+        return lo + rng.uniform(size=(n, self.n_joints)) * (hi - lo)
+
     def model_dict(self) -> dict:
         ch = self.chain
         return {"mounts": {"left": ch.left, "right": ch.right, "left_R_nominal": ch.left_R_nominal.tolist(),

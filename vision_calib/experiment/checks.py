@@ -1,0 +1,121 @@
+"""Checks on measured data before identification: is the pose set rich enough, and do the measured
+motions agree with the commanded ones?
+
+**Pose-set richness.** The rank of the identification Jacobian on the user's poses is compared with
+the kind's structural rank (the same parameters over many generic poses, ``Setup.generic_poses``). A
+deficit means the poses, not the model, lose parameters (e.g. a zero pose spread): refused with the
+lost parameters named, unless the caller accepts fixing them.
+
+**Motion consistency (screw invariants).** For two poses i, j the measured relative motion
+``M_ij = T_i^-1 T_j`` (T = measured T_cam_target) and the one predicted by the nominal model from
+the joint readings, ``P_ij``, are conjugates of the same robot motion whatever the camera and target
+mounts (``T_cam_target = A · F(q) · B`` gives ``M_ij = B^-1 F_i^-1 F_j B``; eye-in-hand the same with
+``F_i F_j^-1``). Their rotation angles agree, and so does the translation along the screw axis
+(the pitch; the translation norm for pure translations). Nominal-model errors change them by a
+fraction of a degree / a millimetre; a joint-unit error, a wrong target size or focal length, or a
+pose whose images belong to another pose changes them grossly. The scale of the lengths is
+estimated as the median ratio measured / predicted over the informative pairs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .. import frames as F
+from ..errors import DataError, IdentifiabilityError
+from ..rig import Measurements, Setup
+
+#: relative length-scale error above which the measured motions are refused (wrong target size / fx / units)
+SCALE_TOL = 0.05
+#: pairs must move this much to inform the scale: pitch or pure translation [m], rotation [rad]
+MIN_TRANSLATION_M = 0.01
+MIN_ROTATION_RAD = np.radians(5.0)
+PURE_TRANSLATION_RAD = np.radians(0.5)
+#: a pose whose median angle mismatch exceeds max(ANGLE_FLOOR, ANGLE_K x the global median) is inconsistent
+ANGLE_FLOOR_RAD = np.radians(1.0)
+ANGLE_K = 5.0
+
+
+def screw_invariants(T_rel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(angle (N,) rad, pitch (N,) m = translation along the rotation axis, translation norm (N,) m)
+    of relative motions T_rel (N, 4, 4)."""
+    rv = F.xyz_rotvec_from_T(T_rel)[..., 3:]
+    ang = np.linalg.norm(rv, axis=-1)
+    axis = rv / np.maximum(ang, 1e-12)[..., None]
+    t = T_rel[..., :3, 3]
+    return ang, np.abs(np.sum(t * axis, axis=-1)), np.linalg.norm(t, axis=-1)
+
+
+def _pairs(n: int, max_pairs: int = 4000, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    i, j = np.triu_indices(n, 1)
+    if len(i) > max_pairs:
+        k = np.random.default_rng(seed).choice(len(i), max_pairs, replace=False)
+        i, j = i[k], j[k]
+    return i, j
+
+
+def motion_consistency(setup: Setup, meas: Measurements) -> dict:
+    """Compare measured and predicted (nominal model, joint readings) relative motions of all pose pairs.
+    Returns {scale, n_scale_pairs, angle_mismatch_median_deg, per-pose angle mismatch (deg) and the
+    labels of inconsistent poses}."""
+    T_pred = setup.predict_from_joints(meas.joints, setup.params.nominal)
+    T_meas = meas.T_cam_target
+    i, j = _pairs(len(T_meas))
+    am, pm, nm = screw_invariants(np.linalg.inv(T_meas[i]) @ T_meas[j])
+    ap, pp, npred = screw_invariants(np.linalg.inv(T_pred[i]) @ T_pred[j])
+    dang = np.abs(am - ap)
+    pure = (ap < PURE_TRANSLATION_RAD) & (npred > MIN_TRANSLATION_M)
+    screw = (ap > MIN_ROTATION_RAD) & (pp > MIN_TRANSLATION_M)
+    ratios = np.concatenate([nm[pure] / npred[pure], pm[screw] / pp[screw]])
+    scale = float(np.median(ratios)) if ratios.size >= 3 else float("nan")
+    per_pose = np.full(len(T_meas), np.nan)
+    for k in range(len(T_meas)):
+        sel = (i == k) | (j == k)
+        if sel.any():
+            per_pose[k] = np.median(dang[sel])
+    med = float(np.median(dang)) if dang.size else float("nan")
+    lim = max(ANGLE_FLOOR_RAD, ANGLE_K * med) if np.isfinite(med) else np.inf
+    bad = np.flatnonzero(per_pose > lim)
+    labels = meas.labels or tuple(str(k) for k in range(len(T_meas)))
+    return {"scale": scale, "n_scale_pairs": int(ratios.size), "angle_mismatch_median_deg": float(np.degrees(med)),
+            "angle_mismatch_limit_deg": float(np.degrees(lim)), "median_rotation_deg": float(np.degrees(np.median(ap)))
+            if ap.size else float("nan"),
+            "inconsistent_poses": [{"pose_id": labels[k], "angle_mismatch_deg": float(np.degrees(per_pose[k]))}
+                                   for k in bad]}
+
+
+def check_motion(setup: Setup, meas: Measurements, where: str, scale_hint: str) -> dict:
+    """:func:`motion_consistency`, refusing (DataError naming ``where`` and the likely cause) measured
+    motions whose length scale is off by more than SCALE_TOL or whose rotations do not follow the joints
+    at all. ``scale_hint``: the keys that set the length scale (e.g. the target's square size, fx)."""
+    if len(meas.T_cam_target) < 3:
+        return {}
+    out = motion_consistency(setup, meas)
+    med_rot = out["median_rotation_deg"]
+    if out["angle_mismatch_median_deg"] > max(2.0, 0.1 * med_rot):
+        raise DataError(
+            f"{where}: the measured rotations between poses do not follow the commanded joints (median mismatch "
+            f"{out['angle_mismatch_median_deg']:.3g} deg for a median commanded rotation of {med_rot:.3g} deg): "
+            "joint values in the wrong angle unit, a joint order different from the robot's, or the wrong robot model")
+    s = out["scale"]
+    if np.isfinite(s) and abs(s - 1) > SCALE_TOL:
+        raise DataError(
+            f"{where}: the measured motions are {s:.3g} x the commanded ones ({out['n_scale_pairs']} pose pairs): "
+            f"a wrong length scale -- check {scale_hint} and the length units")
+    return out
+
+
+def structural_rank_check(setup: Setup, rep, residual: str, where: str, accept: bool = False,
+                          n_generic: int = 200) -> list[str]:
+    """IdentifiabilityError naming the parameters the user's pose set loses compared with generic poses
+    (``rep``: IdentifiabilityReport of the user's poses), unless ``accept``; returns those names."""
+    from .steps import analyze_setup
+
+    ref, _ = analyze_setup(setup, setup.generic_poses(np.random.default_rng(12345), n_generic), residual)
+    lost = [n for n in rep.non_identifiable if n not in ref.non_identifiable]
+    if rep.rank < ref.rank and lost and not accept:
+        raise IdentifiabilityError(
+            f"{where}: the {rep.n_obs} poses identify {rep.rank} of the {ref.rank} parameters that varied poses "
+            f"identify; not identifiable from these poses: {', '.join(lost)}. Use more (and more varied) poses, "
+            "or accept fixing them at nominal (--fix-unidentifiable)")
+    return lost
