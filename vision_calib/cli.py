@@ -50,6 +50,23 @@ def _sigma(text: str) -> float:
     return v
 
 
+def _scheduler(text: str) -> str:
+    """argparse type: a Dask scheduler address ``tcp://host:port`` (or tls://) or an existing scheduler file."""
+    import re
+
+    if re.fullmatch(r"(tcp|tls)://[A-Za-z0-9.\-_]+:\d{1,5}|(tcp|tls)://\[[0-9A-Fa-f:.]+\]:\d{1,5}", text):
+        if 0 < int(text.rsplit(":", 1)[1]) < 65536:
+            return text
+        raise argparse.ArgumentTypeError(f"port out of range in {text!r}")
+    if text.startswith(("http://", "https://")):
+        raise argparse.ArgumentTypeError(f"{text!r} looks like the Dask dashboard (http); give the scheduler "
+                                         "address tcp://host:port (default port 8786)")
+    if "://" not in text and Path(text).is_file():
+        return text
+    raise argparse.ArgumentTypeError(f"expected tcp://host:port or an existing scheduler file (JSON written by "
+                                     f"dask-scheduler --scheduler-file), got {text!r}")
+
+
 def _add_common(p, poses=True):
     p.add_argument("scene", help="scene YAML file (see scenes/)")
     if poses:
@@ -98,7 +115,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("spec", help="study YAML (see scenes/studies/)")
     p.add_argument("--out", required=True)
     p.add_argument("--workers", type=_count, default=None)
-    p.add_argument("--scheduler", default=None, help="Dask scheduler address (tcp://host:port)")
+    p.add_argument("--scheduler", type=_scheduler, default=None,
+                   help="Dask scheduler address (tcp://host:port) or scheduler file")
     p.add_argument("--json", action="store_true")
 
     p = sub.add_parser("import-visp", help="convert a ViSP eye-to-hand folder into a recorded folder")
@@ -206,10 +224,36 @@ def _summary_synthetic(out: dict) -> str:
     )
 
 
+def _locks(args) -> list:
+    """Exclusive lock on the command's --out, see io/lock.py. (--export-recording is not locked here:
+    simulate refuses a non-empty folder, and a lock file inside would make it non-empty.)"""
+    from .io.lock import OutputLock
+
+    locks = []
+    out = getattr(args, "out", None)
+    if out is not None:
+        if args.command == "target":  # a file: lock beside it
+            locks.append(OutputLock(Path(out).parent, "output file", lock_path=Path(str(out) + ".lock")))
+        else:
+            locks.append(OutputLock(out))
+    return locks
+
+
+def _run_locked(args) -> int:
+    held = []
+    try:
+        for lock in _locks(args):
+            held.append(lock.acquire())
+        return _dispatch(args)
+    finally:
+        for lock in reversed(held):
+            lock.release()
+
+
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        return _dispatch(args)
+        return _run_locked(args)
     except VisionCalibError as exc:
         print(f"vision-calib: error: {exc}", file=sys.stderr)
         return exc.exit_code
@@ -218,6 +262,9 @@ def main(argv=None) -> int:
     except OSError as exc:  # output folder not writable, a file where a folder should be, ...
         where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
         print(f"vision-calib: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 2
+    except MemoryError:
+        print("vision-calib: error: out of memory (reduce the image size, dpi, poses or workers)", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("vision-calib: interrupted (results already written are kept)", file=sys.stderr)
