@@ -36,7 +36,7 @@ import yaml
 
 from ..camera import CameraIntrinsics
 from ..config import Section, load_yaml
-from ..errors import ConfigError, DataError
+from ..errors import DataError
 from .atomic import write_text_atomic
 
 FORMAT = "vision_calib.recording/1"
