@@ -150,8 +150,8 @@ def _csv_columns(cpath: Path, header: list[str], pose_kind: str) -> tuple[int, l
     if pose_kind == "flange_pose":
         expected = list(FLANGE_COLUMNS)
     else:
-        qs = sorted((h for h in header if h[:1] == "q" and h[1:].isdigit()), key=lambda h: int(h[1:]))
-        expected = [f"q{j}" for j in range(1, len(qs) + 1)]
+        qs = [int(h[1:]) for h in header if h[:1] == "q" and h[1:].isdigit()]
+        expected = [f"q{j}" for j in range(1, max(qs, default=0) + 1)]
         if not qs:
             raise DataError(f"{cpath}: header: no joint columns q1..qn (poses: joints), got {','.join(header)}")
     known = ["pose_id", *expected]
