@@ -94,15 +94,41 @@ class CameraIntrinsics:
         }
 
     @classmethod
-    def from_dict(cls, d: dict, where: str = "camera") -> "CameraIntrinsics":
-        """From {width, height, fx, fy, cx, cy, dist?}; ConfigError naming the missing key."""
-        missing = [k for k in ("width", "height", "fx", "fy", "cx", "cy") if k not in d]
+    def from_dict(cls, d: dict, where: str = "camera", require_dist: bool = False) -> "CameraIntrinsics":
+        """From {width, height, fx, fy, cx, cy, dist} [px]; ConfigError naming ``where`` (file: key) and the key.
+
+        Unknown keys are refused with the closest known key suggested (``k9`` is not silently ignored).
+        require_dist: ``dist`` must be given (recordings: a real camera's distortion is never assumed
+        zero); otherwise a missing ``dist`` means an ideal, undistorted camera."""
+        from .config import did_you_mean
+
+        if not isinstance(d, dict):
+            raise ConfigError(f"{where}: expected a mapping of camera intrinsics, got {type(d).__name__}")
+        known = ("width", "height", "fx", "fy", "cx", "cy", "dist")
+        for k in d:
+            if k not in known:
+                raise ConfigError(f"{where}.{k}: unknown key{did_you_mean(k, known)}; allowed: {', '.join(known)}")
+        need = known if require_dist else known[:-1]
+        missing = [k for k in need if d.get(k) is None]
         if missing:
-            raise ConfigError(f"{where}: missing key(s) {missing} (need width, height, fx, fy, cx, cy [px])")
-        try:
-            return cls(
-                int(d["width"]), int(d["height"]), float(d["fx"]), float(d["fy"]), float(d["cx"]), float(d["cy"]),
-                tuple(float(v) for v in d.get("dist", (0, 0, 0, 0, 0))),
-            )
-        except (TypeError, ValueError) as exc:
-            raise ConfigError(f"{where}: invalid camera intrinsics ({exc})") from None
+            hint = ("; give dist: [0, 0, 0, 0, 0] for an undistorted camera" if "dist" in missing else "")
+            raise ConfigError(f"{where}: missing key(s) {', '.join(missing)} (need width, height, fx, fy, cx, cy [px], "
+                              f"dist [k1, k2, p1, p2, k3]){hint}")
+        vals = {}
+        for k in known[:-1]:
+            v = d[k]
+            if isinstance(v, bool) or not isinstance(v, (int, float)):
+                raise ConfigError(f"{where}.{k}: expected a number [px], got {v!r}")
+            if not np.isfinite(v):
+                raise ConfigError(f"{where}.{k}: expected a finite number [px], got {v!r}")
+            if k in ("width", "height") and (not float(v).is_integer() or v < 1):
+                raise ConfigError(f"{where}.{k}: expected a positive integer [px], got {v!r}")
+            if k in ("fx", "fy") and not v > 0:
+                raise ConfigError(f"{where}.{k}: expected a focal length > 0 [px], got {v!r}")
+            vals[k] = v
+        dist = d.get("dist", (0, 0, 0, 0, 0))
+        if (not isinstance(dist, (list, tuple)) or len(dist) != 5
+                or any(isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) for v in dist)):
+            raise ConfigError(f"{where}.dist: expected 5 finite numbers [k1, k2, p1, p2, k3] (OpenCV order), got {dist!r}")
+        return cls(int(vals["width"]), int(vals["height"]), float(vals["fx"]), float(vals["fy"]), float(vals["cx"]),
+                   float(vals["cy"]), tuple(float(v) for v in dist))

@@ -15,6 +15,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse  # noqa: E402
 import sys  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 from .errors import VisionCalibError  # noqa: E402
 
@@ -47,6 +48,23 @@ def _sigma(text: str) -> float:
     if not (v >= 0 and v < float("inf")):
         raise argparse.ArgumentTypeError(f"expected a finite number >= 0, got {text}")
     return v
+
+
+def _scheduler(text: str) -> str:
+    """argparse type: a Dask scheduler address ``tcp://host:port`` (or tls://) or an existing scheduler file."""
+    import re
+
+    if re.fullmatch(r"(tcp|tls)://[A-Za-z0-9.\-_]+:\d{1,5}|(tcp|tls)://\[[0-9A-Fa-f:.]+\]:\d{1,5}", text):
+        if 0 < int(text.rsplit(":", 1)[1]) < 65536:
+            return text
+        raise argparse.ArgumentTypeError(f"port out of range in {text!r}")
+    if text.startswith(("http://", "https://")):
+        raise argparse.ArgumentTypeError(f"{text!r} looks like the Dask dashboard (http); give the scheduler "
+                                         "address tcp://host:port (default port 8786)")
+    if "://" not in text and Path(text).is_file():
+        return text
+    raise argparse.ArgumentTypeError(f"expected tcp://host:port or an existing scheduler file (JSON written by "
+                                     f"dask-scheduler --scheduler-file), got {text!r}")
 
 
 def _add_common(p, poses=True):
@@ -100,13 +118,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True)
     p.add_argument("--method", choices=["lse", "ekf", "igm"], default=None)
     _add_run_options(p)
+    p.add_argument("--allow-symlinks", action="store_true",
+                   help="follow symbolic links that lead out of the recorded folder (refused by default)")
     p.add_argument("--json", action="store_true")
 
     p = sub.add_parser("study", help="parameter sweep x Monte Carlo (local processes or a Dask cluster)")
     p.add_argument("spec", help="study YAML (see scenes/studies/)")
     p.add_argument("--out", required=True)
     p.add_argument("--workers", type=_count, default=None)
-    p.add_argument("--scheduler", default=None, help="Dask scheduler address (tcp://host:port)")
+    p.add_argument("--scheduler", type=_scheduler, default=None,
+                   help="Dask scheduler address (tcp://host:port) or scheduler file")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.add_argument("--json", action="store_true")
 
@@ -159,7 +180,8 @@ def _dispatch(args) -> int:
         from .experiment.process import process_folder
 
         report = process_folder(args.folder, out_dir=args.out, method=args.method, progress=not args.json,
-                                plots=not args.no_plots, fix_unidentifiable=args.fix_unidentifiable)
+                                plots=not args.no_plots, fix_unidentifiable=args.fix_unidentifiable,
+                                allow_symlinks=args.allow_symlinks)
         print(to_json(report) if args.json else report["summary_text"])
         return _status(report["verdict"])
     if args.command == "study":
@@ -220,10 +242,36 @@ def _summary_synthetic(out: dict) -> str:
     )
 
 
+def _locks(args) -> list:
+    """Exclusive lock on the command's --out, see io/lock.py. (--export-recording is not locked here:
+    simulate refuses a non-empty folder, and a lock file inside would make it non-empty.)"""
+    from .io.lock import OutputLock
+
+    locks = []
+    out = getattr(args, "out", None)
+    if out is not None:
+        if args.command == "target":  # a file: lock beside it
+            locks.append(OutputLock(Path(out).parent, "output file", lock_path=Path(str(out) + ".lock")))
+        else:
+            locks.append(OutputLock(out))
+    return locks
+
+
+def _run_locked(args) -> int:
+    held = []
+    try:
+        for lock in _locks(args):
+            held.append(lock.acquire())
+        return _dispatch(args)
+    finally:
+        for lock in reversed(held):
+            lock.release()
+
+
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     try:
-        return _dispatch(args)
+        return _run_locked(args)
     except VisionCalibError as exc:
         print(f"vision-calib: error: {exc}", file=sys.stderr)
         return exc.exit_code
@@ -232,6 +280,9 @@ def main(argv=None) -> int:
     except OSError as exc:  # output folder not writable, a file where a folder should be, ...
         where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
         print(f"vision-calib: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 2
+    except MemoryError:
+        print("vision-calib: error: out of memory (reduce the image size, dpi, poses or workers)", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("vision-calib: interrupted (results already written are kept)", file=sys.stderr)

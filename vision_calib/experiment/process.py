@@ -62,10 +62,11 @@ def _recording_setup(rec):
     return scene, setup.with_camera(rec.camera)
 
 
-def process_folder(folder, out_dir, method=None, progress=False, plots=True, fix_unidentifiable=False) -> dict:
+def process_folder(folder, out_dir, method=None, progress=False, plots=True, fix_unidentifiable=False,
+                   allow_symlinks=False) -> dict:
     """Process a recorded folder; writes DIR/measurements.json, DIR/report.json (+ plots, model)."""
     t0 = time.perf_counter()
-    rec = read_recording(folder)
+    rec = read_recording(folder, allow_symlinks=allow_symlinks)
     out = Path(out_dir)
     scene, setup = _recording_setup(rec) if rec.pose_kind != "flange_pose" else (None, None)
     method = None if scene is None else check_method(setup, method or scene.identification.method, "--method")

@@ -35,8 +35,8 @@ import numpy as np
 import yaml
 
 from ..camera import CameraIntrinsics
-from ..config import ANGLE_UNITS, LENGTH_UNITS, Section, load_yaml
-from ..errors import ConfigError, DataError
+from ..config import Section, load_yaml
+from ..errors import DataError
 from .atomic import write_text_atomic
 
 FORMAT = "vision_calib.recording/1"
@@ -102,22 +102,160 @@ def write_recording(folder, scene, poses, joints, frames: int) -> Path:
     return folder
 
 
-def read_recording(folder) -> Recording:
+#: recording.yaml's key tree (config.check_keys): unknown keys are errors, with the closest suggested
+_SCHEMA = {
+    "format": None, "source": None, "description": None, "notes": None,
+    "units": {"length", "angle"},
+    "camera": None,  # CameraIntrinsics.from_dict checks its keys
+    "camera_mount": None, "target": None,  # target_from_dict checks its keys
+    "scene": None, "scene_name": None, "poses": None, "frames_per_pose": None, "averaging": None,
+}
+FLANGE_COLUMNS = ("x", "y", "z", "qx", "qy", "qz", "qw")
+#: |joint value| [rad or m] and |flange position| [m] beyond which a pose is refused as implausible
+MAX_ABS_JOINT = 100.0
+MAX_ABS_POSITION_M = 100.0
+
+
+def check_inside(path: Path, root: Path, allow_symlinks: bool) -> Path:
+    """``path`` itself when it resolves inside ``root`` (or allow_symlinks); DataError otherwise: a
+    symlink inside a recording must not make the tools read (or copy) files from elsewhere."""
+    if allow_symlinks:
+        return path
+    real, base = Path(path).resolve(), Path(root).resolve()
+    if real != base and base not in real.parents:
+        raise DataError(f"{path}: a symbolic link leading out of the folder {root} (to {real}); refused "
+                        "(copy the file into the folder, or allow symlinks explicitly: --allow-symlinks)")
+    return path
+
+
+def read_text_utf8(path: Path) -> str:
+    """A text file as str (a UTF-8 BOM is dropped); DataError naming the file and the line of a non-UTF-8 byte."""
+    data = Path(path).read_bytes()
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = data[:exc.start].count(b"\n") + 1
+        col = exc.start - data.rfind(b"\n", 0, exc.start)
+        raise DataError(f"{path}: line {line}: not UTF-8 text (byte 0x{data[exc.start]:02x} at column {col}); "
+                        "save the file as UTF-8") from None
+
+
+def _csv_columns(cpath: Path, header: list[str], pose_kind: str) -> tuple[int, list[int]]:
+    """(index of pose_id, indices of the value columns in q1..qn / x..qw order), matched by name."""
+    from ..config import did_you_mean
+
+    dup = sorted({h for h in header if header.count(h) > 1})
+    if dup:
+        raise DataError(f"{cpath}: header: duplicate column(s) {', '.join(dup)}")
+    if pose_kind == "flange_pose":
+        expected = list(FLANGE_COLUMNS)
+    else:
+        qs = [int(h[1:]) for h in header if h[:1] == "q" and h[1:].isdigit()]
+        expected = [f"q{j}" for j in range(1, max(qs, default=0) + 1)]
+        if not qs:
+            raise DataError(f"{cpath}: header: no joint columns q1..qn (poses: joints), got {','.join(header)}")
+    known = ["pose_id", *expected]
+    for h in header:
+        if h not in known:
+            raise DataError(f"{cpath}: header: unknown column {h!r}{did_you_mean(h, known)}; expected pose_id and "
+                            f"{', '.join(expected)} (poses: {pose_kind})")
+    missing = [h for h in known if h not in header]
+    if missing:
+        raise DataError(f"{cpath}: header: missing column(s) {', '.join(missing)} (poses: {pose_kind})")
+    return header.index("pose_id"), [header.index(h) for h in expected]
+
+
+def _read_poses_csv(cpath: Path, pose_kind: str, Lf: float, Af: float) -> tuple[list[str], np.ndarray]:
+    """(pose ids, (N, n) joints [rad] or (N, 4, 4) T_base_flange [m]) from poses.csv."""
+    text = read_text_utf8(cpath)
+    rows = [(ln, r) for ln, r in enumerate(csv.reader(io.StringIO(text, newline="")), start=1)
+            if r and any(c.strip() for c in r)]
+    if len(rows) < 2:
+        raise DataError(f"{cpath}: no pose rows")
+    header = [h.strip() for h in rows[0][1]]
+    i_id, cols = _csv_columns(cpath, header, pose_kind)
+    ids, vals = [], []
+    for ln, r in rows[1:]:
+        if len(r) != len(header):
+            raise DataError(f"{cpath}: line {ln}: {len(r)} values, expected {len(header)} ({','.join(header)})")
+        pid = r[i_id].strip()
+        if not pid or pid in (".", "..") or "/" in pid or "\\" in pid:
+            raise DataError(f"{cpath}: line {ln}: invalid pose_id {pid!r}")
+        try:
+            v = [float(r[c]) for c in cols]
+        except ValueError:
+            raise DataError(f"{cpath}: line {ln} (pose {pid!r}): non-numeric value in {[r[c] for c in cols]}") from None
+        if not np.all(np.isfinite(v)):
+            raise DataError(f"{cpath}: line {ln} (pose {pid!r}): NaN or infinite value")
+        lim, f = (MAX_ABS_JOINT, Af) if pose_kind == "joints" else (MAX_ABS_POSITION_M, Lf)
+        vv = np.abs(v if pose_kind == "joints" else v[:3]) * f
+        if np.any(vv > lim):
+            raise DataError(f"{cpath}: line {ln} (pose {pid!r}): implausible value {max(vv):.4g} "
+                            f"({'joint, SI' if pose_kind == 'joints' else 'position, m'}; limit {lim:g})")
+        ids.append(pid)
+        vals.append(v)
+    dup = sorted({i for i in ids if ids.count(i) > 1})
+    if dup:
+        raise DataError(f"{cpath}: duplicate pose ids {dup}")
+    vals = np.array(vals)
+    if pose_kind == "joints":
+        return ids, vals * Af
+    from ..frames import T_from_xyz_quat
+
+    q = vals[:, 3:]
+    nq = np.linalg.norm(q, axis=1)
+    bad = np.flatnonzero(np.abs(nq - 1) > 1e-3)
+    if bad.size:
+        raise DataError(f"{cpath}: pose {ids[bad[0]]!r}: quaternion norm {nq[bad[0]]:.4f} is not 1")
+    return ids, T_from_xyz_quat(vals[:, :3] * Lf, q / nq[:, None])
+
+
+def _find_images(folder: Path, ids, frames: int, allow_symlinks: bool) -> tuple[dict, list[str]]:
+    """({pose_id: sorted image paths}, extra files) under folder/images; symlinks checked."""
+    images, extra = {}, []
+    idir = folder / "images"
+    if not idir.is_dir():
+        return images, extra
+    check_inside(idir, folder, allow_symlinks)
+    known = set(ids)
+    for d in sorted(idir.iterdir()):
+        if d.is_dir() and d.name in known:
+            check_inside(d, folder, allow_symlinks)
+            files = sorted(p for p in d.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_EXT)
+            for f in files:
+                check_inside(f, folder, allow_symlinks)
+            extra += [str(p.relative_to(folder)) for p in d.iterdir() if p.is_file() and p.suffix.lower() not in IMAGE_EXT]
+            if len(files) > frames:
+                raise DataError(f"{d}: {len(files)} images but recording.yaml frames_per_pose is {frames} "
+                                "(fix frames_per_pose: it sets how the frames are averaged)")
+            if files:
+                images[d.name] = files
+        else:
+            extra.append(str(d.relative_to(folder)))
+    return images, extra
+
+
+def read_recording(folder, allow_symlinks: bool = False) -> Recording:
     """Read and validate a recorded folder. Missing/corrupt images are NOT errors here (the
     measurement stage rejects those poses with a reason); a missing recording.yaml or poses.csv,
-    a malformed CSV, NaN values or duplicate pose ids are (DataError/ConfigError naming the file)."""
+    an unknown key (closest key suggested), a missing ``camera.dist``, a malformed or non-UTF-8 CSV,
+    unknown/missing/duplicate CSV columns, NaN or implausible values, duplicate pose ids, more images
+    per pose than ``frames_per_pose`` are (DataError/ConfigError naming the file, key, line or pose).
+    allow_symlinks: follow symbolic links that lead out of the folder (refused by default)."""
+    from ..config import check_keys
     from ..targets import target_from_dict
 
     folder = Path(folder)
     if not folder.is_dir():
         raise DataError(f"{folder}: recorded folder not found")
-    ypath = folder / "recording.yaml"
+    ypath = check_inside(folder / "recording.yaml", folder, allow_symlinks)
     top = Section(load_yaml(ypath), ypath)
+    check_keys(top, _SCHEMA)
     fmt = top.get("format", str, FORMAT)
     if fmt != FORMAT:
         raise top.error("format", f"expected {FORMAT!r}, got {fmt!r}")
     Lf, Af = top.units(default_length="m", default_angle="rad")
-    camera = CameraIntrinsics.from_dict(top.section("camera").data, where=top.where("camera"))
+    camera = CameraIntrinsics.from_dict(top.section("camera").data, where=top.where("camera"), require_dist=True)
     mount = top.get("camera_mount", str, choices=("eye_in_hand", "fixed", "base"))
     tsec = top.section("target")
     target = target_from_dict(tsec.data, where=tsec.where())
@@ -136,62 +274,14 @@ def read_recording(folder) -> Recording:
             p = alt
         scene_path = p
     pose_kind = top.get("poses", str, "joints", choices=("joints", "flange_pose"))
-    frames = top.positive("frames_per_pose", int, 10)
+    frames = top.number("frames_per_pose", int, 10, min=1)
     averaging = top.get("averaging", str, "corners", choices=("corners", "poses"))
 
     cpath = folder / "poses.csv"
     if not cpath.is_file():
         raise DataError(f"{cpath}: file not found (one row per robot pose: pose_id then joint values)")
-    with open(cpath, newline="", encoding="utf-8-sig") as fh:  # -sig: spreadsheets write a BOM
-        rows = [r for r in csv.reader(fh) if r and any(c.strip() for c in r)]
-    if len(rows) < 2:
-        raise DataError(f"{cpath}: no pose rows")
-    header = [h.strip() for h in rows[0]]
-    if header[0] != "pose_id":
-        raise DataError(f"{cpath}: first column must be 'pose_id', got {header[0]!r}")
-    if pose_kind == "flange_pose" and header[1:] != ["x", "y", "z", "qx", "qy", "qz", "qw"]:
-        raise DataError(f"{cpath}: flange poses need columns pose_id,x,y,z,qx,qy,qz,qw, got {','.join(header)}")
-    ids, vals = [], []
-    for ln, r in enumerate(rows[1:], start=2):
-        if len(r) != len(header):
-            raise DataError(f"{cpath}: line {ln}: {len(r)} values, expected {len(header)} ({','.join(header)})")
-        try:
-            v = [float(c) for c in r[1:]]
-        except ValueError:
-            raise DataError(f"{cpath}: line {ln} (pose {r[0].strip()!r}): non-numeric value in {r[1:]}") from None
-        if not np.all(np.isfinite(v)):
-            raise DataError(f"{cpath}: line {ln} (pose {r[0].strip()!r}): NaN or infinite value")
-        ids.append(r[0].strip())
-        vals.append(v)
-    dup = sorted({i for i in ids if ids.count(i) > 1})
-    if dup:
-        raise DataError(f"{cpath}: duplicate pose ids {dup}")
-    vals = np.array(vals)
-    if pose_kind == "joints":
-        poses = vals * Af
-    else:
-        from ..frames import T_from_xyz_quat
-
-        q = vals[:, 3:]
-        nq = np.linalg.norm(q, axis=1)
-        bad = np.flatnonzero(np.abs(nq - 1) > 1e-3)
-        if bad.size:
-            raise DataError(f"{cpath}: pose {ids[bad[0]]!r}: quaternion norm {nq[bad[0]]:.4f} is not 1")
-        poses = T_from_xyz_quat(vals[:, :3] * Lf, q / nq[:, None])
-
-    images = {}
-    extra = []
-    idir = folder / "images"
-    if idir.is_dir():
-        known = set(ids)
-        for d in sorted(idir.iterdir()):
-            if d.is_dir() and d.name in known:
-                files = sorted(p for p in d.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_EXT)
-                extra += [str(p.relative_to(folder)) for p in d.iterdir() if p.is_file() and p.suffix.lower() not in IMAGE_EXT]
-                if files:
-                    images[d.name] = files
-            else:
-                extra.append(str(d.relative_to(folder)))
-    assert Lf in LENGTH_UNITS.values() and Af in ANGLE_UNITS.values()
+    check_inside(cpath, folder, allow_symlinks)
+    ids, poses = _read_poses_csv(cpath, pose_kind, Lf, Af)
+    images, extra = _find_images(folder, ids, frames, allow_symlinks)
     return Recording(folder, camera, mount, target, scene_path, pose_kind, tuple(ids), poses, images, frames,
                      tuple(extra), averaging, tuple(notes))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -39,8 +40,10 @@ def read_visp_camera_xml(path, camera_name: str | None = None) -> CameraIntrinsi
         except ValueError:
             raise ConfigError(f"{path}: {where}: <{key}> is not a number ({txt!r})") from None
 
-    w = int(num(cam, "image_width", "camera"))
-    h = int(num(cam, "image_height", "camera"))
+    w, h = num(cam, "image_width", "camera"), num(cam, "image_height", "camera")
+    if not (w >= 1 and h >= 1 and float(w).is_integer() and float(h).is_integer()):
+        raise ConfigError(f"{path}: camera: <image_width>/<image_height> must be positive integers, got {w} x {h}")
+    w, h = int(w), int(h)
     models = cam.findall("model")
     if not models:
         raise ConfigError(f"{path}: camera: missing <model>")
@@ -51,8 +54,14 @@ def read_visp_camera_xml(path, camera_name: str | None = None) -> CameraIntrinsi
         for key in ("kud", "kdu"):
             if model.findtext(key) is not None and num(model, key, "model") != 0.0:
                 raise ConfigError(f"{path}: model {mtype}: non-zero <{key}> (ViSP radial model) is not supported")
-    return CameraIntrinsics(w, h, num(model, "px", "model"), num(model, "py", "model"),
-                            num(model, "u0", "model"), num(model, "v0", "model"))
+    try:
+        return CameraIntrinsics(w, h, num(model, "px", "model"), num(model, "py", "model"),
+                                num(model, "u0", "model"), num(model, "v0", "model"))
+    except ConfigError as exc:  # non-positive or non-finite px/py/size: name the file
+        raise ConfigError(f"{path}: {exc}") from None
+
+
+_POSE_KEYS = ("rows", "cols", "data")
 
 
 def read_visp_pose_yaml(path) -> np.ndarray:
@@ -61,9 +70,19 @@ def read_visp_pose_yaml(path) -> np.ndarray:
 
     path = Path(path)
     try:
-        d = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as exc:
+        d = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except (OSError, yaml.YAMLError, UnicodeDecodeError) as exc:
         raise DataError(f"{path}: cannot read ViSP pose YAML ({' '.join(str(exc).split())})") from None
+    if not isinstance(d, dict):
+        raise DataError(f"{path}: expected a mapping with rows, cols, data, got {type(d).__name__}")
+    from ..config import did_you_mean
+
+    for key in d:
+        if key not in _POSE_KEYS:
+            raise DataError(f"{path}: {key}: unknown key{did_you_mean(key, _POSE_KEYS)}; allowed: {', '.join(_POSE_KEYS)}")
+    if d.get("rows", 6) != 6 or d.get("cols", 1) != 1:
+        raise DataError(f"{path}: expected rows: 6, cols: 1 (6 numbers: t [m], theta-u [rad]), got rows: {d.get('rows')}, "
+                        f"cols: {d.get('cols')}")
     try:
         v = np.asarray(d["data"], dtype=float).reshape(-1)
     except (TypeError, KeyError, ValueError) as exc:
@@ -88,23 +107,37 @@ def _detect_tag_id(image_path, dictionary: str) -> int:
     return int(ids[0][0])
 
 
+def _copy_no_looser(src_file: Path, dst_file: Path) -> None:
+    """Copy a file's bytes; the copy is never more readable/writable than the source (mode & source mode)."""
+    import shutil
+
+    mode = src_file.stat().st_mode & 0o777
+    shutil.copyfile(src_file, dst_file)
+    os.chmod(dst_file, (dst_file.stat().st_mode & 0o777) & mode)
+
+
 def import_visp_eye_to_hand(src, dst, tag_m: float | None = None, tag_id: int | None = None,
-                            dictionary: str = "DICT_APRILTAG_36h11"):
+                            dictionary: str = "DICT_APRILTAG_36h11", allow_symlinks: bool = False):
     """Convert a ViSP hand-eye folder (``*_camera.xml``, ``*_pose_rPe_N.yaml`` flange poses in the
     base as t + theta-u, ``*_image-N.png``) into a recorded folder (DESIGN.md §5) with flange poses:
     fixed camera, one AprilTag on the flange. tag_m: tag side [m] (default: read from
-    ``apriltag-data.txt`` 'size: 0.048 m'). Returns the destination Path."""
+    ``apriltag-data.txt`` 'size: 0.048 m'). Files that are symbolic links leading out of ``src`` are
+    refused unless allow_symlinks; copied images keep no looser permissions than their source.
+    Returns the destination Path."""
     import csv
     import io
     import re
-    import shutil
+
+    from .recording import check_inside
 
     import yaml
 
     from .atomic import write_text_atomic
 
     src, dst = Path(src), Path(dst)
-    cams = sorted(src.glob("*camera*.xml"))
+    if not src.is_dir():
+        raise DataError(f"{src}: ViSP folder not found")
+    cams = [check_inside(p, src, allow_symlinks) for p in sorted(src.glob("*camera*.xml"))]
     if not cams:
         raise DataError(f"{src}: no ViSP camera XML (*camera*.xml)")
     intr = read_visp_camera_xml(cams[0])
@@ -112,21 +145,25 @@ def import_visp_eye_to_hand(src, dst, tag_m: float | None = None, tag_id: int | 
     for p in src.glob("*pose_rPe_*.yaml"):
         m = re.search(r"_(\d+)\.yaml$", p.name)
         if m:
-            poses[int(m.group(1))] = read_visp_pose_yaml(p)
+            poses[int(m.group(1))] = read_visp_pose_yaml(check_inside(p, src, allow_symlinks))
     if not poses:
         raise DataError(f"{src}: no ViSP flange poses (*_pose_rPe_N.yaml)")
     images = {}
     for p in src.glob("*image-*.png"):
         m = re.search(r"-(\d+)\.png$", p.name)
         if m:
-            images[int(m.group(1))] = p
+            images[int(m.group(1))] = check_inside(p, src, allow_symlinks)
     if tag_m is None:
         info = src / "apriltag-data.txt"
-        m = re.search(r"size:\s*([0-9.eE+-]+)\s*m", info.read_text()) if info.is_file() else None
+        text = check_inside(info, src, allow_symlinks).read_text(errors="replace") if info.is_file() else ""
+        m = re.search(r"size:\s*([0-9.eE+-]+)\s*m", text)
         if not m:
             raise DataError(f"{src}: tag size unknown: give tag_m (no 'size: <x> m' in apriltag-data.txt)")
-        tag_m = float(m.group(1))
-    if not tag_m > 0:
+        try:
+            tag_m = float(m.group(1))
+        except ValueError:
+            raise DataError(f"{info}: tag size {m.group(1)!r} is not a number; give tag_m") from None
+    if not (tag_m > 0 and np.isfinite(tag_m)):
         raise DataError(f"tag size must be > 0 m, got {tag_m}")
     if tag_id is None:
         tag_id = _detect_tag_id(images[min(images)], dictionary) if images else 0
@@ -154,5 +191,5 @@ def import_visp_eye_to_hand(src, dst, tag_m: float | None = None, tag_id: int | 
     for k, p in images.items():
         d = dst / "images" / str(k)
         d.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(p, d / "00.png")
+        _copy_no_looser(p, d / "00.png")
     return dst

@@ -636,6 +636,18 @@ def _get(d, key, path, where, kind=float):
         raise ConfigError(f"{path}: key '{where}{key}' must be {'a number' if kind is float else f'a list of {kind[0]} numbers'}, got {d[key]!r}") from None
 
 
+_FRAME_KEYS = {"x", "y", "z", "theta_deg", "tilt_rpy_deg"}
+#: key tree of an H4 robot file (config.check_keys): unknown keys are errors, closest key suggested
+_H4_SCHEMA = {
+    "kind": None, "model": None, "name": None, "description": None, "source": None, "notes": None,
+    "geometry": {"R", "L", "l", "h", "d", "alpha_deg", "q0_deg"},
+    "external": {"B_T_C": _FRAME_KEYS, "M_T_E": _FRAME_KEYS},
+    "workspace": {"center", "size", "theta_deg"},
+    "scale": {"length_m", "angle_deg"},
+    "fixed": None,
+}
+
+
 def load_h4_robot(path, model: str | None = None) -> H4Robot:
     """Load an H4 scene file (see scenes/robots/h4.yaml; lengths m, angles in *_deg keys).
     model: "12" or "31" (default: the file's ``model``); model 31 is built from the model-12
@@ -650,8 +662,13 @@ def load_h4_robot(path, model: str | None = None) -> H4Robot:
         raise ConfigError(f"{path}: cannot read H4 robot file ({e})") from None
     except yaml.YAMLError as e:
         raise ConfigError(f"{path}: invalid YAML ({e})") from None
+    except UnicodeDecodeError:
+        raise ConfigError(f"{path}: not a UTF-8 text file") from None
     if not isinstance(doc, dict) or doc.get("kind") != "h4":
         raise ConfigError(f"{path}: expected a mapping with 'kind: h4'")
+    from ..config import Section, check_keys
+
+    check_keys(Section(doc, path), _H4_SCHEMA)
     g = doc.get("geometry")
     if not isinstance(g, dict):
         raise ConfigError(f"{path}: missing mapping 'geometry'")
@@ -666,7 +683,7 @@ def load_h4_robot(path, model: str | None = None) -> H4Robot:
     for k in ("h4.R", "h4.L", "h4.l", "h4.h"):
         if geo[k] <= 0:
             raise ConfigError(f"{path}: geometry.{k[3:]} must be > 0 (m), got {geo[k]}")
-    ext = doc.get("external", {})
+    ext = doc.get("external") or {}
     vals = dict(geo)
     tilts = {}
     for fr in ("B_T_C", "M_T_E"):
@@ -680,16 +697,16 @@ def load_h4_robot(path, model: str | None = None) -> H4Robot:
             np.array([np.pi, 0, 0])  # fmt: skip
         tilts[fr] = rot_z(rpy[2]) @ rot_y(rpy[1]) @ rot_x(rpy[0])
     names = MODEL12_NAMES + EXTERNAL_NAMES
-    sc = doc.get("scale", {}) or {}
-    scale_len = float(sc.get("length_m", 1e-3))
-    scale_ang = np.deg2rad(float(sc.get("angle_deg", np.rad2deg(1e-3))))
+    sc = Section(doc.get("scale") or {}, path, "scale")
+    scale_len = sc.number("length_m", float, 1e-3, min=0, min_open=True, unit="m")
+    scale_ang = np.deg2rad(sc.number("angle_deg", float, float(np.rad2deg(1e-3)), min=0, min_open=True, unit="deg"))
     kinds = [_kind(n) for n in names]
     ps = ParameterSet.from_lists(names, [vals[n] for n in names], kinds,
                                  scale=[scale_len if k == "length" else scale_ang for k in kinds])  # fmt: skip
     ws = doc.get("workspace", {}) or {}
     center = _get(ws, "center", path, "workspace.", (3,)) if "center" in ws else DEFAULT_CENTER
     size = _get(ws, "size", path, "workspace.", (3,)) if "size" in ws else DEFAULT_SIZE
-    th = tuple(float(t) for t in ws.get("theta_deg", DEFAULT_THETA_DEG))
+    th = tuple(Section(ws, path, "workspace").floats("theta_deg", None, np.asarray(DEFAULT_THETA_DEG, float)))
     robot = H4Robot("12", ps, d12=d12, R_BC0=tilts["B_T_C"], R_ME0=tilts["M_T_E"], center=center, size=size,
                     theta_deg=th).variant("D")  # fmt: skip
     model = str(doc.get("model", "12")) if model is None else str(model)

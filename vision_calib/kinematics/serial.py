@@ -435,9 +435,7 @@ _TRIAL_KEYS = ("description", "configurations", "units", "deviation", "reported"
 
 
 def _check_keys(sec, allowed):
-    for k in sec.keys():
-        if k not in allowed:
-            raise sec.error(str(k), f"unknown key (expected one of {', '.join(allowed)})")
+    sec.check_known(allowed)  # ConfigError naming file and key, closest allowed key suggested
 
 
 def _array(sec, key, ndim, last, what, default=None):

@@ -25,6 +25,7 @@ pixel (all features are axis-aligned rectangles), so edges are not quantised to 
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, fields
 from pathlib import Path
 
@@ -34,6 +35,7 @@ import numpy as np
 from ..errors import ConfigError
 
 KINDS = ("charuco", "apriltag_grid")
+MAX_TARGET_M = 10.0  # a larger board is a unit mistake (mm given as m), refused on load
 _BORDER_BITS = 1  # OpenCV markers: one black border bit around the data bits
 
 
@@ -70,6 +72,8 @@ class TargetSpec:
 
     def __post_init__(self):
         where = f"target {self.name!r}"
+        if not isinstance(self.name, str):
+            raise ConfigError(f"{where}: key 'name' must be a string, got {self.name!r}")
         if self.kind not in KINDS:
             raise ConfigError(f"{where}: key 'kind' must be one of {KINDS}, got {self.kind!r}")
         for key in ("rows", "cols", "first_id"):
@@ -109,6 +113,10 @@ class TargetSpec:
                 if getattr(self, key) <= 0:
                     raise ConfigError(f"{where}: key {key!r} must be > 0 [m], got {getattr(self, key)}")
             n_markers = self.rows * self.cols
+        size = max(self.outline_m())
+        if size > MAX_TARGET_M:
+            raise ConfigError(f"{where}: the board would be {size:.4g} m wide, more than {MAX_TARGET_M:g} m "
+                              "(lengths are in metres: square_m, marker_m, tag_m, spacing_m, margin_m)")
         dict_size = self.cv_dictionary().bytesList.shape[0]
         if self.first_id + n_markers > dict_size:
             raise ConfigError(
@@ -250,6 +258,8 @@ class TargetSpec:
         """
         if not (px_per_m > 0 and math.isfinite(px_per_m)):
             raise ConfigError(f"target {self.name!r}: texture px_per_m must be > 0, got {px_per_m}")
+        H, W = self.texture_shape(px_per_m)
+        check_memory(H * W * 9, f"target {self.name!r}: a {W} x {H} px texture ({px_per_m:.0f} px/m)")
         return np.round(255.0 * self._coverage(px_per_m)).astype(np.uint8)
 
     def _coverage(self, px_per_m: float) -> np.ndarray:
@@ -269,6 +279,29 @@ class TargetSpec:
     def to_dict(self) -> dict:
         """Plain dict (the YAML schema of :func:`load_target`)."""
         return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+def available_memory() -> int | None:
+    """Bytes of memory available now (Linux MemAvailable), None where unknown."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def check_memory(nbytes: int, what: str, fraction: float = 0.5) -> None:
+    """ConfigError before an allocation of ``nbytes`` larger than ``fraction`` of the available memory."""
+    avail = available_memory()
+    if avail is not None and nbytes > fraction * avail:
+        raise ConfigError(f"{what} needs about {nbytes / 2**30:.3g} GiB of memory, more than {fraction:.0%} of the "
+                          f"{avail / 2**30:.3g} GiB available; use a lower resolution (dpi)")
 
 
 def _overlap_1d(a: float, b: float, n: int) -> tuple[np.ndarray, int]:
@@ -292,9 +325,12 @@ def target_from_dict(d: dict, where: str = "target") -> TargetSpec:
     """
     if not isinstance(d, dict):
         raise ConfigError(f"{where}: expected a mapping of target keys, got {type(d).__name__}")
-    unknown = sorted(set(d) - _YAML_KEYS - _EXTRA_KEYS)
-    if unknown:
-        raise ConfigError(f"{where}: unknown key(s) {unknown}; allowed: {sorted(_YAML_KEYS | _EXTRA_KEYS)}")
+    from ..config import did_you_mean
+
+    allowed = sorted(_YAML_KEYS | _EXTRA_KEYS)
+    for key in d:
+        if key not in allowed:
+            raise ConfigError(f"{where}: {key}: unknown key{did_you_mean(key, allowed)}; allowed: {', '.join(allowed)}")
     if "units" in d and d["units"] not in ("m", "metre", "meter", "metres", "meters"):
         raise ConfigError(f"{where}: key 'units' must be 'm' (lengths are in metres), got {d['units']!r}")
     missing = [k for k in ("kind", "rows", "cols", "dictionary") if k not in d]
@@ -310,18 +346,9 @@ def target_from_dict(d: dict, where: str = "target") -> TargetSpec:
 
 def load_target(path) -> TargetSpec:
     """Load a target YAML file (keys of :class:`TargetSpec`, lengths in m). ConfigError names file and key."""
-    import yaml
+    from ..config import load_yaml
 
     path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise ConfigError(f"{path}: cannot read target file ({exc.strerror})") from None
-    try:
-        d = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: invalid YAML ({exc})") from None
-    if isinstance(d, dict):
-        d = dict(d)
-        d.setdefault("name", path.stem)
+    d = dict(load_yaml(path))  # ConfigError on a missing, non-UTF-8, invalid or non-mapping file
+    d.setdefault("name", path.stem)
     return target_from_dict(d, where=str(path))
