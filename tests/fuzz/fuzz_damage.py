@@ -190,8 +190,6 @@ def _perturb_joint(rec):
 TALLY: dict[str, str] = {}
 
 ERR, OK = "error", "correct"
-PLAUSIBILITY = "missing check: plausibility of measured vs commanded motion (process)"
-OUTLIERS = "missing check: per-pose outlier rejection of the identification residuals (process)"
 
 CASES = [
     # --- recording.yaml: keys
@@ -226,10 +224,10 @@ CASES = [
     ("yaml-units-cubit", _set("units.length", "cubit"), ERR, r"units.length: expected one of"),
     ("yaml-scene-missing", _set("scene", "/nonexistent/scene.yaml"), OK, None),  # falls back to scenes/<scene_name>
     ("yaml-scene-and-name-missing", lambda r: (_set("scene", "nope.yaml")(r), _set("scene_name", "nope")(r)), ERR, r"scene: file not found"),
-    ("yaml-target-square-x2", lambda r: (_scale("target.square_m", 2)(r), _scale("target.marker_m", 2)(r)), "xfail", PLAUSIBILITY),
+    ("yaml-target-square-x2", lambda r: (_scale("target.square_m", 2)(r), _scale("target.marker_m", 2)(r)), ERR, r"measured motions are .* x the commanded ones.*square_m"),
     ("yaml-target-rows-cols-swapped", lambda r: (_set("target.rows", 7)(r), _set("target.cols", 5)(r)), ERR, r"too few|usable|valid"),
     ("yaml-target-dictionary", _set("target.dictionary", "DICT_6X6_250"), ERR, r"too few|usable|valid"),
-    ("yaml-angle-deg", _set("units.angle", "deg"), "xfail", PLAUSIBILITY),
+    ("yaml-angle-deg", _set("units.angle", "deg"), ERR, r"do not follow the commanded joints.*wrong angle unit"),
     ("yaml-mount-fixed", _set("camera_mount", "fixed"), ERR, r"recording.yaml: camera_mount: 'fixed' but the scene"),
     ("yaml-empty", _raw_yaml(b""), ERR, r"recording.yaml: expected a mapping"),
     ("yaml-list", _raw_yaml(b"- 1\n- 2\n"), ERR, r"recording.yaml: expected a mapping"),
@@ -239,7 +237,7 @@ CASES = [
     # --- poses.csv
     ("csv-columns-reordered", _csv_permute([0, 3, 1, 2, 6, 5, 4]), OK, None),
     ("csv-pose_id-last", _csv_permute([1, 2, 3, 4, 5, 6, 0]), OK, None),
-    ("csv-header-lies", _csv_header("pose_id,q2,q1,q3,q4,q5,q6"), "xfail", PLAUSIBILITY),
+    ("csv-header-lies", _csv_header("pose_id,q2,q1,q3,q4,q5,q6"), ERR, r"do not follow the commanded joints|outside the robot's limits|outlier poses"),
     ("csv-unknown-column", _csv_edit(lambda rows: [r + (["temp"] if i == 0 else ["21.5"]) for i, r in enumerate(rows)]), ERR, r"poses.csv: header: unknown column 'temp'"),
     ("csv-typo-column", _csv_header("pose_id,q1,q2,q3,q4,q5,g6"), ERR, r"unknown column 'g6'"),
     ("csv-duplicate-column", _csv_header("pose_id,q1,q2,q3,q3,q5,q6"), ERR, r"duplicate column\(s\) q3"),
@@ -262,7 +260,7 @@ CASES = [
     ("csv-removed", _remove("poses.csv"), ERR, r"poses.csv: file not found"),
     ("csv-row-dropped", _csv_edit(lambda rows: rows[:5] + rows[6:]), OK, None),
     ("csv-rows-shuffled", _csv_edit(lambda rows: rows[:1] + rows[1:][::-1]), OK, None),
-    ("csv-joint-off-10deg", _perturb_joint, "xfail", OUTLIERS),
+    ("csv-joint-off-10deg", _perturb_joint, OK, "the pose is rejected: its motion does not follow its joints"),
     # --- images
     ("img-pose-missing", _remove("images/004"), OK, None),
     ("img-corrupt", _each_image("005", _corrupt), OK, None),
@@ -278,5 +276,5 @@ CASES = [
     ("img-symlink-pose-out", _symlink_out("images/002"), ERR, r"images/002: a symbolic link leading out"),
     ("img-symlink-images-out", _symlink_out("images"), ERR, r"images: a symbolic link leading out"),
     ("yaml-symlink-out", _symlink_out("recording.yaml"), ERR, r"recording.yaml: a symbolic link leading out"),
-    ("img-swapped-between-poses", _swap_poses("001", "008"), "xfail", OUTLIERS),
+    ("img-swapped-between-poses", _swap_poses("001", "008"), OK, "both poses are rejected: motion inconsistent"),
 ]

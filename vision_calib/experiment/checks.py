@@ -105,6 +105,22 @@ def check_motion(setup: Setup, meas: Measurements, where: str, scale_hint: str) 
     return out
 
 
+def drop_inconsistent(meas: Measurements, motion: dict, where: str, max_fraction: float = 0.3):
+    """(measurements without the poses :func:`motion_consistency` found inconsistent, [(label, reason)]).
+    DataError when more than ``max_fraction`` of the poses are (then the data or the model is wrong)."""
+    bad = {p["pose_id"]: p["angle_mismatch_deg"] for p in motion.get("inconsistent_poses", [])}
+    if not bad:
+        return meas, []
+    if len(bad) > max_fraction * len(meas.labels):
+        raise DataError(f"{where}: {len(bad)} of {len(meas.labels)} poses move inconsistently with their joints "
+                        f"(first: {next(iter(bad))}): the joint readings or the robot model are wrong")
+    keep = [k for k, lab in enumerate(meas.labels) if lab not in bad]
+    lim = motion["angle_mismatch_limit_deg"]
+    return meas.subset(keep), [(lab, f"its measured motion relative to the other poses does not follow its joints "
+                                     f"(median rotation mismatch {a:.3g} deg > {lim:.3g} deg): images of another "
+                                     "pose, or a wrong joint reading") for lab, a in bad.items()]
+
+
 def structural_rank_check(setup: Setup, rep, residual: str, where: str, accept: bool = False,
                           n_generic: int = 200) -> list[str]:
     """IdentifiabilityError naming the parameters the user's pose set loses compared with generic poses

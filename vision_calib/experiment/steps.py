@@ -115,8 +115,10 @@ class Identified:
 
 
 def identify_measurements(setup: Setup, meas: Measurements, method, residual, analysis=None, context: str = "",
-                          robust: bool = True, where: str = "", fix_unidentifiable: bool = False) -> Identified:
-    """Identification of the setup's identifiable free parameters from measured data (``analysis``: the
+                          robust: bool = True, where: str = "", fix_unidentifiable: bool = False,
+                          rejected=()) -> Identified:
+    """Identification of the setup's identifiable free parameters from measured data ``meas`` (``rejected``:
+    [(label, reason)] of poses the caller removed before; ``analysis``: the
     IdentifiabilityReport of these poses when the caller has it; a pose set that loses parameters generic
     poses identify is refused unless ``fix_unidentifiable``). With ``robust``,
     poses failing a chi-square test after a robust fit are rejected (``identify.fit_rejecting_outliers``,
@@ -139,12 +141,13 @@ def identify_measurements(setup: Setup, meas: Measurements, method, residual, an
     structural_rank_check(setup, rep, residual, where, accept=fix_unidentifiable)
     base = setup.params.mask(rep.base_parameters)
     problem, params = base_problem(setup, meas, residual, base, context)
-    rejected = []
+    rejected = list(rejected)  # poses the caller already rejected (e.g. motion consistency): kept in the record
     if robust and problem.n_obs * problem.m > params.n_free + problem.m:
-        fit, rejected = fit_rejecting_outliers(problem, level=OUTLIER_LEVEL)
-        if rejected:
-            keep = [k for k, lab in enumerate(problem.labels) if lab not in {r[0] for r in rejected}]
+        fit, out = fit_rejecting_outliers(problem, level=OUTLIER_LEVEL)
+        if out:
+            keep = [k for k, lab in enumerate(problem.labels) if lab not in {r[0] for r in out}]
             problem = problem.subset(keep)
+            rejected += out
         result = fit if method != "ekf" else solve(problem, method)
     else:
         result = solve(problem, method)

@@ -26,7 +26,6 @@ runs measure their noise.
 
 from __future__ import annotations
 
-import difflib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -44,18 +43,6 @@ TOP_KEYS = ("name", "robot", "mount", "units", "camera", "target", "effects", "r
             "validation", "measurement", "identification")
 #: scene effect names -> SensorEffects field names (short forms accepted in scenes and studies)
 EFFECT_ALIASES = {"noise_grey": "read_noise_grey", "blur_px": "blur_sigma_px"}
-
-
-def only(sec: Section, known) -> Section:
-    """ConfigError naming the file and key for a key of ``sec`` not in ``known`` (closest known key
-    suggested); returns ``sec``."""
-    known = list(known)
-    for k in sec.keys():
-        if k not in known:
-            close = difflib.get_close_matches(str(k), known, n=1)
-            hint = f"; did you mean {close[0]!r}?" if close else ""
-            raise sec.error(str(k), f"unknown key (known: {', '.join(known)}){hint}")
-    return sec
 
 
 @dataclass(frozen=True)
@@ -135,13 +122,10 @@ class SceneContext:
 
     def xyz_rpy(self, sec: Section, key: str) -> np.ndarray:
         """(4, 4) transform of ``sec[key] = {xyz: [..], rpy: [..]}`` in the scene's units."""
-        s = only(sec.section(key), ("xyz", "rpy"))
+        s = sec.section(key).check_known(("xyz", "rpy"))
         xyz = s.floats("xyz", 3, np.zeros(3))
         rpy = s.floats("rpy", 3, np.zeros(3))
         return F.T_from_xyz_rpy(xyz * self.Lf, rpy * self.Af)
-
-    def only(self, sec: Section, known) -> Section:
-        return only(sec, known)
 
 
 @dataclass(frozen=True)
@@ -176,12 +160,12 @@ def _camera(sec: Section | None) -> CameraIntrinsics | None:
     if sec is None:
         return None
     if "focal_mm" in sec:
-        only(sec, ("width", "height", "focal_mm", "pixel_um", "dist"))
+        sec.check_known(("width", "height", "focal_mm", "pixel_um", "dist"))
         cam = CameraIntrinsics.from_focal_mm(sec.get("width", int), sec.get("height", int), sec.positive("focal_mm"),
                                              sec.positive("pixel_um"))
         d = sec.floats("dist", 5, np.zeros(5))
         return CameraIntrinsics(cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy, tuple(float(v) for v in d))
-    only(sec, ("width", "height", "fx", "fy", "cx", "cy", "dist"))
+    sec.check_known(("width", "height", "fx", "fy", "cx", "cy", "dist"))
     return CameraIntrinsics.from_dict(sec.data, where=sec.where())
 
 
@@ -193,13 +177,13 @@ def _effects(sec: Section):
 
 
 def _pose_settings(sec: Section, kinds, extra_keys=()) -> PoseSettings:
-    only(sec, ("kind", "count", "configurations") + tuple(extra_keys))
+    sec.check_known(("kind", "count", "configurations") + tuple(extra_keys))
     return PoseSettings(kind=sec.get("kind", str, "random", choices=kinds), count=sec.positive("count", int, None),
                         configurations=sec.get("configurations", str, None))
 
 
 def _measurement(sec: Section) -> MeasurementSettings:
-    only(sec, ("frames", "averaging", "sigma_mm", "sigma_deg", "sigma_q_deg"))
+    sec.check_known(("frames", "averaging", "sigma_mm", "sigma_deg", "sigma_q_deg"))
     return MeasurementSettings(
         frames=sec.positive("frames", int, 10),
         averaging=sec.get("averaging", str, "corners", choices=("corners", "poses")),
@@ -210,7 +194,7 @@ def _measurement(sec: Section) -> MeasurementSettings:
 
 
 def _truth(sec: Section, setup: Setup, Lf: float, Af: float) -> TruthSettings:
-    only(sec, ("seed", "sigma_length_mm", "sigma_angle_deg", "deviations", "trial"))
+    sec.check_known(("seed", "sigma_length_mm", "sigma_angle_deg", "deviations", "trial"))
     devs = {}
     dsec = sec.section("deviations", default={})
     for k in dsec.keys():
@@ -236,7 +220,7 @@ def load_scene(path) -> Scene:
     top = Section(load_yaml(path), path)
     robot_path = top.path_value("robot")
     kind = kind_of_robot_file(robot_path, where=top.where("robot"))
-    only(top, TOP_KEYS + tuple(getattr(kind, "scene_keys", ())))
+    top.check_known(TOP_KEYS + tuple(getattr(kind, "scene_keys", ())))
     name = top.get("name", str, path.stem)
     Lf, Af = top.units(default_length="m", default_angle="deg")
     mount = top.get("mount", str, choices=kind.mounts)
@@ -248,10 +232,10 @@ def load_scene(path) -> Scene:
 
         target = load_target(target_path)
     measurement = _measurement(top.section("measurement", default={}))
-    rs = only(top.section("render", default={}), ("supersample",))
+    rs = top.section("render", default={}).check_known(("supersample",))
     ctx = SceneContext(top, name, mount, robot_path, camera, target, Lf, Af, measurement.sigma_q_rad)
     setup = kind.from_scene(ctx)
-    ident = only(top.section("identification", default={}), ("method", "residual", "fix", "free"))
+    ident = top.section("identification", default={}).check_known(("method", "residual", "fix", "free"))
     method = ident.get("method", str, kind.methods[0], choices=kind.methods)
     residual = ident.get("residual", str, kind.residuals[0], choices=kind.residuals)
     pose_kinds = ("random", "configurations") + tuple(kind.pose_grids)

@@ -205,7 +205,7 @@ class SerialSetup(Setup):
     def _mounted(chain, ctx):
         """The chain with the scene's ``mounts`` (or the robot file's, checked against the camera mount)."""
         ms = ctx.top.section("mounts", default={})
-        ctx.only(ms, MOUNT_KEYS[ctx.mount])
+        ms.check_known(MOUNT_KEYS[ctx.mount])
         lk, rk = MOUNT_KEYS[ctx.mount]
         if lk in ms or rk in ms:
             T_base_left = ctx.xyz_rpy(ms, lk)

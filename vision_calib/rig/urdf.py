@@ -14,7 +14,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
 
-from .scene import only
 from .serial import MOUNTS, SerialSetup
 
 
@@ -31,7 +30,7 @@ class URDFSetup(SerialSetup):
     def load_chain(cls, ctx):
         from ..kinematics.urdf import load_urdf_robot
 
-        sec = only(ctx.top.section("urdf"), ("base_link", "tip_link"))
+        sec = ctx.top.section("urdf").check_known(("base_link", "tip_link"))
         left, right = MOUNTS[ctx.mount]
         return load_urdf_robot(ctx.robot_path, sec.get("base_link", str), sec.get("tip_link", str), left, right)
 
@@ -43,7 +42,7 @@ class URDFSetup(SerialSetup):
     def load_model(cls, doc, robot_path: Path):
         from ..kinematics.urdf import load_urdf_robot
 
-        links = only(doc.section("urdf"), ("base_link", "tip_link"))
+        links = doc.section("urdf").check_known(("base_link", "tip_link"))
         return cls._model_mounts(load_urdf_robot(robot_path, links.get("base_link", str), links.get("tip_link", str)),
                                  doc)
 
