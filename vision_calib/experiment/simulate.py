@@ -21,7 +21,8 @@ from ..io.report import REPORT_VERSION, build_report, measurements_block, parame
 from ..rig import Measurements, Scene, SCENES_DIR, load_scene, scene_poses
 from .image_chain import ImageChain, measure_poses
 from .checks import check_motion, drop_inconsistent
-from .steps import check_method, identify_measurements, rejection_summary, rngs, run_analysis_and_truth
+from .steps import (check_method, identify_measurements, rejection_summary, rngs, run_analysis_and_truth,
+                    shared_truth, unmodelled_truth)
 from .synthetic import run_synthetic
 
 DEFAULT_SCENE = SCENES_DIR / "h4_vision.yaml"
@@ -92,8 +93,12 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
     poses = scene_poses(scene, rp, n_poses)
     validation = scene_poses(scene, rv, which="validation")
     rep, x_true = run_analysis_and_truth(scene, poses, residual)  # the run's one identifiability analysis
-    T_true = setup.T_cam_target(poses, x_true)
-    q_true = setup.joints(poses, x_true)
+    truth, x_truth = unmodelled_truth(scene)  # a true robot the model does not share, if the scene asks
+    if truth is not None:
+        x_true = x_truth
+    tsetup = truth or setup
+    T_true = tsetup.T_cam_target(poses, x_true)
+    q_true = tsetup.joints(poses, x_true)
     labels = [f"{i:03d}" for i in range(len(poses))]
     timings["setup"] = time.perf_counter() - t
 
@@ -128,13 +133,13 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
     meas_acc, err = _measurement_accuracy(T_true[ok], meas)
     st = float(np.sqrt(np.mean(err[:, :3] ** 2)))  # measured pose noise, as pose sigmas
     sr = float(np.sqrt(np.mean(err[:, 3:] ** 2)))
-    meas_val = setup.synthetic_measurements(validation, x_true, rv, st, sr)
-    evals = {"before": setup.evaluate(setup.params.nominal, x_true, validation, meas_val),
-             "after": setup.evaluate(result.identified, x_true, validation, meas_val)}
+    meas_val = tsetup.synthetic_measurements(validation, x_true, rv, st, sr)
+    evals = {"before": setup.evaluate(setup.params.nominal, x_true, validation, meas_val, truth=truth),
+             "after": setup.evaluate(result.identified, x_true, validation, meas_val, truth=truth)}
     # reference: the same experiment with synthetic pose measurements of the same noise level
     ref = run_synthetic(scene, method=method, residual=residual, sigma_t_m=st, sigma_r_rad=sr, seed=seed,
                         poses=poses, validation=validation, base=setup.params.mask(rep.base_parameters),
-                        x_true=x_true)
+                        x_true=x_true, truth=truth)
     timings["evaluate"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t_start
 
@@ -146,7 +151,8 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
         settings={"poses": int(len(poses)), "frames": int(frames), "method": method, "residual": residual,
                   "averaging": scene.measurement.averaging, "camera": setup.camera.to_dict(),
                   "effects": scene.effects.to_dict(), "validation_poses": int(len(validation))},
-        measurements=mblock, identifiability=rep, parameters=parameters_table(ps.names, ps.nominal, x_true, result),
+        measurements=mblock, identifiability=rep, parameters=parameters_table(
+            ps.names, ps.nominal, x_true if truth is None else shared_truth(setup, truth, x_true), result),
         result=result, identified=ident, motion=motion, accuracy=evals, timings=timings,
         extra={"synthetic_reference": {"sigma_mm": st * 1e3, "sigma_deg": float(np.degrees(sr)),
                                        "accuracy_after": ref.after.to_dict()}})

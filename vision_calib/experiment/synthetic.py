@@ -13,7 +13,7 @@ import numpy as np
 
 from ..io.report import parameters_table
 from ..rig import Evaluation, Measurements, Scene, load_scene, scene_poses
-from .steps import analyze_setup, base_problem, check_method, rngs, scene_truth, solve
+from .steps import analyze_setup, base_problem, check_method, rngs, scene_truth, shared_truth, solve, unmodelled_truth
 
 
 def _scene(scene) -> Scene:
@@ -38,6 +38,7 @@ class SyntheticRun:
     method: str
     residual: str
     base: np.ndarray
+    truth: object = None  #: the truth setup when it is not the identified model (x_true is then its vector)
 
 
 def identifiability_json(scene, residual=None, n_poses=None, seed=None, all_params=False) -> dict:
@@ -76,6 +77,8 @@ def run_synthetic(scene, method=None, residual=None, n_poses=None, sigma_t_m=Non
     if base is None:
         rep, _ = analyze_setup(setup, poses, residual)
         base = setup.params.mask(rep.base_parameters)
+    if x_true is None and truth is None:
+        truth, x_true = unmodelled_truth(scene)
     if x_true is None:
         x_true = scene_truth(scene)
     truth_setup = truth or setup
@@ -87,7 +90,7 @@ def run_synthetic(scene, method=None, residual=None, n_poses=None, sigma_t_m=Non
     before = setup.evaluate(setup.params.nominal, x_true, validation, meas_val, truth=truth)
     after = setup.evaluate(result.identified, x_true, validation, meas_val, truth=truth)
     return SyntheticRun(scene, result, x_true, poses, validation, meas, problem, before, after, seconds, method,
-                        residual, base)
+                        residual, base, truth)
 
 
 def identify_synthetic_json(scene, method=None, residual=None, n_poses=None, sigma_mm=None, sigma_deg=None,
@@ -109,7 +112,8 @@ def identify_synthetic_json(scene, method=None, residual=None, n_poses=None, sig
         "n_poses": int(len(out.poses)),
         "sigma_mm": float(st * 1e3),
         "sigma_deg": float(np.degrees(sr)),
-        "parameters": parameters_table(ps.names, ps.nominal, out.x_true, res),
+        "parameters": parameters_table(ps.names, ps.nominal, out.x_true if out.truth is None else
+                                       shared_truth(scene.setup, out.truth, out.x_true), res),
         "accuracy": {"before": out.before.to_dict(), "after": out.after.to_dict()},
         "converged": bool(res.converged),
         "iterations": int(res.iterations),

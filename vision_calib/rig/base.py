@@ -120,6 +120,8 @@ class Setup:
     methods: ClassVar[tuple[str, ...]] = ("lse", "ekf")
     #: pose-set kinds of ``poses.kind`` besides ``random`` and ``configurations``
     pose_grids: ClassVar[tuple[str, ...]] = ()
+    #: scene ``truth`` keys describing errors the model does not share (see :meth:`truth_model`)
+    truth_keys: ClassVar[tuple[str, ...]] = ()
 
     # ------------------------------------------------------------------ to implement
     @property
@@ -156,6 +158,13 @@ class Setup:
         raise NotImplementedError
 
     # ------------------------------------------------------------------ optional, with defaults
+    def truth_model(self, spec: dict, rng: np.random.Generator, where: str = "truth") -> "Setup":
+        """The setup of a true robot with errors this model does not share (``spec``: the scene's
+        ``truth`` entries of :attr:`truth_keys`); its parameters are drawn by the caller. Default: none."""
+        if spec:
+            raise ConfigError(f"{where}: {', '.join(spec)}: this {self.kind} setup has no unmodelled truth options")
+        return self
+
     def predict_from_joints(self, joints, x) -> np.ndarray:
         """(N, 4, 4) T_cam_target the model with parameters x predicts from joint readings (N, n_joints)
         rad. Default: commanded poses are joint sets (serial kinds)."""

@@ -38,6 +38,7 @@ class H4Setup(Setup):
     mounts: ClassVar[tuple[str, ...]] = ("base",)
     pose_grids: ClassVar[tuple[str, ...]] = ("grid81",)
     scene_keys: ClassVar[tuple[str, ...]] = ("model", "variant")
+    truth_keys: ClassVar[tuple[str, ...]] = ("model", "tilt_deg")
 
     @property
     def n_joints(self) -> int:
@@ -143,6 +144,35 @@ class H4Setup(Setup):
         fix = [n for n in self.meta.get("fix", ()) if n in robot.names]
         params = robot.params.fix(fix) if fix else robot.params
         return replace(self, params=params, robot=replace(robot, params=params), variant=variant)
+
+    def truth_model(self, spec: dict, rng: np.random.Generator, where: str = "truth") -> "H4Setup":
+        """A true H4 the identified model does not share: ``model: "31"`` (per-chain geometry, free mask H:
+        the caller draws deviations on all of it; the paper's real robot needed model 31) and/or
+        ``tilt_deg``: std [deg] of random tilts of the camera and of the target mounts about the base x/y
+        axes, not represented by the 4-parameter external transforms (the paper estimates the camera axis
+        first, §4.1)."""
+        bad = set(spec) - set(self.truth_keys)
+        if bad:
+            raise ConfigError(f"{where}: unknown unmodelled-truth keys {sorted(bad)} (known: {self.truth_keys})")
+        setup = self
+        model = str(spec.get("model", self.model))
+        if model not in ("12", "31"):
+            raise ConfigError(f"{where}.model: expected '12' or '31', got {model!r}")
+        if model != self.model:
+            setup = self.with_variant(model=model)
+        try:
+            tilt = float(np.radians(float(spec.get("tilt_deg", 0.0))))
+        except (TypeError, ValueError):
+            raise ConfigError(f"{where}.tilt_deg: expected a number of degrees, got {spec['tilt_deg']!r}") from None
+        if not (np.isfinite(tilt) and 0 <= tilt < np.radians(10)):
+            raise ConfigError(f"{where}.tilt_deg: expected 0 <= tilt < 10 deg, got {spec['tilt_deg']!r}")
+        if tilt > 0:
+            from ..frames import so3_exp
+
+            r1, r2 = (np.append(rng.normal(size=2) * tilt, 0.0) for _ in range(2))
+            robot = replace(setup.robot, R_BC0=so3_exp(r1) @ setup.robot.R_BC0, R_ME0=so3_exp(r2) @ setup.robot.R_ME0)
+            setup = replace(setup, robot=robot)
+        return setup
 
     def model_dict(self) -> dict:
         return {"model": self.robot.model, "variant": self.variant, "shared_L": bool(self.robot.shared_L),

@@ -55,6 +55,9 @@ class TruthSettings:
     sigma_angle_rad: float = float(np.radians(0.05))
     deviations: dict = field(default_factory=dict)
     trial: str | None = None
+    #: errors of the true robot that the identified model does not have (kind-specific keys, ``Setup.truth_keys``,
+    #: e.g. H4 ``model: "31"`` and ``tilt_deg``): the truth is then another setup (``Setup.truth_model``)
+    unmodelled: dict = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -194,7 +197,10 @@ def _measurement(sec: Section) -> MeasurementSettings:
 
 
 def _truth(sec: Section, setup: Setup, Lf: float, Af: float) -> TruthSettings:
-    sec.check_known(("seed", "sigma_length_mm", "sigma_angle_deg", "deviations", "trial"))
+    sec.check_known(("seed", "sigma_length_mm", "sigma_angle_deg", "deviations", "trial") + tuple(setup.truth_keys))
+    unmodelled = {k: sec.data[k] for k in setup.truth_keys if sec.data.get(k) is not None}
+    if unmodelled:
+        setup.truth_model(unmodelled, np.random.default_rng(0), where=sec.where())  # validate now
     devs = {}
     dsec = sec.section("deviations", default={})
     for k in dsec.keys():
@@ -209,7 +215,7 @@ def _truth(sec: Section, setup: Setup, Lf: float, Af: float) -> TruthSettings:
     return TruthSettings(seed=sec.nonnegative("seed", int, 0),
                          sigma_length_m=sec.nonnegative("sigma_length_mm", float, 0.5) * 1e-3,
                          sigma_angle_rad=float(np.radians(sec.nonnegative("sigma_angle_deg", float, 0.05))),
-                         deviations=devs, trial=trial)
+                         deviations=devs, trial=trial, unmodelled=unmodelled)
 
 
 def load_scene(path) -> Scene:
