@@ -32,11 +32,22 @@ def distortion_source_map(intr: CameraIntrinsics) -> np.ndarray:
 
 
 @lru_cache(maxsize=8)
-def remap_tables(intr: CameraIntrinsics) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`distortion_source_map` as OpenCV fixed-point remap tables (CV_16SC2 + CV_16UC1, 1/32 px
-    interpolation steps: what ``cv2.remap`` would build from float maps on every call). Cached."""
-    src = distortion_source_map(intr).astype(np.float32)
-    return cv2.convertMaps(src[..., 0], src[..., 1], cv2.CV_16SC2)
+def bilinear_tables(intr: CameraIntrinsics) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Exact bilinear resampling tables of :func:`distortion_source_map` (border replicated), cached:
+    (flat index of the top-left source pixel (H, W) int64, column weight (H, W) float32, row weight
+    (H, W) float32). Not ``cv2.remap``: its fixed-point tables round source positions to 1/32 px, a
+    deterministic, spatially correlated corner shift that measurably biased the simulated poses
+    (H4 demo validation RMS 0.016 -> 0.045 mm); see :func:`vision_calib.sensor.cpu.remap_exact`."""
+    src = distortion_source_map(intr)
+    h, w = intr.height, intr.width
+    u = np.clip(src[..., 0], 0.0, w - 1.0)
+    v = np.clip(src[..., 1], 0.0, h - 1.0)
+    j0 = np.minimum(np.floor(u).astype(np.int64), w - 2)
+    i0 = np.minimum(np.floor(v).astype(np.int64), h - 2)
+    out = (i0 * w + j0, (u - j0).astype(np.float32), (v - i0).astype(np.float32))
+    for a in out:
+        a.setflags(write=False)
+    return out
 
 
 @lru_cache(maxsize=8)
