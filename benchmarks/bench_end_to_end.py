@@ -6,7 +6,11 @@
 
     .venv/bin/python benchmarks/bench_end_to_end.py [--workers 2] [--runs 100]
 
-Target: the 81-pose run (810 rendered frames) in under 60 s on 2 cores.
+Target: the 81-pose run (810 rendered frames) in under 60 s on 2 cores. Per stage, the chain's CPU time
+per pose is printed beside a floor measured in the same run, one process, one thread (issue 11): render
+vs ``cv2.warpPerspective`` of the board texture at 2x + area average; effects (10 frames) vs
+``cv2.remap`` + ``cv2.GaussianBlur`` + 10 ``cv2.randn``; measure (per frame) vs raw ``detectBoard`` +
+``solvePnP``. Worker times run two workers on the 2 cores, so ratios > 1 partly reflect sharing.
 """
 
 from __future__ import annotations
@@ -31,6 +35,60 @@ def _peak_mb():
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
+def floors(n_poses: int = 6) -> dict:
+    """Floor times per pose [s] of the three stages on the default scene (see the module docstring)."""
+    import cv2
+
+    from vision_calib.render.warp import supersampled_K
+    from vision_calib.targets import load_target
+
+    cv2.setNumThreads(1)
+    scene = load_scene(DEFAULT_SCENE)
+    K = scene.setup.camera
+    spec = load_target(scene.target_path)
+    rp, _, _ = rngs(0)
+    poses = scene_poses(scene, rp, n_poses)
+    from vision_calib.experiment.synthetic import scene_truth
+
+    Ts = scene.setup.T_cam_target(poses, scene_truth(scene))
+    ppm = 4096 / max(spec.outline_m())
+    tex = spec.texture(ppm).astype(np.float32)
+    x0, y0, x1, y1 = spec.texture_extent_m()
+    Ht, Wt = tex.shape
+    A = np.array([[(x1 - x0) / Wt, 0, x0 + 0.5 * (x1 - x0) / Wt], [0, (y1 - y0) / Ht, y0 + 0.5 * (y1 - y0) / Ht], [0, 0, 1]])
+    Ks = supersampled_K(K, 2)
+    out = {"render": 0.0, "effects": 0.0, "measure": 0.0}
+    imgs = []
+    for T in Ts:
+        t0 = time.perf_counter()
+        H = Ks @ np.column_stack([T[:3, 0], T[:3, 1], T[:3, 3]]) @ A
+        hi = cv2.warpPerspective(tex, H, (2 * K.width, 2 * K.height), flags=cv2.INTER_LINEAR,
+                                 borderMode=cv2.BORDER_CONSTANT, borderValue=128)
+        imgs.append(cv2.resize(hi, K.size, interpolation=cv2.INTER_AREA))
+        out["render"] += time.perf_counter() - t0
+    src = cv2.undistortPointsIter(np.stack(np.meshgrid(np.arange(K.width, dtype=float), np.arange(K.height, dtype=float)),
+                                           -1).reshape(-1, 1, 2), K.K, K.dist_array, None, K.K,
+                                  (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-12)).reshape(K.height, K.width, 2)
+    mx, my = src[..., 0].astype(np.float32), src[..., 1].astype(np.float32)
+    det = cv2.aruco.CharucoDetector(spec.cv_board())
+    _, P = spec.corner_points()
+    z = np.empty((K.height, K.width), np.float32)
+    for img in imgs:
+        t0 = time.perf_counter()
+        x = cv2.GaussianBlur(cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE), (7, 7), 0.6)
+        frames = []
+        for _ in range(10):
+            cv2.randn(z, 0, 2.0)
+            frames.append(cv2.add(x, z, dtype=cv2.CV_8U))
+        out["effects"] += time.perf_counter() - t0
+        t0 = time.perf_counter()
+        cc, ci, _, _ = det.detectBoard(frames[0])
+        if ci is not None and len(ci) >= 4:
+            cv2.solvePnP(P[ci.ravel()], cc, K.K, K.dist_array)
+        out["measure"] += time.perf_counter() - t0
+    return {k: v / len(Ts) for k, v in out.items()}
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser()
     ap.add_argument("--workers", type=int, default=None)
@@ -48,6 +106,12 @@ def main(argv=None):
     print(f"  wall time {wall:.1f} s ({n_frames / wall:.1f} frames/s overall; target < 60 s)")
     print(f"  render+measure wall {t['render_measure_wall']:.1f} s; CPU time summed over workers: "
           f"render {t['render_cpu']:.1f} s, effects {t['effects_cpu']:.1f} s, measure {t['measure_cpu']:.1f} s")
+    fl = floors()
+    n_p = rep["settings"]["poses"]
+    for stage, per in (("render", 1), ("effects", 1), ("measure", rep["settings"]["frames"])):
+        got = t[f"{stage}_cpu"] / n_p / per
+        unit = "per pose" if per == 1 else "per frame"
+        print(f"  {stage:8s} {got * 1e3:7.1f} ms {unit}; floor {fl[stage] * 1e3:7.1f} ms; ratio {got / fl[stage]:.2f}")
     print(f"  identify {t['identify'] * 1e3:.0f} ms, evaluate + synthetic reference {t['evaluate'] * 1e3:.0f} ms")
     print(f"  peak RSS: main process {me:.0f} MiB, largest render/measure worker {t['worker_peak_rss_mib']:.0f} MiB")
     a, b = rep["accuracy"]["after"], rep["accuracy"]["before"]

@@ -27,9 +27,9 @@ def project(spec, K, T):
     return ids, uv.reshape(-1, 2)
 
 
-@pytest.fixture(scope="module")
-def small4():
-    with TargetRenderer(A5, K_SMALL, supersample=4, background=100) as r:
+@pytest.fixture(scope="module", params=["warp", "pyrender"])
+def small4(request):
+    with TargetRenderer(A5, K_SMALL, supersample=4, background=100, backend=request.param) as r:
         yield r
 
 
@@ -103,7 +103,7 @@ def test_occluder_hides_the_board():
         assert abs(moved[int(round(v)), int(round(u))] - 40) > 10
         with pytest.raises(DataError, match="occluder_poses"):
             r.render(T, occluder_poses=[])
-    with TargetRenderer(A5, K_SMALL, supersample=2) as plain:  # same image as without any occluder
+    with TargetRenderer(A5, K_SMALL, supersample=2, backend="pyrender") as plain:  # same image as without any occluder
         np.testing.assert_array_equal(moved, plain.render(T))
 
 
@@ -124,8 +124,13 @@ def test_bad_input(small4):
         small4.render_batch(np.eye(4))
     with pytest.raises(ConfigError, match="supersample"):
         TargetRenderer(A5, K_SMALL, supersample=0)
-    with pytest.raises(ConfigError, match="GL_MAX_TEXTURE_SIZE"):
-        TargetRenderer(A5, K_SMALL, texture_px_per_m=1e6)
+    for backend in ("pyrender", "warp"):
+        with pytest.raises(ConfigError, match="GL_MAX_TEXTURE_SIZE"):
+            TargetRenderer(A5, K_SMALL, texture_px_per_m=1e6, backend=backend)
+    with pytest.raises(ConfigError, match="backend"):
+        TargetRenderer(A5, K_SMALL, backend="vulkan")
+    with pytest.raises(ConfigError, match="occluders"):
+        TargetRenderer(A5, K_SMALL, backend="warp", occluders=[(trimesh.creation.box(), np.eye(4))])
 
 
 def _random_poses(spec, n, rng, d=(0.3, 0.55)):
@@ -224,14 +229,14 @@ def test_supersample_factors_agree():
 def test_closing_one_renderer_keeps_others_alive():
     """pyrender's delete() terminates the shared EGL display; TargetRenderer.close() must not."""
     T = look_at_target(A5, 0.5)
-    a = TargetRenderer(A5, K_SMALL, supersample=1)
-    b = TargetRenderer(A5, K_SMALL, supersample=1)
+    a = TargetRenderer(A5, K_SMALL, supersample=1, backend="pyrender")
+    b = TargetRenderer(A5, K_SMALL, supersample=1, backend="pyrender")
     img_a = a.render(T)
     a.close()
     a.close()  # idempotent
     np.testing.assert_array_equal(b.render(T), img_a)
     b.close()
-    with TargetRenderer(A5, K_SMALL, supersample=1) as c:  # a fresh one after all were closed
+    with TargetRenderer(A5, K_SMALL, supersample=1, backend="pyrender") as c:  # a fresh one after all were closed
         np.testing.assert_array_equal(c.render(T), img_a)
 
 
@@ -277,20 +282,22 @@ def border_edge_offsets(img, K, T, spec):
     return np.array(dv), np.array(du)
 
 
-def test_pattern_edges_unbiased_on_non_power_of_two_texture():
+@pytest.mark.parametrize("backend", ["pyrender", "warp"])
+def test_pattern_edges_unbiased_on_non_power_of_two_texture(backend):
     """Edges of the H4 pattern at 0.45 / 0.68 / 1.0 m (different mip levels), supersample 2: no mean offset
     and < 0.025 px everywhere (before the fix: mean dv +0.04 px, max 0.09 px at 0.68 m)."""
     H, W = H4_LIKE.texture_shape(4096 / max(H4_LIKE.outline_m()))
     assert H & (H - 1) != 0  # the case that was biased
-    with TargetRenderer(H4_LIKE, K_H4, supersample=2) as r:
+    with TargetRenderer(H4_LIKE, K_H4, supersample=2, backend=backend) as r:
         assert r.texture_shape == (H, W)
         for z in (0.45, 0.68, 1.0):
             T = make_T(t=[-0.105, -0.083, z])  # board near the image centre, corners at arbitrary sub-pixel phases
             dv, du = border_edge_offsets(r.render(T), K_H4, T, H4_LIKE)
             assert len(dv) >= 24 and len(du) >= 12
+            mean_tol, max_tol = (0.01, 0.025) if backend == "pyrender" else (0.02, 0.05)  # warp: measured 0.016 / 0.048
             for d in (dv, du):
-                assert abs(d.mean()) < 0.01, (z, dv.mean(), du.mean())
-                assert np.abs(d).max() < 0.025, (z, np.abs(dv).max(), np.abs(du).max())
+                assert abs(d.mean()) < mean_tol, (z, dv.mean(), du.mean())
+                assert np.abs(d).max() < max_tol, (z, np.abs(dv).max(), np.abs(du).max())
 
 
 @pytest.mark.slow

@@ -2,8 +2,12 @@
 pose, in worker processes.
 
 This module is an *edge*: its worker initialiser is the one place (with ``cli.py``) that sets the
-OpenGL platform and thread environment of a process. Workers hold one OpenGL context and one torch
-thread each. Per-pose seeds derive from the run seed, so results do not depend on the worker count.
+OpenGL platform and thread environment of a process. Workers hold one OpenGL context and one OpenCV
+(and, if the torch effects are used, torch) thread each. Per-pose seeds derive from the run seed, so
+results do not depend on the worker count. Neither the main process nor the workers import torch for the
+CPU effects. :class:`ImagePool` starts the workers once (``with ImagePool(chain) as pool:
+measure_poses(chain, ..., pool=pool)`` for many runs); workers die with their parent (Linux
+``PR_SET_PDEATHSIG``), also after ``kill -9`` of the main process.
 """
 
 from __future__ import annotations
@@ -33,15 +37,60 @@ class ImageChain:
     averaging: str = "corners"
 
 
-def _worker_init(target_path, intrinsics, supersample):
+def _die_with_parent(main_pid: int) -> None:
+    """Make this worker die with the main process ``main_pid``, also after ``kill -9`` of it.
+
+    A worker's parent is the fork server, not the main process, and the fork server outlives the main
+    process as long as any worker lives (each worker inherits the server's "alive" pipe end), so a plain
+    ``PR_SET_PDEATHSIG`` never fires. Hence: a daemon thread polls the main process every 0.25 s and
+    exits the worker when it is gone; ``PR_SET_PDEATHSIG`` (Linux) also kills it if the fork server dies."""
+    import ctypes
+    import signal
+    import sys
+    import threading
+
+    if sys.platform.startswith("linux"):
+        PR_SET_PDEATHSIG = 1
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)
+
+    def main_alive() -> bool:
+        try:
+            os.kill(main_pid, 0)
+        except ProcessLookupError:
+            return False
+        except PermissionError:
+            return True
+        try:  # a killed, not yet reaped main process is a zombie
+            with open(f"/proc/{main_pid}/stat") as f:
+                return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+        except OSError:
+            return True
+
+    def watch():
+        while main_alive():
+            time.sleep(0.25)
+        os._exit(1)
+
+    if not main_alive():
+        os._exit(1)
+    threading.Thread(target=watch, name="die-with-main", daemon=True).start()
+
+
+def _worker_init(target_path, intrinsics, supersample, main_pid=None):
+    if main_pid is not None:
+        _die_with_parent(main_pid)
     os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
     os.environ.setdefault("EGL_PLATFORM", "surfaceless")
     # one Mesa llvmpipe thread per worker: several threaded workers oversubscribe the cores
     # (measured: 20 frames/s with Mesa's threads vs 47 frames/s with one, 2 workers, 2 cores)
     os.environ.setdefault("LP_NUM_THREADS", "1")
-    import torch
+    import sys
 
-    torch.set_num_threads(1)
+    import cv2
+
+    cv2.setNumThreads(1)
+    if "torch" in sys.modules:  # only if something imported it already (torch effects import it lazily)
+        sys.modules["torch"].set_num_threads(1)
     from ..render import TargetRenderer
     from ..targets import load_target
 
@@ -60,7 +109,7 @@ def _worker_pose(job):
     t0 = time.perf_counter()
     ideal = _W["renderer"].render(T_cam_target)
     t1 = time.perf_counter()
-    frames = apply_effects(ideal, effects, n_frames, seed, _W["intr"])
+    frames = apply_effects(ideal, effects, n_frames, seed, _W["intr"])  # OpenCV on the CPU: no torch
     t2 = time.perf_counter()
     if image_dir is not None:
         import cv2
@@ -79,36 +128,74 @@ def _worker_pose(job):
     return i, pm, {"render": t1 - t0, "effects": t2 - t1, "write": t3 - t2, "measure": t4 - t3, "rss_mib": rss_mib}
 
 
+def _worker_pid(_=None) -> int:
+    """This worker's process id (tests: workers die with the main process)."""
+    return os.getpid()
+
+
+class ImagePool:
+    """Worker processes for the image chain of one camera/target/supersampling, started once and reused by
+    every :func:`measure_poses` call given ``pool=`` (a study running many simulations). Context manager.
+
+    chain: ImageChain (its target_path, camera and supersample fix the workers); workers: process count
+    (default: CPU count)."""
+
+    def __init__(self, chain: ImageChain, workers: int | None = None):
+        from concurrent.futures import ProcessPoolExecutor
+        import multiprocessing as mp
+
+        self.key = (str(chain.target_path), chain.camera, int(chain.supersample))
+        self.workers = max(1, int(workers or os.cpu_count() or 1))
+        # Rendering always runs in worker processes started by a fork server: the calling process may
+        # hold an OpenGL context or library threads (a renderer of its own, torch), and a plain fork of
+        # such a process can deadlock in the child. The server preloads our modules (no torch, no OpenGL).
+        ctx = mp.get_context("forkserver")
+        ctx.set_forkserver_preload(["vision_calib.experiment.image_chain", "vision_calib.render",
+                                    "vision_calib.sensor", "vision_calib.measure"])
+        self._ex = ProcessPoolExecutor(self.workers, mp_context=ctx, initializer=_worker_init,
+                                       initargs=self.key + (os.getpid(),))
+
+    def map(self, fn, jobs):
+        return self._ex.map(fn, jobs, chunksize=1)
+
+    def close(self) -> None:
+        ex, self._ex = getattr(self, "_ex", None), None
+        if ex is not None:
+            ex.shutdown()
+
+    def __enter__(self) -> "ImagePool":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
 def measure_poses(chain: ImageChain, T_cam_targets, labels, seed: int, frames: int, workers: int | None = None,
-                  image_dir=None, progress: bool = False):
+                  image_dir=None, progress: bool = False, pool: ImagePool | None = None):
     """Render + effects + measure every pose T_cam_targets (N, 4, 4) [m, OpenCV camera frame].
+    pool: an open :class:`ImagePool` for this chain's camera/target/supersampling (reused, not closed);
+    default: a pool of ``workers`` processes for this call only.
     Returns (list of PoseMeasurement in pose order, timings {stage: total seconds})."""
-    from concurrent.futures import ProcessPoolExecutor
-    import multiprocessing as mp
+    from ..errors import ConfigError
 
     cam = chain.camera
     jobs = [(i, labels[i], T_cam_targets[i], chain.effects, frames,
              int(np.random.default_rng([seed, 5, i]).integers(2**31 - 1)), chain.averaging, image_dir)
             for i in range(len(T_cam_targets))]
-    workers = max(1, min(workers or os.cpu_count() or 1, len(jobs)))
     results = [None] * len(jobs)
     stage = {"render": 0.0, "effects": 0.0, "write": 0.0, "measure": 0.0}
+    if pool is not None and pool.key != (str(chain.target_path), cam, int(chain.supersample)):
+        raise ConfigError("measure_poses: the ImagePool was started for another target/camera/supersample")
+    own = pool is None
+    if own:
+        pool = ImagePool(chain, max(1, min(workers or os.cpu_count() or 1, len(jobs))))
     bar = None
     if progress:
         from tqdm import tqdm
 
         bar = tqdm(total=len(jobs), desc="render+measure", unit="pose", leave=False)
-    init = (str(chain.target_path), cam, chain.supersample)
-    # Rendering always runs in worker processes started by a fork server: the calling process may
-    # hold an OpenGL context or library threads (a renderer of its own, torch), and a plain fork of
-    # such a process can deadlock in the child. The server preloads our modules, so workers start fast.
-    ctx = mp.get_context("forkserver")
-    ctx.set_forkserver_preload(["vision_calib.experiment.image_chain", "vision_calib.render", "vision_calib.sensor",
-                                "vision_calib.measure"])
-    ex = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_worker_init, initargs=init)
-    it = ex.map(_worker_pose, jobs, chunksize=1)
     try:
-        for i, pm, t in it:
+        for i, pm, t in pool.map(_worker_pose, jobs):
             results[i] = pm
             stage["worker_peak_rss_mib"] = max(stage.get("worker_peak_rss_mib", 0.0), t.pop("rss_mib"))
             for k, v in t.items():
@@ -116,7 +203,8 @@ def measure_poses(chain: ImageChain, T_cam_targets, labels, seed: int, frames: i
             if bar is not None:
                 bar.update(1)
     finally:
-        ex.shutdown()
+        if own:
+            pool.close()
         if bar is not None:
             bar.close()
     return results, stage

@@ -1,15 +1,11 @@
-"""render stage: pyrender + trimesh offscreen rendering of calibration targets.
+"""render stage: the ideal image of a calibration target (CPU homography warp of a mip-mapped texture
+for a lone planar board; pyrender + trimesh offscreen OpenGL otherwise and for checking).
 
-The only package that touches OpenGL; it sets ``PYOPENGL_PLATFORM=egl`` and
-``EGL_PLATFORM=surfaceless`` (setdefault) before pyrender is imported (Mesa llvmpipe on CPU, the GPU's
-EGL driver when there is one). Conventions: see :mod:`vision_calib.render.renderer`.
+pyrender/OpenGL are imported only when the pyrender backend is used; that import sets
+``PYOPENGL_PLATFORM=egl`` and ``EGL_PLATFORM=surfaceless`` (setdefault) first (Mesa llvmpipe on CPU, the
+GPU's EGL driver when there is one). Conventions: see :mod:`vision_calib.render.renderer`.
 """
 
-import os
-
-os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
-os.environ.setdefault("EGL_PLATFORM", "surfaceless")
-
-from .renderer import TargetRenderer, look_at_target  # noqa: E402
+from .renderer import TargetRenderer, look_at_target
 
 __all__ = ["TargetRenderer", "look_at_target"]

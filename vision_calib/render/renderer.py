@@ -1,4 +1,18 @@
-"""Offscreen rendering of a calibration target with pyrender (the only OpenGL code of the package).
+"""Rendering of a calibration target: the ideal grey image a pinhole camera sees.
+
+Two backends (``TargetRenderer(..., backend=...)``):
+- ``"warp"`` (opt-in; one planar target, no occluders): a CPU homography warp of a mip-mapped board
+  texture (:mod:`vision_calib.render.warp`), internally supersampled ``max(supersample, 4)`` x; a pose
+  with a board corner at or behind ``znear`` falls back to pyrender. NOT the default yet: bilinear sampling
+  of a box-filtered mip level leaves a texel-phase-dependent edge error, coherent along straight edges of
+  a fronto-parallel board: up to 0.05 px (mean up to 0.016 px) on the H4 board vs < 0.025 px for pyrender
+  (``tests/render/test_renderer.py::test_pattern_edges_unbiased_on_non_power_of_two_texture``), and
+  cornerSubPix corners 0.015 px RMS from the 8x reference at 3x (pyrender 0.014 px).
+- ``"pyrender"`` (default, "auto"): OpenGL through pyrender (occluders too; the reference).
+  Its internals are reached only through :mod:`vision_calib.render.gl_adapter`; pyrender is imported
+  on first use, so a warp-only process never loads OpenGL.
+
+The rest of this docstring describes the pyrender path.
 
 What :class:`TargetRenderer` renders is the *ideal* grey image of the target: pinhole projection with
 the camera matrix K (no distortion, no noise, no blur), flat unlit shading (texture value = pixel
@@ -42,28 +56,18 @@ from __future__ import annotations
 
 import os
 
-os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
-os.environ.setdefault("EGL_PLATFORM", "surfaceless")
+import cv2
+import numpy as np
 
-import cv2  # noqa: E402
-import numpy as np  # noqa: E402
-import pyrender  # noqa: E402
-import trimesh  # noqa: E402
-from OpenGL import GL  # noqa: E402
-
-from ..camera import CameraIntrinsics  # noqa: E402
-from ..errors import ConfigError, DataError  # noqa: E402
-from ..frames import cam_gl_from_cv, check_finite, inv_T  # noqa: E402
-from ..targets.spec import TargetSpec  # noqa: E402
-
-_GL_TEXTURE_MAX_ANISOTROPY = 0x84FE  # GL 4.6 / EXT_texture_filter_anisotropic
-_GL_MAX_TEXTURE_MAX_ANISOTROPY = 0x84FF
-
-_LIVE: set[int] = set()  # ids of open TargetRenderers (see TargetRenderer.close)
+from ..camera import CameraIntrinsics
+from ..errors import ConfigError, DataError
+from ..frames import cam_gl_from_cv, check_finite, inv_T
+from ..targets.spec import TargetSpec
+from .warp import MAX_WARP_TEXTURE_PX, MipWarp, planar_warp_ok
 
 #: Default cap on the texture's larger side [texels] when ``texture_px_per_m`` is not given.
 DEFAULT_MAX_TEXTURE_PX = 4096
-
+BACKENDS = ("auto", "warp", "pyrender")
 
 def _quad(extent, z_front: bool, uv_max=(1.0, 1.0)) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Two triangles covering extent (x0, y0, x1, y1) [m] at z = 0; vertices (4, 3), faces (2, 3),
@@ -103,130 +107,139 @@ def _pad_for_mipmaps(tex: np.ndarray) -> tuple[np.ndarray, tuple[float, float]]:
     return tex, (W / Wp, H / Hp)
 
 
+class _GLScene:
+    """The pyrender scene of one board (+ occluders) and its offscreen context (see gl_adapter)."""
+
+    def __init__(self, target, K: CameraIntrinsics, s: int, background, occluders, texture_px_per_m, back_grey,
+                 texture_lod_bias, anisotropy, znear, zfar):
+        os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+        os.environ.setdefault("EGL_PLATFORM", "surfaceless")
+        import pyrender
+
+        from .gl_adapter import GLOffscreen
+
+        self.gl = GLOffscreen(s * K.width, s * K.height)
+        max_tex = self.gl.max_texture_size()
+        shape = target.texture_shape(texture_px_per_m)
+        padded = _mip_padded_shape(shape)
+        if max(padded) > max_tex:
+            self.close()
+            raise ConfigError(
+                f"TargetRenderer: texture {shape[1]}x{shape[0]} px (padded to {padded[1]}x{padded[0]} for "
+                f"mipmapping) exceeds GL_MAX_TEXTURE_SIZE {max_tex}; lower texture_px_per_m "
+                f"({texture_px_per_m:.0f} px/m)")
+        tex, uv_max = _pad_for_mipmaps(target.texture(texture_px_per_m))
+        self.texture_padded_shape = tex.shape
+        self.scene = pyrender.Scene(bg_color=np.array([background, background, background, 255.0]) / 255.0,
+                                    ambient_light=np.ones(3))
+        extent = target.texture_extent_m()
+        v, f, uv = _quad(extent, z_front=True, uv_max=uv_max)
+        front_mat = pyrender.MetallicRoughnessMaterial(
+            baseColorFactor=np.ones(4), metallicFactor=0.0, roughnessFactor=1.0,
+            baseColorTexture=pyrender.Texture(source=tex, source_channels="R"))
+        front = pyrender.Primitive(positions=v, indices=f, texcoord_0=uv, material=front_mat,
+                                   mode=pyrender.GLTF.TRIANGLES)
+        vb, fb, _ = _quad(extent, z_front=False)
+        g = back_grey / 255.0
+        back_mat = pyrender.MetallicRoughnessMaterial(baseColorFactor=np.array([g, g, g, 1.0]), metallicFactor=0.0)
+        back = pyrender.Primitive(positions=vb, indices=fb, material=back_mat, mode=pyrender.GLTF.TRIANGLES)
+        self.scene.add(pyrender.Mesh([front, back]), pose=np.eye(4))
+        cam = pyrender.IntrinsicsCamera(fx=s * K.fx, fy=s * K.fy, cx=s * (K.cx + 0.5), cy=s * (K.cy + 0.5),
+                                        znear=znear, zfar=zfar)
+        self.cam_node = self.scene.add(cam, pose=np.eye(4))
+        self.occ_nodes = []
+        for i, occ in enumerate(occluders):
+            mesh, T_cam_mesh, grey = occ
+            mat = pyrender.MetallicRoughnessMaterial(baseColorFactor=np.array([grey, grey, grey, 1.0]),
+                                                     metallicFactor=0.0)
+            node = self.scene.add(pyrender.Mesh.from_trimesh(mesh, material=mat, smooth=False), pose=np.eye(4))
+            self.occ_nodes.append((node, T_cam_mesh))
+        self.flags = pyrender.RenderFlags.FLAT
+        self.gl.render_grey(self.scene, self.flags)  # warm-up: uploads the texture (lazily), then set its sampling
+        self.anisotropy = self.gl.configure_texture(front_mat.baseColorTexture, texture_lod_bias,
+                                                    16.0 if anisotropy is None else anisotropy)
+
+    def render(self, T_cam_target, occluder_poses) -> np.ndarray:
+        """Supersampled grey uint8 (s H, s W) at pose T_cam_target (checked by the caller)."""
+        T_target_cam = inv_T(T_cam_target)
+        self.scene.set_pose(self.cam_node, cam_gl_from_cv(T_target_cam))
+        for i, (node, T_cam_mesh) in enumerate(self.occ_nodes):
+            T = T_cam_mesh if occluder_poses is None else check_finite(f"occluder_poses[{i}]", occluder_poses[i])
+            self.scene.set_pose(node, T_target_cam @ T)
+        return self.gl.render_grey(self.scene, self.flags)
+
+    def close(self) -> None:
+        self.gl.close()
+
+
 class TargetRenderer:
     """Render a textured target plane as seen by a pinhole camera (OpenCV intrinsics, no distortion).
 
     target: TargetSpec. intrinsics: CameraIntrinsics (its ``dist`` is ignored: ideal image).
-    supersample: s >= 1, render at s x resolution then box-average. background: grey level [0, 255]
-    of empty pixels. occluders: optional list of ``(trimesh.Trimesh, T_cam_mesh (4, 4))`` or
-    ``(mesh, T_cam_mesh, grey)``, flat grey objects (default grey 40) fixed in the camera frame unless
-    ``occluder_poses`` is given to :meth:`render`. texture_px_per_m: texture resolution [texels/m]
-    (default: larger board side = 4096 texels; the texture is padded to power-of-two sides).
-    texture_lod_bias: mipmap LOD bias (default -1). anisotropy: max anisotropic filtering (default 16;
-    1 = off; ignored if the driver lacks it).
-    back_grey: grey level of the board's back face.
-    znear, zfar: clip distances [m]. One OpenGL context is kept; call :meth:`close` or use ``with``.
+    supersample: s >= 1, render at s x resolution then box-average (the warp backend uses max(s, 4)).
+    background: grey level [0, 255] of empty pixels. occluders: optional list of
+    ``(trimesh.Trimesh, T_cam_mesh (4, 4))`` or ``(mesh, T_cam_mesh, grey)``, flat grey objects (default
+    grey 40) fixed in the camera frame unless ``occluder_poses`` is given to :meth:`render` (pyrender only).
+    texture_px_per_m: texture resolution [texels/m] (default: larger board side = 4096 texels).
+    texture_lod_bias: mipmap LOD bias of the GL sampler (default -1). anisotropy: max anisotropic filtering
+    (default 16; 1 = off; ignored if the driver lacks it). back_grey: grey level of the board's back face.
+    znear, zfar: clip distances [m]. backend: "auto" (default: "pyrender"; see the module docstring for why
+    the warp path is not chosen automatically yet), "warp" or "pyrender". An OpenGL context is held only when pyrender is used;
+    call :meth:`close` or use ``with``.
     """
 
-    def __init__(
-        self,
-        target: TargetSpec,
-        intrinsics: CameraIntrinsics,
-        supersample: int = 2,
-        background: float = 128,
-        occluders=None,
-        texture_px_per_m: float | None = None,
-        back_grey: float = 200,
-        texture_lod_bias: float = -1.0,
-        anisotropy: float | None = None,
-        znear: float = 0.005,
-        zfar: float = 100.0,
-    ):
+    def __init__(self, target: TargetSpec, intrinsics: CameraIntrinsics, supersample: int = 2,
+                 background: float = 128, occluders=None, texture_px_per_m: float | None = None,
+                 back_grey: float = 200, texture_lod_bias: float = -1.0, anisotropy: float | None = None,
+                 znear: float = 0.005, zfar: float = 100.0, backend: str = "auto"):
         if int(supersample) != supersample or supersample < 1:
             raise ConfigError(f"TargetRenderer: supersample must be an integer >= 1, got {supersample}")
         if not (0 <= background <= 255):
             raise ConfigError(f"TargetRenderer: background must be a grey level in [0, 255], got {background}")
         if not (0 < znear < zfar):
             raise ConfigError(f"TargetRenderer: need 0 < znear < zfar [m], got {znear}, {zfar}")
-        self.target = target
-        self.intrinsics = intrinsics
-        self.supersample = s = int(supersample)
+        if backend not in BACKENDS:
+            raise ConfigError(f"TargetRenderer: backend must be one of {BACKENDS}, got {backend!r}")
+        occ = []
+        for i, o in enumerate(occluders or []):
+            if len(o) not in (2, 3):
+                raise ConfigError(f"TargetRenderer: occluder {i} must be (mesh, T_cam_mesh) or (mesh, T_cam_mesh, grey)")
+            occ.append((o[0], check_finite(f"occluder {i} T_cam_mesh", o[1]), (o[2] if len(o) == 3 else 40.0) / 255.0))
+        if backend == "auto":
+            backend = "pyrender"  # the warp path's edge accuracy is not yet at pyrender's (module docstring)
+        if backend == "warp" and occ:
+            raise ConfigError("TargetRenderer: backend 'warp' renders a lone planar target; occluders need 'pyrender'")
+        self.backend = backend
+        self.target, self.intrinsics = target, intrinsics
+        self.supersample = int(supersample)
         self.background = float(background)
         w_m, h_m = target.outline_m()
-        if texture_px_per_m is None:
-            texture_px_per_m = DEFAULT_MAX_TEXTURE_PX / max(w_m, h_m)
-        self.texture_px_per_m = float(texture_px_per_m)
-        K = intrinsics
-        self._r = pyrender.OffscreenRenderer(s * K.width, s * K.height)
-        _LIVE.add(id(self))
-        self._r._platform.make_current()
-        max_tex = int(GL.glGetIntegerv(GL.GL_MAX_TEXTURE_SIZE))
+        self.texture_px_per_m = float(DEFAULT_MAX_TEXTURE_PX / max(w_m, h_m) if texture_px_per_m is None
+                                      else texture_px_per_m)
         self.texture_shape = target.texture_shape(self.texture_px_per_m)
-        padded = _mip_padded_shape(self.texture_shape)
-        if max(padded) > max_tex:
-            self.close()
-            raise ConfigError(
-                f"TargetRenderer: texture {self.texture_shape[1]}x{self.texture_shape[0]} px (padded to "
-                f"{padded[1]}x{padded[0]} for mipmapping) exceeds "
-                f"GL_MAX_TEXTURE_SIZE {max_tex}; lower texture_px_per_m ({self.texture_px_per_m:.0f} px/m)"
-            )
-        tex, uv_max = _pad_for_mipmaps(target.texture(self.texture_px_per_m))
-        self.texture_padded_shape = tex.shape
+        self._gl_args = (target, intrinsics, self.supersample, self.background, occ, self.texture_px_per_m,
+                         back_grey, texture_lod_bias, anisotropy, znear, zfar)
+        self._znear = znear
+        self._n_occ = len(occ)
+        self._gl = self._warp = None
+        self.anisotropy = float("nan")  # GL sampler's anisotropy, once a GL context exists
+        if backend == "warp":
+            if max(self.texture_shape) > MAX_WARP_TEXTURE_PX:
+                raise ConfigError(
+                    f"TargetRenderer: texture {self.texture_shape[1]}x{self.texture_shape[0]} px exceeds the warp "
+                    f"backend's {MAX_WARP_TEXTURE_PX} px (GL_MAX_TEXTURE_SIZE of common drivers); lower "
+                    f"texture_px_per_m ({self.texture_px_per_m:.0f} px/m)")
+            self._warp = MipWarp(target, intrinsics, max(self.supersample, 4), self.background, back_grey,
+                                 self.texture_px_per_m)
+        else:
+            self._open_gl()
 
-        self._scene = pyrender.Scene(bg_color=np.array([background, background, background, 255.0]) / 255.0,
-                                     ambient_light=np.ones(3))
-        extent = target.texture_extent_m()
-        v, f, uv = _quad(extent, z_front=True, uv_max=uv_max)
-        front_mat = pyrender.MetallicRoughnessMaterial(
-            baseColorFactor=np.ones(4), metallicFactor=0.0, roughnessFactor=1.0,
-            baseColorTexture=pyrender.Texture(source=tex, source_channels="R"),
-        )
-        front = pyrender.Primitive(positions=v, indices=f, texcoord_0=uv, material=front_mat, mode=pyrender.GLTF.TRIANGLES)
-        vb, fb, _ = _quad(extent, z_front=False)
-        g = back_grey / 255.0
-        back_mat = pyrender.MetallicRoughnessMaterial(baseColorFactor=np.array([g, g, g, 1.0]), metallicFactor=0.0)
-        back = pyrender.Primitive(positions=vb, indices=fb, material=back_mat, mode=pyrender.GLTF.TRIANGLES)
-        self._scene.add(pyrender.Mesh([front, back]), pose=np.eye(4))
-
-        self._cam = pyrender.IntrinsicsCamera(
-            fx=s * K.fx, fy=s * K.fy, cx=s * (K.cx + 0.5), cy=s * (K.cy + 0.5), znear=znear, zfar=zfar
-        )
-        self._cam_node = self._scene.add(self._cam, pose=np.eye(4))
-
-        self._occ_nodes = []
-        for i, occ in enumerate(occluders or []):
-            if len(occ) not in (2, 3):
-                raise ConfigError(f"TargetRenderer: occluder {i} must be (mesh, T_cam_mesh) or (mesh, T_cam_mesh, grey)")
-            mesh, T_cam_mesh = occ[0], check_finite(f"occluder {i} T_cam_mesh", occ[1])
-            grey = (occ[2] if len(occ) == 3 else 40.0) / 255.0
-            mat = pyrender.MetallicRoughnessMaterial(baseColorFactor=np.array([grey, grey, grey, 1.0]), metallicFactor=0.0)
-            node = self._scene.add(pyrender.Mesh.from_trimesh(mesh, material=mat, smooth=False), pose=np.eye(4))
-            self._occ_nodes.append((node, T_cam_mesh))
-
-        self._flags = pyrender.RenderFlags.FLAT
-        # Warm-up render uploads the texture (pyrender does it lazily), then set its sampling.
-        self._render_raw()
-        if anisotropy is None:
-            anisotropy = 16.0
-        self.anisotropy = self._configure_texture(front_mat.baseColorTexture, texture_lod_bias, anisotropy)
-
-    def _configure_texture(self, texture, lod_bias: float, anisotropy: float) -> float:
-        """Set LOD bias and anisotropic filtering on the uploaded texture; returns the anisotropy used."""
-        self._r._platform.make_current()
-        GL.glBindTexture(GL.GL_TEXTURE_2D, texture._texid)
-        GL.glTexParameterf(GL.GL_TEXTURE_2D, GL.GL_TEXTURE_LOD_BIAS, float(lod_bias))
-        for wrap in (GL.GL_TEXTURE_WRAP_S, GL.GL_TEXTURE_WRAP_T):  # no wrap-around at the board's edges
-            GL.glTexParameteri(GL.GL_TEXTURE_2D, wrap, GL.GL_CLAMP_TO_EDGE)
-        used = 1.0
-        if anisotropy > 1:
-            try:
-                max_aniso = float(GL.glGetFloatv(_GL_MAX_TEXTURE_MAX_ANISOTROPY))
-                used = min(float(anisotropy), max_aniso)
-                GL.glTexParameterf(GL.GL_TEXTURE_2D, _GL_TEXTURE_MAX_ANISOTROPY, used)
-            except GL.GLError:  # extension missing: plain trilinear
-                used = 1.0
-        GL.glBindTexture(GL.GL_TEXTURE_2D, 0)
-        return used
-
-    def _render_raw(self) -> np.ndarray:
-        """Render the scene as it is; grey uint8 (s H, s W)."""
-        self._r._platform.make_current()
-        GL.glPixelStorei(GL.GL_UNPACK_ALIGNMENT, 1)  # single-channel texture rows of any width
-        GL.glPixelStorei(GL.GL_PACK_ALIGNMENT, 1)  # RGB read-back of any width
-        color = self._r.render(self._scene, flags=self._flags)
-        if isinstance(color, tuple):
-            color = color[0]
-        return np.ascontiguousarray(color[..., 0])
+    def _open_gl(self) -> _GLScene:
+        if self._gl is None:
+            self._gl = _GLScene(*self._gl_args)
+            self.anisotropy = self._gl.anisotropy
+            self.texture_padded_shape = self._gl.texture_padded_shape
+        return self._gl
 
     # ------------------------------------------------------------------ rendering
     def render(self, T_cam_target, occluder_poses=None, dtype=np.float32) -> np.ndarray:
@@ -238,17 +251,14 @@ class TargetRenderer:
         T_cam_target = check_finite("T_cam_target", T_cam_target)
         if T_cam_target.shape != (4, 4):
             raise DataError(f"T_cam_target must be (4, 4), got {T_cam_target.shape}")
-        T_target_cam = inv_T(T_cam_target)
-        self._scene.set_pose(self._cam_node, cam_gl_from_cv(T_target_cam))
-        if occluder_poses is not None and len(occluder_poses) != len(self._occ_nodes):
-            raise DataError(f"occluder_poses: expected {len(self._occ_nodes)} poses, got {len(occluder_poses)}")
-        for i, (node, T_cam_mesh) in enumerate(self._occ_nodes):
-            T = T_cam_mesh if occluder_poses is None else check_finite(f"occluder_poses[{i}]", occluder_poses[i])
-            self._scene.set_pose(node, T_target_cam @ T)
-
-        img = self._render_raw().astype(np.float32)
-        if self.supersample > 1:  # exact s x s box average for an integer factor
-            img = cv2.resize(img, self.intrinsics.size, interpolation=cv2.INTER_AREA)
+        if occluder_poses is not None and len(occluder_poses) != self._n_occ:
+            raise DataError(f"occluder_poses: expected {self._n_occ} poses, got {len(occluder_poses)}")
+        if self._warp is not None and planar_warp_ok(self.target, T_cam_target, self._znear):
+            img = self._warp.render(T_cam_target)
+        else:
+            img = self._open_gl().render(T_cam_target, occluder_poses).astype(np.float32)
+            if self.supersample > 1:  # exact s x s box average for an integer factor
+                img = cv2.resize(img, self.intrinsics.size, interpolation=cv2.INTER_AREA)
         if np.dtype(dtype) == np.uint8:
             return np.clip(np.round(img), 0, 255).astype(np.uint8)
         return img.astype(dtype, copy=False)
@@ -266,27 +276,10 @@ class TargetRenderer:
 
     # ------------------------------------------------------------------ lifetime
     def close(self) -> None:
-        """Release the OpenGL context (idempotent). Other live renderers keep working: pyrender's own
-        ``delete()`` calls eglTerminate on the process-wide EGL display, which would kill their contexts,
-        so the display is terminated only by the last renderer closed."""
-        r = getattr(self, "_r", None)
-        if r is None:
-            return
-        self._r = None
-        _LIVE.discard(id(self))
-        plat = r._platform
-        plat.make_current()
-        r._renderer.delete()
-        if type(plat).__name__ == "EGLPlatform" and _LIVE:
-            from OpenGL.EGL import eglDestroyContext
-
-            eglDestroyContext(plat._egl_display, plat._egl_context)
-            plat._egl_context = None
-            plat._egl_display = None
-        else:
-            plat.delete_context()
-        r._renderer = None
-        r._platform = None
+        """Release the OpenGL context if one was opened (idempotent; other live renderers keep working)."""
+        gl, self._gl = getattr(self, "_gl", None), None
+        if gl is not None:
+            gl.close()
 
     def __enter__(self) -> "TargetRenderer":
         return self

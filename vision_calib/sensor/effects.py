@@ -1,4 +1,6 @@
-"""Camera/sensor effects applied to an ideal pinhole render (torch + kornia).
+"""Camera/sensor effects applied to an ideal pinhole render: the torch + kornia implementation (batched,
+GPU-capable; ``apply_effects(..., device=...)`` uses it). The CPU default is :mod:`vision_calib.sensor.cpu`
+(OpenCV, same model and statistics, ~2x faster on one core); both share :mod:`vision_calib.sensor.maps`.
 
 Pipeline for one robot pose (:func:`apply_effects`), deterministic part computed once, noise
 per frame:
@@ -24,97 +26,24 @@ rounding, i.e. at most one grey level on a few pixels after quantisation).
 
 from __future__ import annotations
 
-import math
-from dataclasses import asdict, dataclass
 from functools import lru_cache
 
-import cv2
 import numpy as np
 import torch
 
 from ..camera import CameraIntrinsics
 from ..errors import ConfigError, DataError
-
-
-@dataclass(frozen=True)
-class SensorEffects:
-    """Sensor/lens effect parameters (recorded in reports via :meth:`to_dict`).
-
-    apply_distortion: resample with the intrinsics' Brown–Conrady coefficients.
-    blur_sigma_px: Gaussian defocus std [px] (0 = none). blur_disc_radius_px: disc defocus
-    radius [px] (0 = none; exclusive with the Gaussian). exposure: scale of the ideal intensity
-    (1 = nominal). gain: digital gain (grey levels per 255/full_well electrons).
-    full_well_e: electrons at grey level 255 for exposure = gain = 1 (0 = no photon noise).
-    read_noise_grey: read-noise std [grey levels]. black_level_grey: offset [grey levels].
-    vignetting: relative intensity loss at the image corner (0 = none, quadratic in radius).
-    photon_model: "gaussian" | "poisson". Output is always clipped and rounded to uint8.
-    """
-
-    apply_distortion: bool = True
-    blur_sigma_px: float = 0.6
-    blur_disc_radius_px: float = 0.0
-    exposure: float = 1.0
-    gain: float = 1.0
-    full_well_e: float = 10000.0
-    read_noise_grey: float = 1.0
-    black_level_grey: float = 0.0
-    vignetting: float = 0.0
-    photon_model: str = "gaussian"
-
-    def __post_init__(self):
-        for name in ("blur_sigma_px", "blur_disc_radius_px", "exposure", "gain", "full_well_e",
-                     "read_noise_grey", "black_level_grey", "vignetting"):
-            v = getattr(self, name)
-            if not np.isfinite(v) or v < 0:
-                raise ConfigError(f"SensorEffects.{name} must be finite and >= 0, got {v!r}")
-        if self.vignetting >= 1:
-            raise ConfigError(f"SensorEffects.vignetting must be < 1, got {self.vignetting}")
-        if self.blur_sigma_px > 0 and self.blur_disc_radius_px > 0:
-            raise ConfigError("SensorEffects: give either blur_sigma_px or blur_disc_radius_px, not both")
-        if self.photon_model not in ("gaussian", "poisson"):
-            raise ConfigError(f"SensorEffects.photon_model must be 'gaussian' or 'poisson', got {self.photon_model!r}")
-
-    def to_dict(self) -> dict:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, d: dict, where: str = "sensor") -> "SensorEffects":
-        known = set(cls.__dataclass_fields__)
-        unknown = set(d) - known
-        if unknown:
-            raise ConfigError(f"{where}: unknown sensor effect key(s) {sorted(unknown)} (known: {sorted(known)})")
-        try:
-            return cls(**d)
-        except TypeError as exc:
-            raise ConfigError(f"{where}: invalid sensor effects ({exc})") from None
-
-    @classmethod
-    def ideal(cls) -> "SensorEffects":
-        """No distortion, blur, noise or vignetting (only 8-bit quantisation)."""
-        return cls(apply_distortion=False, blur_sigma_px=0.0, full_well_e=0.0, read_noise_grey=0.0)
-
-
-# ----------------------------------------------------------------------------- distortion map
-@lru_cache(maxsize=8)
-def _source_map_cached(intr: CameraIntrinsics) -> np.ndarray:
-    h, w = intr.height, intr.width
-    u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
-    uv_d = np.stack([u.ravel(), v.ravel()], axis=1).reshape(-1, 1, 2)
-    crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-12)
-    K = intr.K
-    uv_u = cv2.undistortPointsIter(uv_d, K, intr.dist_array, None, K, crit).reshape(h, w, 2)
-    uv_u.setflags(write=False)
-    return uv_u
-
-
-def distortion_source_map(intr: CameraIntrinsics) -> np.ndarray:
-    """(H, W, 2) float64: for every distorted pixel centre (u_d, v_d) = (col, row), the ideal
-    (undistorted) pixel location (u_u, v_u) that projects there, i.e.
-    ``intr.project(undistorted ray) == (u_d, v_d)``. Cached per intrinsics (read-only array)."""
-    return _source_map_cached(intr)
+from .maps import disc_kernel, distortion_source_map, gaussian_ksize, vignetting_gain
+from .settings import SensorEffects
 
 
 def _grid_for(intr: CameraIntrinsics, device) -> torch.Tensor:
+    return _grid_cached(intr, str(torch.device(device)))
+
+
+@lru_cache(maxsize=8)
+def _grid_cached(intr: CameraIntrinsics, device: str) -> torch.Tensor:
+    """grid_sample grid (1, H, W, 2) of :func:`distortion_source_map`, cached per camera and device."""
     src = distortion_source_map(intr)
     h, w = intr.height, intr.width
     gx = src[..., 0] / (w - 1) * 2 - 1  # align_corners=True: -1 / +1 are the centres of the edge pixels
@@ -122,28 +51,8 @@ def _grid_for(intr: CameraIntrinsics, device) -> torch.Tensor:
     return torch.from_numpy(np.stack([gx, gy], axis=-1)[None].astype(np.float32)).to(device)
 
 
-# ----------------------------------------------------------------------------- helpers
-def _disc_kernel(radius_px: float) -> torch.Tensor:
-    """Normalised (1, k, k) disc kernel, edge pixels weighted by 4x4 supersampled coverage."""
-    r = int(math.ceil(radius_px))
-    k = 2 * r + 1
-    sub = (np.arange(4) + 0.5) / 4 - 0.5
-    ys, xs = np.mgrid[-r:r + 1, -r:r + 1]
-    cov = np.zeros((k, k))
-    for dy in sub:
-        for dx in sub:
-            cov += ((xs + dx) ** 2 + (ys + dy) ** 2) <= radius_px ** 2
-    cov /= cov.sum()
-    return torch.from_numpy(cov[None].astype(np.float32))
-
-
 def _vignetting_map(intr: CameraIntrinsics, strength: float, device) -> torch.Tensor:
-    h, w = intr.height, intr.width
-    v, u = torch.meshgrid(torch.arange(h, dtype=torch.float32, device=device),
-                          torch.arange(w, dtype=torch.float32, device=device), indexing="ij")
-    r2 = (u - intr.cx) ** 2 + (v - intr.cy) ** 2
-    corners = [(x - intr.cx) ** 2 + (y - intr.cy) ** 2 for x in (-0.5, w - 0.5) for y in (-0.5, h - 0.5)]
-    return 1.0 - strength * r2 / max(corners)
+    return torch.from_numpy(np.array(vignetting_gain(intr, float(strength)))).to(device)
 
 
 def deterministic_image(ideal: torch.Tensor, effects: SensorEffects, intr: CameraIntrinsics) -> torch.Tensor:
@@ -162,10 +71,10 @@ def deterministic_image(ideal: torch.Tensor, effects: SensorEffects, intr: Camer
         x = torch.nn.functional.grid_sample(x, grid, mode="bilinear", padding_mode="border", align_corners=True)
     if effects.blur_sigma_px > 0:
         s = float(effects.blur_sigma_px)
-        k = 2 * int(math.ceil(3.5 * s)) + 1
+        k = gaussian_ksize(s)
         x = kornia.filters.gaussian_blur2d(x, (k, k), (s, s), border_type="replicate")
     elif effects.blur_disc_radius_px > 0:
-        x = kornia.filters.filter2d(x, _disc_kernel(effects.blur_disc_radius_px).to(x.device), border_type="replicate")
+        x = kornia.filters.filter2d(x, torch.from_numpy(np.array(disc_kernel(float(effects.blur_disc_radius_px)))[None]).to(x.device), border_type="replicate")
     if effects.vignetting > 0:
         x = x * _vignetting_map(intr, effects.vignetting, x.device)
     fw = effects.full_well_e if effects.full_well_e > 0 else 255.0
@@ -173,7 +82,7 @@ def deterministic_image(ideal: torch.Tensor, effects: SensorEffects, intr: Camer
     return e[0] if squeeze else e
 
 
-def apply_effects(
+def apply_effects_torch(
     ideal,
     effects: SensorEffects,
     n_frames: int,

@@ -1,0 +1,99 @@
+"""Sensor effects on the CPU with OpenCV/numpy (the default of :func:`vision_calib.sensor.apply_effects`).
+
+Same model, order and parameters as the torch/kornia implementation (:mod:`vision_calib.sensor.effects`,
+whose docstring describes the pipeline), built for one core:
+- distortion: exact bilinear resampling (:func:`remap_exact`) with per-camera index/weight tables
+  (:func:`maps.bilinear_tables`, border replicated) built once per camera, not per pose. Not ``cv2.remap``:
+  its 1/32 px fixed-point source positions shifted corners systematically (demo validation 3x worse);
+- blur: ``cv2.GaussianBlur`` with the same kernel size (``maps.gaussian_ksize``) or ``cv2.filter2D`` with
+  the same disc kernel, border replicated;
+- noise: the noise-free image and the per-pixel noise std are computed once per pose; each frame is one
+  ``cv2.randn`` draw scaled in place, then ``cv2.add(..., dtype=CV_8U)`` adds the mean, rounds to the
+  nearest integer (ties to even, as torch.round) and saturates to [0, 255] in a single pass.
+
+Random draws: OpenCV's RNG (multiply-with-carry; normal deviates by the ziggurat method), seeded with
+the caller's seed through ``cv2.setRNGSeed`` (a per-thread state): the same seed gives the same frames.
+They are *not* the same draws as the torch path for that seed, only the same distribution (tests compare
+noise variance against signal, blur MTF and distortion with the analytic model). ``photon_model="poisson"``
+draws from a ``numpy.random.Generator`` seeded with the same seed.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from ..camera import CameraIntrinsics
+from .maps import bilinear_tables, disc_kernel, gaussian_ksize, vignetting_gain
+from .settings import SensorEffects
+
+
+def remap_exact(img: np.ndarray, intr: CameraIntrinsics) -> np.ndarray:
+    """Distorted image (H, W) float32 from the ideal one: bilinear sample of img at
+    :func:`distortion_source_map` (float32 weights, no position rounding; matches torch grid_sample with
+    align_corners=True and border padding)."""
+    idx, wx, wy = bilinear_tables(intr)
+    w = intr.width
+    f = img.reshape(-1)
+    a = f[idx]
+    b = f[idx + 1]
+    top = a + wx * (b - a)
+    a = f[idx + w]
+    b = f[idx + w + 1]
+    bot = a + wx * (b - a)
+    return top + wy * (bot - top)
+
+
+def deterministic_image_cv(ideal: np.ndarray, effects: SensorEffects, intr: CameraIntrinsics) -> np.ndarray:
+    """Noise-free expected *electrons* (H, W) float32 of the ideal render ideal (H, W) [grey 0..255]:
+    distortion, blur, vignetting and exposure applied (see the torch ``deterministic_image``)."""
+    x = np.ascontiguousarray(ideal, dtype=np.float32)
+    if effects.apply_distortion and any(intr.dist):
+        x = remap_exact(x, intr)
+    if effects.blur_sigma_px > 0:
+        s = float(effects.blur_sigma_px)
+        k = gaussian_ksize(s)
+        x = cv2.GaussianBlur(x, (k, k), s, sigmaY=s, borderType=cv2.BORDER_REPLICATE)
+    elif effects.blur_disc_radius_px > 0:
+        x = cv2.filter2D(x, cv2.CV_32F, disc_kernel(float(effects.blur_disc_radius_px)),
+                         borderType=cv2.BORDER_REPLICATE)
+    if effects.vignetting > 0:
+        x = cv2.multiply(x, vignetting_gain(intr, float(effects.vignetting)))
+    fw = effects.full_well_e if effects.full_well_e > 0 else 255.0
+    return np.multiply(x, np.float32(effects.exposure * fw / 255.0), dtype=np.float32)
+
+
+def apply_effects_cv(ideal: np.ndarray, effects: SensorEffects, n_frames: int, seed: int,
+                     intr: CameraIntrinsics) -> np.ndarray:
+    """``n_frames`` independent frames (n_frames, H, W) uint8 of one pose from its ideal render (H, W)
+    [grey 0..255]; shapes are checked by the caller (:func:`vision_calib.sensor.apply_effects`)."""
+    e = deterministic_image_cv(ideal, effects, intr)  # electrons
+    fw = effects.full_well_e if effects.full_well_e > 0 else 255.0
+    grey_per_e = effects.gain * 255.0 / fw
+    out = np.empty((n_frames,) + e.shape, np.uint8)
+    if effects.full_well_e > 0 and effects.photon_model == "poisson":
+        rng = np.random.default_rng(int(seed))
+        lam = np.maximum(e, 0.0).astype(np.float64)
+        for k in range(n_frames):
+            grey = rng.poisson(lam).astype(np.float32) * np.float32(grey_per_e)
+            if effects.read_noise_grey > 0:
+                grey += np.float32(effects.read_noise_grey) * rng.standard_normal(e.shape, dtype=np.float32)
+            out[k] = cv2.add(grey, float(effects.black_level_grey), dtype=cv2.CV_8U)
+        return out
+    mean = cv2.add(cv2.multiply(e, grey_per_e), float(effects.black_level_grey))
+    var = np.zeros_like(e)
+    if effects.full_well_e > 0:
+        var = cv2.multiply(np.maximum(e, 0.0), grey_per_e ** 2)
+    if effects.read_noise_grey > 0:
+        var = cv2.add(var, float(effects.read_noise_grey) ** 2)
+    if not (effects.full_well_e > 0 or effects.read_noise_grey > 0):
+        out[:] = cv2.add(mean, 0.0, dtype=cv2.CV_8U)
+        return out
+    std = cv2.sqrt(var)
+    z = np.empty_like(e)
+    cv2.setRNGSeed(int(seed) & 0x7FFFFFFF)
+    for k in range(n_frames):  # one draw per frame, scaled in place; add + round + saturate in one pass
+        cv2.randn(z, 0.0, 1.0)
+        cv2.multiply(z, std, dst=z)
+        cv2.add(z, mean, dst=out[k], dtype=cv2.CV_8U)
+    return out
