@@ -37,7 +37,7 @@ class ImageChain:
     averaging: str = "corners"
 
 
-def _die_with_parent(main_pid: int) -> None:
+def die_with_parent(main_pid: int) -> None:
     """Make this worker die with the main process ``main_pid``, also after ``kill -9`` of it.
 
     A worker's parent is the fork server, not the main process, and the fork server outlives the main
@@ -78,7 +78,7 @@ def _die_with_parent(main_pid: int) -> None:
 
 def _worker_init(target_path, intrinsics, supersample, main_pid=None):
     if main_pid is not None:
-        _die_with_parent(main_pid)
+        die_with_parent(main_pid)
     os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
     os.environ.setdefault("EGL_PLATFORM", "surfaceless")
     # one Mesa llvmpipe thread per worker: several threaded workers oversubscribe the cores

@@ -47,6 +47,14 @@ def apply_overrides(scene: Scene, overrides: dict) -> Scene:
     return replace(scene, effects=replace(scene.effects, **eff), measurement=replace(scene.measurement, **meas))
 
 
+def image_chain_of(scene: Scene) -> ImageChain:
+    """The image-chain settings of a scene (target file, camera, sensor effects, supersampling, averaging)."""
+    if scene.target_path is None or scene.setup.camera is None:
+        raise DataError(f"{scene.path}: image simulation needs a target and a camera in the scene")
+    return ImageChain(str(scene.target_path), scene.setup.camera, scene.effects, scene.supersample,
+                      scene.measurement.averaging)
+
+
 def _measurement_accuracy(T_true, meas: Measurements) -> dict:
     """Measured poses vs ground truth (simulation only): RMS per component and predicted std."""
     err = F.pose_error(T_true, meas.T_cam_target)
@@ -79,8 +87,7 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
     _check_outputs(out_dir, export_recording)
     if overrides:
         scene = apply_overrides(scene, overrides)
-    if scene.target_path is None or scene.setup.camera is None:
-        raise DataError(f"{scene.path}: image simulation needs a target and a camera in the scene")
+    chain = image_chain_of(scene)  # fails now (no target/camera), not after rendering
     setup = scene.setup
     seed = 0 if seed is None else int(seed)
     frames = frames or scene.measurement.frames
@@ -103,10 +110,8 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
     timings["setup"] = time.perf_counter() - t
 
     image_dir = None if export_recording is None else Path(export_recording) / "images"
-    chain = ImageChain(str(scene.target_path), setup.camera, scene.effects, scene.supersample,
-                       scene.measurement.averaging)
-    pms, stage = measure_poses(chain, T_true, labels, seed, frames, workers, image_dir, progress, **(
-        {"pool": pool} if pool is not None else {}))
+    chain = image_chain_of(scene)
+    pms, stage = measure_poses(chain, T_true, labels, seed, frames, workers, image_dir, progress, pool=pool)
     timings["worker_peak_rss_mib"] = stage.pop("worker_peak_rss_mib", float("nan"))
     timings.update({f"{k}_cpu": v for k, v in stage.items()})
     timings["render_measure_wall"] = time.perf_counter() - t - timings["setup"]

@@ -28,22 +28,24 @@ def _default(o):
     raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
 
-def _clean(o):
-    """Replace NaN/inf by None (JSON has no NaN) recursively."""
+def jsonable(o):
+    """JSON-ready copy of ``o``: numpy arrays/scalars to Python, NaN/inf to None (JSON has no NaN), recursively."""
     if isinstance(o, float) or isinstance(o, np.floating):
         return None if not math.isfinite(float(o)) else float(o)
     if isinstance(o, dict):
-        return {str(k): _clean(v) for k, v in o.items()}
+        return {str(k): jsonable(v) for k, v in o.items()}
     if isinstance(o, (list, tuple)):
-        return [_clean(v) for v in o]
+        return [jsonable(v) for v in o]
     if isinstance(o, np.ndarray):
-        return _clean(o.tolist())
+        return jsonable(o.tolist())
+    if isinstance(o, np.generic):
+        return o.item()
     return o
 
 
 def to_json(obj, indent: int | None = 2) -> str:
     """JSON text of ``obj`` (numpy arrays/scalars converted, NaN -> null)."""
-    return json.dumps(_clean(obj), default=_default, indent=indent)
+    return json.dumps(jsonable(obj), default=_default, indent=indent)
 
 
 def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> Path:

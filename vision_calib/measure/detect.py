@@ -18,6 +18,13 @@ import numpy as np
 
 from ..camera import CameraIntrinsics
 from ..errors import ConfigError
+from ..io.atomic import jsonable
+
+
+#: per target kind, what ``refine="auto"`` uses (AprilTag's own edge refinement) and whether the extra
+#: cornerSubPix pass runs by default (ChArUco corners)
+AUTO_REFINE = {"apriltag_grid": "apriltag"}
+AUTO_EXTRA_SUBPIX = {"charuco": True}
 
 
 @dataclass(frozen=True)
@@ -47,18 +54,16 @@ class DetectConfig:
     def __post_init__(self):
         if self.refine not in ("auto", "apriltag", "subpix", "contour", "none"):
             raise ConfigError(f"DetectConfig.refine must be auto|apriltag|subpix|contour|none, got {self.refine!r}")
+        if self.min_corners < 1 or self.subpix_win < 1:
+            raise ConfigError("DetectConfig.min_corners and subpix_win must be >= 1")
 
     def refine_for(self, kind: str) -> str:
         """The marker refinement actually used for a target kind."""
-        if self.refine != "auto":
-            return self.refine
-        return "apriltag" if kind == "apriltag_grid" else "none"
+        return AUTO_REFINE.get(kind, "none") if self.refine == "auto" else self.refine
 
     def extra_subpix_for(self, kind: str) -> bool:
         """Whether the extra cornerSubPix pass runs for a target kind."""
-        return (kind == "charuco") if self.extra_subpix is None else bool(self.extra_subpix)
-        if self.min_corners < 1 or self.subpix_win < 1:
-            raise ConfigError("DetectConfig.min_corners and subpix_win must be >= 1")
+        return AUTO_EXTRA_SUBPIX.get(kind, False) if self.extra_subpix is None else bool(self.extra_subpix)
 
 
 @dataclass(frozen=True, eq=False)
@@ -90,20 +95,8 @@ class Detection:
             "image_size": None if self.image_size is None else [int(x) for x in self.image_size],
             "ids": [int(i) for i in self.ids],
             "uv_px": np.asarray(self.uv_px, dtype=float).tolist(),
-            "diagnostics": _jsonable(self.diagnostics),
+            "diagnostics": jsonable(self.diagnostics),
         }
-
-
-def _jsonable(d):
-    if isinstance(d, dict):
-        return {str(k): _jsonable(v) for k, v in d.items()}
-    if isinstance(d, (list, tuple)):
-        return [_jsonable(v) for v in d]
-    if isinstance(d, np.ndarray):
-        return d.tolist()
-    if isinstance(d, np.generic):
-        return d.item()
-    return d
 
 
 def _invalid(reason, frame_index, image_size=None, **diag) -> Detection:

@@ -19,7 +19,8 @@ import numpy as np
 from .. import frames
 from ..camera import CameraIntrinsics
 from ..errors import ConfigError
-from .detect import DetectConfig, Detection, _jsonable, detect_batch
+from ..io.atomic import jsonable
+from .detect import DetectConfig, Detection, detect_batch
 from .pnp import (project_pinhole, reprojection_jacobian, solve_pnp_planar,
                   target_lookup, undistort_px)
 
@@ -86,7 +87,7 @@ class PoseMeasurement:
             "n_corners": int(self.n_corners),
             "reprojection_rms_px": float(self.reprojection_rms_px),
             "sigma_px": float(self.sigma_px),
-            "frames": _jsonable(list(self.frames)),
+            "frames": jsonable(list(self.frames)),
         }
 
 

@@ -173,7 +173,7 @@ def _camera(sec: Section | None) -> CameraIntrinsics | None:
 
 
 def _effects(sec: Section):
-    from ..sensor import SensorEffects
+    from ..sensor.settings import SensorEffects
 
     d = {EFFECT_ALIASES.get(k, k): v for k, v in sec.data.items()}
     return SensorEffects.from_dict(d, where=sec.where())

@@ -190,6 +190,25 @@ def _run_synthetic(spec: StudySpec, scene, s: dict, seed: int) -> dict:
             "cond": rep.condition_number, "parameters": parameters_table(ps.names, ps.nominal, x_shared, res)}
 
 
+_IMAGE_POOLS: dict = {}
+
+
+def _image_pool(scene):
+    """One image worker per study process and camera/target/supersampling, started at its first images-mode
+    run and reused by the following ones (closed at exit; it dies with this process anyway)."""
+    import atexit
+
+    from ..experiment.image_chain import ImagePool
+    from ..experiment.simulate import image_chain_of
+
+    chain = image_chain_of(scene)
+    key = (chain.target_path, chain.camera, chain.supersample)
+    if key not in _IMAGE_POOLS:
+        _IMAGE_POOLS[key] = ImagePool(chain, workers=1)
+        atexit.register(_IMAGE_POOLS[key].close)
+    return _IMAGE_POOLS[key]
+
+
 def _run_images(spec: StudySpec, scene, s: dict, seed: int) -> dict:
     """End-to-end run (render + measure + identify, experiment.simulate.run_simulation)."""
     from ..experiment.simulate import run_simulation
@@ -198,7 +217,8 @@ def _run_images(spec: StudySpec, scene, s: dict, seed: int) -> dict:
         scene = replace(scene, identification=replace(scene.identification, residual=s["residual"]))
     overrides = {k: s[k] for k in ("noise_grey", "blur_px") if s.get(k) is not None}
     rep = run_simulation(scene, out_dir=None, seed=seed, n_poses=s.get("n_poses"), frames=s.get("frames"),
-                         method=s.get("method"), workers=1, progress=False, overrides=overrides)
+                         method=s.get("method"), workers=1, progress=False, overrides=overrides,
+                         pool=_image_pool(scene))
     ident = rep["identification"]
     return {"converged": ident["converged"], "iterations": ident["iterations"],
             "seconds": rep.get("timings_s", {}).get("identify", float("nan")),

@@ -44,7 +44,10 @@ def _execute(spec, todo, workers, scheduler, on_done):
     import multiprocessing as mp
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
-    with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as ex:
+    from ..experiment.image_chain import die_with_parent
+
+    with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"), initializer=die_with_parent,
+                             initargs=(os.getpid(),)) as ex:
         pending = {ex.submit(_run_task, spec, c, r) for c, r in todo}
         try:
             while pending:
