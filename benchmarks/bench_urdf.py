@@ -16,7 +16,7 @@ import vision_calib.cli  # noqa: F401  (single-threaded BLAS, as the CLI runs)
 
 import numpy as np
 
-from vision_calib.experiment.scene import SCENES_DIR
+from vision_calib.rig import SCENES_DIR
 from vision_calib.frames import T_from_xyz_rpy
 from vision_calib.identify import analyze
 from vision_calib.identify.serial_problem import serial_problem
