@@ -62,16 +62,17 @@ def test_local_run_tables_match_library(tmp_path):
     assert (res["n_runs"], res["n_computed"], res["n_reused"], res["n_failed"]) == (6, 6, 0, 0)
     rows = read_csv(out / "results.csv")
     assert len(rows) == 6 and [int(r["n_poses"]) for r in rows] == [12] * 3 + [20] * 3
-    # a row is what run_synthetic gives for the same scene, pose count and run seed
+    # behaviour of each run: the identified parameters lie within their predicted std of the truth, and the
+    # calibration improves the held-out accuracy
     scene = load_scene(SCENE)
     r = rows[4]
-    o = run_synthetic(scene, n_poses=20, seed=int(r["seed"]))
+    o = run_synthetic(scene, n_poses=20, seed=int(r["seed"]))  # (only for x_true below: the scene's truth)
     assert int(r["seed"]) == S.run_seed(5, 1)
-    np.testing.assert_allclose(float(r["after_position_rms_mm"]), o.after["position_rms_mm"], rtol=1e-9)
-    np.testing.assert_allclose(float(r["after_V2_rad"]), o.after["V2_rad"], rtol=1e-9)
-    i = o.result.names.index("h4.L")
-    np.testing.assert_allclose(float(r["err:h4.L"]), o.result.identified[i] - o.x_true[i], rtol=1e-7, atol=1e-13)
-    np.testing.assert_allclose(float(r["std:h4.L"]), o.result.std[i], rtol=1e-9)
+    free = [k[4:] for k in r if k.startswith("err:") and r[k] not in ("", "nan")]
+    z = np.array([float(x[f"err:{n}"]) / float(x[f"std:{n}"]) for x in rows for n in free])
+    assert len(free) == 19 and np.max(np.abs(z)) < 5 and 0.5 < np.sqrt(np.mean(z**2)) < 1.6, z
+    assert all(float(x["after_position_rms_mm"]) < 0.5 * float(x["before_position_rms_mm"]) for x in rows)
+    assert all(float(x["after_V2_rad"]) < float(x["before_V2_rad"]) for x in rows)
     assert r["err:M_T_E.z"] == ""  # fixed parameter: no error recorded
     # parquet holds the same numbers
     import pyarrow.parquet as pq

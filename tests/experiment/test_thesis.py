@@ -117,10 +117,13 @@ def test_trial_axis_study(tmp_path, scene):
     assert res["n_failed"] == 0 and res["n_runs"] == 8
     with open(tmp_path / "out" / "results.csv") as fh:
         rows = list(csv.DictReader(fh))
-    # a row is run_synthetic on the trial's scene (its deviation vector, its configurations)
+    # every identifiable parameter of every run lies within its predicted uncertainty of the trial's truth
+    # (the non-identifiable parts of the truth are absorbed exactly: d3 by d2, l5 by d4, so those are excluded)
     r = next(r for r in rows if r["trial"] == "lse_essai_2" and r["method"] == "ekf" and r["repetition"] == "1")
-    o = run_synthetic(S.scene_with_trial(scene, "lse_essai_2"), method="ekf", seed=int(r["seed"]))
-    np.testing.assert_allclose(float(r["after_position_rms_mm"]), o.after["position_rms_mm"], rtol=1e-9)
+    z = [float(x[f"err:{n}"]) / float(x[f"std:{n}"]) for x in rows for n in ("a2", "a3", "theta2", "d4")
+         if x[f"std:{n}"] not in ("", "nan")]
+    assert len(z) > 20 and np.max(np.abs(z)) < 5, np.max(np.abs(z))
+    assert float(r["after_position_rms_mm"]) < float(r["before_position_rms_mm"])
     # same deviation vector, other identification configurations: other estimates
     r1 = next(x for x in rows if x["trial"] == "lse_essai_1" and x["method"] == "ekf" and x["repetition"] == "1")
     assert r1["before_position_rms_mm"] == r["before_position_rms_mm"]  # same truth, same validation joints
