@@ -45,7 +45,10 @@ def test_noise_free_recovery_of_every_identifiable_parameter(scene, method):
     free = res.free
     ps = out.scene.setup.params
     rel = np.abs(res.identified[free] - x_true[free]) / np.maximum(np.abs(x_true[free]), ps.scale[free])
-    assert rel.max() < 1e-9, dict(zip(np.array(ps.names)[free], rel))
+    # the EKF stops when a further pass would move the estimate by < 1e-3 of its std (here the 1 um / 1 urad
+    # noise floor of exact data): a few 1e-9 relative; least squares converges to rounding
+    assert rel.max() < (1e-8 if method == "ekf" else 1e-9), dict(zip(np.array(ps.names)[free], rel))
+    assert res.converged
     assert out.after["position_rms_mm"] < 1e-6
 
 
