@@ -51,6 +51,7 @@ L_i, l_i, plus h, d, q0_i. P_1 fixes the base frame (it is a constant, ``H4Robot
 31 parameters are: h4.x2, h4.y2, h4.z2, h4.x3, h4.y3, h4.z3, h4.x4, h4.y4, h4.z4 (9),
 h4.psi1..4 (4), h4.beta1..4 (4), h4.L1..4 (4), h4.l1..4 (4), h4.h, h4.d (2), q0_1..4 (4).
 Model 12 maps exactly to model 31 with psi_i = alpha_i, beta_i = -pi/2 (``to_model31``).
+The conversion and the table-2 variants live in :mod:`.h4_variants`, the file loader in :mod:`.h4_io`.
 
 External parameters (seed §4.1)
 -------------------------------
@@ -60,8 +61,10 @@ Camera on the base, target on the nacelle, target plane parallel to the nacelle:
     T_target_nacelle = [Rz(M_T_E.theta) R_ME0, (M_T_E.x, M_T_E.y, M_T_E.z)]   (seed's M_T_E)
     T_base_nacelle   = T_base_cam @ T_cam_target @ T_target_nacelle            (seed eq. 3)
 
-R_BC0 and R_ME0 are fixed rotations (default Rx(pi): camera looking down, target facing up):
-the camera tilt is known from the measured target normal (seed §4.1) and is not identified.
+R_BC0 and R_ME0 are fixed rotations (default Rx(pi): camera looking down, target facing up),
+not identified: the camera tilt is measured beforehand from the rotation axis of the nacelle
+seen by the camera (seed §4.1; vision_calib.identify.camera_axis.estimate_camera_axis, and
+robot_with_camera_axis to set R_BC0 / R_ME0 from it), else taken from the scene file.
 Measured pose -> X: (x, y, z) = translation of T_base_nacelle; theta = yaw of its rotation R,
 theta = atan2(R10 - R01, R00 + R11), the angle of the z-rotation closest to R (Frobenius); it
 equals theta exactly when R = Rz(theta), and ignores a small residual tilt from noise.
@@ -71,14 +74,12 @@ acts exactly like B_T_C.z (seed eq. 24); it is fixed by default.
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 
 import numpy as np
 
-from ..errors import ConfigError, DataError, ParameterError, UnreachablePoseError
-from ..frames import inv_T, make_T, rot_x, rot_y, rot_z, skew
+from ..errors import DataError, ParameterError, UnreachablePoseError
+from ..frames import inv_T, make_T, rot_x, rot_z, skew
 from .params import ParameterSet
 
 #: corner signs of chains 1..4: (+h,+d), (-h,+d), (-h,-d), (+h,-d)
@@ -547,32 +548,10 @@ class H4Robot:
     # ------------------------------------------------------------------ conversions / variants
     def to_model31(self, x=None) -> "H4Robot":
         """Exact model-31 description of a model-12 robot (at x, default nominal); d = d12.
-        Free mask: variant H (d and B_T_C.theta fixed as well as M_T_E.z)."""
-        if self.model == "31":
-            return self
-        v = self.params.values(self._x(x))
-        names = model31_names(False)
-        val = {}
-        for i in range(4):
-            j = i + 1
-            al = v[f"h4.alpha{j}"]
-            P = [EPS_H[i] * v["h4.h"] + v["h4.R"] * np.cos(al), EPS_D[i] * self.d12 + v["h4.R"] * np.sin(al), 0.0]
-            if j > 1:
-                val.update({f"h4.x{j}": P[0], f"h4.y{j}": P[1], f"h4.z{j}": P[2]})
-            else:
-                P1 = np.array(P)
-            val.update({f"h4.psi{j}": al, f"h4.beta{j}": -np.pi / 2, f"h4.L{j}": v["h4.L"], f"h4.l{j}": v["h4.l"],
-                        f"q0_{j}": v[f"q0_{j}"]})  # fmt: skip
-        val.update({"h4.h": v["h4.h"], "h4.d": self.d12})
-        geo = [val[nm] for nm in names]
-        ext = [v[nm] for nm in EXTERNAL_NAMES]
-        all_names = names + EXTERNAL_NAMES
-        sc_len, sc_ang = self.params.scale[self.params.index("h4.L")], self.params.scale[self.params.index("h4.alpha1")]
-        ext_scale = dict(zip(self.params.names, self.params.scale))
-        sc = [ext_scale.get(nm, sc_ang if _kind(nm) == "angle" else sc_len) for nm in all_names]
-        ps = ParameterSet.from_lists(all_names, geo + ext, [_kind(n) for n in all_names], scale=sc)
-        r = replace(self, model="31", params=ps, P1=P1, shared_L=False)
-        return r.variant("H")
+        Free mask: variant H (d and B_T_C.theta fixed as well as M_T_E.z). See :mod:`.h4_variants`."""
+        from .h4_variants import to_model31
+
+        return to_model31(self, x)
 
     def variant(self, letter: str) -> "H4Robot":
         """Seed table 2 variant: same values, free mask (and arm-length sharing for E) set.
@@ -580,37 +559,10 @@ class H4Robot:
         (17, 18, 18, 19 free). E-H (model 31; M_T_E.z, d and B_T_C.theta fixed -- the two
         couplings of the base-frame form, see module doc): H none (36 free), G fixes l1..4 (32),
         F fixes h and l1..4 (31), E also shares one arm length h4.L (28). A model-12 robot
-        asked for E-H is converted with :meth:`to_model31` first."""
-        letter = str(letter).upper()
-        if letter in "ABCD" and len(letter) == 1:
-            if self.model != "12":
-                raise ParameterError(f"H4 variant {letter} is built on model 12, this robot is model {self.model}")
-            fixed = {"A": ["h4.h", "h4.l"], "B": ["h4.h"], "C": ["h4.l"], "D": []}[letter] + ["M_T_E.z"]
-            return replace(self, params=self.params.with_free(self.names, True).fix(fixed))
-        if letter in "EFGH" and len(letter) == 1:
-            if self.model == "12":
-                return self.to_model31().variant(letter)
-            r = self
-            if letter == "E" and not self.shared_L:
-                r = r._share_L()
-            elif letter != "E" and self.shared_L:
-                raise ParameterError(f"H4 variant {letter} needs per-arm lengths; this robot shares h4.L")
-            ls = [f"h4.l{i}" for i in range(1, 5)]
-            fixed = {"E": ["h4.h"] + ls, "F": ["h4.h"] + ls, "G": ls, "H": []}[letter]
-            fixed += ["M_T_E.z", "h4.d", "B_T_C.theta"]
-            return replace(r, params=r.params.with_free(r.names, True).fix(fixed))
-        raise ParameterError(f"unknown H4 variant {letter!r} (expected one of A-H)")
+        asked for E-H is converted with :meth:`to_model31` first. See :mod:`.h4_variants`."""
+        from .h4_variants import variant
 
-    def _share_L(self) -> "H4Robot":
-        p = self.params
-        Ls = [p.index(f"h4.L{i}") for i in range(1, 5)]
-        keep = [i for i in range(len(p)) if i not in Ls[1:]]
-        names = list(p.names[i] for i in keep)
-        nominal = p.nominal[keep].copy()
-        nominal[names.index("h4.L1")] = p.nominal[Ls].mean()
-        names[names.index("h4.L1")] = "h4.L"
-        ps = ParameterSet(tuple(names), nominal, tuple(p.kinds[i] for i in keep), p.free[keep], p.scale[keep])
-        return replace(self, params=ps, shared_L=True)
+        return variant(self, letter)
 
     def with_values(self, x) -> "H4Robot":
         """Copy whose nominal values are x (n,) (e.g. a perturbed 'true' robot)."""
@@ -622,105 +574,8 @@ class H4Robot:
 
 
 # ----------------------------------------------------------------------------- loading
-def _get(d, key, path, where, kind=float):
-    if key not in d:
-        raise ConfigError(f"{path}: missing key '{where}{key}'")
-    try:
-        if kind is float:
-            return float(d[key])
-        arr = np.asarray(d[key], float)
-        if arr.shape != kind:
-            raise ValueError
-        return arr
-    except (TypeError, ValueError):
-        raise ConfigError(f"{path}: key '{where}{key}' must be {'a number' if kind is float else f'a list of {kind[0]} numbers'}, got {d[key]!r}") from None
-
-
-_FRAME_KEYS = {"x", "y", "z", "theta_deg", "tilt_rpy_deg"}
-#: key tree of an H4 robot file (config.check_keys): unknown keys are errors, closest key suggested
-_H4_SCHEMA = {
-    "kind": None, "model": None, "name": None, "description": None, "source": None, "notes": None,
-    "geometry": {"R", "L", "l", "h", "d", "alpha_deg", "q0_deg"},
-    "external": {"B_T_C": _FRAME_KEYS, "M_T_E": _FRAME_KEYS},
-    "workspace": {"center", "size", "theta_deg"},
-    "scale": {"length_m", "angle_deg"},
-    "fixed": None,
-}
-
-
 def load_h4_robot(path, model: str | None = None) -> H4Robot:
-    """Load an H4 scene file (see scenes/robots/h4.yaml; lengths m, angles in *_deg keys).
-    model: "12" or "31" (default: the file's ``model``); model 31 is built from the model-12
-    nominal by :meth:`H4Robot.to_model31`. Free mask: variant D (model 12) or H (model 31),
-    then the file's optional ``fixed`` list of names is applied."""
-    import yaml
+    """Load an H4 scene file (see scenes/robots/h4.yaml); implemented in :mod:`.h4_io`."""
+    from .h4_io import load_h4_robot as _load
 
-    path = Path(path)
-    try:
-        doc = yaml.safe_load(path.read_text())
-    except OSError as e:
-        raise ConfigError(f"{path}: cannot read H4 robot file ({e})") from None
-    except yaml.YAMLError as e:
-        raise ConfigError(f"{path}: invalid YAML ({e})") from None
-    except UnicodeDecodeError:
-        raise ConfigError(f"{path}: not a UTF-8 text file") from None
-    if not isinstance(doc, dict) or doc.get("kind") != "h4":
-        raise ConfigError(f"{path}: expected a mapping with 'kind: h4'")
-    from ..config import Section, check_keys
-
-    check_keys(Section(doc, path), _H4_SCHEMA)
-    g = doc.get("geometry")
-    if not isinstance(g, dict):
-        raise ConfigError(f"{path}: missing mapping 'geometry'")
-    geo = {nm: _get(g, k, path, "geometry.") for nm, k in
-           (("h4.R", "R"), ("h4.L", "L"), ("h4.l", "l"), ("h4.h", "h"))}  # fmt: skip
-    d12 = _get(g, "d", path, "geometry.")
-    alpha = np.deg2rad(_get(g, "alpha_deg", path, "geometry.", (4,)))
-    q0 = np.deg2rad(_get(g, "q0_deg", path, "geometry.", (4,))) if "q0_deg" in g else np.zeros(4)
-    for i in range(4):
-        geo[f"h4.alpha{i + 1}"] = alpha[i]
-        geo[f"q0_{i + 1}"] = q0[i]
-    for k in ("h4.R", "h4.L", "h4.l", "h4.h"):
-        if geo[k] <= 0:
-            raise ConfigError(f"{path}: geometry.{k[3:]} must be > 0 (m), got {geo[k]}")
-    ext = doc.get("external") or {}
-    vals = dict(geo)
-    tilts = {}
-    for fr in ("B_T_C", "M_T_E"):
-        e = ext.get(fr)
-        if not isinstance(e, dict):
-            raise ConfigError(f"{path}: missing mapping 'external.{fr}'")
-        for c in "xyz":
-            vals[f"{fr}.{c}"] = _get(e, c, path, f"external.{fr}.")
-        vals[f"{fr}.theta"] = np.deg2rad(_get(e, "theta_deg", path, f"external.{fr}."))
-        rpy = np.deg2rad(_get(e, "tilt_rpy_deg", path, f"external.{fr}.", (3,))) if "tilt_rpy_deg" in e else \
-            np.array([np.pi, 0, 0])  # fmt: skip
-        tilts[fr] = rot_z(rpy[2]) @ rot_y(rpy[1]) @ rot_x(rpy[0])
-    names = MODEL12_NAMES + EXTERNAL_NAMES
-    sc = Section(doc.get("scale") or {}, path, "scale")
-    scale_len = sc.number("length_m", float, 1e-3, min=0, min_open=True, unit="m")
-    scale_ang = np.deg2rad(sc.number("angle_deg", float, float(np.rad2deg(1e-3)), min=0, min_open=True, unit="deg"))
-    kinds = [_kind(n) for n in names]
-    ps = ParameterSet.from_lists(names, [vals[n] for n in names], kinds,
-                                 scale=[scale_len if k == "length" else scale_ang for k in kinds])  # fmt: skip
-    ws = doc.get("workspace", {}) or {}
-    center = _get(ws, "center", path, "workspace.", (3,)) if "center" in ws else DEFAULT_CENTER
-    size = _get(ws, "size", path, "workspace.", (3,)) if "size" in ws else DEFAULT_SIZE
-    th = tuple(Section(ws, path, "workspace").floats("theta_deg", None, np.asarray(DEFAULT_THETA_DEG, float)))
-    robot = H4Robot("12", ps, d12=d12, R_BC0=tilts["B_T_C"], R_ME0=tilts["M_T_E"], center=center, size=size,
-                    theta_deg=th).variant("D")  # fmt: skip
-    model = str(doc.get("model", "12")) if model is None else str(model)
-    if model not in ("12", "31"):
-        raise ConfigError(f"{path}: 'model' must be \"12\" or \"31\", got {model!r}")
-    if model == "31":
-        robot = robot.to_model31()
-    fixed = doc.get("fixed") or []
-    if fixed:
-        try:
-            robot = replace(robot, params=robot.params.fix([f for f in fixed if f in robot.names]))
-        except ParameterError as e:
-            raise ConfigError(f"{path}: key 'fixed': {e}") from None
-        unknown = [f for f in fixed if f not in robot.names and f not in MODEL12_NAMES + model31_names()]
-        if unknown:
-            raise ConfigError(f"{path}: key 'fixed' names unknown parameters {unknown}")
-    return robot
+    return _load(path, model)
