@@ -89,7 +89,7 @@ def process_folder(folder, out_dir, method=None, progress=False, plots=True, fix
     meas, inconsistent = drop_inconsistent(meas, motion, where)
     ident = identify_measurements(setup, meas, method, residual, context=rejection_summary(pms), where=where,
                                   fix_unidentifiable=fix_unidentifiable, rejected=inconsistent)
-    result, problem, rep = ident.result, ident.problem, ident.analysis
+    result, problem, rep, setup = ident.result, ident.problem, ident.analysis, ident.setup
     t_id = time.perf_counter() - t1
     ps = setup.params
     report = build_report(

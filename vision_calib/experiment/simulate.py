@@ -131,7 +131,7 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
     ident = identify_measurements(setup, meas_used, method, residual, rep if not inconsistent else None,
                                   context=rejection_summary(pms), where=str(scene.path),
                                   fix_unidentifiable=fix_unidentifiable, rejected=inconsistent)
-    result, problem = ident.result, ident.problem
+    result, problem, setup = ident.result, ident.problem, ident.setup  # setup: after Setup.prepare (H4 camera axis)
     timings["identify"] = time.perf_counter() - t
 
     t = time.perf_counter()
@@ -139,8 +139,9 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
     st = float(np.sqrt(np.mean(err[:, :3] ** 2)))  # measured pose noise, as pose sigmas
     sr = float(np.sqrt(np.mean(err[:, 3:] ** 2)))
     meas_val = tsetup.synthetic_measurements(validation, x_true, rv, st, sr)
-    evals = {"before": setup.evaluate(setup.params.nominal, x_true, validation, meas_val, truth=truth),
-             "after": setup.evaluate(result.identified, x_true, validation, meas_val, truth=truth)}
+    # before: the nominal model; after: the identified one (with what prepare() determined); truth: tsetup
+    evals = {"before": scene.setup.evaluate(setup.params.nominal, x_true, validation, meas_val, truth=tsetup),
+             "after": setup.evaluate(result.identified, x_true, validation, meas_val, truth=tsetup)}
     # reference: the same experiment with synthetic pose measurements of the same noise level
     ref = run_synthetic(scene, method=method, residual=residual, sigma_t_m=st, sigma_r_rad=sr, seed=seed,
                         poses=poses, validation=validation, base=setup.params.mask(rep.base_parameters),

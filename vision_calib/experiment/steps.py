@@ -135,6 +135,8 @@ class Identified:
     rejected: tuple
     adequacy: dict
     variance_factor: float
+    setup: object = None  #: the setup identified (after ``Setup.prepare``): evaluate and export with it
+    prepared: dict = None  #: what ``Setup.prepare`` determined from the data (e.g. the H4 camera axis)
 
 
 def identify_measurements(setup: Setup, meas: Measurements, method, residual, analysis=None, context: str = "",
@@ -154,6 +156,7 @@ def identify_measurements(setup: Setup, meas: Measurements, method, residual, an
     from .checks import structural_rank_check
 
     where = where or setup.name
+    setup, prepared = setup.prepare(meas)
     rep = analysis
     if rep is None:
         if len(meas.T_cam_target) == 0:
@@ -192,7 +195,7 @@ def identify_measurements(setup: Setup, meas: Measurements, method, residual, an
         extra += (f"{len(rejected)} outlier poses rejected: " + "; ".join(f"{lab}: {why}" for lab, why in rejected[:5]),)
     if extra:
         result = replace(result, warnings=tuple(result.warnings) + extra)
-    return Identified(result, problem, params, rep, tuple(rejected), adequacy, max(factor, 1.0))
+    return Identified(result, problem, params, rep, tuple(rejected), adequacy, max(factor, 1.0), setup, prepared)
 
 
 def plausibility_warnings(params, result, rel: float = 0.2, length_floor_m: float = 0.05,

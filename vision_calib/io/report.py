@@ -118,6 +118,8 @@ def build_report(kind: str, *, source: dict, settings: dict, result, measurement
         report["outliers"] = [{"pose_id": lab, "reason": why} for lab, why in identified.rejected]
         report["adequacy"] = identified.adequacy
         report["variance_factor"] = identified.variance_factor
+        if identified.prepared:
+            report["prepared"] = identified.prepared
     if motion:
         report["motion_check"] = motion
     if accuracy is not None:

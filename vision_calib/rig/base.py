@@ -158,6 +158,11 @@ class Setup:
         raise NotImplementedError
 
     # ------------------------------------------------------------------ optional, with defaults
+    def prepare(self, meas: Measurements) -> tuple["Setup", dict]:
+        """Steps the data determine before identification (e.g. the H4 camera axis, paper §4.1): the setup
+        to identify with and a JSON-ready record for the report. Default: nothing to do."""
+        return self, {}
+
     def truth_model(self, spec: dict, rng: np.random.Generator, where: str = "truth") -> "Setup":
         """The setup of a true robot with errors this model does not share (``spec``: the scene's
         ``truth`` entries of :attr:`truth_keys`); its parameters are drawn by the caller. Default: none."""

@@ -20,6 +20,9 @@ import numpy as np
 from ..errors import ConfigError, DataError, ParameterError
 from .base import Evaluation, Setup
 
+#: significance level at which a measured camera/target tilt replaces the nominal one (chi-square, 2 dof)
+AXIS_LEVEL = 1e-3
+
 
 @dataclass(frozen=True)
 class H4Setup(Setup):
@@ -144,6 +147,31 @@ class H4Setup(Setup):
         fix = [n for n in self.meta.get("fix", ()) if n in robot.names]
         params = robot.params.fix(fix) if fix else robot.params
         return replace(self, params=params, robot=replace(robot, params=params), variant=variant)
+
+    def prepare(self, meas) -> tuple["H4Setup", dict]:
+        """The camera and target tilts from the measured rotation axis of the nacelle (paper §4.1,
+        ``identify.camera_axis``): the fixed tilts R_BC0 / R_ME0 of the model take the measured axes (the
+        4-parameter external transforms cannot represent a tilt), then the identification runs as usual."""
+        from ..identify.camera_axis import estimate_camera_axis, robot_with_camera_axis
+
+        from scipy.stats import chi2
+
+        # rotation noise from the residuals of the axis fit, not from the per-pose covariances: the measured
+        # rotations carry a systematic part (detector bias) that the covariances miss, and an estimate that is
+        # not significant against the real scatter would only move the model by that bias
+        est = estimate_camera_axis(meas.T_cam_target, R_BC0=self.robot.R_BC0, R_ME0=self.robot.R_ME0)
+        q = [float(w @ np.linalg.solve(c, w)) for w, c in ((est.tilt_cam_rad, est.cov_tilt_cam),
+                                                             (est.tilt_target_rad, est.cov_tilt_target))]
+        applied = max(q) > chi2.isf(AXIS_LEVEL, 2)
+        robot = robot_with_camera_axis(self.robot, est) if applied else self.robot
+        sd_c, sd_t = np.sqrt(np.diag(est.cov_tilt_cam)), np.sqrt(np.diag(est.cov_tilt_target))
+        info = {"camera_tilt_deg": np.degrees(est.tilt_cam_rad).tolist(), "camera_tilt_std_deg": np.degrees(sd_c).tolist(),
+                "target_tilt_deg": np.degrees(est.tilt_target_rad).tolist(),
+                "target_tilt_std_deg": np.degrees(sd_t).tolist(), "rms_residual_deg": float(np.degrees(est.rms_residual_rad)),
+                "applied": bool(applied), "chi2_camera_target": q,
+                "method": "rotation axis of the nacelle (paper 4.1); tilts relative to the nominal, about the camera "
+                          f"x/y and target x/y axes; applied when significant (chi2, 2 dof, level {AXIS_LEVEL})"}
+        return replace(self, robot=robot), info
 
     def truth_model(self, spec: dict, rng: np.random.Generator, where: str = "truth") -> "H4Setup":
         """A true H4 the identified model does not share: ``model: "31"`` (per-chain geometry, free mask H:
