@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import cv2
@@ -43,23 +43,46 @@ class DetectConfig:
     corners -> invalid Detection.
     refine "auto" (default, measured): "apriltag" for AprilTag grids (corner std 0.05 px vs 0.18 px
     for subpix), "none" for ChArUco markers (the ChArUco corners do not change; AprilTag refinement
-    of the markers costs 175 ms/frame vs 9 ms at 1024 x 768)."""
+    of the markers costs 175 ms/frame vs 9 ms at 1024 x 768).
+    batch: how ``detect_batch`` treats the frames of one pose. "per_frame": full detection of every
+    frame (the path above). "seeded" (default): the markers/board are detected once (on the first
+    frame that gives a valid detection), then every other frame's corners are refined from those
+    positions: ChArUco by ``cv2.cornerSubPix`` (window ``subpix_win``), AprilTag grids by straight-edge
+    fits of each tag's border (:mod:`.tag_edges`; the seed frame itself is refined the same way, so all
+    frames share one estimator; marker detection for the seed with refine "auto" -> "none"). A frame is
+    refined from the seed only when its 1/8-scale image correlates with the seed's at least
+    ``min_view_ncc`` and no corner moves more than ``max_shift_px`` from its seed; otherwise it gets a
+    full detection (diagnostics "fallback": why). Measured (benchmarks/bench_detect.py): ChArUco poses
+    equal the per-frame path's within 1e-4 mm / 1e-4 deg, same corner bias and scatter; AprilTag grids:
+    corner bias and scatter and pose error smaller than with OpenCV's AprilTag refinement."""
 
     refine: str = "auto"
     apriltag_offset_px: float = -0.5
     extra_subpix: bool | None = None
     subpix_win: int = 5
     min_corners: int = 4
+    batch: str = "seeded"
+    max_shift_px: float = 1.0
+    min_view_ncc: float = 0.9
 
     def __post_init__(self):
         if self.refine not in ("auto", "apriltag", "subpix", "contour", "none"):
             raise ConfigError(f"DetectConfig.refine must be auto|apriltag|subpix|contour|none, got {self.refine!r}")
         if self.min_corners < 1 or self.subpix_win < 1:
             raise ConfigError("DetectConfig.min_corners and subpix_win must be >= 1")
+        if self.batch not in ("seeded", "per_frame"):
+            raise ConfigError(f"DetectConfig.batch must be 'seeded' or 'per_frame', got {self.batch!r}")
+        if not self.max_shift_px > 0 or not -1.0 <= self.min_view_ncc <= 1.0:
+            raise ConfigError("DetectConfig.max_shift_px must be > 0 and min_view_ncc in [-1, 1]")
 
     def refine_for(self, kind: str) -> str:
-        """The marker refinement actually used for a target kind."""
+        """The marker refinement actually used for a target kind (per-frame detection)."""
         return AUTO_REFINE.get(kind, "none") if self.refine == "auto" else self.refine
+
+    def seed_config(self) -> "DetectConfig":
+        """The per-frame config used for full detections in the seeded batch mode: refine "auto" ->
+        "none" (the seeded refinement replaces OpenCV's marker corner refinement)."""
+        return replace(self, refine="none") if self.refine == "auto" else self
 
     def extra_subpix_for(self, kind: str) -> bool:
         """Whether the extra cornerSubPix pass runs for a target kind."""
@@ -173,68 +196,92 @@ def _detector(target, config: DetectConfig):
 
 
 # ----------------------------------------------------------------------------- detection
+def _load_checked(image, intrinsics, frame_index):
+    """-> (grey image, size, source, None) or (None, size, source, invalid Detection)."""
+    source = str(image) if isinstance(image, (str, Path)) else "array"
+    img, why = load_gray(image)
+    if img is None:
+        return None, None, source, _invalid(why, frame_index, source=source)
+    size = (int(img.shape[1]), int(img.shape[0]))
+    if intrinsics is not None and size != intrinsics.size:
+        return None, size, source, _invalid(f"image size {size[0]}x{size[1]} does not match the camera intrinsics "
+                                            f"{intrinsics.width}x{intrinsics.height} ({source})", frame_index, size,
+                                            source=source)
+    return img, size, source, None
+
+
 def detect(image, target, intrinsics: CameraIntrinsics | None = None, frame_index: int = 0,
            config: DetectConfig = DetectConfig()) -> Detection:
     """Detect the target's corners in one image (path or (H, W)[, C] array). Never raises on bad
     images: returns ``Detection(valid=False, reason=...)``. intrinsics: when given, the image
     size must match (width, height)."""
     t0 = time.perf_counter()
-    source = str(image) if isinstance(image, (str, Path)) else "array"
-    img, why = load_gray(image)
-    if img is None:
-        return _invalid(why, frame_index, source=source)
-    size = (int(img.shape[1]), int(img.shape[0]))
-    if intrinsics is not None and size != intrinsics.size:
-        return _invalid(f"image size {size[0]}x{size[1]} does not match the camera intrinsics "
-                        f"{intrinsics.width}x{intrinsics.height} ({source})", frame_index, size, source=source)
+    img, size, source, bad = _load_checked(image, intrinsics, frame_index)
+    if bad is not None:
+        return bad
+    return _detect_gray(img, size, source, target, frame_index, config, t0)
+
+
+def _find_corners(img, target, config: DetectConfig, diag: dict):
+    """Marker detection + ChArUco interpolation on a grey image: (ids, uv) or (None, reason)."""
     det, target_ids = _detector(target, config)
+    if target.kind == "charuco":
+        ch_corners, ch_ids, m_corners, m_ids = det.detectBoard(img)
+        n_markers = 0 if m_ids is None else len(m_ids)
+        diag["n_markers"] = n_markers
+        diag["marker_ids"] = [] if m_ids is None else sorted(int(i) for i in m_ids.ravel())
+        if ch_ids is None or len(ch_ids) == 0:
+            return None, ("target not visible: no marker of the target dictionary detected" if n_markers == 0
+                          else f"no ChArUco corner interpolated from {n_markers} marker(s)")
+        return ch_ids.ravel().astype(int), ch_corners.reshape(-1, 2).astype(np.float64)
+    m_corners, m_ids, _rej = det.detectMarkers(img)
+    all_ids = [] if m_ids is None else [int(i) for i in m_ids.ravel()]
+    diag["n_markers"] = len(all_ids)
+    diag["marker_ids"] = sorted(all_ids)
+    ids_l, uv_l = [], []
+    for mid, c in zip(all_ids, m_corners):
+        cid = 4 * mid + np.arange(4)
+        if int(cid[0]) in target_ids:
+            ids_l.append(cid)
+            uv_l.append(c.reshape(4, 2))
+    if not ids_l:
+        return None, ("target not visible: no marker of the target dictionary detected" if not all_ids
+                      else f"detected marker ids {sorted(all_ids)} do not belong to the target "
+                           f"(wrong dictionary or wrong board?)")
+    uv = np.concatenate(uv_l).astype(np.float64)
+    if config.refine_for(target.kind) == "apriltag":
+        uv += config.apriltag_offset_px
+    return np.concatenate(ids_l), uv
+
+
+def _subpix(img, uv, win):
+    crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-4)
+    pts = uv.astype(np.float32).reshape(-1, 1, 2)
+    cv2.cornerSubPix(img, pts, (int(win), int(win)), (-1, -1), crit)
+    return pts.reshape(-1, 2).astype(np.float64)
+
+
+def _detect_gray(img, size, source, target, frame_index, config: DetectConfig, t0,
+                 post=None) -> Detection:
+    """Detection on a loaded grey image. post: optional (img, ids, uv) -> (ids, uv) refinement replacing
+    the extra cornerSubPix pass (the seeded batch mode's per-frame estimator)."""
+    _, target_ids = _detector(target, config)
     diag = {"source": source}
     try:
-        if target.kind == "charuco":
-            ch_corners, ch_ids, m_corners, m_ids = det.detectBoard(img)
-            n_markers = 0 if m_ids is None else len(m_ids)
-            diag["n_markers"] = n_markers
-            diag["marker_ids"] = [] if m_ids is None else sorted(int(i) for i in m_ids.ravel())
-            if ch_ids is None or len(ch_ids) == 0:
-                diag["time_s"] = time.perf_counter() - t0
-                reason = ("target not visible: no marker of the target dictionary detected" if n_markers == 0
-                          else f"no ChArUco corner interpolated from {n_markers} marker(s)")
-                return _invalid(reason, frame_index, size, **diag)
-            ids = ch_ids.ravel().astype(int)
-            uv = ch_corners.reshape(-1, 2).astype(np.float64)
-        else:
-            m_corners, m_ids, _rej = det.detectMarkers(img)
-            all_ids = [] if m_ids is None else [int(i) for i in m_ids.ravel()]
-            diag["n_markers"] = len(all_ids)
-            diag["marker_ids"] = sorted(all_ids)
-            ids_l, uv_l = [], []
-            for mid, c in zip(all_ids, m_corners):
-                cid = 4 * mid + np.arange(4)
-                if int(cid[0]) in target_ids:
-                    ids_l.append(cid)
-                    uv_l.append(c.reshape(4, 2))
-            if not ids_l:
-                diag["time_s"] = time.perf_counter() - t0
-                reason = ("target not visible: no marker of the target dictionary detected" if not all_ids
-                          else f"detected marker ids {sorted(all_ids)} do not belong to the target "
-                               f"(wrong dictionary or wrong board?)")
-                return _invalid(reason, frame_index, size, **diag)
-            ids = np.concatenate(ids_l)
-            uv = np.concatenate(uv_l).astype(np.float64)
-            if config.refine_for(target.kind) == "apriltag":
-                uv += config.apriltag_offset_px
+        ids, uv = _find_corners(img, target, config, diag)
+        if ids is None:
+            diag["time_s"] = time.perf_counter() - t0
+            return _invalid(uv, frame_index, size, **diag)
         keep = np.array([int(i) in target_ids for i in ids], dtype=bool)
         ids, uv = ids[keep], uv[keep]
-        if config.extra_subpix_for(target.kind) and len(ids):
-            crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-4)
-            w = int(config.subpix_win)
-            pts = uv.astype(np.float32).reshape(-1, 1, 2)
-            cv2.cornerSubPix(img, pts, (w, w), (-1, -1), crit)
-            uv = pts.reshape(-1, 2).astype(np.float64)
+        order = np.argsort(ids, kind="stable")
+        ids, uv = ids[order], uv[order]
+        if post is not None and len(ids):
+            ids, uv = post(img, ids, uv)
+        elif config.extra_subpix_for(target.kind) and len(ids):
+            uv = _subpix(img, uv, config.subpix_win)
     except cv2.error as exc:
         return _invalid(f"OpenCV detection error: {exc}".splitlines()[0], frame_index, size, **diag)
-    order = np.argsort(ids, kind="stable")
-    ids, uv = ids[order], uv[order]
     diag["n_corners"] = int(len(ids))
     diag["time_s"] = time.perf_counter() - t0
     if len(ids) < config.min_corners:
@@ -245,5 +292,11 @@ def detect(image, target, intrinsics: CameraIntrinsics | None = None, frame_inde
 def detect_batch(images, target, intrinsics: CameraIntrinsics | None = None,
                  config: DetectConfig = DetectConfig()) -> list[Detection]:
     """Detect in every frame of a pose: images is a (N, H, W) array or a sequence of paths/arrays.
-    Returns N Detections (frame_index = position); never raises on a bad frame."""
+    Returns N Detections (frame_index = position); never raises on a bad frame. ``config.batch``:
+    "seeded" detects once and refines the other frames from those corners (:mod:`.seeded`),
+    "per_frame" runs :func:`detect` on every frame."""
+    if config.batch == "seeded":
+        from .seeded import detect_seeded
+
+        return detect_seeded(images, target, intrinsics, config)
     return [detect(im, target, intrinsics, i, config) for i, im in enumerate(images)]
