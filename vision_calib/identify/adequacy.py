@@ -86,9 +86,13 @@ def model_adequacy(result: IdentificationResult, level: float = DEFAULT_LEVEL, n
 
 
 def _robust_scale(problem: IdentificationProblem, res: IdentificationResult) -> float:
-    """1.4826 * median |whitened residual component| (= 1 for N(0, 1) components)."""
+    """1.4826 * median |whitened residual component| (= 1 for N(0, 1) components), corrected for the
+    parameters fitted: fitted residuals are smaller than the noise by about sqrt((N - n) / N) for N
+    equations and n free parameters (with 60 equations for 30 parameters, uncorrected, 4 good poses
+    of 10 failed the test)."""
     rw = np.einsum("kij,kj->ki", problem.whitening(), res.residuals)
-    s = 1.4826 * float(np.median(np.abs(rw)))
+    n_eq, n_free = rw.size, int(np.sum(res.free))
+    s = 1.4826 * float(np.median(np.abs(rw))) * np.sqrt(n_eq / max(n_eq - n_free, 1))
     if not (np.isfinite(s) and s > 0):
         raise DataError(f"robust scale of the whitened residuals is {s}: cannot test poses for outliers")
     return s
