@@ -54,7 +54,8 @@ def kfold_validation(setup, meas, method: str, residual: str, base, folds: int, 
         rb_all.append(rb)
         ra_all.append(ra)
         per_fold.append({"fold": k + 1, "n_train": int(len(train)), "n_test": int(len(test)),
-                         "converged": bool(result.converged), "before": _rms(rb), "after": _rms(ra)})
+                         "converged": bool(result.converged),
+                         "n_identified": int(np.sum(result.free)), "before": _rms(rb), "after": _rms(ra)})
     overall = {"before": _rms(np.concatenate(rb_all)), "after": _rms(np.concatenate(ra_all))}
     return {"folds": int(folds), "seed": int(seed), "residual_of": chain_direction(setup), "per_fold": per_fold,
             "overall": overall}

@@ -257,8 +257,9 @@ def _settings(top: Section):
         ds = _only(top.section("default_sigma"), ("t_m", "t_mm", "t_cm", "r_rad", "r_deg"))
         t = length_key(ds, "t")
         r = 0.0 if measured.startswith("p_") else angle_key(ds, "r")
-        if measured.startswith("p_") and any(k.startswith("r_") for k in ds.keys()):
-            raise ds.error("r_deg", "position-only measurements (measured: p_*) have no rotation sigma")
+        rkeys = [str(k) for k in ds.keys() if str(k).startswith("r_")]
+        if measured.startswith("p_") and rkeys:
+            raise ds.error(rkeys[0], "position-only measurements (measured: p_*) have no rotation sigma")
         if t <= 0 or (r <= 0 and not measured.startswith("p_")):
             raise ds.error(None, "sigmas must be > 0")
         default = (t, r)
