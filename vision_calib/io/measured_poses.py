@@ -348,7 +348,8 @@ def write_measured_poses(yaml_path, scene_path, ids, q, T, measured: str, units=
     doc = {"format": FORMAT, "scene": str(scene_path), "csv": csv_path.name, "units": dict(units),
            "measured": measured, "folds": int(folds), "seed": int(seed)}
     if default_sigma is not None:
-        doc["default_sigma"] = {"t_m": float(default_sigma[0])} | ({} if pos_only else {"r_rad": float(default_sigma[1])})
+        doc["default_sigma"] = {"t_mm": float(default_sigma[0]) * 1e3} | (
+            {} if pos_only else {"r_deg": float(np.degrees(default_sigma[1]))})
     write_text_atomic(yaml_path, yaml.safe_dump(doc, sort_keys=False))
     return yaml_path
 
