@@ -99,7 +99,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("file", help="measured-pose YAML (with its CSV beside it)")
     p.add_argument("--out", required=True)
     p.add_argument("--method", choices=["lse", "ekf"], default=None)
-    p.add_argument("--folds", type=_int_at_least(2), default=None, help="k of the held-out validation (default: file's)")
+    p.add_argument("--folds", type=_int_at_least(2), default=None,
+                   help="k of the held-out validation (default: the file's)")
     p.add_argument("--json", action="store_true")
 
     p = sub.add_parser("study", help="parameter sweep x Monte Carlo (local processes or a Dask cluster)")

@@ -38,7 +38,7 @@ import numpy as np
 
 from .. import frames as F
 from ..config import ANGLE_UNITS, LENGTH_UNITS, Section, angle_key, length_key, load_yaml
-from ..errors import ConfigError, DataError
+from ..errors import DataError
 
 FORMAT = "vision_calib.measured_poses/1"
 YAML_KEYS = ("format", "scene", "csv", "units", "measured", "default_sigma", "folds", "seed")
