@@ -122,6 +122,16 @@ def build_parser() -> argparse.ArgumentParser:
                    help="follow symbolic links that lead out of the recorded folder (refused by default)")
     p.add_argument("--json", action="store_true")
 
+    p = sub.add_parser("process-poses", help="joints + measured poses (no images) -> identify -> k-fold report "
+                       "(format: docs/measured_poses.md)")
+    p.add_argument("file", help="measured-pose YAML (with its CSV beside it)")
+    p.add_argument("--out", required=True)
+    p.add_argument("--method", choices=["lse", "ekf"], default=None)
+    p.add_argument("--folds", type=_int_at_least(2), default=None,
+                   help="k of the held-out validation (default: the file's)")
+    _add_run_options(p)
+    p.add_argument("--json", action="store_true")
+
     p = sub.add_parser("study", help="parameter sweep x Monte Carlo (local processes or a Dask cluster)")
     p.add_argument("spec", help="study YAML (see scenes/studies/)")
     p.add_argument("--out", required=True)
@@ -182,6 +192,13 @@ def _dispatch(args) -> int:
         report = process_folder(args.folder, out_dir=args.out, method=args.method, progress=not args.json,
                                 plots=not args.no_plots, fix_unidentifiable=args.fix_unidentifiable,
                                 allow_symlinks=args.allow_symlinks)
+        print(to_json(report) if args.json else report["summary_text"])
+        return _status(report["verdict"])
+    if args.command == "process-poses":
+        from .experiment.poses import process_poses
+
+        report = process_poses(args.file, out_dir=args.out, method=args.method, folds=args.folds,
+                               plots=not args.no_plots, fix_unidentifiable=args.fix_unidentifiable)
         print(to_json(report) if args.json else report["summary_text"])
         return _status(report["verdict"])
     if args.command == "study":

@@ -139,7 +139,8 @@ def _what(report) -> str:
     if "scene" in src:
         s = report["settings"]
         return (f"scene {src['scene']['name']}" + (f"  seed {report['seed']}" if "seed" in report else "")
-                + f"  poses {s.get('poses')}  frames {s.get('frames')}  method {s.get('method')}")
+                + f"  poses {s.get('poses')}" + (f"  frames {s['frames']}" if s.get("frames") else "")
+                + f"  method {s.get('method')}")
     return f"{src.get('folder')}"
 
 

@@ -1,0 +1,358 @@
+"""Measured poses without images: joint readings + measured target/camera poses (or positions) from
+any pose logger, for ``vision-calib process-poses`` (format: ``docs/measured_poses.md``).
+
+Two files: a YAML description and a CSV with one row per robot pose::
+
+    # measured_poses.yaml
+    format: vision_calib.measured_poses/1
+    scene: ../scenes/rx90_eye_in_hand.yaml   # robot + mounts + free parameters (relative to this file)
+    csv: measured_poses.csv                  # default: this file's name with .csv
+    units: {length: mm, angle: deg}          # REQUIRED: of the CSV (joints, positions, sigmas, covariances)
+    measured: T_cam_target                   # T_cam_target | T_target_cam | p_cam_target | p_target_cam
+    default_sigma: {t_mm: 0.1, r_deg: 0.02}  # REQUIRED when the CSV has no sigma/covariance columns
+    folds: 5                                 # k-fold held-out validation (>= 2)
+    seed: 0                                  # of the fold split
+
+    # measured_poses.csv (columns matched by header name, any order)
+    pose_id,q1,..,qn,x,y,z,qx,qy,qz,qw[,sigma columns]   # full pose, quaternion scalar last
+    pose_id,q1,..,qn,x,y,z[,sigma columns]               # position only (measured: p_*)
+
+``T_a_b`` is the pose of frame b in frame a, ``p_a_b`` the position of frame b's origin in frame a.
+Noise columns (one group): ``sigma_x,sigma_y,sigma_z[,sigma_rx,sigma_ry,sigma_rz]`` or
+``sigma_t[,sigma_r]`` (isotropic) or the upper triangle ``cov_<i>_<j>`` of the covariance over
+``x,y,z[,rx,ry,rz]``, all in the file's units. The pose noise convention is
+``frames.pose_error``: translation error and small rotation (rotation vector of R_meas R_true^T) of
+the named transform, both in its reference frame a. The reader maps rows and covariances to
+``Measurements`` (T_cam_target, covariance in the camera frame) exactly (``frames.inverse_error_map``).
+"""
+
+from __future__ import annotations
+
+import csv
+import difflib
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .. import frames as F
+from ..config import ANGLE_UNITS, LENGTH_UNITS, Section, angle_key, length_key, load_yaml
+from ..errors import DataError
+
+FORMAT = "vision_calib.measured_poses/1"
+YAML_KEYS = ("format", "scene", "csv", "units", "measured", "default_sigma", "folds", "seed")
+MEASURED = ("T_cam_target", "T_target_cam", "p_cam_target", "p_target_cam")
+POSE_COLS = ("x", "y", "z", "qx", "qy", "qz", "qw")
+COMPONENTS = ("x", "y", "z", "rx", "ry", "rz")
+#: measured sizes this many times larger/smaller than the nominal model's: a unit error
+PLAUSIBLE_FACTOR = 5.0
+
+
+@dataclass(frozen=True)
+class MeasuredPoses:
+    """A validated measured-pose file. ``q``: (N, n) joint readings [rad]. ``T_meas``: (N, 4, 4) the
+    rows as given (``measured``; position-only rows get an identity rotation) [m]. ``cov``: (N, m, m)
+    noise of the rows in the file's direction, SI (m = 6 full pose, 3 position). ``measurements``:
+    ``rig.Measurements`` (T_cam_target + camera-frame covariance) for the setup's problem.
+    ``residual``: "position" for position-only rows, else the scene's."""
+
+    path: Path
+    csv_path: Path
+    scene: object
+    measured: str
+    residual: str
+    ids: tuple
+    q: np.ndarray
+    T_meas: np.ndarray
+    cov: np.ndarray
+    measurements: object
+    sigma_source: str
+    units: dict
+    folds: int
+    seed: int
+
+    @property
+    def position_only(self) -> bool:
+        return self.measured.startswith("p_")
+
+
+def _suggest(name: str, known) -> str:
+    close = difflib.get_close_matches(name, list(known), n=1)
+    return f"; did you mean {close[0]!r}?" if close else ""
+
+
+def _only(sec: Section, known) -> Section:
+    for k in sec.keys():
+        if k not in known:
+            raise sec.error(str(k), f"unknown key (known: {', '.join(known)}){_suggest(str(k), known)}")
+    return sec
+
+
+def _header(csv_path: Path, header: list[str], n_joints: int, position_only: bool) -> tuple[dict, str]:
+    """{column: index} and the noise group ('sigma' | 'iso' | 'cov' | 'none') of a CSV header."""
+    comps = COMPONENTS[:3] if position_only else COMPONENTS
+    pose = ("x", "y", "z") if position_only else POSE_COLS
+    groups = {"sigma": [f"sigma_{c}" for c in comps], "iso": ["sigma_t"] + ([] if position_only else ["sigma_r"]),
+              "cov": [f"cov_{a}_{b}" for i, a in enumerate(comps) for b in comps[i:]]}
+    joints = [f"q{j + 1}" for j in range(n_joints)]
+    known = ["pose_id", *joints, *pose, *(c for g in groups.values() for c in g)]
+    cols = {}
+    for i, h in enumerate(header):
+        if h in cols:
+            raise DataError(f"{csv_path}: line 1: column {h!r} appears twice")
+        if re.fullmatch(r"q\d+", h) and h not in joints:
+            raise DataError(f"{csv_path}: line 1: column {h!r}: the scene's robot has {n_joints} joints "
+                            f"(q1..q{n_joints}), the CSV has more joint columns")
+        if h not in known:
+            extra = " (measured: p_* is position only)" if position_only and h in POSE_COLS else ""
+            raise DataError(f"{csv_path}: line 1: unknown column {h!r}{extra}{_suggest(h, known)}")
+        cols[h] = i
+    for need in ["pose_id", *joints, *pose]:
+        if need not in cols:
+            raise DataError(f"{csv_path}: line 1: missing column {need!r} (need pose_id, {joints[0]}..{joints[-1]}, "
+                            f"{','.join(pose)})")
+    present = [g for g, names in groups.items() if any(c in cols for c in names)]
+    if len(present) > 1:
+        raise DataError(f"{csv_path}: line 1: noise columns of two kinds ({' and '.join(present)}): give one")
+    if present:
+        miss = [c for c in groups[present[0]] if c not in cols]
+        if miss:
+            raise DataError(f"{csv_path}: line 1: missing noise column(s) {', '.join(miss)}")
+    return cols, (present[0] if present else "none")
+
+
+def _rows(csv_path: Path, n_joints: int, position_only: bool):
+    """(ids, values {column: (N,) float in file units}, noise group, CSV line of each row) of the CSV."""
+    if not csv_path.is_file():
+        raise DataError(f"{csv_path}: file not found")
+    with open(csv_path, newline="", encoding="utf-8-sig") as fh:  # -sig: spreadsheets write a BOM
+        rows = [(ln, r) for ln, r in enumerate(csv.reader(fh), start=1) if r and any(c.strip() for c in r)]
+    if len(rows) < 2:
+        raise DataError(f"{csv_path}: no pose rows")
+    header = [h.strip() for h in rows[0][1]]
+    cols, group = _header(csv_path, header, n_joints, position_only)
+    ids, vals = [], []
+    for ln, r in rows[1:]:
+        if len(r) != len(header):
+            raise DataError(f"{csv_path}: line {ln}: {len(r)} values, expected {len(header)} ({','.join(header)})")
+        pid = r[cols["pose_id"]].strip()
+        v = []
+        for name, i in cols.items():
+            if name == "pose_id":
+                continue
+            try:
+                x = float(r[i])
+            except ValueError:
+                raise DataError(f"{csv_path}: line {ln} (pose {pid!r}): column {name}: not a number ({r[i]!r})") from None
+            if not np.isfinite(x):
+                raise DataError(f"{csv_path}: line {ln} (pose {pid!r}): column {name}: NaN or infinite value")
+            v.append(x)
+        ids.append(pid)
+        vals.append(v)
+    dup = sorted({i for i in ids if ids.count(i) > 1})
+    if dup:
+        raise DataError(f"{csv_path}: duplicate pose ids {dup}")
+    arr = np.array(vals, float)
+    names = [c for c in cols if c != "pose_id"]
+    return ids, {c: arr[:, k] for k, c in enumerate(names)}, group, [ln for ln, _ in rows[1:]]
+
+
+def _covariances(csv_path, ids, lines, v, group, m, Lf, Af, default) -> tuple[np.ndarray, str]:
+    """(N, m, m) SI covariances of the rows from the noise columns (or the YAML default sigmas)."""
+    n = len(ids)
+    unit = np.array([Lf] * 3 + [Af] * 3)[:m]
+    comps = COMPONENTS[:m]
+    if group == "none":
+        s = np.array([default[0]] * 3 + [default[1]] * 3)[:m]
+        return np.broadcast_to(np.diag(s**2), (n, m, m)).copy(), "default_sigma (measured_poses yaml)"
+    if group == "cov":
+        C = np.zeros((n, m, m))
+        for i in range(m):
+            for j in range(i, m):
+                C[:, i, j] = C[:, j, i] = v[f"cov_{comps[i]}_{comps[j]}"] * unit[i] * unit[j]
+        ev = np.linalg.eigvalsh(C)[:, 0]
+        bad = np.flatnonzero(ev <= 0)
+        if bad.size:
+            k = bad[0]
+            raise DataError(f"{csv_path}: line {lines[k]} (pose {ids[k]!r}): cov_* columns: covariance is not "
+                            "positive definite")
+        return C, "csv cov_* columns"
+    names = [f"sigma_{c}" for c in comps] if group == "sigma" else (["sigma_t"] * 3 + ["sigma_r"] * 3)[:m]
+    S = np.column_stack([v[c] for c in names]) * unit
+    for c in dict.fromkeys(names):
+        bad = np.flatnonzero(v[c] <= 0)
+        if bad.size:
+            k = bad[0]
+            raise DataError(f"{csv_path}: line {lines[k]} (pose {ids[k]!r}): column {c}: sigma must be > 0, "
+                            f"got {v[c][k]}")
+    return np.einsum("ni,ij->nij", S**2, np.eye(m)), f"csv {'sigma_*' if group == 'sigma' else 'sigma_t/sigma_r'} columns"
+
+
+def _poses(csv_path, ids, lines, v, position_only: bool, Lf: float) -> np.ndarray:
+    """(N, 4, 4) rows as transforms [m] (identity rotation for position-only rows)."""
+    xyz = np.column_stack([v["x"], v["y"], v["z"]]) * Lf
+    if position_only:
+        return F.make_T(np.broadcast_to(np.eye(3), (len(ids), 3, 3)), xyz)
+    quat = np.column_stack([v[c] for c in ("qx", "qy", "qz", "qw")])
+    nq = np.linalg.norm(quat, axis=1)
+    bad = np.flatnonzero(np.abs(nq - 1) > 1e-3)
+    if bad.size:
+        k = bad[0]
+        raise DataError(f"{csv_path}: line {lines[k]} (pose {ids[k]!r}): columns qx,qy,qz,qw: quaternion norm "
+                        f"{nq[k]:.6g} is not 1")
+    return F.T_from_xyz_quat(xyz, quat / nq[:, None])
+
+
+def chain_direction(setup) -> str:
+    """The transform the setup's chain measures (its pose/position residuals live there)."""
+    return "T_target_cam" if setup.mount == "eye_in_hand" else "T_cam_target"
+
+
+def to_camera_convention(setup, measured: str, T, cov):
+    """(T_cam_target (N, 4, 4), cov (N, 6, 6) camera frame) of rows ``T`` (N, 4, 4) of ``measured`` with
+    covariances ``cov`` (N, m, m) in that direction. Position-only rows (m = 3) must be of the chain's
+    own direction; their rotation gets a placeholder variance the position residual never reads."""
+    T, cov = np.asarray(T, float), np.asarray(cov, float)
+    if cov.shape[-1] == 3:
+        full = np.zeros(cov.shape[:-2] + (6, 6))
+        full[:, :3, :3] = cov
+        full[:, 3:, 3:] = np.eye(3) * np.trace(cov, axis1=1, axis2=2)[:, None, None] / 3
+        cov, measured = full, "T" + measured[1:]
+    if measured == "T_cam_target":
+        return T, cov
+    G = F.inverse_error_map(T)
+    return F.inv_T(T), G @ cov @ np.swapaxes(G, -1, -2)
+
+
+def _check_plausible(csv_path, setup, measured, q, T, units: dict) -> None:
+    """DataError when the measured positions are many times larger/smaller than what the nominal model
+    predicts for the same joints (a length unit error, e.g. mm declared as m)."""
+    T_pred = setup.T_cam_target(q, setup.params.nominal)
+    if measured[2:] == "target_cam":
+        T_pred = F.inv_T(T_pred)
+    meas = float(np.sqrt(np.mean(np.sum(T[:, :3, 3] ** 2, axis=1))))
+    pred = float(np.sqrt(np.mean(np.sum(T_pred[:, :3, 3] ** 2, axis=1))))
+    ratio = meas / max(pred, 1e-9)
+    if not (1 / PLAUSIBLE_FACTOR <= ratio <= PLAUSIBLE_FACTOR):
+        raise DataError(
+            f"{csv_path}: columns x,y,z: the measured positions are {ratio:.3g} times the size the nominal model "
+            f"predicts for these joints (RMS {meas:.4g} m vs {pred:.4g} m, read with units.length: "
+            f"{units['length']}): wrong length unit in the YAML, or wrong scene/mounts?")
+
+
+def _settings(top: Section):
+    """(scene Path, csv Path, Lf, Af, units, measured, default sigmas or None, folds, seed)."""
+    _only(top, YAML_KEYS)
+    fmt = top.get("format", str)
+    if fmt != FORMAT:
+        raise top.error("format", f"expected {FORMAT!r}, got {fmt!r}")
+    scene_path = top.path_value("scene")
+    csv_path = top.path_value("csv", None) or top.file.with_suffix(".csv")
+    us = _only(top.section("units"), ("length", "angle"))
+    units = {"length": us.get("length", str, choices=LENGTH_UNITS), "angle": us.get("angle", str, choices=ANGLE_UNITS)}
+    measured = top.get("measured", str, choices=MEASURED)
+    default = None
+    if "default_sigma" in top:
+        ds = _only(top.section("default_sigma"), ("t_m", "t_mm", "t_cm", "r_rad", "r_deg"))
+        t = length_key(ds, "t")
+        r = 0.0 if measured.startswith("p_") else angle_key(ds, "r")
+        rkeys = [str(k) for k in ds.keys() if str(k).startswith("r_")]
+        if measured.startswith("p_") and rkeys:
+            raise ds.error(rkeys[0], "position-only measurements (measured: p_*) have no rotation sigma")
+        if t <= 0 or (r <= 0 and not measured.startswith("p_")):
+            raise ds.error(None, "sigmas must be > 0")
+        default = (t, r)
+    folds = top.get("folds", int, 5)
+    if folds < 2:
+        raise top.error("folds", f"expected an integer >= 2, got {folds}")
+    seed = top.nonnegative("seed", int, 0)
+    return (scene_path, csv_path, LENGTH_UNITS[units["length"]], ANGLE_UNITS[units["angle"]], units, measured,
+            default, folds, seed)
+
+
+def read_measured_poses(path) -> MeasuredPoses:
+    """Read and validate a measured-pose YAML + CSV (see the module docstring). ConfigError for the YAML,
+    DataError for the CSV, each naming the file and the key / line / pose / column."""
+    from ..rig import Measurements, load_scene
+
+    path = Path(path)
+    top = Section(load_yaml(path), path)
+    scene_path, csv_path, Lf, Af, units, measured, default, folds, seed = _settings(top)
+    scene = load_scene(scene_path)
+    setup = scene.setup
+    if not hasattr(setup, "chain_measurements"):
+        raise top.error("scene", f"measured-pose files need a robot commanded by joint sets (serial, URDF); "
+                                 f"{scene.path} is a {setup.kind} robot")
+    pos_only = measured.startswith("p_")
+    if pos_only and measured != "p" + chain_direction(setup)[1:]:
+        raise top.error("measured", f"a {setup.mount} camera measures {'p' + chain_direction(setup)[1:]} "
+                                    f"(position-only rows cannot be inverted without their rotation)")
+    residual = "position" if pos_only else scene.identification.residual
+    setup.check_residual(residual)
+    ids, v, group, lines = _rows(csv_path, setup.n_joints, pos_only)
+    if group == "none" and default is None:
+        raise top.error("default_sigma", f"required: {csv_path.name} has no sigma_*/cov_* columns (no silent "
+                                         "default noise)")
+    if group != "none" and default is not None:
+        raise top.error("default_sigma", f"{csv_path.name} has its own noise columns: remove one of the two")
+    q = np.column_stack([v[f"q{j + 1}"] for j in range(setup.n_joints)]) * Af
+    setup.check_joints(q, str(csv_path), ids)
+    T = _poses(csv_path, ids, lines, v, pos_only, Lf)
+    cov, src = _covariances(csv_path, ids, lines, v, group, 3 if pos_only else 6, Lf, Af, default)
+    _check_plausible(csv_path, setup, measured, q, T, units)
+    if len(ids) < folds:
+        raise top.error("folds", f"{folds} folds need at least {folds} poses, {csv_path.name} has {len(ids)}")
+    T_ct, cov_ct = to_camera_convention(setup, measured, T, cov)
+    meas = Measurements(q, q, T_ct, cov_ct, tuple(ids))
+    return MeasuredPoses(path, csv_path, scene, measured, residual, tuple(ids), q, T, cov, meas, src, units, folds,
+                         seed)
+
+
+def write_measured_poses(yaml_path, scene_path, ids, q, T, measured: str, units=None, sigmas=None, cov=None,
+                         default_sigma=None, folds: int = 5, seed: int = 0) -> Path:
+    """Write a measured-pose YAML + CSV (``<yaml stem>.csv``). q: (N, n) joints [rad]; T: (N, 4, 4) rows of
+    ``measured`` [m] (position-only: translations used); units: {length, angle} of the CSV (default m,
+    rad); one of sigmas (N, m) per-component std [m, rad], cov (N, m, m) SI, or default_sigma
+    (t [m], r [rad]) written to the YAML."""
+    import yaml
+
+    from .atomic import write_text_atomic
+
+    yaml_path = Path(yaml_path)
+    units = units or {"length": "m", "angle": "rad"}
+    Lf, Af = LENGTH_UNITS[units["length"]], ANGLE_UNITS[units["angle"]]
+    pos_only = measured.startswith("p_")
+    m = 3 if pos_only else 6
+    unit = np.array([Lf] * 3 + [Af] * 3)[:m]
+    q, T = np.asarray(q, float), np.asarray(T, float)
+    head = [f"q{j + 1}" for j in range(q.shape[1])]
+    cols = [q / Af]
+    xyz, quat = F.xyz_quat_from_T(T)
+    head += list(POSE_COLS[:3] if pos_only else POSE_COLS)
+    cols += [xyz / Lf] if pos_only else [xyz / Lf, quat]
+    comps = COMPONENTS[:m]
+    if sigmas is not None:
+        head += [f"sigma_{c}" for c in comps]
+        cols.append(np.asarray(sigmas, float) / unit)
+    if cov is not None:
+        C = np.asarray(cov, float) / np.outer(unit, unit)
+        iu = np.triu_indices(m)
+        head += [f"cov_{comps[i]}_{comps[j]}" for i, j in zip(*iu)]
+        cols.append(C[:, iu[0], iu[1]])
+    vals = np.column_stack(cols)
+    lines = [",".join(["pose_id"] + head)]
+    lines += [",".join([str(pid)] + [repr(float(x)) for x in row]) for pid, row in zip(ids, vals)]
+    csv_path = yaml_path.with_suffix(".csv")
+    write_text_atomic(csv_path, "\n".join(lines) + "\n")
+    doc = {"format": FORMAT, "scene": str(scene_path), "csv": csv_path.name, "units": dict(units),
+           "measured": measured, "folds": int(folds), "seed": int(seed)}
+    if default_sigma is not None:
+        doc["default_sigma"] = {"t_mm": float(default_sigma[0]) * 1e3} | (
+            {} if pos_only else {"r_deg": float(np.degrees(default_sigma[1]))})
+    write_text_atomic(yaml_path, yaml.safe_dump(doc, sort_keys=False))
+    return yaml_path
+
+
+__all__ = ["FORMAT", "MEASURED", "MeasuredPoses", "read_measured_poses", "write_measured_poses",
+           "to_camera_convention", "chain_direction"]
