@@ -49,7 +49,7 @@ def _data(scene, x_true, seed, n=40, direction="T_cam_target"):
 
 def _identify(path):
     mp = read_measured_poses(path)
-    res, _, _, _ = identify_measurements(mp.scene.setup, mp.measurements, "lse", mp.residual)
+    res = identify_measurements(mp.scene.setup, mp.measurements, "lse", mp.residual, robust=False).result
     return mp, res
 
 
