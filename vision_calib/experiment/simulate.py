@@ -76,6 +76,23 @@ def _check_outputs(out_dir, export_recording) -> None:
             raise DataError(f"{ex}: --export-recording needs a new or empty folder (frames of another run would mix in)")
 
 
+def _render_and_measure(scene, chain, T_true, q_true, poses, seed, frames, workers, export_recording, progress, pool,
+                        timings: dict) -> list:
+    """PoseMeasurement per pose of the image chain (+ the recorded folder when exporting); stage timings added."""
+    t = time.perf_counter()
+    labels = [f"{i:03d}" for i in range(len(poses))]
+    image_dir = None if export_recording is None else Path(export_recording) / "images"
+    pms, stage = measure_poses(chain, T_true, labels, seed, frames, workers, image_dir, progress, pool=pool)
+    timings["worker_peak_rss_mib"] = stage.pop("worker_peak_rss_mib", float("nan"))
+    timings.update({f"{k}_cpu": v for k, v in stage.items()})
+    timings["render_measure_wall"] = time.perf_counter() - t
+    if export_recording is not None:
+        from ..io.recording import write_recording
+
+        write_recording(export_recording, scene, poses, q_true, frames)
+    return pms
+
+
 def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, method=None, export_recording=None,
                    workers=None, progress=False, overrides=None, plots=True, pool=None,
                    fix_unidentifiable=False) -> dict:
@@ -106,20 +123,9 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
     tsetup = truth or setup
     T_true = tsetup.T_cam_target(poses, x_true)
     q_true = tsetup.joints(poses, x_true)
-    labels = [f"{i:03d}" for i in range(len(poses))]
     timings["setup"] = time.perf_counter() - t
-
-    image_dir = None if export_recording is None else Path(export_recording) / "images"
-    chain = image_chain_of(scene)
-    pms, stage = measure_poses(chain, T_true, labels, seed, frames, workers, image_dir, progress, pool=pool)
-    timings["worker_peak_rss_mib"] = stage.pop("worker_peak_rss_mib", float("nan"))
-    timings.update({f"{k}_cpu": v for k, v in stage.items()})
-    timings["render_measure_wall"] = time.perf_counter() - t - timings["setup"]
-    if export_recording is not None:
-        from ..io.recording import write_recording
-
-        write_recording(export_recording, scene, poses, q_true, frames)
-
+    pms = _render_and_measure(scene, chain, T_true, q_true, poses, seed, frames, workers, export_recording, progress,
+                              pool, timings)
     meas, ok = Measurements.from_pose_measurements(poses, q_true, pms)
     mblock = measurements_block(pms)
     if out_dir is not None:  # kept even if identification fails below

@@ -211,6 +211,7 @@ def handeye_problem(T_base_flange, T_cam_target_meas, mount: str = "fixed", A0=N
     pose_cov (robot repeatability, model error); with neither pose_cov nor sigmas: 1 mm / 0.1 deg.
     labels: (N,) pose identifiers. ``meta`` holds mount, the A/B names, G (N, 4, 4) and the
     nominal rotations used by :func:`transforms_from_x`.
+    Longer than 80 lines: input checks, initial guess, covariance and the two closures share one scope.
     """
     mount = _check_mount(mount)
     F = _check_poses("T_base_flange", T_base_flange)

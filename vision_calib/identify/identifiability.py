@@ -196,7 +196,6 @@ def observability_indices(s: np.ndarray, n_poses: int) -> dict[str, float]:
     s = np.sort(np.asarray(s, float))[::-1]
     if s.size == 0 or s[-1] <= 0:
         return {"O1": 0.0, "O2": 0.0, "O3": 0.0, "O4": 0.0, "O5": 0.0}
-    L = s.size
     return {
         "O1": float(np.exp(np.mean(np.log(s))) / np.sqrt(n_poses)),
         "O2": float(s[-1] / s[0]),
@@ -246,6 +245,7 @@ def analyze(
     jacobian: (n_obs, m, n) Jacobian at x already validated by :func:`check_problem` (skips a recompute).
     Raises IdentifiabilityError when there are fewer scalar equations than free parameters,
     ParameterError when nothing is free, DataError on non-finite data (naming the poses).
+    Longer than 80 lines: one sequence (checks, scaled whitened Jacobian, SVD, base selection, couplings, indices) over shared arrays; split, it would pass ten arrays between helpers.
     """
     params = problem.params
     names = params.free_names

@@ -243,6 +243,7 @@ def solve_lse(
     ``info`` holds nfev, njev, scipy status/message, the identifiability report
     (``info["identifiability"]``), jac mode, loss. Small problems run with single-threaded BLAS
     (:mod:`~vision_calib.identify.threads`).
+    Longer than 80 lines: validation, the scipy call with its closures, and the result assembly share the problem's scaled state.
     """
     t0 = time.perf_counter()
     method = _lse_method(method, loss, jac)

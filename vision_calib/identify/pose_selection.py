@@ -205,6 +205,7 @@ def select_poses(problem: IdentificationProblem, n: int, criterion: str = "D", x
     Raises IdentifiabilityError when n * m < n_free or when the free parameters are not all
     identifiable from the whole pool (naming them; fix them first, e.g. identify.base_problem),
     ParameterError on a bad n / criterion / start, DataError on non-finite data.
+    Longer than 80 lines: argument checks and the greedy + exchange loop share the information blocks.
     """
     c = _check_criterion(criterion)
     K, m = problem.n_obs, problem.m

@@ -102,6 +102,7 @@ def serial_problem(
     (default "0".."N-1"). free: names to identify (default: the chain's free mask).
     Raises ParameterError if two exactly redundant parameters (``chain.redundant_pairs()``, e.g.
     a Hayati ``beta3`` and ``d3``) are both free.
+    Longer than 80 lines: input validation then the residual and Jacobian closures over the same checked arrays.
     """
     # duck-typed: SerialChain or any chain with the same protocol (e.g. kinematics.urdf.URDFChain)
     if not all(hasattr(chain, a) for a in ("params", "forward", "pose_jacobian", "check_joints", "redundant_pairs")):

@@ -477,6 +477,7 @@ def load_serial_robot(path: str | os.PathLike) -> SerialChain:
     "thesis_measured_positions" (k, 3) m}} and ``trials`` {name: {"description", "configurations"
     (name or None), "deviation" / "reported" {param name: SI value}}}.
     Errors: :class:`ConfigError` naming the file and the key.
+    Longer than 80 lines: a flat, key-by-key validation of the robot file (each error names its key).
     """
     from ..config import Section, load_yaml
 
