@@ -159,7 +159,10 @@ class H4Setup(Setup):
         # rotation noise from the residuals of the axis fit, not from the per-pose covariances: the measured
         # rotations carry a systematic part (detector bias) that the covariances miss, and an estimate that is
         # not significant against the real scatter would only move the model by that bias
-        est = estimate_camera_axis(meas.T_cam_target, R_BC0=self.robot.R_BC0, R_ME0=self.robot.R_ME0)
+        try:
+            est = estimate_camera_axis(meas.T_cam_target, R_BC0=self.robot.R_BC0, R_ME0=self.robot.R_ME0)
+        except DataError as exc:  # e.g. all poses at one theta: the axis is not determined, keep the nominal
+            return self, {"applied": False, "reason": str(exc)}
         q = [float(w @ np.linalg.solve(c, w)) for w, c in ((est.tilt_cam_rad, est.cov_tilt_cam),
                                                              (est.tilt_target_rad, est.cov_tilt_target))]
         applied = max(q) > chi2.isf(AXIS_LEVEL, 2)
