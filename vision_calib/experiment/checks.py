@@ -105,6 +105,27 @@ def check_motion(setup: Setup, meas: Measurements, where: str, scale_hint: str) 
     return out
 
 
+def drop_degenerate(meas: Measurements) -> tuple[Measurements, list]:
+    """(measurements without the poses whose covariance is not positive definite, [(label, reason)]): a
+    pose whose frames are all identical (duplicated image files) has zero scatter and no noise estimate."""
+    bad = []
+    tr = np.trace(meas.cov, axis1=1, axis2=2)
+    floor = 1e-6 * np.median(tr) if len(tr) else 0.0  # a million times below the others: no noise estimate
+    for k, c in enumerate(meas.cov):
+        try:
+            np.linalg.cholesky(c)
+            if not tr[k] > floor:
+                bad.append(k)
+        except np.linalg.LinAlgError:
+            bad.append(k)
+    if not bad:
+        return meas, []
+    labels = meas.labels or tuple(str(k) for k in range(len(meas.cov)))
+    keep = [k for k in range(len(meas.cov)) if k not in bad]
+    return meas.subset(keep), [(labels[k], "pose covariance not positive definite: its frames show no scatter "
+                                           "(identical images, e.g. duplicated or linked files)") for k in bad]
+
+
 def drop_inconsistent(meas: Measurements, motion: dict, where: str, max_fraction: float = 0.3):
     """(measurements without the poses :func:`motion_consistency` found inconsistent, [(label, reason)]).
     DataError when more than ``max_fraction`` of the poses are (then the data or the model is wrong)."""

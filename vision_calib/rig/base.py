@@ -200,7 +200,7 @@ class Setup:
         """DataError naming ``where`` and the pose if joint readings q (N, n) rad are out of range."""
         q = np.asarray(q, float)
         if q.ndim != 2 or q.shape[1] != self.n_joints:
-            raise DataError(f"{where}: {q.shape[-1] if q.ndim else 0} joint values per pose, the robot has "
+            raise DataError(f"{where}: {q.shape[-1] if q.ndim else 0} joint columns, the robot has "
                             f"{self.n_joints}")
 
     def fixed_note(self, name: str) -> str:
