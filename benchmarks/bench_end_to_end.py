@@ -129,7 +129,7 @@ def main(argv=None):
     pos = []
     for k in range(args.runs):
         out = run_synthetic(scene, seed=k, poses=poses, validation=validation, base=base)
-        pos.append(out["after"]["position_rms_mm"])
+        pos.append(out.after["position_rms_mm"])
     mc = time.perf_counter() - t0
     print(f"\nMonte Carlo: {args.runs} synthetic identifications + evaluations (H4 model 12, 71 poses): "
           f"{mc:.2f} s ({mc / args.runs * 1e3:.1f} ms each, one process); validation position RMS after "
