@@ -34,34 +34,28 @@ def _rect_corners(rects: np.ndarray) -> np.ndarray:
                      np.stack([x0, y1], -1)], axis=1)
 
 
-def _split_pieces(e: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Cut edges e (E, 4) = (xa, ya, xb, yb) [cell units] at integer y and at integer x in [0, width].
-    Returns (edge index (P,), start (P, 2), end (P, 2)) of the pieces, in order along each edge."""
-    xa, ya, xb, yb = e.T
-    ky0 = np.floor(np.minimum(ya, yb)) + 1  # integers strictly inside (min y, max y) ...
-    ny = np.maximum(np.ceil(np.maximum(ya, yb)) - ky0, 0).astype(np.int64)
-    lo, hi = np.minimum(xa, xb), np.maximum(xa, xb)
-    kx0 = np.maximum(np.floor(lo) + 1, 0)  # ... and integers in (min x, max x) clipped to [0, width]
-    nx = np.maximum(np.minimum(np.ceil(hi) - 1, width) - kx0 + 1, 0).astype(np.int64)
-    n = ny + nx
-    idx = np.repeat(np.arange(len(e)), n)
-    start = np.cumsum(n) - n
-    k = np.arange(idx.size) - np.repeat(start, n)  # rank of each cut within its edge
-    is_y = k < ny[idx]
-    val = np.where(is_y, ky0[idx] + k, kx0[idx] + k - ny[idx])
-    dy, dx = (yb - ya)[idx], (xb - xa)[idx]
+def _cut(e: tuple, axis: int, lo: int, hi: int) -> tuple[tuple, np.ndarray]:
+    """Cut segments e = (xa, ya, xb, yb) (four (E,) arrays) at every integer value of coordinate ``axis``
+    (0: x, 1: y) strictly between their end points and within [lo, hi]. Returns the pieces (four (P,)
+    arrays; each segment's pieces in order along it, the cuts being generated in that order: no sorting)
+    and the index (P,) of the segment each piece comes from."""
+    xa, ya, xb, yb = e
+    a, b = (xa, xb) if axis == 0 else (ya, yb)
+    k0 = np.maximum(np.floor(np.minimum(a, b)) + 1, lo)
+    k1 = np.minimum(np.ceil(np.maximum(a, b)) - 1, hi)
+    n = np.maximum(k1 - k0 + 1, 0).astype(np.int64)  # cuts per segment -> n + 1 pieces
+    m = n + 1
+    i = np.repeat(np.arange(len(a)), m)
+    r = np.arange(i.size) - np.repeat(np.cumsum(m) - m, m)  # rank of the piece within its segment
+    ai, bi, ni = a[i], b[i], n[i]
+    first = np.where(b > a, k0, k1)[i]
+    step = np.where(b > a, 1.0, -1.0)[i]
     with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.where(is_y, (val - ya[idx]) / dy, (val - xa[idx]) / dx)
-    # all cut parameters, plus 0 and 1 per edge, sorted within each edge
-    all_idx = np.concatenate([np.arange(len(e)), idx, np.arange(len(e))])
-    all_t = np.concatenate([np.zeros(len(e)), np.clip(t, 0.0, 1.0), np.ones(len(e))])
-    order = np.lexsort((all_t, all_idx))
-    all_idx, all_t = all_idx[order], all_t[order]
-    same = all_idx[1:] == all_idx[:-1]
-    i, t0, t1 = all_idx[1:][same], all_t[:-1][same], all_t[1:][same]
-    p0 = np.stack([xa[i] + t0 * (xb - xa)[i], ya[i] + t0 * (yb - ya)[i]], -1)
-    p1 = np.stack([xa[i] + t1 * (xb - xa)[i], ya[i] + t1 * (yb - ya)[i]], -1)
-    return i, p0, p1
+        inv = 1.0 / (bi - ai)
+        t0 = np.where(r == 0, 0.0, (first + step * (r - 1) - ai) * inv)
+        t1 = np.where(r == ni, 1.0, (first + step * r - ai) * inv)
+    xai, yai, dx, dy = xa[i], ya[i], (xb - xa)[i], (yb - ya)[i]
+    return (xai + t0 * dx, yai + t0 * dy, xai + t1 * dx, yai + t1 * dy), i
 
 
 def accumulate_coverage(polys: np.ndarray, weights: np.ndarray, height: int, width: int) -> np.ndarray:
@@ -75,23 +69,24 @@ def accumulate_coverage(polys: np.ndarray, weights: np.ndarray, height: int, wid
     b = np.roll(polys, -1, axis=1).reshape(-1, 2)
     w = np.repeat(np.asarray(weights, float), V)
     keep = (a[:, 1] != b[:, 1]) & (np.maximum(a[:, 1], b[:, 1]) > 0) & (np.minimum(a[:, 1], b[:, 1]) < height)
-    e = np.concatenate([a[keep], b[keep]], axis=1)
+    e = (a[keep, 0], a[keep, 1], b[keep, 0], b[keep, 1])
     w = w[keep]
-    acc = np.zeros((height, width + 2))
-    if len(e) == 0:
-        return acc[:, :width]
-    i, p0, p1 = _split_pieces(e, width)
-    ym = 0.5 * (p0[:, 1] + p1[:, 1])
-    dy = p1[:, 1] - p0[:, 1]
-    row = np.floor(ym).astype(np.int64)
+    size = height * (width + 2)
+    if len(w) == 0:
+        return np.zeros((height, width))
+    rows, i1 = _cut(e, 1, 0, height)
+    (xa, ya, xb, yb), i2 = _cut(rows, 0, 0, width)
+    dy = yb - ya
+    row = np.floor(0.5 * (ya + yb)).astype(np.int64)
     ok = (row >= 0) & (row < height) & (dy != 0)
-    xm = np.clip(0.5 * (p0[ok, 0] + p1[ok, 0]), 0.0, width)
+    xm = np.clip(0.5 * (xa[ok] + xb[ok]), 0.0, width)
     col = np.floor(xm).astype(np.int64)
     frac = xm - col
-    h = (w[i] * dy)[ok]
+    h = (w[i1[i2]] * dy)[ok]
     flat = row[ok] * (width + 2) + col
-    size = height * (width + 2)
-    acc += (np.bincount(flat, h * (1.0 - frac), size) + np.bincount(flat + 1, h * frac, size)).reshape(acc.shape)
+    # the piece's dy split between its cell (part right of it) and the next cell; row sums then give areas
+    acc = np.bincount(np.concatenate([flat, flat + 1]), np.concatenate([h * (1.0 - frac), h * frac]), size)
+    acc = acc.reshape(height, width + 2)
     return np.cumsum(acc, axis=1)[:, :width]
 
 
@@ -107,6 +102,7 @@ class PolygonRenderer:
         x0, y0, x1, y1 = target.texture_extent_m()
         self._outline = _rect_corners(np.array([[x0, y0, x1, y1]], float))  # (1, 4, 2)
         self._rects = _rect_corners(np.array(target._black_rects(), float).reshape(-1, 4))  # (N, 4, 2)
+        self._blank = np.full((intrinsics.height, intrinsics.width), self.background, np.float32)
 
     def _project(self, T: np.ndarray, pts: np.ndarray) -> np.ndarray:
         """(..., 2) target points [m] -> pixel-border coordinates (u + 0.5, v + 0.5)."""
@@ -119,7 +115,7 @@ class PolygonRenderer:
         every outline corner must be in front of the camera (:func:`~vision_calib.render.warp.planar_warp_ok`)."""
         T = np.asarray(T_cam_target, float)
         K, bg = self.K, self.background
-        out = np.full((K.height, K.width), bg, np.float32)
+        out = self._blank.copy()
         outline = self._project(T, self._outline)
         u0 = max(0, int(math.floor(outline[..., 0].min())))
         v0 = max(0, int(math.floor(outline[..., 1].min())))
