@@ -222,7 +222,7 @@ def test_supersample_factors_agree():
     T = look_at_target(A5, 0.45, (0.3, -0.2, 0.1))
     imgs = []
     for s in (2, 3):
-        with TargetRenderer(A5, K, supersample=s) as r:
+        with TargetRenderer(A5, K, supersample=s, backend="pyrender") as r:
             imgs.append(r.render(T))
     assert np.mean(np.abs(imgs[0] - imgs[1])) < 1.0
 
@@ -304,11 +304,13 @@ def test_pattern_edges_unbiased_on_non_power_of_two_texture(backend):
 
 
 @pytest.mark.slow
-def test_charuco_corners_unbiased_on_non_power_of_two_texture():
+@pytest.mark.parametrize("backend", ["pyrender", "polygon"])
+def test_charuco_corners_unbiased_on_non_power_of_two_texture(backend):
     """H4 board at 0.6-0.76 m, supersample 2, 5 poses (one fronto-parallel): cornerSubPix corners of the
     render agree with cv2.projectPoints with no mean offset (< 0.01 px; the detector's own bias is
     ~0.005 px mean here), and with the same detector on a CPU reference (homography warp of the texture,
-    8x supersampled) to 0.03 px RMS (before the fix: mean dv +0.03 px, RMS 0.07-0.11 px)."""
+    8x supersampled) to 0.03 px RMS (pyrender before the fix: mean dv +0.03 px, RMS 0.07-0.11 px; the
+    polygon backend: < 0.01 px RMS, measured 0.005 px, the reference's own sampling error)."""
     from vision_calib.render.bench import reference_image, subpix_at
 
     rng = np.random.default_rng(3)
@@ -316,7 +318,7 @@ def test_charuco_corners_unbiased_on_non_power_of_two_texture():
         look_at_target(H4_LIKE, rng.uniform(0.6, 0.76), rng.uniform(-0.35, 0.35, 3), rng.uniform(-0.03, 0.03, 2))
         for _ in range(4)]
     d_proj, d_ref = [], []
-    with TargetRenderer(H4_LIKE, K_H4, supersample=2) as r:
+    with TargetRenderer(H4_LIKE, K_H4, supersample=2, backend=backend) as r:
         for T in poses:
             _, uv = project(H4_LIKE, K_H4, T)
             got = subpix_at(r.render(T), uv)
@@ -326,4 +328,4 @@ def test_charuco_corners_unbiased_on_non_power_of_two_texture():
     d_proj, d_ref = np.concatenate(d_proj), np.concatenate(d_ref)
     assert np.all(np.abs(d_proj.mean(axis=0)) < 0.01), d_proj.mean(axis=0)
     assert np.all(np.abs(d_ref.mean(axis=0)) < 0.005), d_ref.mean(axis=0)
-    assert np.sqrt((d_ref ** 2).sum(axis=1).mean()) < 0.03
+    assert np.sqrt((d_ref ** 2).sum(axis=1).mean()) < (0.03 if backend == "pyrender" else 0.01)
