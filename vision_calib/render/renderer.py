@@ -6,10 +6,13 @@ drew the last image ``TargetRenderer.last_backend``):
   coverage of the board's black rectangles projected by the pose's homography
   (:mod:`vision_calib.render.coverage`), on the CPU, no texture and no supersampling (``supersample`` is
   not used: the image is the s -> infinity limit). A pose with a board corner at or behind ``znear`` falls
-  back to pyrender. Against a CPU reference (``cv2.warpPerspective`` of the 4096-texel texture at 8x,
-  box-averaged; ``python -m vision_calib.render.bench``), cornerSubPix corners agree to 0.002-0.005 px RMS
-  (the reference's own sampling error; pyrender at s = 2: 0.012-0.017 px), and border edges agree with
-  the projection to < 1e-6 px (``tests/render/test_renderer.py``), at 0.3-0.6 of pyrender's time.
+  back to pyrender. Measured (``benchmarks/bench_render.py``, 8 poses each, one thread): cornerSubPix
+  corners minus the same detector on a CPU reference (``cv2.warpPerspective`` of the 4096-texel texture at
+  8x, box-averaged) 0.002 (A5, AprilTag) to 0.005-0.007 px RMS (H4, H4 tilted up to 46 deg), which is the
+  reference's own sampling error (0.002 px against a 16x reference), vs pyrender at s = 2: 0.012-0.048 px
+  (s = 4: 0.004-0.012 px); edges of the H4 board within 2e-5 px of the projection (float32 rounding;
+  ``tests/render/test_renderer.py``). Speed on the H4 scene: ~4 ms per pose, 0.13 x the floor
+  (full-texture ``cv2.warpPerspective`` at 2x + area average), pyrender s = 2 ~1.8 x the floor.
 - ``"warp"`` (opt-in, kept for comparison): a CPU homography warp of a mip-mapped board texture
   (:mod:`vision_calib.render.warp`), internally supersampled ``max(supersample, 4)`` x; bilinear sampling
   of a box-filtered mip level leaves a texel-phase-dependent edge error, coherent along straight edges:
