@@ -130,20 +130,22 @@ def test_detected_corners_agree_with_pyrender_to_a_fraction_of_the_noise():
 
 @pytest.mark.slow
 def test_pose_bias_and_random_error_unchanged_vs_pyrender():
-    """H4 scene, 8 random views x 5 noisy frames (same seeds for both renderers), PnP on averaged corners:
-    per component, the pose bias RMS (noise-free frame vs truth) and the random error RMS of the polygon
-    backend equal pyrender's (s = 4) within two standard errors of an RMS over 8 poses (2 / sqrt(16) =
-    50 %), and the per-pose bias moves by less than the per-pose random error (paired RMS over poses)."""
+    """H4 scene, n = 16 random views x 5 noisy frames (same seeds for both renderers), PnP on averaged
+    corners: per component, the pose bias RMS (noise-free frame vs truth) and the random error RMS of the
+    polygon backend equal pyrender's (s = 4) within two standard errors of the difference of two RMS over
+    n poses (2 / sqrt(n) = 50 %; measured: bias <= 5 %, random <= 32 %), and the per-pose bias moves by
+    less than the per-pose random error of the 5-frame average (paired RMS over poses; measured <= 0.61 of
+    it)."""
     K, spec, eff = _h4()
     res = {}
     for name, kw in (("polygon", dict(backend="polygon")), ("pyrender", dict(backend="pyrender", supersample=4))):
         with TargetRenderer(spec, K.without_distortion(), **kw) as r:
-            res[name] = accuracy_study(spec, K, eff, n_poses=8, n_frames=5, seed=1, modes=("corners",),
+            res[name] = accuracy_study(spec, K, eff, n_poses=16, n_frames=5, seed=1, modes=("corners",),
                                        dist_range=(0.6, 0.76), renderer=r)["corners"]
     a, b = res["polygon"], res["pyrender"]
-    assert a["n_valid"] == b["n_valid"] == 8
+    assert a["n_valid"] == b["n_valid"] == 16
     for key in ("bias_rms", "random_rms"):
         rel = np.abs(a[key] - b[key]) / b[key]
-        assert np.all(rel < 2 / np.sqrt(2 * 8)), (key, rel)
+        assert np.all(rel < 2 / np.sqrt(16)), (key, rel)
     paired = np.sqrt(((a["bias"] - b["bias"]) ** 2).mean(0))
     assert np.all(paired < b["random_rms"]), (paired, b["random_rms"])
