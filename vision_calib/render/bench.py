@@ -1,8 +1,8 @@
 """Render speed and accuracy figures (prints; no assertions). ``python -m vision_calib.render.bench``.
 
 For each scene (``a5``: ``targets/charuco_a5.yaml`` at 0.3-0.6 m; ``h4``: the H4 9 x 6 ChArUco, whose
-texture is not a power of two, at 0.6-0.76 m, f = 1013 px) and supersample factor s: frames/s of
-:meth:`TargetRenderer.render` at 1024 x 768 (set ``LP_NUM_THREADS=1`` for single-thread figures), the
+texture is not a power of two, at 0.6-0.76 m, f = 1013 px), for the polygon backend and pyrender at each
+supersample factor s: frames/s of :meth:`TargetRenderer.render` at 1024 x 768 (set ``LP_NUM_THREADS=1`` for single-thread figures), the
 cornerSubPix corner shift between the rendered image and a CPU reference (``cv2.warpPerspective`` of
 the same texture at 8x, box-averaged) at the same projected ChArUco corners (mean and RMS), and the
 solvePnP pose error from the rendered corners; plus, for the reference, the detector's own bias
@@ -94,8 +94,8 @@ def main(argv=None):
               f"{P.shape[0]} corners each. cornerSubPix on the CPU reference: bias vs projectPoints RMS "
               f"{np.sqrt((det_bias ** 2).sum(1).mean()):.4f} px; PnP error RMS {np.sqrt((pe[:, 0] ** 2).mean()):.4f} deg, "
               f"tz {np.sqrt((pe[:, 1] ** 2).mean()):.4f} mm")
-        for s in a.factors:
-            with TargetRenderer(spec, K, supersample=s) as r:
+        for backend, s in [("polygon", 1)] + [("pyrender", f) for f in a.factors]:
+            with TargetRenderer(spec, K, supersample=s, backend=backend) as r:
                 r.render(poses[0])  # warm-up (shader compilation)
                 t0 = time.perf_counter()
                 imgs = [r.render(T) for T in poses]
@@ -103,7 +103,7 @@ def main(argv=None):
                 got = [subpix_at(img, uv) for img, uv in zip(imgs, uvs)]
                 d = np.concatenate([g - ref for g, ref in zip(got, refs)])
                 pe = np.array([_pnp_error(P, g, K, T) for g, T in zip(got, poses)])
-                print(f"  s={s}: {1 / dt:6.1f} frames/s; render - reference corner shift: mean ({d[:, 0].mean():+.4f}, "
+                print(f"  {backend if backend == 'polygon' else f'pyrender s={s}'}: {1 / dt:6.1f} frames/s; render - reference corner shift: mean ({d[:, 0].mean():+.4f}, "
                       f"{d[:, 1].mean():+.4f}) RMS {np.sqrt((d ** 2).sum(1).mean()):.4f} max {np.abs(d).max():.4f} px; "
                       f"PnP error RMS {np.sqrt((pe[:, 0] ** 2).mean()):.4f} deg, tz {np.sqrt((pe[:, 1] ** 2).mean()):.4f} mm; "
                       f"anisotropy {r.anisotropy:g}", flush=True)

@@ -1,16 +1,25 @@
 """Rendering of a calibration target: the ideal grey image a pinhole camera sees.
 
-Two backends (``TargetRenderer(..., backend=...)``):
-- ``"warp"`` (opt-in; one planar target, no occluders): a CPU homography warp of a mip-mapped board
-  texture (:mod:`vision_calib.render.warp`), internally supersampled ``max(supersample, 4)`` x; a pose
-  with a board corner at or behind ``znear`` falls back to pyrender. NOT the default yet: bilinear sampling
-  of a box-filtered mip level leaves a texel-phase-dependent edge error, coherent along straight edges of
-  a fronto-parallel board: up to 0.05 px (mean up to 0.016 px) on the H4 board vs < 0.025 px for pyrender
-  (``tests/render/test_renderer.py::test_pattern_edges_unbiased_on_non_power_of_two_texture``), and
-  cornerSubPix corners 0.015 px RMS from the 8x reference at 3x (pyrender 0.014 px).
-- ``"pyrender"`` (default, "auto"): OpenGL through pyrender (occluders too; the reference).
-  Its internals are reached only through :mod:`vision_calib.render.gl_adapter`; pyrender is imported
-  on first use, so a warp-only process never loads OpenGL.
+Backends (``TargetRenderer(..., backend=...)``; the one in use is ``TargetRenderer.backend``, the one that
+drew the last image ``TargetRenderer.last_backend``):
+- ``"polygon"`` (the default, ``"auto"``, for one planar target and no occluders): the exact pixel-area
+  coverage of the board's black rectangles projected by the pose's homography
+  (:mod:`vision_calib.render.coverage`), on the CPU, no texture and no supersampling (``supersample`` is
+  not used: the image is the s -> infinity limit). A pose with a board corner at or behind ``znear`` falls
+  back to pyrender. Measured (``benchmarks/bench_render.py``, 8 poses each, one thread): cornerSubPix
+  corners minus the same detector on a CPU reference (``cv2.warpPerspective`` of the 4096-texel texture at
+  8x, box-averaged) 0.002 (A5, AprilTag) to 0.005-0.007 px RMS (H4, H4 tilted up to 46 deg), which is the
+  reference's own sampling error (0.002 px against a 16x reference), vs pyrender at s = 2: 0.012-0.048 px
+  (s = 4: 0.004-0.012 px); edges of the H4 board within 2e-5 px of the projection (float32 rounding;
+  ``tests/render/test_renderer.py``). Speed on the H4 scene: ~4 ms per pose, 0.13 x the floor
+  (full-texture ``cv2.warpPerspective`` at 2x + area average), pyrender s = 2 ~1.8 x the floor.
+- ``"warp"`` (opt-in, kept for comparison): a CPU homography warp of a mip-mapped board texture
+  (:mod:`vision_calib.render.warp`), internally supersampled ``max(supersample, 4)`` x; bilinear sampling
+  of a box-filtered mip level leaves a texel-phase-dependent edge error, coherent along straight edges:
+  up to 0.05 px on the H4 board vs < 0.025 px for pyrender.
+- ``"pyrender"`` (occluders, and the reference for checking): OpenGL through pyrender. Its internals are
+  reached only through :mod:`vision_calib.render.gl_adapter`; pyrender is imported on first use, so a
+  CPU-only process never loads OpenGL.
 
 The rest of this docstring describes the pyrender path.
 
@@ -63,11 +72,12 @@ from ..camera import CameraIntrinsics
 from ..errors import ConfigError, DataError
 from ..frames import cam_gl_from_cv, check_finite, inv_T
 from ..targets.spec import TargetSpec
+from .coverage import PolygonRenderer
 from .warp import MAX_WARP_TEXTURE_PX, MipWarp, planar_warp_ok
 
 #: Default cap on the texture's larger side [texels] when ``texture_px_per_m`` is not given.
 DEFAULT_MAX_TEXTURE_PX = 4096
-BACKENDS = ("auto", "warp", "pyrender")
+BACKENDS = ("auto", "polygon", "warp", "pyrender")
 
 def _quad(extent, z_front: bool, uv_max=(1.0, 1.0)) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Two triangles covering extent (x0, y0, x1, y1) [m] at z = 0; vertices (4, 3), faces (2, 3),
@@ -176,16 +186,18 @@ class TargetRenderer:
     """Render a textured target plane as seen by a pinhole camera (OpenCV intrinsics, no distortion).
 
     target: TargetSpec. intrinsics: CameraIntrinsics (its ``dist`` is ignored: ideal image).
-    supersample: s >= 1, render at s x resolution then box-average (the warp backend uses max(s, 4)).
+    supersample: s >= 1, render at s x resolution then box-average (pyrender; the warp backend uses
+    max(s, 4); the polygon backend computes exact pixel areas and ignores it).
     background: grey level [0, 255] of empty pixels. occluders: optional list of
     ``(trimesh.Trimesh, T_cam_mesh (4, 4))`` or ``(mesh, T_cam_mesh, grey)``, flat grey objects (default
     grey 40) fixed in the camera frame unless ``occluder_poses`` is given to :meth:`render` (pyrender only).
     texture_px_per_m: texture resolution [texels/m] (default: larger board side = 4096 texels).
     texture_lod_bias: mipmap LOD bias of the GL sampler (default -1). anisotropy: max anisotropic filtering
     (default 16; 1 = off; ignored if the driver lacks it). back_grey: grey level of the board's back face.
-    znear, zfar: clip distances [m]. backend: "auto" (default: "pyrender"; see the module docstring for why
-    the warp path is not chosen automatically yet), "warp" or "pyrender". An OpenGL context is held only when pyrender is used;
-    call :meth:`close` or use ``with``.
+    znear, zfar: clip distances [m]. backend: "auto" (default: "polygon" without occluders, else "pyrender"),
+    "polygon", "warp" or "pyrender" (module docstring); the chosen one is :attr:`backend`, the one that drew
+    the last image :attr:`last_backend` (a planar backend hands poses with a board corner at or behind znear
+    to pyrender). An OpenGL context is held only once pyrender is used; call :meth:`close` or use ``with``.
     """
 
     def __init__(self, target: TargetSpec, intrinsics: CameraIntrinsics, supersample: int = 2,
@@ -206,9 +218,9 @@ class TargetRenderer:
                 raise ConfigError(f"TargetRenderer: occluder {i} must be (mesh, T_cam_mesh) or (mesh, T_cam_mesh, grey)")
             occ.append((o[0], check_finite(f"occluder {i} T_cam_mesh", o[1]), (o[2] if len(o) == 3 else 40.0) / 255.0))
         if backend == "auto":
-            backend = "pyrender"  # the warp path's edge accuracy is not yet at pyrender's (module docstring)
-        if backend == "warp" and occ:
-            raise ConfigError("TargetRenderer: backend 'warp' renders a lone planar target; occluders need 'pyrender'")
+            backend = "pyrender" if occ else "polygon"
+        if backend in ("polygon", "warp") and occ:
+            raise ConfigError(f"TargetRenderer: backend {backend!r} renders a lone planar target; occluders need 'pyrender'")
         self.backend = backend
         self.target, self.intrinsics = target, intrinsics
         self.supersample = int(supersample)
@@ -221,17 +233,21 @@ class TargetRenderer:
                          back_grey, texture_lod_bias, anisotropy, znear, zfar)
         self._znear = znear
         self._n_occ = len(occ)
-        self._gl = self._warp = None
+        self._gl = self._cpu = None
+        self.last_backend = None
         self.anisotropy = float("nan")  # GL sampler's anisotropy, once a GL context exists
-        if backend == "warp":
-            if max(self.texture_shape) > MAX_WARP_TEXTURE_PX:
+        if backend == "polygon":
+            self._cpu = PolygonRenderer(target, intrinsics, self.background, back_grey)
+        if backend in ("polygon", "warp"):
+            if max(self.texture_shape) > MAX_WARP_TEXTURE_PX:  # the texture of a pyrender fallback
                 raise ConfigError(
-                    f"TargetRenderer: texture {self.texture_shape[1]}x{self.texture_shape[0]} px exceeds the warp "
-                    f"backend's {MAX_WARP_TEXTURE_PX} px (GL_MAX_TEXTURE_SIZE of common drivers); lower "
+                    f"TargetRenderer: texture {self.texture_shape[1]}x{self.texture_shape[0]} px exceeds the CPU "
+                    f"backends' {MAX_WARP_TEXTURE_PX} px (GL_MAX_TEXTURE_SIZE of common drivers); lower "
                     f"texture_px_per_m ({self.texture_px_per_m:.0f} px/m)")
-            self._warp = MipWarp(target, intrinsics, max(self.supersample, 4), self.background, back_grey,
+        if backend == "warp":
+            self._cpu = MipWarp(target, intrinsics, max(self.supersample, 4), self.background, back_grey,
                                  self.texture_px_per_m)
-        else:
+        if backend == "pyrender":
             self._open_gl()
 
     def _open_gl(self) -> _GLScene:
@@ -253,9 +269,11 @@ class TargetRenderer:
             raise DataError(f"T_cam_target must be (4, 4), got {T_cam_target.shape}")
         if occluder_poses is not None and len(occluder_poses) != self._n_occ:
             raise DataError(f"occluder_poses: expected {self._n_occ} poses, got {len(occluder_poses)}")
-        if self._warp is not None and planar_warp_ok(self.target, T_cam_target, self._znear):
-            img = self._warp.render(T_cam_target)
+        if self._cpu is not None and planar_warp_ok(self.target, T_cam_target, self._znear):
+            img = self._cpu.render(T_cam_target)
+            self.last_backend = self.backend
         else:
+            self.last_backend = "pyrender"
             img = self._open_gl().render(T_cam_target, occluder_poses).astype(np.float32)
             if self.supersample > 1:  # exact s x s box average for an integer factor
                 img = cv2.resize(img, self.intrinsics.size, interpolation=cv2.INTER_AREA)

@@ -1,5 +1,8 @@
-"""CPU fast path of :class:`~vision_calib.render.TargetRenderer` for a scene with one planar target and
-no occluders: the ideal image is a homography warp of a pre-filtered (mip-mapped) board texture.
+"""Opt-in CPU path (``backend="warp"``) of :class:`~vision_calib.render.TargetRenderer` for a scene with one
+planar target and no occluders: the ideal image is a homography warp of a pre-filtered (mip-mapped) board
+texture. Not the default: its edges carry a texel-phase error up to 0.05 px and its corners are 2-3 x
+further from the 8x reference than the default "polygon" backend's (:mod:`vision_calib.render.coverage`;
+``benchmarks/bench_render.py``). :func:`supersampled_K` and :func:`planar_warp_ok` serve all backends.
 
 Conventions are those of :mod:`vision_calib.render.renderer` (OpenCV pixel centres, supersampling by s
 with hi-res pixel centre u_s = s (u + 0.5) - 0.5, then an exact s x s box average):

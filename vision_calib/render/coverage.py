@@ -1,0 +1,138 @@
+"""Exact pixel-area coverage of a planar target under a homography (the ``"polygon"`` backend).
+
+Every target is white inside its outline with non-overlapping, axis-aligned black rectangles
+(:meth:`TargetSpec._black_rects`, the same rectangles its texture is drawn from). A homography maps
+straight lines to straight lines, so each rectangle projects to an exact convex quadrilateral whose
+vertices are the projected corners; the ideal image (pixel value = mean of the board's radiance over
+the pixel's square, the limit of supersampling by s -> infinity) is then
+
+    I = background + (face - background) * cover(outline) - face * sum_k cover(rect_k)   (front face)
+    I = background + (back_grey - background) * cover(outline)                           (back face)
+
+with cover(Q) the exact fraction of each pixel inside quad Q. :func:`accumulate_coverage` computes it by
+signed-area accumulation (as in font rasterisers): every polygon edge is cut at each integer x and y
+(pixel borders), each piece lying in one pixel cell adds its signed height dy times the part of the cell
+right of it to that cell and the rest to the next cell; a cumulative sum along each row then gives the
+covered area of every pixel, exactly up to float64 rounding (no texture, no sampling, no aliasing).
+Pixel u covers [u - 0.5, u + 0.5] (OpenCV centres): pixel coordinates are shifted by + 0.5 first.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..camera import CameraIntrinsics
+from ..targets.spec import TargetSpec
+
+
+def _rect_corners(rects: np.ndarray) -> np.ndarray:
+    """(N, 4, 2) corners TL, TR, BR, BL of rectangles (N, 4) = (x0, y0, x1, y1)."""
+    x0, y0, x1, y1 = rects.T
+    return np.stack([np.stack([x0, y0], -1), np.stack([x1, y0], -1), np.stack([x1, y1], -1),
+                     np.stack([x0, y1], -1)], axis=1)
+
+
+def _cut(e: tuple, axis: int, lo: int, hi: int) -> tuple[tuple, np.ndarray]:
+    """Cut segments e = (xa, ya, xb, yb) (four (E,) arrays) at every integer value of coordinate ``axis``
+    (0: x, 1: y) strictly between their end points and within [lo, hi]. Returns the pieces (four (P,)
+    arrays; each segment's pieces in order along it, the cuts being generated in that order: no sorting)
+    and the index (P,) of the segment each piece comes from."""
+    xa, ya, xb, yb = e
+    a, b = (xa, xb) if axis == 0 else (ya, yb)
+    k0 = np.maximum(np.floor(np.minimum(a, b)) + 1, lo)
+    k1 = np.minimum(np.ceil(np.maximum(a, b)) - 1, hi)
+    n = np.maximum(k1 - k0 + 1, 0).astype(np.int64)  # cuts per segment -> n + 1 pieces
+    m = n + 1
+    i = np.repeat(np.arange(len(a)), m)
+    r = np.arange(i.size) - np.repeat(np.cumsum(m) - m, m)  # rank of the piece within its segment
+    ai, bi, ni = a[i], b[i], n[i]
+    first = np.where(b > a, k0, k1)[i]
+    step = np.where(b > a, 1.0, -1.0)[i]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / (bi - ai)
+        t0 = np.where(r == 0, 0.0, (first + step * (r - 1) - ai) * inv)
+        t1 = np.where(r == ni, 1.0, (first + step * r - ai) * inv)
+    xai, yai, dx, dy = xa[i], ya[i], (xb - xa)[i], (yb - ya)[i]
+    return (xai + t0 * dx, yai + t0 * dy, xai + t1 * dx, yai + t1 * dy), i
+
+
+def accumulate_coverage(polys: np.ndarray, weights: np.ndarray, height: int, width: int) -> np.ndarray:
+    """Sum over polygons of weight * (signed) covered area per cell, (height, width) float64.
+
+    polys: (N, V, 2) vertices [cell units: cell (r, c) = [c, c + 1] x [r, r + 1]]; weights: (N,).
+    A polygon counter-clockwise on the screen (y down; e.g. TL, BL, BR, TR) counts +1, clockwise -1.
+    Parts outside [0, width] x [0, height] are ignored."""
+    N, V, _ = polys.shape
+    a = polys.reshape(-1, 2)
+    b = np.roll(polys, -1, axis=1).reshape(-1, 2)
+    w = np.repeat(np.asarray(weights, float), V)
+    keep = (a[:, 1] != b[:, 1]) & (np.maximum(a[:, 1], b[:, 1]) > 0) & (np.minimum(a[:, 1], b[:, 1]) < height)
+    e = (a[keep, 0], a[keep, 1], b[keep, 0], b[keep, 1])
+    w = w[keep]
+    size = height * (width + 2)
+    if len(w) == 0:
+        return np.zeros((height, width))
+    rows, i1 = _cut(e, 1, 0, height)
+    (xa, ya, xb, yb), i2 = _cut(rows, 0, 0, width)
+    dy = yb - ya
+    row = np.floor(0.5 * (ya + yb)).astype(np.int64)
+    ok = (row >= 0) & (row < height) & (dy != 0)
+    xm = np.clip(0.5 * (xa[ok] + xb[ok]), 0.0, width)
+    col = np.floor(xm).astype(np.int64)
+    frac = xm - col
+    h = (w[i1[i2]] * dy)[ok]
+    flat = row[ok] * (width + 2) + col
+    # the piece's dy split between its cell (part right of it) and the next cell; row sums then give areas
+    acc = np.bincount(np.concatenate([flat, flat + 1]), np.concatenate([h * (1.0 - frac), h * frac]), size)
+    acc = acc.reshape(height, width + 2)
+    return np.cumsum(acc, axis=1)[:, :width]
+
+
+class PolygonRenderer:
+    """Exact area-coverage image of a planar target (see the module docstring).
+
+    target: TargetSpec; intrinsics: pinhole camera (distortion ignored); background, back_grey: grey
+    levels [0, 255] of empty pixels and of the board's back face; the printed face is white 255 / black 0."""
+
+    def __init__(self, target: TargetSpec, intrinsics: CameraIntrinsics, background: float, back_grey: float):
+        self.K = intrinsics
+        self.background, self.back_grey = float(background), float(back_grey)
+        x0, y0, x1, y1 = target.texture_extent_m()
+        self._outline = _rect_corners(np.array([[x0, y0, x1, y1]], float))  # (1, 4, 2)
+        self._rects = _rect_corners(np.array(target._black_rects(), float).reshape(-1, 4))  # (N, 4, 2)
+        self._blank = np.full((intrinsics.height, intrinsics.width), self.background, np.float32)
+
+    def _project(self, T: np.ndarray, pts: np.ndarray) -> np.ndarray:
+        """(..., 2) target points [m] -> pixel-border coordinates (u + 0.5, v + 0.5)."""
+        Hm = self.K.K @ np.column_stack([T[:3, 0], T[:3, 1], T[:3, 3]])
+        p = pts @ Hm[:, :2].T + Hm[:, 2]
+        return p[..., :2] / p[..., 2:] + 0.5
+
+    def render(self, T_cam_target: np.ndarray) -> np.ndarray:
+        """Ideal grey image (H, W) float32 [0, 255] at pose T_cam_target (4, 4) [m, OpenCV camera frame];
+        every outline corner must be in front of the camera (:func:`~vision_calib.render.warp.planar_warp_ok`)."""
+        T = np.asarray(T_cam_target, float)
+        K, bg = self.K, self.background
+        out = self._blank.copy()
+        outline = self._project(T, self._outline)
+        u0 = max(0, int(math.floor(outline[..., 0].min())))
+        v0 = max(0, int(math.floor(outline[..., 1].min())))
+        u1 = min(K.width, int(math.ceil(outline[..., 0].max())))
+        v1 = min(K.height, int(math.ceil(outline[..., 1].max())))
+        if u1 <= u0 or v1 <= v0:
+            return out
+        q = outline[0]
+        area2 = np.sum(q[:, 0] * np.roll(q[:, 1], -1) - np.roll(q[:, 0], -1) * q[:, 1])
+        sign = -1.0 if area2 > 0 else 1.0  # TL, TR, BR, BL clockwise on the screen: coverage -1 (see above)
+        front = float(T[:3, 2] @ T[:3, 3]) > 0  # camera on the -z side of the board: printed face
+        shift = np.array([u0, v0], float)
+        if front:
+            polys = np.concatenate([outline, self._project(T, self._rects)]) - shift
+            weights = sign * np.concatenate([[255.0 - bg], np.full(len(self._rects), -255.0)])
+        else:
+            polys, weights = outline - shift, sign * np.array([self.back_grey - bg])
+        cov = accumulate_coverage(polys, weights, v1 - v0, u1 - u0)
+        out[v0:v1, u0:u1] += cov.astype(np.float32)
+        return out
