@@ -1,7 +1,7 @@
 """Exact pixel-area coverage of a planar target under a homography (the ``"polygon"`` backend).
 
 Every target is white inside its outline with non-overlapping, axis-aligned black rectangles
-(:meth:`TargetSpec._black_rects`, the same rectangles its texture is drawn from). A homography maps
+(:meth:`TargetSpec.black_rects`, the same rectangles its texture is drawn from). A homography maps
 straight lines to straight lines, so each rectangle projects to an exact convex quadrilateral whose
 vertices are the projected corners; the ideal image (pixel value = mean of the board's radiance over
 the pixel's square, the limit of supersampling by s -> infinity) is then
@@ -101,7 +101,7 @@ class PolygonRenderer:
         self.background, self.back_grey = float(background), float(back_grey)
         x0, y0, x1, y1 = target.texture_extent_m()
         self._outline = _rect_corners(np.array([[x0, y0, x1, y1]], float))  # (1, 4, 2)
-        self._rects = _rect_corners(np.array(target._black_rects(), float).reshape(-1, 4))  # (N, 4, 2)
+        self._rects = _rect_corners(np.array(target.black_rects(), float).reshape(-1, 4))  # (N, 4, 2)
         self._blank = np.full((intrinsics.height, intrinsics.width), self.background, np.float32)
 
     def _project(self, T: np.ndarray, pts: np.ndarray) -> np.ndarray:

@@ -208,7 +208,7 @@ class TargetSpec:
         return cv2.aruco.GridBoard((self.cols, self.rows), self.tag_m, self.spacing_m, d, ids)
 
     # ------------------------------------------------------------------ texture
-    def _black_rects(self) -> list[tuple[float, float, float, float]]:
+    def black_rects(self) -> list[tuple[float, float, float, float]]:
         """Non-overlapping black rectangles (x0, y0, x1, y1) [m, target frame] making up the pattern."""
         rects = []
         d = self.cv_dictionary()
@@ -269,7 +269,7 @@ class TargetSpec:
         sx = W / (x_max - x_min)
         sy = H / (y_max - y_min)
         img = np.ones((H, W), dtype=float)
-        for x0, y0, x1, y1 in self._black_rects():
+        for x0, y0, x1, y1 in self.black_rects():
             ox, i0 = _overlap_1d((x0 - x_min) * sx, (x1 - x_min) * sx, W)
             oy, j0 = _overlap_1d((y0 - y_min) * sy, (y1 - y_min) * sy, H)
             if ox.size and oy.size:
