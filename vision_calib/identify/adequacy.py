@@ -105,6 +105,7 @@ def fit_rejecting_outliers(
     loss: str = "soft_l1",
     scale="auto",
     max_reject_fraction: float = 0.3,
+    min_ratio: float = 0.0,
     **lse_kwargs,
 ) -> tuple[IdentificationResult, list[tuple[str, str]]]:
     """Robust fit, chi-square rejection of outlier poses, plain LSE without them (module docstring).
@@ -112,7 +113,9 @@ def fit_rejecting_outliers(
     x0: (n,) starting vector (SI), default nominal. level: family-wise false-alarm level of the pose
     test. loss: scipy robust loss. scale: "auto" (robust scale of the whitened residuals) or a float
     (noise-std units; 1.0 trusts obs_cov). max_reject_fraction: more rejected poses than this
-    fraction raise DataError (the model or obs_cov is wrong, not a few outliers). lse_kwargs go to
+    fraction raise DataError (the model or obs_cov is wrong, not a few outliers). min_ratio: when > 0, a pose
+    must also exceed min_ratio times the median pose's whitened residual norm (gross errors only: residuals
+    with a systematic, non-Gaussian part have heavier tails than the chi-square law). lse_kwargs go to
     every :func:`~vision_calib.identify.lse.solve_lse` call (free, fix, selection, ...).
     Returns (result of the plain LSE on the kept poses, rejected [(label, reason)]); the result's
     ``info["outliers"]`` records the test and its warnings name the rejected poses.
@@ -135,6 +138,8 @@ def fit_rejecting_outliers(
     n_obs, m = problem.n_obs, problem.m
     d = pose_chi2(problem, robust.residuals) / s**2
     thr = float(chi2_dist.isf(level / n_obs, m))
+    if min_ratio > 0:  # gross errors only: also min_ratio x the median pose's residual norm
+        thr = max(thr, min_ratio**2 * float(np.nanmedian(d)))
     bad = np.flatnonzero(~(d <= thr))  # NaN fails too
     labels = [str(problem.labels[k]) if problem.labels else f"#{int(k)}" for k in range(n_obs)]
     rejected = [(labels[k], f"whitened residual norm^2 {d[k]:.4g} > {thr:.4g} (chi-square, {m} dof, family-wise "
