@@ -173,3 +173,36 @@ def format_study(res: dict, modes=("corners", "poses")) -> str:
             lines.append(head.format(mode, lab, *[f"{x:.3f}" for x in s[key]]))
         lines.append(f"  {mode}: valid {s['n_valid']}/{res['n_poses']}")
     return "\n".join(lines)
+
+
+def scene_z_study(scene_path, n_poses: int = 20, seeds=(1, 2, 3, 4, 5), pose_seed: int = 123) -> dict:
+    """z-scores of the measured pose vs the true pose on a scene's own camera, target and sensor effects:
+    ``n_poses`` of the scene's identification poses (at its true robot), each rendered once and measured
+    with every noise seed. Returns {"n": measurements, "z_new", "z_old" (n, 6), "z_new_rms", "z_new_max",
+    "z_old_rms", "z_old_max" (6,)}."""
+    from ..experiment.simulate import image_chain_of
+    from ..experiment.steps import scene_truth
+    from ..render import TargetRenderer
+    from ..rig import load_scene, scene_poses
+    from ..sensor import apply_effects
+    from ..targets import load_target
+
+    scene = load_scene(scene_path)
+    chain = image_chain_of(scene)
+    target, intr = load_target(chain.target_path), chain.camera
+    Ts = scene.setup.T_cam_target(scene_poses(scene, np.random.default_rng(pose_seed), n_poses), scene_truth(scene))
+    z_new, z_old = [], []
+    with TargetRenderer(target, intr.without_distortion(), supersample=chain.supersample) as r:
+        for k, T in enumerate(Ts):
+            ideal = r.render(T)
+            for s in seeds:
+                dets = detect_batch(apply_effects(ideal, chain.effects, 10, 1000 * k + s, intr), target, intr)
+                m = measure_pose(dets, target, intr, k, MeasureConfig(mode=chain.averaging))
+                if not m.valid:
+                    continue
+                e = frames.pose_error(T, m.T_cam_target)
+                z_new.append(e / m.std)
+                z_old.append(e / np.sqrt(np.diag(random_only_cov(m, dets, target, intr))))
+    zn, zo = np.array(z_new).reshape(-1, 6), np.array(z_old).reshape(-1, 6)
+    return {"n": len(zn), "z_new": zn, "z_old": zo, "z_new_rms": np.sqrt((zn**2).mean(0)), "z_new_max": np.abs(zn).max(0),
+            "z_old_rms": np.sqrt((zo**2).mean(0)), "z_old_max": np.abs(zo).max(0)}
