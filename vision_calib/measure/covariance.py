@@ -27,27 +27,25 @@ accounted for by propagation: the pose error of the (unweighted) PnP is delta = 
     Cov(delta) = (J^T J)^-1 J^T D J (J^T J)^-1      [m, rad; frames.pose_error convention].
 
 A *correlated* corner error (the same shift or scale on all corners, e.g. a depth bias) does not
-show in r: a rigid pose absorbs it. Measured against the renderer's truth (:func:`corner_error_split`,
-:func:`strain_fit`; ``benchmarks/bench_measure.py --skip speed,sweep``): without lens distortion the
-part of the true corner error that moves the pose is the share independent errors predict
-(|J delta| / |r| = 0.27 vs 0.28 expected, H4 scene); with distortion it is larger (0.42), and the
-excess is a smooth per-pose error field over the board, found by fitting one to the true corner
-errors (``strain_fit``: 6 low-order terms per pose, minus what the independent part leaks into
-such a fit): a *scale strain* e = f diag(eps_u, eps_v) x, std about 1e-4 per axis (H4: 0.7e-4 / 1.7e-4;
-RX-90 A5 board: 0.7e-4 / 0.9e-4), and a *keystone* term e = f x (kappa . x), std up to 1e-3 (RX-90:
-0.9e-3 / 1.0e-3; H4: 0.4e-3 / 0); x = normalised image coordinates of the corner from the pattern's
-centroid, f the focal length in px. Without distortion all of these are within the leak. Their origin is
-the lens model chain: the image is resampled through the distortion map and the corners are undistorted
-with the model, and the residual of that correction varies smoothly over the board (a real camera has
-the same kind of term from the residual of its calibrated lens model). They are modelled as random with
-stds :data:`LENS_FIELD_STD` (cameras with distortion; 0 without) and propagated like the rest:
+show in r: a rigid pose absorbs it. Measured against the renderer's truth (:func:`corner_error_split`
+on rendered poses of the scenes): without lens distortion the part of the true corner error that moves
+the pose is the share independent errors predict (|J delta| / |r| = 0.27 vs 0.28 expected, H4 scene;
+RX-90 A5 board 0.36 vs 0.38); with distortion it is larger (0.42 and 0.59), and the independent model
+alone then leaves z RMS up to 2.1 (H4 tz, rx) and 2.3 (RX-90 ry). The excess is a smooth per-pose error
+field over the board: fitting per pose a scale strain (e = eps_u x_u, eps_v x_v) and a keystone term
+(e = x (kappa . x)) to the true corner errors, beyond what the independent part leaks into such a fit,
+gives strain about 1e-4 of the normalised image coordinate (0.01-0.02 px at the board's edge) and
+keystone 0.01-0.03 px at the edge, none without distortion. Its origin is the lens model chain: the
+image is resampled through the distortion map and the corners are undistorted with the model, and the
+residual of that correction varies smoothly over the board (a real camera has the same kind of term from
+the residual of its calibrated lens model). The four terms are modelled as random amplitudes in px at
+the pattern's edge (x = corner offset from the pattern's centroid / the largest such offset: a corner
+error does not grow with the board's size), std :data:`LENS_FIELD_STD` = 0.015 px each for cameras
+with distortion (0 without; ``MeasureConfig.lens_field_std`` overrides), propagated like the rest:
 
     D = diag(sigma_f^2 / n_k + sigma_s^2) + S S^T,   S = d u / d(field terms) x their stds  (2K x 4),
 
 and their expected share of r^T r, tr((I - H) S S^T), is removed before sigma_s is estimated.
-The field terms are amplitudes in px at the pattern's edge (x scaled by the corners' largest distance
-from their centroid): a corner error does not grow with the board's size; 0.015 px each reproduces the
-measured strain/keystone of both scenes.
 
 A common shift of all corners is a detector bias for AprilTag grids: OpenCV's AprilTag refinement
 returns corners +0.46 to +0.49 px off the pixel-centre convention depending on blur (measure/detect.py,
@@ -70,9 +68,8 @@ from ..camera import CameraIntrinsics
 from .pnp import project_pinhole, reprojection_jacobian
 
 
-#: stds of the smooth per-pose corner error field left by the lens-distortion chain: scale strain
-#: (eps_u, eps_v; dimensionless) and keystone (kappa_u, kappa_v; per unit normalised image coordinate),
-#: measured on rendered H4 and RX-90 poses (see the module docstring)
+#: stds [px at the pattern's edge] of the smooth per-pose corner error field left by the lens-distortion
+#: chain: scale strain (u, v) and keystone (u, v); measured on rendered H4 and RX-90 poses (module docstring)
 LENS_FIELD_STD = (0.015, 0.015, 0.015, 0.015)
 APRILTAG_SHIFT_PX = 0.05
 APRILTAG_GROWTH_PX = 0.015
