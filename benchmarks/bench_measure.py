@@ -1,7 +1,9 @@
-"""Measurement-chain benchmark: accuracy vs ground truth and CRLB, noise sweep, speed per stage.
+"""Measurement-chain benchmark: accuracy vs ground truth, the image-model bound and the pose covariance
+(z-scores), noise sweep, speed per stage.
 
     .venv/bin/python benchmarks/bench_measure.py [--poses 50] [--sweep-poses 12] [--speed-poses 12]
-                                                 [--workers 2] [--seed 0] [--skip accuracy,sweep,speed]
+                                                 [--workers 2] [--seed 0] [--skip accuracy,scenes,sweep,speed]
+                                                 [--scene-poses 20] [--scene-seeds 1,2,3,4,5]
 
 Default setting: 1024 x 768, fx = fy = 1100 px, mild Brown–Conrady distortion, ChArUco 7 x 10
 (30 mm squares, DICT_5X5_100) at 0.4-0.8 m, tilt up to 35 deg, SensorEffects() defaults (blur
@@ -21,7 +23,8 @@ import tracemalloc
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
@@ -58,8 +61,25 @@ def run_accuracy(n_poses, seed, supersample=2, targets=(CHARUCO, APRILGRID)):
             tot_t = np.max(s["rms"][:3]) * 1e3
             tot_r = np.degrees(np.max(s["rms"][3:]))
             print(f"  {mode}: max component total RMS {tot_t:.4f} mm (target < 0.2), {tot_r:.4f} deg (target < 0.03); "
-                  f"max random/CRLB {np.max(s['random_over_crlb']):.2f} (target <= 1.3)")
+                  f"random/bound {np.min(s['random_over_bound']):.2f}-{np.max(s['random_over_bound']):.2f}; "
+                  f"bias/random {np.min(s['bias_over_random']):.1f}-{np.max(s['bias_over_random']):.1f}; "
+                  f"z RMS new {np.min(s['z_new_rms']):.2f}-{np.max(s['z_new_rms']):.2f} (max |z| "
+                  f"{np.max(s['z_new_max']):.1f}), old {np.min(s['z_old_rms']):.1f}-{np.max(s['z_old_rms']):.1f} "
+                  f"(max |z| {np.max(s['z_old_max']):.1f})")
         print(f"  ({time.perf_counter() - t0:.1f} s)")
+
+
+def run_scene_z(scenes, n_poses, seeds):
+    from vision_calib.measure.accuracy import scene_z_study
+
+    for path in scenes:
+        section(f"pose covariance z-scores: {path}, {n_poses} scene poses x noise seeds {seeds}, 10 frames")
+        t0 = time.perf_counter()
+        res = scene_z_study(ROOT / path, n_poses, seeds)
+        print(f"  {'':14}" + "".join(f"{c:>8}" for c in ("tx", "ty", "tz", "rx", "ry", "rz")))
+        for key in ("z_new_rms", "z_new_max", "z_old_rms", "z_old_max"):
+            print(f"  {key:14}" + "".join(f"{x:8.2f}" for x in res[key]))
+        print(f"  ({res['n']} measurements, {time.perf_counter() - t0:.1f} s)")
 
 
 def _sweep_pose(ideal, target, read_noise, n_frames, seed):
@@ -213,13 +233,18 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--supersample", type=int, default=2, help="TargetRenderer supersampling for the accuracy study")
     ap.add_argument("--charuco-only", action="store_true", help="accuracy study on the ChArUco board only")
-    ap.add_argument("--skip", default="", help="comma-separated: accuracy,sweep,speed")
+    ap.add_argument("--skip", default="", help="comma-separated: accuracy,scenes,sweep,speed")
+    ap.add_argument("--scene-poses", type=int, default=20)
+    ap.add_argument("--scene-seeds", default="1,2,3,4,5")
     a = ap.parse_args(argv)
     skip = set(filter(None, a.skip.split(",")))
     if "speed" not in skip:
         run_speed(a.speed_poses, a.workers, a.seed)
     if "accuracy" not in skip:
         run_accuracy(a.poses, a.seed, a.supersample, (CHARUCO,) if a.charuco_only else (CHARUCO, APRILGRID))
+    if "scenes" not in skip:
+        run_scene_z(("scenes/h4_vision.yaml", "scenes/rx90_eye_in_hand.yaml"), a.scene_poses,
+                    tuple(int(x) for x in a.scene_seeds.split(",")))
     if "sweep" not in skip:
         run_sweep(a.sweep_poses, a.seed)
 

@@ -59,8 +59,9 @@ def test_covariance_matches_monte_carlo_and_crlb(charuco, mode):
     sigma, n = 0.2, 5
     errs, covs = [], []
     for _ in range(300):
+        # corners projected with the exact lens model: no lens-model error term (measure/covariance.py)
         m = measure_pose(_noisy_detections(T, ids, p, DIST_INTR, sigma, n, rng), charuco, DIST_INTR,
-                         config=MeasureConfig(mode=mode))
+                         config=MeasureConfig(mode=mode, lens_field_std=(0.0,) * 4))
         assert m.valid and m.n_frames_used == n and m.n_corners == len(ids)
         errs.append(frames.pose_error(T, m.T_cam_target))
         covs.append(m.cov)

@@ -104,3 +104,30 @@ def crlb_pose_cov(target, intrinsics: CameraIntrinsics, T_cam_target: np.ndarray
         & (uv[:, 1] >= -0.5) & (uv[:, 1] <= intrinsics.height - 0.5)
     J = reprojection_jacobian(T_cam_target, p[inside], intrinsics)
     return pose_cov_from_jacobian(J, sigma_px) / n_frames
+
+
+def pose_bound_from_corner_info(J: np.ndarray, info_blocks: np.ndarray, n_frames: int = 1) -> np.ndarray:
+    """Cramér–Rao bound (6, 6) of the pose from independent corners with Fisher information blocks
+    info_blocks (K, 2, 2) [1/px^2] each, J (2K, 6) the reprojection Jacobian, n_frames independent
+    frames: (n_frames sum_k J_k^T F_k J_k)^-1."""
+    Jr = J.reshape(-1, 2, 6)
+    info = np.einsum("kai,kab,kbj->ij", Jr, info_blocks, Jr)
+    return np.linalg.pinv(info * n_frames)
+
+
+def corner_edge_normals(T_cam_target: np.ndarray, p_target: np.ndarray, intr: CameraIntrinsics):
+    """Unit image normals (K, 2, 2) of the two target edges through each corner (the images of the
+    target x and y axes at p_target (K, 3)) and the image length (K, 2) px of a unit target length
+    along each axis."""
+    pc = frames.transform_points(T_cam_target, p_target)
+    x, y, z = pc[:, 0], pc[:, 1], pc[:, 2]
+    dproj = np.zeros((len(pc), 2, 3))
+    dproj[:, 0, 0] = intr.fx / z
+    dproj[:, 0, 2] = -intr.fx * x / z**2
+    dproj[:, 1, 1] = intr.fy / z
+    dproj[:, 1, 2] = -intr.fy * y / z**2
+    d = np.einsum("kij,jl->kli", dproj, T_cam_target[:3, :2])  # (K, axis, 2) image direction per metre
+    scale = np.linalg.norm(d, axis=2)
+    t = d / scale[..., None]
+    normals = np.stack([-t[..., 1], t[..., 0]], axis=2)
+    return normals, scale

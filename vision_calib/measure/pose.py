@@ -6,7 +6,9 @@ Two averaging modes (``MeasureConfig.mode``):
 - ``"poses"``: PnP per frame, then the SE(3) mean (``frames.mean_pose``); covariance
   sigma^2 (sum_f J_f^T J_f)^-1.
 sigma_px is the pooled per-coordinate scatter of the corners across frames when >= 2 frames
-are valid, else the reprojection residual std (2K - 6 degrees of freedom).
+are valid, else the reprojection residual std (2K - 6 degrees of freedom). The covariance adds to
+that random part the systematic corner error that does not average over frames
+(:func:`vision_calib.measure.covariance.pose_covariance`, whose docstring gives the model).
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from .. import frames
 from ..camera import CameraIntrinsics
 from ..errors import ConfigError
 from ..io.atomic import jsonable
+from .covariance import pose_covariance
 from .detect import DetectConfig, Detection, detect_batch
 from .pnp import (project_pinhole, reprojection_jacobian, solve_pnp_planar,
                   target_lookup, undistort_px)
@@ -29,12 +32,15 @@ from .pnp import (project_pinhole, reprojection_jacobian, solve_pnp_planar,
 class MeasureConfig:
     """mode: "corners" | "poses". min_corners: PnP needs at least this many corners (per frame
     for "poses", averaged for "corners"). max_rms_px: reject when the final reprojection RMS (over
-    all frames' corners, px) exceeds it. pnp_method: "ippe" | "sqpnp"."""
+    all frames' corners, px) exceeds it. pnp_method: "ippe" | "sqpnp". lens_field_std: (4,) stds of
+    the smooth corner error field of the lens model in the covariance (None: the measured default of
+    ``covariance.LENS_FIELD_STD`` for cameras with distortion; zeros for corners without that error)."""
 
     mode: str = "corners"
     min_corners: int = 4
     max_rms_px: float = 1.5
     pnp_method: str = "ippe"
+    lens_field_std: tuple | None = None
 
     def __post_init__(self):
         if self.mode not in ("corners", "poses"):
@@ -175,7 +181,6 @@ def measure_pose(detections: Sequence[Detection], target, intrinsics: CameraIntr
     # final-pose residuals over every used frame
     proj = project_pinhole(T, p_all, intrinsics)
     all_res = []
-    J_all = reprojection_jacobian(T, p_all, intrinsics)
     cnt = np.zeros(len(all_ids))  # observations per corner in the frames actually used
     for fi, ids, uv in obs:
         idx = [pos[int(i)] for i in ids]
@@ -190,9 +195,9 @@ def measure_pose(detections: Sequence[Detection], target, intrinsics: CameraIntr
         sigma = sigma_scatter
     else:
         sigma = float(np.sqrt(np.sum(all_res**2) / max(n_res - 6, 1)))
-    Jr = J_all.reshape(len(all_ids), 2, 6)
-    JtJ = np.einsum("k,kij,kil->jl", cnt, Jr, Jr)  # sum over frames of J_f^T J_f == J^T diag(cnt) J
-    cov = sigma**2 * np.linalg.pinv(JtJ)
+    used = cnt > 0  # random (frame scatter / n) + systematic per-corner + lens field: measure/covariance.py
+    cov = pose_covariance(T, p_all[used], mean_uv[used], cnt[used], sigma if len(obs) >= 2 else float("nan"),
+                          intrinsics, config.lens_field_std, getattr(target, "kind", None), all_ids[used]).cov
     if not rms <= config.max_rms_px:
         return PoseMeasurement(pose_id, False, f"reprojection RMS {rms:.3f} px > {config.max_rms_px} px",
                                np.full((4, 4), np.nan), np.full((6, 6), np.nan), len(obs), len(all_ids), rms,

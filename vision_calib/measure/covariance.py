@@ -1,0 +1,286 @@
+"""Pose covariance of one measured pose: a random part that averages over frames and a systematic
+part that does not.
+
+Model (per corner k, undistorted pixels, after averaging its n_k frames):
+
+    u_k_mean = u_k(T_true) + b_k + e_k,   Cov(e_k) = sigma_f^2 / n_k I2,   Cov(b_k) = sigma_s^2 I2
+
+- e_k, the *random* part: photon/read noise moving the detected corner from frame to frame.
+  sigma_f is the pooled frame-to-frame scatter of the corners (per coordinate, px); averaging n_k
+  frames divides its variance by n_k.
+- b_k, the *systematic* part: the error of the detector (and of the rendering/resampling for
+  simulated images) on *this* view of the corner: the same in every frame of the pose, so it does
+  not average out. It changes from corner to corner with the local geometry (sub-pixel phase,
+  orientation and foreshortening of the edges around the corner), so it is modelled as independent
+  between corners with one variance sigma_s^2 per pose.
+
+Estimation of sigma_s, per pose: the PnP fit on the frame-averaged corners leaves the residual
+r = (I - H)(b + e), H = J (J^T J)^-1 J^T the hat matrix of the 6 pose parameters (J: reprojection
+Jacobian, 2K x 6). For independent errors of covariance D = diag(sigma_f^2 / n_k + sigma_s^2),
+E[r^T r] = sum_i D_ii (1 - H_ii), where sum_i (1 - H_ii) = 2K - 6. Hence
+
+    sigma_s^2 = (r^T r - sum_i (sigma_f^2 / n_i)(1 - H_ii)) / (2K - 6),   clipped at 0.
+
+The part of b that a rigid pose can explain (J delta) is invisible in r; for independent b_k it is
+accounted for by propagation: the pose error of the (unweighted) PnP is delta = (J^T J)^-1 J^T (b + e),
+
+    Cov(delta) = (J^T J)^-1 J^T D J (J^T J)^-1      [m, rad; frames.pose_error convention].
+
+A *correlated* corner error (the same shift or scale on all corners, e.g. a depth bias) does not
+show in r: a rigid pose absorbs it. Measured against the renderer's truth (:func:`corner_error_split`
+on rendered poses of the scenes): without lens distortion the part of the true corner error that moves
+the pose is the share independent errors predict (|J delta| / |r| = 0.27 vs 0.28 expected, H4 scene;
+RX-90 A5 board 0.36 vs 0.38); with distortion it is larger (0.42 and 0.59), and the independent model
+alone then leaves z RMS up to 2.1 (H4 tz, rx) and 2.3 (RX-90 ry). The excess is a smooth per-pose error
+field over the board: fitting per pose a scale strain (e = eps_u x_u, eps_v x_v) and a keystone term
+(e = x (kappa . x)) to the true corner errors, beyond what the independent part leaks into such a fit,
+gives strain about 1e-4 of the normalised image coordinate (0.01-0.02 px at the board's edge) and
+keystone 0.01-0.03 px at the edge, none without distortion. Its origin is the lens model chain: the
+image is resampled through the distortion map and the corners are undistorted with the model, and the
+residual of that correction varies smoothly over the board (a real camera has the same kind of term from
+the residual of its calibrated lens model). The four terms are modelled as random amplitudes in px at
+the pattern's edge (x = corner offset from the pattern's centroid / the largest such offset: a corner
+error does not grow with the board's size), std :data:`LENS_FIELD_STD` = 0.015 px each for cameras
+with distortion (0 without; ``MeasureConfig.lens_field_std`` overrides), propagated like the rest:
+
+    D = diag(sigma_f^2 / n_k + sigma_s^2) + S S^T,   S = d u / d(field terms) x their stds  (2K x 4),
+
+and their expected share of r^T r, tr((I - H) S S^T), is removed before sigma_s is estimated.
+
+A common shift of all corners is a detector bias for AprilTag grids: OpenCV's AprilTag refinement
+returns corners +0.46 to +0.49 px off the pixel-centre convention depending on blur (measure/detect.py,
+``apriltag_offset_px`` = -0.5 corrects the mean), and the per-pose mean true corner error measured on
+12 rendered bench poses is (-0.036, -0.049) px, RMS (0.04, 0.06) px (ChArUco: 0.004 / 0.003 px, the
+leak of the independent part). It moves tx / ty and never shows in r. The same refinement also places
+the tag sides slightly off (a tag looks smaller or larger by delta px at each corner, along the direction
+from the tag's centre): measured delta per pose on the same poses: mean -0.011 px, RMS 0.015 px; a
+uniform growth of all tags biases the depth. :data:`DETECTOR_TERMS` adds both for AprilTag grids as
+columns of S (shift std 0.05 px per axis, growth std 0.015 px).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..camera import CameraIntrinsics
+from .pnp import project_pinhole, reprojection_jacobian
+
+
+#: stds [px at the pattern's edge] of the smooth per-pose corner error field left by the lens-distortion
+#: chain: scale strain (u, v) and keystone (u, v); measured on rendered H4 and RX-90 poses (module docstring)
+LENS_FIELD_STD = (0.015, 0.015, 0.015, 0.015)
+APRILTAG_SHIFT_PX = 0.05
+APRILTAG_GROWTH_PX = 0.015
+
+
+def _apriltag_terms(ids: np.ndarray, uv_px: np.ndarray) -> np.ndarray:
+    """(2K, 3) columns of S for AprilTag-grid corners (ids 4 marker + k): common shift u, v and tag growth."""
+    tag = np.asarray(ids) // 4
+    centre = np.zeros_like(uv_px)
+    for t in np.unique(tag):
+        centre[tag == t] = uv_px[tag == t].mean(axis=0)
+    d = uv_px - centre
+    n = d / np.maximum(np.linalg.norm(d, axis=1), 1e-9)[:, None]
+    n[np.bincount(tag)[tag] < 2] = 0.0  # a lone corner of its tag: no growth direction
+    return np.column_stack([APRILTAG_SHIFT_PX * np.tile(np.eye(2), (len(ids), 1)), APRILTAG_GROWTH_PX * n.ravel()])
+
+
+#: per target kind: (corner ids (K,), uv (K, 2) px) -> (2K, m) detector-bias columns of S (module docstring)
+DETECTOR_TERMS = {"apriltag_grid": _apriltag_terms}
+
+
+@dataclass(frozen=True)
+class PoseCovariance:
+    """cov: (6, 6) total [m, rad]; cov_random: (6, 6) its frame-noise part; sigma_frame_px: per-frame
+    corner scatter used (px, per coordinate); sigma_sys_px: systematic per-corner std estimated from
+    the averaged-corner fit (px, per coordinate); dof: 2K - 6 of that fit; residual_rms_px: RMS
+    (per coordinate) of the averaged-corner residual."""
+
+    cov: np.ndarray
+    cov_random: np.ndarray
+    sigma_frame_px: float
+    sigma_sys_px: float
+    dof: int
+    residual_rms_px: float
+
+
+def _sandwich(J: np.ndarray, d: np.ndarray, S: np.ndarray | None = None) -> np.ndarray:
+    """(J^T J)^-1 J^T (diag(d) + S S^T) J (J^T J)^-1 for J (2K, 6), d (2K,), S (2K, m) or None."""
+    A = np.linalg.pinv(J.T @ J)
+    M = J.T @ (J * d[:, None])
+    if S is not None:
+        JS = J.T @ S
+        M = M + JS @ JS.T
+    return A @ M @ A
+
+
+def field_directions(uv_px: np.ndarray) -> np.ndarray:
+    """(2K, 4) d(uv)/d(eps_u, eps_v, kappa_u, kappa_v) [px per px of amplitude] of the smooth corner error
+    field (module docstring) at the corners uv_px (K, 2): x = (uv - mean) / (largest |uv - mean|), strain
+    terms e = a x (per axis), keystone terms e = x (kappa . x); rows (u0, v0, u1, v1, ...)."""
+    d = uv_px - uv_px.mean(axis=0)
+    x = d / max(float(np.max(np.linalg.norm(d, axis=1))), 1e-9)
+    A = np.zeros((2 * len(x), 4))
+    A[0::2, 0] = x[:, 0]
+    A[1::2, 1] = x[:, 1]
+    for j in range(2):
+        A[0::2, 2 + j] = x[:, 0] * x[:, j]
+        A[1::2, 2 + j] = x[:, 1] * x[:, j]
+    return A
+
+
+def pose_covariance(T_cam_target: np.ndarray, p_target: np.ndarray, mean_uv_px: np.ndarray, n_obs: np.ndarray,
+                    sigma_frame_px: float, intr: CameraIntrinsics,
+                    field_std=None, target_kind: str | None = None, ids=None) -> PoseCovariance:
+    """Covariance of the pose measured from frame-averaged corners (see the module docstring).
+
+    T_cam_target: (4, 4) the measured pose; p_target: (K, 3) m corner points; mean_uv_px: (K, 2)
+    frame-averaged undistorted corners (px); n_obs: (K,) frames per corner; sigma_frame_px: pooled
+    frame-to-frame corner std (px, per coordinate; NaN with a single frame: then the random and
+    systematic parts cannot be told apart and the whole residual variance is used as one sigma);
+    field_std: (4,) stds of the smooth error field terms (None: :data:`LENS_FIELD_STD` if the camera
+    has distortion, else zeros); target_kind, ids (K,) corner ids: add the kind's detector-bias terms
+    (:data:`DETECTOR_TERMS`)."""
+    p_target = np.asarray(p_target, dtype=float)
+    n_obs = np.asarray(n_obs, dtype=float)
+    J = reprojection_jacobian(T_cam_target, p_target, intr)
+    r = (np.asarray(mean_uv_px, dtype=float) - project_pinhole(T_cam_target, p_target, intr)).ravel()
+    dof = max(J.shape[0] - 6, 1)
+    ss = float(r @ r)
+    Jp = np.linalg.pinv(J.T @ J)
+    h = np.einsum("ij,jk,ik->i", J, Jp, J)  # leverages H_ii
+    if field_std is None:
+        field_std = LENS_FIELD_STD if any(intr.dist) else (0.0,) * 4
+    uv = project_pinhole(T_cam_target, p_target, intr)
+    S = field_directions(uv) * np.asarray(field_std, float)
+    if target_kind in DETECTOR_TERMS and ids is not None:
+        S = np.column_stack([S, DETECTOR_TERMS[target_kind](np.asarray(ids, dtype=int), uv)])
+    S_perp = S - J @ (Jp @ (J.T @ S))
+    ss_field = float(np.sum(S_perp**2))  # expected share of the strain in r^T r
+    if np.isfinite(sigma_frame_px):
+        d_rand = np.repeat(sigma_frame_px**2 / n_obs, 2)
+        sys2 = max((ss - ss_field - float(np.sum(d_rand * (1.0 - h)))) / dof, 0.0)
+    else:  # one frame: the residual carries both parts
+        d_rand = np.full(J.shape[0], max(ss - ss_field, 0.0) / dof)
+        sys2 = 0.0
+    cov_random = _sandwich(J, d_rand)
+    cov = _sandwich(J, d_rand + sys2, S)
+    return PoseCovariance(cov, cov_random, float(sigma_frame_px), float(np.sqrt(sys2)), int(dof),
+                          float(np.sqrt(ss / len(r))))
+
+
+def corner_error_split(T_true: np.ndarray, p_target: np.ndarray, mean_uv_px: np.ndarray,
+                       intr: CameraIntrinsics) -> dict:
+    """Split the true corner error e = mean_uv - u(T_true) (needs the truth: rendered data only) into
+    the part a rigid pose explains (J delta, the correlated part that moves the pose) and the rest
+    (what the PnP residual sees). Returns {"delta": (6,) pose error of that LS fit, "explained_rms_px",
+    "orthogonal_rms_px" (per coordinate), "n": 2K}; for independent corner errors of equal variance
+    E[|J delta|^2] / E[|r|^2] = 6 / (2K - 6)."""
+    J = reprojection_jacobian(T_true, p_target, intr)
+    e = (np.asarray(mean_uv_px, dtype=float) - project_pinhole(T_true, p_target, intr)).ravel()
+    delta, *_ = np.linalg.lstsq(J, e, rcond=None)
+    ex = J @ delta
+    return {"delta": delta, "explained_rms_px": float(np.sqrt(np.mean(ex**2))),
+            "orthogonal_rms_px": float(np.sqrt(np.mean((e - ex) ** 2))), "n": int(len(e))}
+
+
+# ----------------------------------------------------------------------------- image-model bound
+# The bound below is computed from the image model alone (the sensor's noise and blur, the target's
+# contrast, the detector's window), not from measured frames: for a corner at position q seen in an image
+# mu(x - q) + noise, the Fisher information is F = sum over the pixels the detector uses of
+# grad(mu) grad(mu)^T / var(pixel) (Gaussian pixel noise), and CRLB(q) = F^-1.
+# - mu: white 255, black 0 (target texture) times exposure x gain, blurred by the sensor blur and the
+#   pixel's area (variance blur_sigma^2 + 1/12 px^2; a disc of radius R adds R^2 / 4).
+# - var(pixel) [grey^2] = photon (mu gain 255 / full_well) + read noise^2 + 1/12 (8-bit rounding).
+# - ChArUco (saddle corner refined by cv2.cornerSubPix in a (2 w + 1)^2 window, w = DetectConfig.subpix_win):
+#   mu = mid + C/2 erf(n1.x / (sqrt2 s)) erf(n2.x / (sqrt2 s)), n1, n2 the image normals of the two
+#   board edges through the corner; F summed over the window's pixels.
+# - AprilTag grid (OpenCV's AprilTag refinement fits a line to each tag side and intersects them): per
+#   unit length an edge of contrast C gives I1 = C^2 / (2 sqrt(pi) s var_mid); a line fitted over a side of
+#   L px locates its end (the corner) along its normal with variance 4 / (I1 L); F = sum_i n_i n_i^T I1 L_i / 4.
+# Corners are taken as independent and the distortion's local scale (~1) is ignored.
+
+def _edge_sigma_px(effects) -> float:
+    return float(np.sqrt(effects.blur_sigma_px**2 + effects.blur_disc_radius_px**2 / 4 + 1.0 / 12))
+
+
+def pixel_variance(mean_grey, effects) -> np.ndarray:
+    """Per-pixel noise variance [grey^2] of the sensor model (sensor.SensorEffects) at mean grey levels."""
+    mean_grey = np.asarray(mean_grey, dtype=float)
+    v = np.full(mean_grey.shape, effects.read_noise_grey**2 + 1.0 / 12)
+    if effects.full_well_e > 0:
+        v = v + np.maximum(mean_grey - effects.black_level_grey, 0.0) * effects.gain * 255.0 / effects.full_well_e
+    return v
+
+
+def _contrast(effects) -> float:
+    return 255.0 * effects.exposure * effects.gain
+
+
+def saddle_info(normals: np.ndarray, effects, half_win: int) -> np.ndarray:
+    """(K, 2, 2) Fisher information [1/px^2] of saddle corners with edge normals (K, 2, 2) in a
+    (2 half_win + 1)^2 pixel window (see the comment above)."""
+    g = np.arange(-half_win, half_win + 1, dtype=float)
+    P = np.stack(np.meshgrid(g, g), axis=-1).reshape(-1, 2)  # (N, 2)
+    s, C = _edge_sigma_px(effects), _contrast(effects)
+    a1 = np.einsum("nd,kd->kn", P, normals[:, 0]) / s
+    a2 = np.einsum("nd,kd->kn", P, normals[:, 1]) / s
+    e1, e2 = erf_(a1 / np.sqrt(2)), erf_(a2 / np.sqrt(2))
+    mu = C / 2 * (1 + e1 * e2) + effects.black_level_grey
+    k = np.sqrt(2 / np.pi) / s
+    grad = C / 2 * k * ((np.exp(-a1**2 / 2) * e2)[..., None] * normals[:, None, 0]
+                        + (np.exp(-a2**2 / 2) * e1)[..., None] * normals[:, None, 1])  # (K, N, 2)
+    w = 1.0 / pixel_variance(mu, effects)
+    return np.einsum("kn,kna,knb->kab", w, grad, grad)
+
+
+def tag_edge_info(normals: np.ndarray, side_px: np.ndarray, effects) -> np.ndarray:
+    """(K, 2, 2) Fisher information [1/px^2] of tag corners from two fitted sides of side_px (K, 2) px."""
+    s, C = _edge_sigma_px(effects), _contrast(effects)
+    I1 = C**2 / (2 * np.sqrt(np.pi) * s) / pixel_variance(C / 2 + effects.black_level_grey, effects)
+    return np.einsum("ki,kia,kib->kab", I1 * side_px / 4, normals, normals)
+
+
+def erf_(x):  # noqa: D103 (scipy imported lazily: measure imports stay light)
+    from scipy.special import erf
+
+    return erf(x)
+
+
+def corner_info(target, T_cam_target, p_target, intr: CameraIntrinsics, effects, detect_config=None) -> np.ndarray:
+    """(K, 2, 2) image-model Fisher information of the target's corners p_target (K, 3) seen from
+    T_cam_target, by target kind (:data:`CORNER_INFO`)."""
+    from .detect import DetectConfig
+    from .pnp import corner_edge_normals
+
+    cfg = detect_config or DetectConfig()
+    normals, scale = corner_edge_normals(T_cam_target, p_target, intr)
+    return CORNER_INFO[target.kind](target, normals, scale, effects, cfg)
+
+
+#: per target kind: (target, normals (K, 2, 2), px per metre along the target axes (K, 2), effects,
+#: DetectConfig) -> Fisher blocks (K, 2, 2)
+CORNER_INFO = {
+    "charuco": lambda t, n, sc, eff, cfg: saddle_info(n, eff, cfg.subpix_win),
+    "apriltag_grid": lambda t, n, sc, eff, cfg: tag_edge_info(n, sc * t.tag_m, eff),
+}
+
+
+def image_bound_pose_cov(target, intr: CameraIntrinsics, T_cam_target: np.ndarray, effects, n_frames: int = 1,
+                         detect_config=None) -> np.ndarray:
+    """Cramér–Rao bound (6, 6) [m, rad] of T_cam_target from the image model (sensor noise and blur, target
+    contrast, detector window; not from measured frames) for the corners inside the image, n_frames
+    independent frames."""
+    from .pnp import pose_bound_from_corner_info
+
+    _, p = target.corner_points()
+    p = np.asarray(p, dtype=float)
+    uv = project_pinhole(T_cam_target, p, intr)
+    z = (p @ T_cam_target[:3, :3].T + T_cam_target[:3, 3])[:, 2]
+    inside = (z > 0) & (uv[:, 0] >= -0.5) & (uv[:, 0] <= intr.width - 0.5) & (uv[:, 1] >= -0.5) \
+        & (uv[:, 1] <= intr.height - 0.5)
+    p = p[inside]
+    F = corner_info(target, T_cam_target, p, intr, effects, detect_config)
+    return pose_bound_from_corner_info(reprojection_jacobian(T_cam_target, p, intr), F, n_frames)
