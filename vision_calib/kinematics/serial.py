@@ -89,8 +89,47 @@ def _rot4(R):
 
 
 # ----------------------------------------------------------------------------- the chain
+class JointChainChecks:
+    """Input checks shared by the serial chain classes (MDH :class:`SerialChain`, ``urdf.URDFChain``):
+    joint arrays and full parameter vectors. Needs ``name``, ``n_joints``, ``joint_limits``, ``params``."""
+
+    def within_limits(self, q) -> np.ndarray:
+        """(N,) bool: every joint inside joint_limits (all True when the chain has none)."""
+        q = self.check_joints(q)
+        if self.joint_limits is None:
+            return np.ones(q.shape[0], dtype=bool)
+        return np.all((q >= self.joint_limits[:, 0]) & (q <= self.joint_limits[:, 1]), axis=1)
+
+    def check_joints(self, q) -> np.ndarray:
+        """Joint sets as a (N, n) float array (a single (n,) set becomes (1, n)); DataError naming
+        the pose on a wrong shape or a non-finite value."""
+        q = np.asarray(q, dtype=float)
+        if q.ndim == 1:
+            q = q[None, :]
+        if q.ndim != 2 or q.shape[1] != self.n_joints:
+            raise DataError(f"{self.name}: joint values must have shape (N, {self.n_joints}) rad, got {q.shape}")
+        bad = ~np.isfinite(q)
+        if bad.any():
+            k, j = (int(v) for v in np.argwhere(bad)[0])
+            raise DataError(f"{self.name}: joint values of pose {k} are not finite (joint {j + 1} = {q[k, j]})")
+        return q
+
+    def _x(self, x) -> np.ndarray:
+        if x is None:
+            return self.params.nominal
+        x = np.asarray(x, dtype=float)
+        if x.shape != (len(self.params),):
+            raise ParameterError(
+                f"{self.name}: parameter vector must have shape ({len(self.params)},) (full vector, "
+                f"names {self.params.names[:3]}...), got {x.shape}")
+        if not np.all(np.isfinite(x)):
+            k = int(np.flatnonzero(~np.isfinite(x))[0])
+            raise ParameterError(f"{self.name}: parameter {self.params.names[k]!r} is not finite")
+        return x
+
+
 @dataclass(frozen=True, eq=False)
-class SerialChain:
+class SerialChain(JointChainChecks):
     """An all-revolute serial arm (modified DH + Hayati) between two mounting transforms.
 
     name: robot/scene name. n_joints: n. params: every geometric parameter (names, nominal in
@@ -268,41 +307,6 @@ class SerialChain:
         """(T_left_base (4, 4), T_flange_right (4, 4)) at x (nominal if None)."""
         x = self._x(x)
         return self._mount(x, self.left, self.left_R_nominal), self._mount(x, self.right, self.right_R_nominal)
-
-    def within_limits(self, q) -> np.ndarray:
-        """(N,) bool: every joint inside joint_limits (all True when the chain has none)."""
-        q = self.check_joints(q)
-        if self.joint_limits is None:
-            return np.ones(q.shape[0], dtype=bool)
-        return np.all((q >= self.joint_limits[:, 0]) & (q <= self.joint_limits[:, 1]), axis=1)
-
-    # ------------------------------------------------------------------ validation
-    def check_joints(self, q) -> np.ndarray:
-        """Joint sets as a (N, n) float array (a single (n,) set becomes (1, n)); DataError naming
-        the pose on a wrong shape or a non-finite value."""
-        q = np.asarray(q, dtype=float)
-        if q.ndim == 1:
-            q = q[None, :]
-        if q.ndim != 2 or q.shape[1] != self.n_joints:
-            raise DataError(f"{self.name}: joint values must have shape (N, {self.n_joints}) rad, got {q.shape}")
-        bad = ~np.isfinite(q)
-        if bad.any():
-            k, j = (int(v) for v in np.argwhere(bad)[0])
-            raise DataError(f"{self.name}: joint values of pose {k} are not finite (joint {j + 1} = {q[k, j]})")
-        return q
-
-    def _x(self, x) -> np.ndarray:
-        if x is None:
-            return self.params.nominal
-        x = np.asarray(x, dtype=float)
-        if x.shape != (len(self.params),):
-            raise ParameterError(
-                f"{self.name}: parameter vector must have shape ({len(self.params)},) (full vector, "
-                f"names {self.params.names[:3]}...), got {x.shape}")
-        if not np.all(np.isfinite(x)):
-            k = int(np.flatnonzero(~np.isfinite(x))[0])
-            raise ParameterError(f"{self.name}: parameter {self.params.names[k]!r} is not finite")
-        return x
 
     def _mount(self, x, m, R_nom) -> np.ndarray:
         i = self._idx

@@ -61,7 +61,7 @@ import numpy as np
 from ..errors import ConfigError, DataError, ParameterError
 from ..frames import make_T, so3_exp, so3_right_jacobian
 from .params import DEFAULT_SCALE, ParameterSet
-from .serial import KNOWN_LEFT, KNOWN_RIGHT, MOUNT_SUFFIXES
+from .serial import KNOWN_LEFT, KNOWN_RIGHT, MOUNT_SUFFIXES, JointChainChecks
 
 #: suffixes of the 6 placement parameters of a movable joint, in vector order
 JOINT_SUFFIXES = ("x", "y", "z", "rx", "ry", "rz")
@@ -75,7 +75,7 @@ def _rot_axis(axis, v) -> np.ndarray:
 
 # ----------------------------------------------------------------------------- the chain
 @dataclass(frozen=True, eq=False)
-class URDFChain:
+class URDFChain(JointChainChecks):
     """Serial chain from a URDF between two mounting transforms (duck-types ``SerialChain``).
 
     name: robot name. params: all parameters (module docstring). left / right: mount names.
@@ -230,37 +230,6 @@ class URDFChain:
         x = self._x(x)
         p = x[self._idx["joint"]]
         return make_T(so3_exp(p[:, 3:]), p[:, :3]), x[self._idx["q0"]].copy()
-
-    def within_limits(self, q) -> np.ndarray:
-        """(N,) bool: every joint inside joint_limits (all True when the chain has none)."""
-        q = self.check_joints(q)
-        if self.joint_limits is None:
-            return np.ones(q.shape[0], dtype=bool)
-        return np.all((q >= self.joint_limits[:, 0]) & (q <= self.joint_limits[:, 1]), axis=1)
-
-    def check_joints(self, q) -> np.ndarray:
-        """Joint values as (N, n) float (rad, m for prismatic joints); DataError naming the pose otherwise."""
-        q = np.asarray(q, dtype=float)
-        if q.ndim == 1:
-            q = q[None, :]
-        if q.ndim != 2 or q.shape[1] != self.n_joints:
-            raise DataError(f"{self.name}: joint values must have shape (N, {self.n_joints}), got {q.shape}")
-        bad = ~np.isfinite(q)
-        if bad.any():
-            k, j = (int(v) for v in np.argwhere(bad)[0])
-            raise DataError(f"{self.name}: joint values of pose {k} are not finite (joint {j + 1} = {q[k, j]})")
-        return q
-
-    def _x(self, x) -> np.ndarray:
-        if x is None:
-            return self.params.nominal
-        x = np.asarray(x, dtype=float)
-        if x.shape != (len(self.params),):
-            raise ParameterError(f"{self.name}: parameter vector must have shape ({len(self.params)},), got {x.shape}")
-        if not np.all(np.isfinite(x)):
-            k = int(np.flatnonzero(~np.isfinite(x))[0])
-            raise ParameterError(f"{self.name}: parameter {self.params.names[k]!r} is not finite")
-        return x
 
     def _mount(self, x, side, R_nom) -> np.ndarray:
         v = x[self._idx[side]]
