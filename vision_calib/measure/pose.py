@@ -110,7 +110,8 @@ def _rms(res: np.ndarray) -> float:
 def measure_pose(detections: Sequence[Detection], target, intrinsics: CameraIntrinsics, pose_id=0,
                  config: MeasureConfig = MeasureConfig()) -> PoseMeasurement:
     """Average the frames of one pose into a PoseMeasurement; never raises on bad frames
-    (invalid frames are skipped and recorded; an unusable pose gives valid=False + reason)."""
+    (invalid frames are skipped and recorded; an unusable pose gives valid=False + reason).
+    Longer than 80 lines: one pass over the frames' detections (validity, averaging, PnP, residuals, covariance, diagnostics) sharing the per-corner arrays."""
     lookup = target_lookup(target)
     fdiag = []
     obs = []  # (frame_index, ids, uv_undist)
