@@ -58,7 +58,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ConfigError, DataError, ParameterError
+from ..errors import ConfigError, ParameterError
 from ..frames import make_T, so3_exp, so3_right_jacobian
 from .params import DEFAULT_SCALE, ParameterSet
 from .serial import KNOWN_LEFT, KNOWN_RIGHT, MOUNT_SUFFIXES, JointChainChecks

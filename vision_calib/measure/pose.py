@@ -24,7 +24,7 @@ from ..errors import ConfigError
 from ..io.atomic import jsonable
 from .covariance import pose_covariance
 from .detect import DetectConfig, Detection, detect_batch
-from .pnp import (project_pinhole, reprojection_jacobian, solve_pnp_planar,
+from .pnp import (project_pinhole, solve_pnp_planar,
                   target_lookup, undistort_px)
 
 
