@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from kin_helpers import fd_pose_jacobian
 
 from vision_calib.errors import ConfigError, DataError, ParameterError
 from vision_calib.frames import T_from_xyz_rpy, make_T, pose_error, rot_x, rot_y, rot_z
@@ -162,16 +163,6 @@ def test_so3_helpers():
 
 
 # ----------------------------------------------------------------------------- Jacobians
-def _fd_pose_jacobian(ch, q, x, h=1e-6):
-    J = np.zeros((q.shape[0], 6, len(x)))
-    T0 = ch.forward(q, x)
-    for k in range(len(x)):
-        e = np.zeros(len(x))
-        e[k] = h
-        J[:, :, k] = (pose_error(T0, ch.forward(q, x + e)) - pose_error(T0, ch.forward(q, x - e))) / (2 * h)
-    return J
-
-
 @pytest.mark.parametrize("name", ROBOT_FILES)
 def test_analytic_jacobian_matches_central_differences(name):
     """Every column (free or fixed, mounts included), pose and position, at nominal and random x."""
@@ -180,7 +171,7 @@ def test_analytic_jacobian_matches_central_differences(name):
     q = _random_q(ch, rng, 6)
     for x in (ch.params.nominal, _random_x(ch, rng, 0.05)):
         J = ch.pose_jacobian(q, x)
-        Jfd = _fd_pose_jacobian(ch, q, x)
+        Jfd = fd_pose_jacobian(ch, q, x)
         for k, nm in enumerate(ch.params.names):
             np.testing.assert_allclose(J[:, :, k], Jfd[:, :, k], atol=2e-8, err_msg=f"{name}: column {nm}")
         np.testing.assert_allclose(ch.position_jacobian(q, x), Jfd[:, :3, :], atol=2e-8)

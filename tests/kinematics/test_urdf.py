@@ -6,10 +6,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from kin_helpers import fd_pose_jacobian
 import yourdfpy
 
 from vision_calib.errors import ConfigError, DataError, ParameterError
-from vision_calib.frames import pose_error, rot_x, rot_z
+from vision_calib.frames import rot_x, rot_z
 from vision_calib.identify import analyze, base_problem, solve_lse
 from vision_calib.identify.serial_problem import serial_problem, synthetic_pose_measurements
 from vision_calib.kinematics.urdf import URDFChain, arm_parameter_names, export_urdf, load_urdf_robot
@@ -61,16 +62,6 @@ def _random_q(ch, rng, n):
     lo = np.where(np.isfinite(ch.joint_limits[:, 0]), ch.joint_limits[:, 0], -np.pi)
     hi = np.where(np.isfinite(ch.joint_limits[:, 1]), ch.joint_limits[:, 1], np.pi)
     return rng.uniform(np.maximum(lo, -np.pi), np.minimum(hi, np.pi), (n, ch.n_joints))
-
-
-def _fd_pose_jacobian(ch, q, x, h=1e-6):
-    J = np.zeros((q.shape[0], 6, len(x)))
-    T0 = ch.forward(q, x)
-    for k in range(len(x)):
-        e = np.zeros(len(x))
-        e[k] = h
-        J[:, :, k] = (pose_error(T0, ch.forward(q, x + e)) - pose_error(T0, ch.forward(q, x - e))) / (2 * h)
-    return J
 
 
 def _library_fk(path, ch, q, base, tip):
@@ -156,7 +147,7 @@ def test_analytic_jacobian_matches_central_differences(tmp_path, which):
     q = _random_q(ch, rng, 5)
     for x in (ch.params.nominal, ch.params.nominal + rng.normal(0, 0.05, len(ch.params))):
         J = ch.pose_jacobian(q, x)
-        Jfd = _fd_pose_jacobian(ch, q, x)
+        Jfd = fd_pose_jacobian(ch, q, x)
         for k, nm in enumerate(ch.params.names):
             np.testing.assert_allclose(J[:, :, k], Jfd[:, :, k], atol=2e-8, err_msg=f"{which}: column {nm}")
         np.testing.assert_allclose(ch.position_jacobian(q, x), Jfd[:, :3, :], atol=2e-8)

@@ -90,8 +90,28 @@ def _rot4(R):
 
 # ----------------------------------------------------------------------------- the chain
 class JointChainChecks:
-    """Input checks shared by the serial chain classes (MDH :class:`SerialChain`, ``urdf.URDFChain``):
-    joint arrays and full parameter vectors. Needs ``name``, ``n_joints``, ``joint_limits``, ``params``."""
+    """What the serial chain classes (MDH :class:`SerialChain`, ``urdf.URDFChain``) share: mount names,
+    named deviations and the checks of joint arrays and full parameter vectors. Needs ``name``,
+    ``n_joints``, ``joint_limits``, ``params``, ``left``, ``right``."""
+
+    @property
+    def mount_names(self) -> tuple[str, str]:
+        return (self.left, self.right)
+
+    @property
+    def measured_name(self) -> str:
+        """Name of the transform the chain computes, e.g. ``T_target_cam`` for
+        ``T_target_base`` . FK . ``T_flange_cam``."""
+        a = self.left[2:].rsplit("_base", 1)[0] if self.left.endswith("_base") else self.left[2:]
+        b = self.right[len("T_flange_"):] if self.right.startswith("T_flange_") else self.right[2:]
+        return f"T_{a}_{b}"
+
+    def deviated(self, deviation=None, base=None) -> np.ndarray:
+        """Full vector (n_params,) = base (default nominal) + named deviations {name: SI value}."""
+        x = (self.params.nominal if base is None else self._x(base)).copy()
+        for k, v in (deviation or {}).items():
+            x[self.params.index(k)] += float(v)
+        return x
 
     def within_limits(self, q) -> np.ndarray:
         """(N,) bool: every joint inside joint_limits (all True when the chain has none)."""
@@ -268,25 +288,6 @@ class SerialChain(JointChainChecks):
                            self.joint_limits, self.left_R_nominal, self.right_R_nominal, self.meta)
 
     # ------------------------------------------------------------------ info
-    @property
-    def mount_names(self) -> tuple[str, str]:
-        return (self.left, self.right)
-
-    @property
-    def measured_name(self) -> str:
-        """Name of the transform the chain computes, e.g. ``T_target_cam`` for
-        ``T_target_base`` . FK . ``T_flange_cam``."""
-        a = self.left[2:].rsplit("_base", 1)[0] if self.left.endswith("_base") else self.left[2:]
-        b = self.right[len("T_flange_"):] if self.right.startswith("T_flange_") else self.right[2:]
-        return f"T_{a}_{b}"
-
-    def deviated(self, deviation=None, base=None) -> np.ndarray:
-        """Full vector (n_params,) = base (default nominal) + named deviations {name: SI value}."""
-        x = (self.params.nominal if base is None else self._x(base)).copy()
-        for k, v in (deviation or {}).items():
-            x[self.params.index(k)] += float(v)
-        return x
-
     def redundant_pairs(self) -> list[tuple[str, str, str]]:
         """Pairs of parameters that are exactly redundant at the nominal (never both free):
         (name_a, name_b, reason)."""

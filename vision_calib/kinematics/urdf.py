@@ -198,24 +198,6 @@ class URDFChain(JointChainChecks):
     def n_joints(self) -> int:
         return int(self.origins.shape[0])
 
-    @property
-    def mount_names(self) -> tuple[str, str]:
-        return (self.left, self.right)
-
-    @property
-    def measured_name(self) -> str:
-        """Name of the transform the chain computes, e.g. ``T_target_cam``."""
-        a = self.left[2:].rsplit("_base", 1)[0]
-        b = self.right[len("T_flange_"):]
-        return f"T_{a}_{b}"
-
-    def deviated(self, deviation=None, base=None) -> np.ndarray:
-        """Full vector (n_params,) = base (default nominal) + named deviations {name: SI value}."""
-        x = (self.params.nominal if base is None else self._x(base)).copy()
-        for k, v in (deviation or {}).items():
-            x[self.params.index(k)] += float(v)
-        return x
-
     def redundant_pairs(self) -> list[tuple[str, str, str]]:
         """Always empty: the redundancy is resolved by the identifiability analysis (module docstring)."""
         return []

@@ -197,11 +197,17 @@ class Setup:
         return {}
 
     def check_joints(self, q, where: str, ids=None) -> None:
-        """DataError naming ``where`` and the pose if joint readings q (N, n) rad are out of range."""
+        """DataError naming ``where``, the pose id and the joint when joint readings q (N, n) rad have the
+        wrong width or a non-finite value (kinds add their own range checks)."""
         q = np.asarray(q, float)
         if q.ndim != 2 or q.shape[1] != self.n_joints:
             raise DataError(f"{where}: {q.shape[-1] if q.ndim else 0} joint columns, the robot has "
                             f"{self.n_joints}")
+        bad = np.argwhere(~np.isfinite(q))
+        if bad.size:
+            k, j = (int(v) for v in bad[0])
+            pid = list(ids)[k] if ids is not None else k
+            raise DataError(f"{where}: pose {pid!r} joint q{j + 1} is not finite ({q[k, j]})")
 
     def fixed_note(self, name: str) -> str:
         """Why parameter ``name`` is fixed (for tables)."""

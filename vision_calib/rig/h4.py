@@ -118,14 +118,6 @@ class H4Setup(Setup):
     def with_params(self, params):
         return replace(self, params=params, robot=replace(self.robot, params=params))
 
-    def check_joints(self, q, where: str, ids=None) -> None:
-        super().check_joints(q, where, ids)
-        bad = np.argwhere(~np.isfinite(np.asarray(q, float)))
-        if bad.size:
-            k, j = (int(v) for v in bad[0])
-            pid = list(ids)[k] if ids is not None else k
-            raise DataError(f"{where}: pose {pid!r} joint q{j + 1} is not finite")
-
     def with_variant(self, variant: str | None = None, model: str | None = None) -> "H4Setup":
         """The setup with its robot rebuilt from the robot file: ``variant`` A..H (paper table 2, built
         from the model-12 robot: E..H are model 31) and/or ``model`` "12"|"31"; the free mask follows the

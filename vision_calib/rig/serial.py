@@ -145,15 +145,11 @@ class SerialSetup(Setup):
         return self.chain.meta.get("trials", {})
 
     def check_joints(self, q, where: str, ids=None) -> None:
-        """DataError naming ``where``, the pose id and the joint when q (N, n) rad has the wrong width,
-        a non-finite value, or a value outside the robot's joint limits (a likely unit error)."""
+        """:meth:`Setup.check_joints`, and DataError for a value outside the robot's joint limits (a likely
+        unit error)."""
         super().check_joints(q, where, ids)
         q = np.asarray(q, float)
         ids = list(ids) if ids is not None else list(range(len(q)))
-        bad = np.argwhere(~np.isfinite(q))
-        if bad.size:
-            k, j = (int(v) for v in bad[0])
-            raise DataError(f"{where}: pose {ids[k]!r} joint q{j + 1} is not finite ({q[k, j]})")
         lim = self.chain.joint_limits
         if lim is None:
             return
