@@ -142,6 +142,17 @@ def drop_inconsistent(meas: Measurements, motion: dict, where: str, max_fraction
                                      "pose, or a wrong joint reading") for lab, a in bad.items()]
 
 
+def screen_measurements(setup: Setup, meas: Measurements, where: str, scale_hint: str):
+    """The checks before identifying measured data, in order: poses without a noise estimate dropped
+    (:func:`drop_degenerate`), the motion consistency refused or accepted (:func:`check_motion`), poses whose
+    motion does not follow their joints dropped (:func:`drop_inconsistent`).
+    Returns (kept measurements, rejected [(label, reason)], the motion-check record)."""
+    meas, degenerate = drop_degenerate(meas)
+    motion = check_motion(setup, meas, where, scale_hint)
+    meas, inconsistent = drop_inconsistent(meas, motion, where)
+    return meas, degenerate + inconsistent, motion
+
+
 def structural_rank_check(setup: Setup, rep, residual: str, where: str, accept: bool = False,
                           n_generic: int = 200) -> list[str]:
     """IdentifiabilityError naming the parameters the user's pose set loses compared with generic poses

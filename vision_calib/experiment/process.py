@@ -20,7 +20,7 @@ from ..io.recording import read_recording
 from ..io.report import (REPORT_VERSION, build_report, measurements_block, parameters_table, residual_stats,
                          write_report)
 from ..rig import Measurements, load_scene
-from .checks import check_motion, drop_degenerate, drop_inconsistent
+from .checks import screen_measurements
 from .steps import check_method, identify_measurements, rejection_summary
 
 
@@ -84,11 +84,9 @@ def process_folder(folder, out_dir, method=None, progress=False, plots=True, fix
                                    f"({rejection_summary(pms)}); identification needs more")
     t1 = time.perf_counter()
     where = str(rec.folder)
-    meas, degenerate = drop_degenerate(meas)
-    motion = check_motion(setup, meas, where, "the recording's target.square_m (or marker/tag size), camera.fx/fy, "
-                          "and units.length of poses.csv")
-    meas, inconsistent = drop_inconsistent(meas, motion, where)
-    inconsistent = degenerate + inconsistent
+    meas, inconsistent, motion = screen_measurements(
+        setup, meas, where, "the recording's target.square_m (or marker/tag size), camera.fx/fy, and units.length "
+        "of poses.csv")
     ident = identify_measurements(setup, meas, method, residual, context=rejection_summary(pms), where=where,
                                   fix_unidentifiable=fix_unidentifiable, rejected=inconsistent)
     result, problem, rep, setup = ident.result, ident.problem, ident.analysis, ident.setup

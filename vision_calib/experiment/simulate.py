@@ -20,7 +20,7 @@ from ..io.atomic import write_json_atomic
 from ..io.report import REPORT_VERSION, build_report, measurements_block, parameters_table, write_report
 from ..rig import Measurements, Scene, SCENES_DIR, load_scene, scene_poses
 from .image_chain import ImageChain, measure_poses
-from .checks import check_motion, drop_degenerate, drop_inconsistent
+from .checks import screen_measurements
 from .steps import (check_method, identify_measurements, rejection_summary, rngs, run_analysis_and_truth,
                     shared_truth, unmodelled_truth)
 from .synthetic import run_synthetic
@@ -132,10 +132,8 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
         write_json_atomic(Path(out_dir) / "measurements.json",
                           {"version": REPORT_VERSION, "scene": scene.name, "seed": seed, **mblock})
     t = time.perf_counter()
-    meas_used, degenerate = drop_degenerate(meas)
-    motion = check_motion(setup, meas_used, f"{scene.path}", f"the target's square size ({scene.target_path})")
-    meas_used, inconsistent = drop_inconsistent(meas_used, motion, str(scene.path))
-    inconsistent = degenerate + inconsistent
+    meas_used, inconsistent, motion = screen_measurements(setup, meas, str(scene.path),
+                                                          f"the target's square size ({scene.target_path})")
     ident = identify_measurements(setup, meas_used, method, residual, rep if not inconsistent else None,
                                   context=rejection_summary(pms), where=str(scene.path),
                                   fix_unidentifiable=fix_unidentifiable, rejected=inconsistent)
