@@ -120,6 +120,14 @@ def build_parser() -> argparse.ArgumentParser:
     _add_run_options(p)
     p.add_argument("--allow-symlinks", action="store_true",
                    help="follow symbolic links that lead out of the recorded folder (refused by default)")
+    p.add_argument("--refine-intrinsics", action="store_true",
+                   help="calibrate the camera from the recording's images even when recording.yaml gives intrinsics")
+    p.add_argument("--json", action="store_true")
+
+    p = sub.add_parser("calibrate-camera", help="camera intrinsics + distortion from images of a target")
+    p.add_argument("folder", help="folder of images (searched recursively: png, jpg, jpeg, bmp, tif, tiff)")
+    p.add_argument("--target", required=True, help="target YAML (see targets/)")
+    p.add_argument("--out", required=True, help="camera YAML to write (README: File formats)")
     p.add_argument("--json", action="store_true")
 
     p = sub.add_parser("process-poses", help="joints + measured poses (no images) -> identify -> k-fold report "
@@ -191,9 +199,19 @@ def _dispatch(args) -> int:
 
         report = process_folder(args.folder, out_dir=args.out, method=args.method, progress=not args.json,
                                 plots=not args.no_plots, fix_unidentifiable=args.fix_unidentifiable,
-                                allow_symlinks=args.allow_symlinks)
+                                allow_symlinks=args.allow_symlinks, refine_intrinsics=args.refine_intrinsics)
         print(to_json(report) if args.json else report["summary_text"])
         return _status(report["verdict"])
+    if args.command == "calibrate-camera":
+        from .measure.intrinsics import calibrate_from_images, find_images, summary_text
+        from .io.camera_file import write_camera_yaml
+        from .targets import load_target
+
+        target = load_target(args.target)
+        res = calibrate_from_images(find_images(args.folder), target, progress=not args.json)
+        write_camera_yaml(args.out, res)
+        print(to_json(res.to_dict()) if args.json else summary_text(res) + f"\nwrote {args.out}")
+        return 0
     if args.command == "process-poses":
         from .experiment.poses import process_poses
 
@@ -267,7 +285,7 @@ def _locks(args) -> list:
     locks = []
     out = getattr(args, "out", None)
     if out is not None:
-        if args.command == "target":  # a file: lock beside it
+        if args.command in ("target", "calibrate-camera"):  # a file: lock beside it
             locks.append(OutputLock(Path(out).parent, "output file", lock_path=Path(str(out) + ".lock")))
         else:
             locks.append(OutputLock(out))

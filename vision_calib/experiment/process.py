@@ -63,10 +63,15 @@ def _recording_setup(rec):
 
 
 def process_folder(folder, out_dir, method=None, progress=False, plots=True, fix_unidentifiable=False,
-                   allow_symlinks=False) -> dict:
-    """Process a recorded folder; writes DIR/measurements.json, DIR/report.json (+ plots, model)."""
+                   allow_symlinks=False, refine_intrinsics=False) -> dict:
+    """Process a recorded folder; writes DIR/measurements.json, DIR/report.json (+ plots, model).
+    refine_intrinsics: calibrate the camera from the recording's images even when recording.yaml gives
+    intrinsics (always done when it gives none); the report's ``intrinsics`` block says which were used."""
+    from .camera_step import recording_intrinsics
+
     t0 = time.perf_counter()
     rec = read_recording(folder, allow_symlinks=allow_symlinks)
+    rec, intr = recording_intrinsics(rec, refine_intrinsics, progress)
     out = Path(out_dir)
     scene, setup = _recording_setup(rec) if rec.pose_kind != "flange_pose" else (None, None)
     method = None if scene is None else check_method(setup, method or scene.identification.method, "--method")
@@ -75,7 +80,7 @@ def process_folder(folder, out_dir, method=None, progress=False, plots=True, fix
     write_json_atomic(out / "measurements.json", {"version": REPORT_VERSION, "folder": str(rec.folder), **mblock})
     t_meas = time.perf_counter() - t0
     if scene is None:
-        return _process_handeye(rec, out, pms, mblock, t0, plots)
+        return _process_handeye(rec, out, pms, mblock, t0, plots, intr)
 
     meas, ok = Measurements.from_pose_measurements(rec.poses, rec.poses, pms)
     residual = scene.identification.residual
@@ -97,16 +102,16 @@ def process_folder(folder, out_dir, method=None, progress=False, plots=True, fix
                                                                "robot_kind": setup.kind}},
         settings={"poses": len(pms), "frames": rec.frames_per_pose, "method": method, "residual": residual,
                   "camera": rec.camera.to_dict()},
-        measurements=mblock, warnings=rec.notes, identifiability=rep,
+        measurements=mblock, warnings=[*rec.notes, *intr["warnings"]], identifiability=rep,
         parameters=parameters_table(ps.names, ps.nominal, None, result), result=result, identified=ident,
         motion=motion,
-        residuals=residual_stats(result.residuals, problem.residual_kind),
+        residuals=residual_stats(result.residuals, problem.residual_kind), extra={"intrinsics": intr},
         timings={"measure": t_meas, "identify": t_id, "total": time.perf_counter() - t0})
     write_report(out, report, setup, result, problem, plots=plots)
     return report
 
 
-def _process_handeye(rec, out, pms, mblock, t0, plots) -> dict:
+def _process_handeye(rec, out, pms, mblock, t0, plots, intr) -> dict:
     """Flange poses known: identify the camera mount and the target mount only."""
     from ..identify.handeye_problem import handeye_report, solve_handeye, stack_measurements
 
@@ -125,8 +130,8 @@ def _process_handeye(rec, out, pms, mblock, t0, plots) -> dict:
     report = build_report(
         "process_handeye", source={"folder": str(rec.folder)},
         settings={"poses": mblock["n_poses"], "mount": mount, "camera": rec.camera.to_dict(), "method": "lse"},
-        measurements=mblock, warnings=rec.notes, result=result,
-        residuals=residual_stats(result.residuals, "pose"), extra={"handeye": he},
+        measurements=mblock, warnings=[*rec.notes, *intr["warnings"]], result=result,
+        residuals=residual_stats(result.residuals, "pose"), extra={"handeye": he, "intrinsics": intr},
         timings={"total": time.perf_counter() - t0})
     write_report(out, report, plots=plots)
     return report

@@ -15,6 +15,9 @@ recording.yaml::
     format: vision_calib.recording/1
     units: {length: m, angle: rad}          # of poses.csv
     camera: {width, height, fx, fy, cx, cy, dist: [k1, k2, p1, p2, k3]}
+                                            # width/height optional (read from the images; a given size
+                                            # must match them); no fx/fy/cx/cy: `process` calibrates the
+                                            # intrinsics from the recording's own images
     camera_mount: eye_in_hand | fixed | base
     target: {kind: charuco, rows: .., cols: .., dictionary: .., square_m: .., marker_m: .., ...}
     scene: /path/to/scene.yaml              # robot model + free parameters (relative to this file or absolute)
@@ -46,7 +49,9 @@ IMAGE_EXT = (".png",)
 @dataclass(frozen=True)
 class Recording:
     """A recorded folder, validated. poses: (N, n) joints [rad] or (N, 4, 4) T_base_flange.
-    images: {pose_id: [paths of its frames, sorted]} (missing poses absent)."""
+    images: {pose_id: [paths of its frames, sorted]} (missing poses absent). camera: None when
+    recording.yaml gives no intrinsics (calibrate them from the images: ``experiment.camera_step``);
+    image_size: (width, height) [px] of the images (None without a readable image)."""
 
     folder: Path
     camera: CameraIntrinsics
@@ -61,6 +66,7 @@ class Recording:
     extra_files: tuple[str, ...] = ()
     averaging: str = "corners"
     notes: tuple[str, ...] = ()
+    image_size: tuple[int, int] | None = None
 
 
 def _target_dict(spec) -> dict:
@@ -255,7 +261,7 @@ def read_recording(folder, allow_symlinks: bool = False) -> Recording:
     if fmt != FORMAT:
         raise top.error("format", f"expected {FORMAT!r}, got {fmt!r}")
     Lf, Af = top.units(default_length="m", default_angle="rad")
-    camera = CameraIntrinsics.from_dict(top.section("camera").data, where=top.where("camera"), require_dist=True)
+    cam_data = dict(top.section("camera", {}).data)
     mount = top.get("camera_mount", str, choices=("eye_in_hand", "fixed", "base"))
     tsec = top.section("target")
     target = target_from_dict(tsec.data, where=tsec.where())
@@ -283,5 +289,39 @@ def read_recording(folder, allow_symlinks: bool = False) -> Recording:
     check_inside(cpath, folder, allow_symlinks)
     ids, poses = _read_poses_csv(cpath, pose_kind, Lf, Af)
     images, extra = _find_images(folder, ids, frames, allow_symlinks)
+    camera, size = _recording_camera(cam_data, top.section("camera", {}), images)
     return Recording(folder, camera, mount, target, scene_path, pose_kind, tuple(ids), poses, images, frames,
-                     tuple(extra), averaging, tuple(notes))
+                     tuple(extra), averaging, tuple(notes), size)
+
+
+def _recording_camera(d: dict, sec: Section, images: dict) -> tuple[CameraIntrinsics | None, tuple | None]:
+    """(intrinsics or None when no fx/fy/cx/cy are given, (width, height) of the first readable image).
+    width/height default to the images' size; a given size that differs is a ConfigError naming the key
+    and the image."""
+    from ..measure.detect import load_gray
+
+    size, first = None, None
+    for f in (f for files in images.values() for f in files):
+        img, _ = load_gray(f)
+        if img is not None:
+            size, first = (int(img.shape[1]), int(img.shape[0])), f
+            break
+    for i, key in enumerate(("width", "height")):
+        v = d.get(key)
+        if v is None:
+            if size is None:
+                raise sec.error(key, "not given and no readable image to read it from")
+            d[key] = size[i]
+        elif size is not None and v != size[i]:
+            raise sec.error(key, f"{v!r} px but the images are {size[0]}x{size[1]} px ({first})")
+    if all(d.get(k) is None for k in ("fx", "fy", "cx", "cy")):
+        if d.get("dist") is not None:
+            raise sec.error("dist", "given without fx, fy, cx, cy (give all of them, or none to calibrate the "
+                                    "intrinsics from the recording's images)")
+        from ..config import did_you_mean
+
+        for k in d:
+            if k not in ("width", "height"):
+                raise sec.error(str(k), f"unknown key{did_you_mean(k, ('width', 'height', 'fx', 'fy', 'cx', 'cy', 'dist'))}")
+        return None, size
+    return CameraIntrinsics.from_dict(d, where=sec.where(), require_dist=True), size

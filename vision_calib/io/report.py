@@ -16,6 +16,8 @@ report.json, version 2 (each value once)::
                      correlation_warnings, warnings}             # no parameter values (they are above)
     accuracy: {before: {...}, after: {...}}                      # validation poses, simulation only
     residuals: {...}                                             # RMS per component (process)
+    intrinsics: {source: "recording.yaml" | "calibrated from the recording", values, std, rms_px,
+                 coverage, warnings, ...}                        # process (experiment/camera_step.py)
     warnings: [str]
     timings_s: {...}
     files: {report, model, residuals_plot, ...}
@@ -161,6 +163,8 @@ def summary_text(report: dict) -> str:
             lines.append("  pose error vs truth, RMS per component: t = "
                          + ", ".join(f"{x:.3f}" for x in acc["translation_rms_mm"]) + " mm; r = "
                          + ", ".join(f"{x:.4f}" for x in acc["rotation_rms_deg"]) + " deg")
+    if "intrinsics" in report:
+        lines.append(_intrinsics_line(report["intrinsics"]))
     lines += [f"warning: {w}" for w in report.get("warnings", [])]
     idf = report.get("identifiability")
     if idf:
@@ -192,6 +196,18 @@ def summary_text(report: dict) -> str:
     if "timings_s" in report and "total" in report["timings_s"]:
         lines.append(f"time: {report['timings_s']['total']:.1f} s")
     return "\n".join(lines)
+
+
+def _intrinsics_line(block: dict) -> str:
+    """One summary line of the ``intrinsics`` block (process: where the camera intrinsics came from)."""
+    v, s = block["values"], block.get("std")
+    names = list(v)
+    if s is None:
+        return (f"intrinsics ({block['source']}): " + ", ".join(f"{k} {v[k]:.2f}" for k in names[:4]) + " px; dist "
+                + ", ".join(f"{v[k]:.4g}" for k in names[4:]))
+    return (f"intrinsics ({block['source']}, {block['n_views_used']} views, RMS {block['rms_px']:.3f} px): "
+            + ", ".join(f"{k} {v[k]:.2f} ± {s[k]:.2f}" for k in names[:4]) + " px; dist "
+            + ", ".join(f"{k} {v[k]:.4g} ± {s[k]:.2g}" for k in names[4:]))
 
 
 def _handeye_lines(report: dict) -> list[str]:

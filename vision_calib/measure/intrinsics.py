@@ -326,5 +326,20 @@ def calibrate_from_images(paths, target, image_size=None, names=None, config: Ca
 
 
 __all__ = ["CalibrationConfig", "IntrinsicsResult", "ViewInfo", "calibrate_intrinsics", "calibrate_from_images",
-           "intrinsics_covariance",
+           "intrinsics_covariance", "summary_text",
            "coverage", "find_images", "PARAM_NAMES", "IMAGE_SUFFIXES"]
+
+
+def summary_text(res: IntrinsicsResult) -> str:
+    """Human summary: values ± std, RMS, views, coverage and its warnings."""
+    v, s = res.values(), res.std
+    lines = [f"camera {res.camera.width}x{res.camera.height}: reprojection RMS {res.rms_px:.3f} px over "
+             f"{res.n_used} views ({len(res.views) - res.n_used} rejected)"]
+    lines += [f"  {k} = {v[k]:.3f} ± {s[k]:.3f} px" for k in PARAM_NAMES[:4]]
+    lines += [f"  {k} = {v[k]:.5g} ± {s[k]:.2g}" for k in PARAM_NAMES[4:]]
+    c = res.coverage
+    lines.append(f"coverage: {100 * c['fraction']:.0f} % of {c['grid'][0]}x{c['grid'][1]} image cells, corners up to "
+                 f"{100 * c['radius_frac']:.0f} % of the principal point-to-corner distance")
+    lines += [f"  view {x.name}: {x.reason}" for x in res.views if not x.used][:20]
+    lines += [f"warning: {w}" for w in res.warnings]
+    return "\n".join(lines)

@@ -1,0 +1,131 @@
+"""Camera calibration (measure.intrinsics) against the simulator's truth, its std against white-noise
+spreads, degenerate / bad inputs, coverage warnings, and the calibrate-camera CLI."""
+
+import cv2
+import numpy as np
+import pytest
+
+from vision_calib.camera import CameraIntrinsics
+from vision_calib.errors import DataError
+from vision_calib.measure.detect import Detection, DetectConfig, detect
+from vision_calib.measure.intrinsics import PARAM_NAMES, calibrate_intrinsics, coverage
+from vision_calib.measure.intrinsics_sim import calibration_poses, render_views
+
+TRUE = CameraIntrinsics(1024, 768, 1100.0, 1100.0, 515.3, 380.7, (-0.1, 0.05, 0.0005, -0.0005, 0.0))
+
+
+def _true_values(c=TRUE):
+    return dict(zip(PARAM_NAMES, (c.fx, c.fy, c.cx, c.cy, *c.dist)))
+
+
+def _exact_detections(target, intr, poses, rng=None, sigma=0.0):
+    """Detections from exact projections (+ N(0, sigma) px) of the target corners inside the image."""
+    ids, p = target.corner_points()
+    out = []
+    for T in poses:
+        uv = intr.project(p @ T[:3, :3].T + T[:3, 3])
+        if sigma:
+            uv = uv + rng.normal(0, sigma, uv.shape)
+        ok = (uv[:, 0] > 0) & (uv[:, 0] < intr.width - 1) & (uv[:, 1] > 0) & (uv[:, 1] < intr.height - 1)
+        out.append(Detection(True, "", ids[ok], uv[ok], intr.size))
+    return out
+
+
+def test_rendered_views_recover_the_true_intrinsics_within_3_std(charuco):
+    poses = calibration_poses(charuco, TRUE, 20, seed=1)
+    images = render_views(charuco, TRUE, poses, seed=1)
+    dets = [detect(im, charuco, None, config=DetectConfig(batch="per_frame")) for im in images]
+    res = calibrate_intrinsics(dets, [f"v{i}" for i in range(len(dets))], charuco)
+    assert res.n_used == 20 and res.rms_px < 0.2
+    truth = _true_values()
+    z = {k: (res.values()[k] - truth[k]) / res.std[k] for k in PARAM_NAMES}
+    assert all(abs(v) < 3 for v in z.values()), z
+    # plausible, not inflated: a few tenths of a px on f and c for 20 views at ~0.05 px corner noise
+    assert 0.02 < res.std["fx"] < 2 and 0.02 < res.std["cx"] < 2, res.std
+    assert res.camera.size == (1024, 768) and res.coverage["fraction"] > 0.8
+
+
+def test_reported_std_matches_the_spread_of_white_noise_trials(charuco):
+    rng = np.random.default_rng(0)
+    poses = calibration_poses(charuco, TRUE, 12, seed=2)
+    est, std = [], []
+    for _ in range(40):
+        res = calibrate_intrinsics(_exact_detections(charuco, TRUE, poses, rng, 0.1), list(range(12)), charuco)
+        est.append(list(res.values().values()))
+        std.append(list(res.std.values()))
+    ratio = np.mean(std, axis=0) / np.std(est, axis=0)
+    assert np.all((ratio > 0.7) & (ratio < 1.4)), dict(zip(PARAM_NAMES, ratio))
+    # the mean is unbiased: within 3 standard errors of the truth
+    se = np.std(est, axis=0) / np.sqrt(len(est))
+    assert np.all(np.abs(np.mean(est, axis=0) - list(_true_values().values())) < 4 * se)
+
+
+def test_fronto_parallel_views_are_refused(charuco):
+    poses = calibration_poses(charuco, TRUE, 12, seed=3, tilt_deg=(0.0, 0.01))
+    dets = _exact_detections(charuco, TRUE, poses, np.random.default_rng(1), 0.05)
+    with pytest.raises(DataError, match="not determined.*fronto-parallel"):
+        calibrate_intrinsics(dets, list(range(12)), charuco)
+
+
+def test_rejected_views_have_reasons_and_an_outlier_view_is_dropped(charuco):
+    poses = calibration_poses(charuco, TRUE, 10, seed=4)
+    dets = _exact_detections(charuco, TRUE, poses, np.random.default_rng(2), 0.05)
+    d = dets[3]
+    dets[3] = Detection(True, "", d.ids, d.uv_px + np.random.default_rng(3).normal(0, 3.0, d.uv_px.shape), d.image_size)
+    dets.append(Detection(True, "", d.ids[:5], d.uv_px[:5], d.image_size))
+    dets.append(Detection(False, "target not visible", np.zeros(0, int), np.zeros((0, 2)), None))
+    dets.append(Detection(True, "", d.ids, d.uv_px, (640, 480)))
+    names = [f"v{i}" for i in range(len(dets))]
+    res = calibrate_intrinsics(dets, names, charuco)
+    why = {v.name: v.reason for v in res.views if not v.used}
+    assert set(why) == {"v3", "v10", "v11", "v12"}, why
+    assert why["v3"].startswith("outlier") and "too few corners: 5" in why["v10"]
+    assert why["v11"] == "target not visible" and "640x480" in why["v12"]
+    assert any("v3 dropped as an outlier" in w for w in res.warnings)
+    truth = _true_values()
+    assert all(abs(res.values()[k] - truth[k]) < 4 * res.std[k] for k in PARAM_NAMES)
+    with pytest.raises(DataError, match="2 usable views of 3"):
+        calibrate_intrinsics(dets[:2] + [dets[10]], ["a", "b", "c"], charuco)
+
+
+def test_coverage_names_the_image_corners_and_borders_never_reached():
+    centre = np.array([[400.0, 300], [600, 300], [512, 450]])  # cells (3, 2), (4, 2), (4, 3)
+    cov = coverage([centre], (1024, 768))
+    assert cov["fraction"] == pytest.approx(3 / 48)
+    text = " ".join(cov["warnings"])
+    for name in ("top-left", "top-right", "bottom-left", "bottom-right", "left", "right", "top", "bottom",
+                 "extrapolated"):
+        assert name in text
+    full = np.array([[u, v] for u in np.linspace(0, 1023, 16) for v in np.linspace(0, 767, 12)])
+    cov = coverage([full], (1024, 768))
+    assert cov["fraction"] == 1.0 and cov["warnings"] == [] and cov["radius_frac"] > 0.99
+
+
+def test_calibrate_camera_cli_writes_camera_yaml(charuco, tmp_path, capsys):
+    import yaml
+
+    from vision_calib.cli import main
+    from vision_calib.io.camera_file import load_camera_yaml
+
+    tgt = tmp_path / "t.yaml"
+    tgt.write_text(yaml.safe_dump({"kind": "charuco", "rows": 7, "cols": 10, "dictionary": "DICT_5X5_100",
+                                   "square_m": 0.03, "marker_m": 0.022}))
+    poses = calibration_poses(charuco, TRUE, 14, seed=5)
+    (tmp_path / "imgs" / "sub").mkdir(parents=True)
+    for i, im in enumerate(render_views(charuco, TRUE, poses, seed=5)):
+        name = f"imgs/{i:02d}.png" if i % 2 else f"imgs/sub/{i:02d}.JPG"
+        cv2.imwrite(str(tmp_path / name), im, [cv2.IMWRITE_JPEG_QUALITY, 98])
+    (tmp_path / "imgs" / "notes.txt").write_text("not an image")
+    out = tmp_path / "camera.yaml"
+    assert main(["calibrate-camera", str(tmp_path / "imgs"), "--target", str(tgt), "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "reprojection RMS" in text and "fx =" in text
+    cam = load_camera_yaml(out)
+    doc = yaml.safe_load(out.read_text())
+    assert doc["n_views_used"] == 14 and doc["std"]["fx"] > 0 and len(doc["std"]["dist"]) == 5
+    assert abs(cam.fx - TRUE.fx) < 5 * doc["std"]["fx"] + 0.5 and abs(cam.cx - TRUE.cx) < 5 * doc["std"]["cx"] + 0.5
+    assert main(["calibrate-camera", str(tmp_path / "nope"), "--target", str(tgt), "--out", str(out)]) == 2
+    assert "nope" in capsys.readouterr().err
+    (tmp_path / "empty").mkdir()
+    assert main(["calibrate-camera", str(tmp_path / "empty"), "--target", str(tgt), "--out", str(out)]) == 2
+    assert "no images" in capsys.readouterr().err

@@ -1,0 +1,51 @@
+"""camera.yaml: the output of ``vision-calib calibrate-camera`` (README "File formats").
+
+The keys width, height, fx, fy, cx, cy, dist are exactly the ``camera:`` block of recording.yaml
+(:meth:`CameraIntrinsics.to_dict`, px; dist = [k1, k2, p1, p2, k3]); the rest says how good they are::
+
+    format: vision_calib.camera/1
+    width: 1024
+    height: 768
+    fx: ..  fy: ..  cx: ..  cy: ..
+    dist: [k1, k2, p1, p2, k3]
+    std: {fx, fy, cx, cy, dist: [5]}     # 1-sigma, same units
+    rms_px: 0.06                         # reprojection RMS, 2-D error per corner [px]
+    n_views_used: 20
+    n_views_rejected: 1
+    coverage: {grid: [8, 6], fraction: 0.98, radius_frac: 0.87, warnings: [...]}
+    warnings: [...]                      # coverage + views dropped as outliers
+    views: [{name, n_corners, rms_px, used, reason}]
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import yaml
+
+from ..camera import CameraIntrinsics
+from ..config import Section, check_keys, load_yaml
+from .atomic import write_text_atomic
+
+FORMAT = "vision_calib.camera/1"
+_CAMERA_KEYS = ("width", "height", "fx", "fy", "cx", "cy", "dist")
+_SCHEMA = {"format": None, **{k: None for k in _CAMERA_KEYS}, "std": None, "rms_px": None, "n_views_used": None,
+           "n_views_rejected": None, "coverage": None, "warnings": None, "views": None}
+
+
+def write_camera_yaml(path, result) -> Path:
+    """Write an ``measure.intrinsics.IntrinsicsResult`` to path (atomic)."""
+    doc = {"format": FORMAT, **result.to_dict()}
+    return write_text_atomic(Path(path), yaml.safe_dump(doc, sort_keys=False))
+
+
+def load_camera_yaml(path) -> CameraIntrinsics:
+    """The CameraIntrinsics of a camera.yaml; ConfigError naming the file and key."""
+    path = Path(path)
+    top = Section(load_yaml(path), path)
+    check_keys(top, _SCHEMA)
+    fmt = top.get("format", str, FORMAT)
+    if fmt != FORMAT:
+        raise top.error("format", f"expected {FORMAT!r}, got {fmt!r}")
+    return CameraIntrinsics.from_dict({k: top.data[k] for k in _CAMERA_KEYS if k in top.data},
+                                      where=str(path), require_dist=True)
