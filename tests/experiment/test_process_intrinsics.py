@@ -1,0 +1,96 @@
+"""process on a recording without intrinsics: calibrated from its own images, parameters close to the
+run with the true intrinsics; a camera size that disagrees with the images is refused."""
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+import yaml
+
+from vision_calib.cli import main
+from vision_calib.errors import ConfigError
+from vision_calib.experiment.process import process_folder
+
+pytestmark = pytest.mark.slow
+RX90 = "scenes/rx90_eye_in_hand.yaml"
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory):
+    from vision_calib.experiment.simulate import run_simulation
+
+    d = tmp_path_factory.mktemp("intr")
+    run_simulation(RX90, out_dir=d / "sim", seed=3, n_poses=24, frames=1, export_recording=d / "rec", workers=2,
+                   plots=False)
+    return d
+
+
+def _edit_camera(src, dst, **camera):
+    shutil.copytree(src, dst)
+    doc = yaml.safe_load((dst / "recording.yaml").read_text())
+    doc["camera"] = camera
+    (dst / "recording.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
+    return doc
+
+
+def test_process_calibrates_missing_intrinsics_and_agrees_with_the_true_ones(recording, tmp_path):
+    ref = process_folder(recording / "rec", tmp_path / "ref", plots=False)
+    assert ref["intrinsics"]["source"] == "recording.yaml" and ref["intrinsics"]["std"] is None
+    _edit_camera(recording / "rec", tmp_path / "rec", width=1024)  # no fx/fy/cx/cy/dist; height from the images
+    out = process_folder(tmp_path / "rec", tmp_path / "out", plots=False)
+    intr = out["intrinsics"]
+    assert intr["source"] == "calibrated from the recording" and intr["n_views_used"] >= 20
+    truth = yaml.safe_load((recording / "rec" / "recording.yaml").read_text())["camera"]
+    for k in ("fx", "fy", "cx", "cy"):
+        assert abs(intr["values"][k] - truth[k]) < 3 * intr["std"][k], (k, intr["values"][k], truth[k])
+    # k1, k2, k3 are strongly correlated when the corners reach only part of the image (warned): compare the
+    # radial distortion they give at the largest radius the corners reached instead (px)
+    assert any("extrapolated" in w for w in intr["warnings"])
+    r_px = intr["coverage"]["radius_frac"] * np.hypot(truth["cx"] + 0.5, truth["cy"] + 0.5)
+
+    def radial_px(f, k1, k2, k3):
+        r2 = (r_px / f) ** 2
+        return r_px * (k1 * r2 + k2 * r2**2 + k3 * r2**3)
+
+    v = intr["values"]
+    t = truth["dist"]
+    assert abs(radial_px(v["fx"], v["k1"], v["k2"], v["k3"]) - radial_px(truth["fx"], t[0], t[1], t[4])) < 0.5
+    assert out["settings"]["camera"]["fx"] == intr["values"]["fx"]
+    assert "intrinsics (calibrated from the recording" in out["summary_text"]
+    # robot parameters: the run with calibrated intrinsics agrees with the reference run within their std plus
+    # the intrinsics' own uncertainty propagated (reference re-run with f, cx, cy each moved by its std: a
+    # 0.15 % focal error alone moves the camera distance, d6 here, by ~0.8 mm = 60 x its std)
+    base = yaml.safe_load((recording / "rec" / "recording.yaml").read_text())["camera"]
+    sens = []
+    for j, moved in enumerate(({"fx": intr["std"]["fx"], "fy": intr["std"]["fy"]}, {"cx": intr["std"]["cx"]},
+                               {"cy": intr["std"]["cy"]})):
+        _edit_camera(recording / "rec", tmp_path / f"p{j}", **{**base, **{k: base[k] + v for k, v in moved.items()}})
+        pj = process_folder(tmp_path / f"p{j}", tmp_path / f"po{j}", plots=False)
+        sens.append({p["name"]: p["identified"] for p in pj["parameters"]})
+    r = {p["name"]: p for p in ref["parameters"]}
+    for p in out["parameters"]:
+        if p["free"]:
+            q = r[p["name"]]
+            tol = 3 * np.sqrt(p["std"] ** 2 + q["std"] ** 2 + sum((d[p["name"]] - q["identified"]) ** 2 for d in sens))
+            assert abs(p["identified"] - q["identified"]) < tol, (p["name"], p["identified"], q["identified"], tol)
+    # and reproduces the measured poses as well as the reference
+    for k, v in ref["residuals"].items():
+        assert np.all(np.array(out["residuals"][k]) < 1.25 * np.array(v) + 1e-3), k
+
+def test_refine_intrinsics_flag_and_wrong_image_size(recording, tmp_path, capsys):
+    assert main(["process", str(recording / "rec"), "--out", str(tmp_path / "o"), "--refine-intrinsics", "--json",
+                 "--no-plots"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["intrinsics"]["source"] == "calibrated from the recording"
+    assert rep["intrinsics"]["given"]["fx"] == 1100.0
+    doc = yaml.safe_load((recording / "rec" / "recording.yaml").read_text())
+    _edit_camera(recording / "rec", tmp_path / "bad", **{**doc["camera"], "height": 720})
+    with pytest.raises(ConfigError, match=r"recording.yaml: camera.height: 720 px but the images are 1024x768"):
+        process_folder(tmp_path / "bad", tmp_path / "o2", plots=False)
+    assert main(["process", str(tmp_path / "bad"), "--out", str(tmp_path / "o3")]) == 2
+    assert "camera.height" in capsys.readouterr().err
+    cam = {k: v for k, v in doc["camera"].items() if k not in ("width", "height")}
+    _edit_camera(recording / "rec", tmp_path / "nosize", **cam)
+    out = process_folder(tmp_path / "nosize", tmp_path / "o4", plots=False)
+    assert out["settings"]["camera"]["width"] == 1024 and out["intrinsics"]["source"] == "recording.yaml"
