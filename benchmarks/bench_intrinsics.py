@@ -1,0 +1,97 @@
+"""Camera calibration benchmark (measure.intrinsics): recovered vs true intrinsics, std and z per seed,
+RMS, time; the spread over seeds vs the mean reported std; a white-noise check of the std.
+
+    .venv/bin/python benchmarks/bench_intrinsics.py [--seeds 0,1,2,3] [--views 20]
+
+Setting: 1024 x 768, fx = fy = 1100 px, distortion (-0.1, 0.05, 5e-4, -5e-4, 0), ChArUco 7 x 10 (30 mm),
+views from ``measure.intrinsics_sim.calibration_poses`` (tilt 20-45 deg, 0.4-0.65 m), CPU polygon render +
+SensorEffects() defaults (blur 0.6 px, ~2 grey levels noise), one frame per view.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import numpy as np  # noqa: E402
+
+from vision_calib.camera import CameraIntrinsics  # noqa: E402
+from vision_calib.measure.detect import Detection, DetectConfig, detect  # noqa: E402
+from vision_calib.measure.intrinsics import PARAM_NAMES, calibrate_intrinsics  # noqa: E402
+from vision_calib.measure.intrinsics_sim import calibration_poses, render_views  # noqa: E402
+from vision_calib.targets.spec import TargetSpec  # noqa: E402
+
+INTR = CameraIntrinsics(1024, 768, 1100.0, 1100.0, 515.3, 380.7, (-0.1, 0.05, 0.0005, -0.0005, 0.0))
+CHARUCO = TargetSpec(kind="charuco", name="bench_charuco_7x10", rows=7, cols=10, dictionary="DICT_5X5_100",
+                     square_m=0.03, marker_m=0.022)
+TRUE = np.array([INTR.fx, INTR.fy, INTR.cx, INTR.cy, *INTR.dist])
+
+
+def rendered(seeds, n_views):
+    print(f"=== rendered views: {n_views} per seed ===")
+    print("per seed: value ± std (z = (value - true) / std)")
+    est, std = [], []
+    for seed in seeds:
+        t0 = time.perf_counter()
+        imgs = render_views(CHARUCO, INTR, calibration_poses(CHARUCO, INTR, n_views, seed), seed)
+        dets = [detect(im, CHARUCO, None, config=DetectConfig(batch="per_frame")) for im in imgs]
+        t1 = time.perf_counter()
+        res = calibrate_intrinsics(dets, list(range(len(dets))), CHARUCO)
+        t2 = time.perf_counter()
+        v, s = np.array(list(res.values().values())), np.array(list(res.std.values()))
+        est.append(v)
+        std.append(s)
+        print(f"seed {seed}: RMS {res.rms_px:.4f} px, {res.n_used} views used, render+detect {t1 - t0:.2f} s, "
+              f"calibrate {t2 - t1:.3f} s")
+        print("   " + "  ".join(f"{n} {x:.6g}±{e:.2g} (z {(x - t) / e:+.1f})" for n, x, e, t in
+                                zip(PARAM_NAMES, v, s, TRUE)))
+        for w in res.warnings:
+            print(f"      warning: {w}")
+    est, std = np.array(est), np.array(std)
+    z = (est - TRUE) / std
+    print("true: " + "  ".join(f"{n} {t:.6g}" for n, t in zip(PARAM_NAMES, TRUE)))
+    print("RMS z over seeds:           " + "  ".join(f"{n} {x:.2f}" for n, x in zip(PARAM_NAMES, np.sqrt(np.mean(z**2, 0)))))
+    if len(seeds) > 1:
+        print("spread over seeds / mean std: " + "  ".join(f"{n} {x:.2f}" for n, x in
+                                                    zip(PARAM_NAMES, est.std(0, ddof=1) / std.mean(0))))
+
+
+def white_noise(trials=100, sigma=0.1):
+    """Exact projections of the corners + N(0, sigma) px: reported std vs the spread of the estimates."""
+    print(f"\n=== white-noise check: {trials} trials, 12 views, sigma {sigma} px per coordinate ===")
+    rng = np.random.default_rng(0)
+    poses = calibration_poses(CHARUCO, INTR, 12, 2)
+    ids, p = CHARUCO.corner_points()
+    clean = [INTR.project(p @ T[:3, :3].T + T[:3, 3]) for T in poses]
+    est, std = [], []
+    t0 = time.perf_counter()
+    for _ in range(trials):
+        dets = []
+        for uv in clean:
+            uv = uv + rng.normal(0, sigma, uv.shape)
+            ok = (uv[:, 0] > 0) & (uv[:, 0] < 1023) & (uv[:, 1] > 0) & (uv[:, 1] < 767)
+            dets.append(Detection(True, "", ids[ok], uv[ok], INTR.size))
+        res = calibrate_intrinsics(dets, list(range(12)), CHARUCO)
+        est.append(list(res.values().values()))
+        std.append(list(res.std.values()))
+    dt = (time.perf_counter() - t0) / trials
+    ratio = np.mean(std, 0) / np.std(est, 0, ddof=1)
+    print("mean reported std / spread: " + "  ".join(f"{n} {x:.2f}" for n, x in zip(PARAM_NAMES, ratio)))
+    print(f"calibration time per trial: {dt * 1e3:.0f} ms")
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--seeds", default="0,1,2,3")
+    ap.add_argument("--views", type=int, default=20)
+    a = ap.parse_args()
+    rendered([int(s) for s in a.seeds.split(",")], a.views)
+    white_noise()
+
+
+if __name__ == "__main__":
+    main()
