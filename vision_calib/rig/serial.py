@@ -51,11 +51,11 @@ def remount_chain(chain, left: str, right: str, T_left_base, T_flange_right):
     return new.with_params(replace(ps, free=free))
 
 
-@dataclass(frozen=True)
 #: |q| [rad] above which a revolute joint without finite limits is refused (degrees read as radians)
 MAX_FREE_REVOLUTE_RAD = 2 * np.pi + 0.1
 
 
+@dataclass(frozen=True)
 class SerialSetup(Setup):
     """Serial arm + camera. ``chain``: chain whose left/right mounts are (T_target_base,
     T_flange_cam) for eye_in_hand or (T_cam_base, T_flange_target) for fixed. ``q_center`` (n,) rad
