@@ -54,7 +54,6 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from .. import frames
 from ..errors import ConfigError, DataError
 from .atomic import write_text_atomic
 from .images import check_image_sizes, image_size, is_image
@@ -83,10 +82,10 @@ def _num(d: dict, key: str, where: str) -> float:
     return float(v)
 
 
-def read_rosi_pose(path) -> np.ndarray:
-    """ROS-I pose YAML {x, y, z [m], qw, qx, qy, qz} -> (4, 4) T_base_flange; DataError naming the file
-    and key for a missing/non-numeric key, |t| > 20 m (mm?) or a non-unit quaternion (|norm - 1| > 1e-3;
-    smaller deviations are renormalised)."""
+def read_rosi_pose(path) -> tuple[np.ndarray, np.ndarray]:
+    """ROS-I pose YAML {x, y, z [m], qw, qx, qy, qz} -> (xyz (3,) m, quaternion (4,) scalar-last, as
+    written: renormalised where it is read); DataError naming the file and key for a missing/non-numeric
+    key, |t| > 20 m (mm?) or a non-unit quaternion (|norm - 1| > 1e-3)."""
     path = Path(path)
     d = _load(path, "ROS-I pose file")
     if not isinstance(d, dict):
@@ -100,7 +99,7 @@ def read_rosi_pose(path) -> np.ndarray:
     n = float(np.linalg.norm(q))
     if abs(n - 1) > QUAT_TOL:
         raise DataError(f"{path}: keys qw, qx, qy, qz: quaternion norm {n:.6g} is not 1 (tolerance {QUAT_TOL:g})")
-    return frames.T_from_xyz_quat(t, q / n)
+    return t, q
 
 
 def _dictionary_name(value, where: str) -> str:
@@ -227,8 +226,7 @@ def import_rosi(src, dst, allow_symlinks: bool = False) -> Path:
     buf = io.StringIO()
     w = csv.writer(buf)
     w.writerow(["pose_id", "x", "y", "z", "qx", "qy", "qz", "qw"])
-    for pid, Tp in T.items():
-        xyz, q = frames.xyz_quat_from_T(Tp)
+    for pid, (xyz, q) in T.items():  # the file's own numbers: a round trip changes no bit
         w.writerow([pid] + [repr(float(v)) for v in (*xyz, *q)])
     for pid, (_, imgs) in poses.items():
         d = dst / "images" / pid
@@ -239,6 +237,20 @@ def import_rosi(src, dst, allow_symlinks: bool = False) -> Path:
     write_text_atomic(dst / "recording.yaml", yaml.safe_dump(rec_doc, sort_keys=False))
     read_recording(dst)
     return dst
+
+
+def _csv_poses(path: Path) -> dict:
+    """{pose_id: (xyz, quaternion scalar-last)} as written in a (validated) flange-pose poses.csv."""
+    from .recording import read_text_utf8
+
+    rows = [r for r in csv.reader(io.StringIO(read_text_utf8(path), newline="")) if r and any(c.strip() for c in r)]
+    head = [h.strip() for h in rows[0]]
+    col = {h: head.index(h) for h in head}
+    out = {}
+    for r in rows[1:]:
+        v = [float(r[col[k]]) for k in ("x", "y", "z", "qx", "qy", "qz", "qw")]
+        out[r[col["pose_id"]].strip()] = (np.array(v[:3]), np.array(v[3:]))
+    return out
 
 
 def export_rosi(rec_folder, dst) -> Path:
@@ -262,8 +274,9 @@ def export_rosi(rec_folder, dst) -> Path:
     (dst / "poses").mkdir(parents=True, exist_ok=True)
     (dst / "images").mkdir(parents=True, exist_ok=True)
     data = []
-    for pid, Tp in zip(rec.pose_ids, rec.poses):
-        xyz, q = frames.xyz_quat_from_T(Tp)
+    raw = _csv_poses(rec.folder / "poses.csv")
+    for pid in rec.pose_ids:
+        xyz, q = raw[pid]
         pose = dict(zip(("x", "y", "z"), map(float, xyz))) | {"qw": float(q[3]), "qx": float(q[0]),
                                                                 "qy": float(q[1]), "qz": float(q[2])}
         write_text_atomic(dst / "poses" / f"{pid}.yaml", yaml.safe_dump(pose, sort_keys=False))
