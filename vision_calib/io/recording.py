@@ -191,7 +191,8 @@ def _read_poses_csv(cpath: Path, pose_kind: str, Lf: float, Af: float) -> tuple[
         lim, f = (MAX_ABS_JOINT, Af) if pose_kind == "joints" else (MAX_ABS_POSITION_M, Lf)
         vv = np.abs(v if pose_kind == "joints" else v[:3]) * f
         if np.any(vv > lim):
-            hint = "" if pose_kind == "joints" else " (millimetres declared as metres? set units.length: mm)"
+            hint = (" (degrees declared as radians? set units.angle: deg)" if pose_kind == "joints"
+                    else " (millimetres declared as metres? set units.length: mm)")
             raise DataError(f"{cpath}: line {ln} (pose {pid!r}): implausible value {max(vv):.4g} "
                             f"({'joint, SI' if pose_kind == 'joints' else 'position, m'}; limit {lim:g}){hint}")
         ids.append(pid)
