@@ -20,6 +20,17 @@ from pathlib import Path  # noqa: E402
 from .errors import VisionCalibError  # noqa: E402
 
 
+def _chessboard(text: str) -> tuple[int, int]:
+    """argparse type: 'COLSxROWS' inner corners, e.g. 9x6 -> (9, 6)."""
+    try:
+        c, r = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected COLSxROWS (inner corners, e.g. 9x6), got {text!r}") from None
+    if c < 2 or r < 2:
+        raise argparse.ArgumentTypeError(f"expected at least 2x2 inner corners, got {text!r}")
+    return c, r
+
+
 def _int_at_least(minimum: int):
     """argparse type: an integer >= minimum."""
 
@@ -154,6 +165,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True)
     p.add_argument("--tag-size-m", type=_sigma, default=None, help="tag side [m] (default: from apriltag-data.txt)")
     p.add_argument("--tag-id", type=_seed, default=None, help="tag id (default: detected in the first image)")
+    # --- importers (io/visp.py chessboard variant, io/rosi.py)
+    p.add_argument("--chessboard", type=_chessboard, default=None, metavar="COLSxROWS",
+                   help="chessboard folder: inner corners as ViSP's -w x -h (e.g. 9x6); the target has one more "
+                        "square each way")
+    p.add_argument("--square-m", type=_sigma, default=None, help="chessboard square side [m] (ViSP's --square_size)")
+    p.add_argument("--mount", choices=("eye_in_hand", "fixed"), default="eye_in_hand",
+                   help="chessboard folders: where the camera is (default eye_in_hand, ViSP's tutorial)")
+
+    p = sub.add_parser("import-rosi", help="convert a ROS-I industrial_calibration hand-eye data set into a "
+                                           "recorded folder")
+    p.add_argument("src", help="folder with cal_data.yaml (or that file)")
+    p.add_argument("dst", help="recorded folder to write")
+    p.add_argument("--allow-symlinks", action="store_true", help="follow symlinks leading out of SRC")
+
+    p = sub.add_parser("export-rosi", help="write a recorded folder (flange poses, ChArUco) as a ROS-I data set")
+    p.add_argument("src", help="recorded folder")
+    p.add_argument("dst", help="folder to write (cal_data.yaml, poses/, images/)")
 
     p = sub.add_parser("target", help="export a printable target image")
     p.add_argument("target", help="target YAML (see targets/)")
@@ -227,10 +255,25 @@ def _dispatch(args) -> int:
         print(to_json(res) if args.json else res["summary_text"])
         return 0
     if args.command == "import-visp":
-        from .io.visp import import_visp_eye_to_hand
+        from .errors import ConfigError
+        from .io.visp import import_visp_chessboard, import_visp_eye_to_hand
 
-        path = import_visp_eye_to_hand(args.src, args.out, tag_m=args.tag_size_m, tag_id=args.tag_id)
+        if args.chessboard is not None:
+            if args.square_m is None:
+                raise ConfigError("--chessboard needs --square-m (the square side in metres)")
+            path = import_visp_chessboard(args.src, args.out, *args.chessboard, args.square_m, mount=args.mount)
+        else:
+            path = import_visp_eye_to_hand(args.src, args.out, tag_m=args.tag_size_m, tag_id=args.tag_id)
         print(f"wrote recorded folder {path}")
+        return 0
+    if args.command in ("import-rosi", "export-rosi"):
+        from .io.rosi import export_rosi, import_rosi
+
+        if args.command == "import-rosi":
+            path = import_rosi(args.src, args.dst, allow_symlinks=args.allow_symlinks)
+            print(f"wrote recorded folder {path}")
+        else:
+            print(f"wrote ROS-I data set {export_rosi(args.src, args.dst)}")
         return 0
     if args.command == "target":
         from .targets import load_target, export_printable

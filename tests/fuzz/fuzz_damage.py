@@ -144,6 +144,32 @@ def _sixteen_bit(f):
     cv2.imwrite(str(f), cv2.imread(str(f), cv2.IMREAD_GRAYSCALE).astype(np.uint16) * 257)
 
 
+def _reformat(ext: str, params=(), convert=None, truncate=False):
+    """Rewrite a PNG frame as ``ext`` (optionally converted, or truncated to half its bytes)."""
+    def fn(f):
+        img = cv2.imread(str(f), cv2.IMREAD_UNCHANGED)
+        new = f.with_suffix(ext)
+        cv2.imwrite(str(new), convert(img) if convert else img, list(params))
+        f.unlink()
+        if truncate:
+            new.write_bytes(new.read_bytes()[: new.stat().st_size // 2])
+    return fn
+
+
+def _flange_csv(scale_xyz=1.0, quat_scale=1.0):
+    """Replace poses.csv by flange poses (poses: flange_pose) of plausible size, times scale_xyz; the
+    first row's quaternion times quat_scale."""
+    def damage(rec):
+        _set("poses", "flange_pose")(rec)
+        rows = _csv_rows(rec)
+        out = [["pose_id", "x", "y", "z", "qx", "qy", "qz", "qw"]]
+        for i, r in enumerate(rows[1:]):
+            q = np.array([0.0, 0.0, np.sin(0.1 * i), np.cos(0.1 * i)]) * (quat_scale if i == 0 else 1.0)
+            out.append([r[0]] + [repr(float(v)) for v in (0.4 * scale_xyz, 0.1 * scale_xyz, 0.5 * scale_xyz, *q)])
+        _write_csv(rec, out)
+    return damage
+
+
 def _swap_poses(a: str, b: str):
     def damage(rec):
         i = rec / "images"
@@ -211,7 +237,7 @@ CASES = [
     ("yaml-fx-nan", _set("camera.fx", float("nan")), ERR, r"recording.yaml: camera.fx: expected a finite"),
     ("yaml-fx-string", _set("camera.fx", "1100px"), ERR, r"camera.fx: expected a number"),
     ("yaml-width-float", _set("camera.width", 1024.5), ERR, r"camera.width: expected a positive integer"),
-    ("yaml-width-x2", _scale("camera.width", 2), ERR, r"recording camera \(2048, 768\) differs"),
+    ("yaml-width-x2", _scale("camera.width", 2), ERR, r"images/000/00.png: image size 1024x768 does not match the camera intrinsics 2048x768"),
     ("yaml-fx-x10", _scale("camera.fx", 10), ERR, r"fx|plausib|converge"),
     ("yaml-frames-zero", _set("frames_per_pose", 0), ERR, r"frames_per_pose: expected a value >= 1"),
     ("yaml-frames-text", _set("frames_per_pose", "two"), ERR, r"frames_per_pose: expected int"),
@@ -265,7 +291,16 @@ CASES = [
     ("img-pose-missing", _remove("images/004"), OK, None),
     ("img-corrupt", _each_image("005", _corrupt), OK, None),
     ("img-blank", _each_image("006", _blank), OK, None),
-    ("img-wrong-size", _each_image("007", _small), OK, None),
+    ("img-wrong-size", _each_image("007", _small), ERR, r"images/007/00.png: image size 640x480 does not match the camera intrinsics 1024x768"),
+    ("img-jpeg-95", _each_image("002", _reformat(".jpg", [cv2.IMWRITE_JPEG_QUALITY, 95])), OK, None),
+    ("img-bmp", _each_image("003", _reformat(".bmp")), OK, None),
+    ("img-tiff-12bit", _each_image("004", _reformat(".tif", convert=lambda a: a.astype(np.uint16) << 4)), OK, None),
+    ("img-jpeg-truncated", _each_image("005", _reformat(".jpg", truncate=True)), OK, None),  # pose rejected, file named
+    ("img-tiff-truncated", _each_image("006", _reformat(".tiff", truncate=True)), OK, None),
+    # --- unit and frame checks up front
+    ("csv-joints-in-degrees", _csv_edit(lambda rows: rows[:1] + [[r[0]] + [repr(float(v) * 57.29577951308232) for v in r[1:]] for r in rows[1:]]), ERR, r"poses.csv: (line \d+ \(pose '\d+'\): implausible value .*degrees declared as radians|pose .* outside the robot's limits .*wrong angle unit)"),
+    ("csv-flange-mm-as-m", _flange_csv(scale_xyz=1000.0), ERR, r"poses.csv: line 2 \(pose '000'\): implausible value 500 .*millimetres declared as metres"),
+    ("csv-flange-quat-norm", _flange_csv(quat_scale=1.01), ERR, r"poses.csv: pose '000': quaternion norm 1.0100 is not 1"),
     ("img-mirrored", _each_image("003", _mirror), OK, None),
     ("img-colour", _each_image("002", _colour), OK, None),
     ("img-16bit", _each_image("002", _sixteen_bit), OK, None),

@@ -8,7 +8,7 @@ Layout::
     FOLDER/poses.csv          header ``pose_id,q1..qn`` (joint values, in the file's angle unit)
                               or ``pose_id,x,y,z,qx,qy,qz,qw`` (flange pose in the robot base:
                               metres + unit quaternion, scalar last) when only flange poses are known
-    FOLDER/images/<pose_id>/<frame>.png
+    FOLDER/images/<pose_id>/<frame>.png   (or .jpg/.jpeg/.bmp/.tif/.tiff: io/images.py; 8/16 bit, grey/colour)
 
 recording.yaml::
 
@@ -41,9 +41,9 @@ from ..camera import CameraIntrinsics
 from ..config import Section, load_yaml
 from ..errors import DataError
 from .atomic import write_text_atomic
+from .images import IMAGE_EXT, check_image_sizes  # IMAGE_EXT: the formats accepted in images/<pose_id>/
 
 FORMAT = "vision_calib.recording/1"
-IMAGE_EXT = (".png",)
 
 
 @dataclass(frozen=True)
@@ -119,7 +119,8 @@ _SCHEMA = {
 FLANGE_COLUMNS = ("x", "y", "z", "qx", "qy", "qz", "qw")
 #: |joint value| [rad or m] and |flange position| [m] beyond which a pose is refused as implausible
 MAX_ABS_JOINT = 100.0
-MAX_ABS_POSITION_M = 100.0
+#: flange positions beyond 20 m from a lab robot's base are millimetres declared as metres
+MAX_ABS_POSITION_M = 20.0
 
 
 def check_inside(path: Path, root: Path, allow_symlinks: bool) -> Path:
@@ -196,8 +197,10 @@ def _read_poses_csv(cpath: Path, pose_kind: str, Lf: float, Af: float) -> tuple[
         lim, f = (MAX_ABS_JOINT, Af) if pose_kind == "joints" else (MAX_ABS_POSITION_M, Lf)
         vv = np.abs(v if pose_kind == "joints" else v[:3]) * f
         if np.any(vv > lim):
+            hint = (" (degrees declared as radians? set units.angle: deg)" if pose_kind == "joints"
+                    else " (millimetres declared as metres? set units.length: mm)")
             raise DataError(f"{cpath}: line {ln} (pose {pid!r}): implausible value {max(vv):.4g} "
-                            f"({'joint, SI' if pose_kind == 'joints' else 'position, m'}; limit {lim:g})")
+                            f"({'joint, SI' if pose_kind == 'joints' else 'position, m'}; limit {lim:g}){hint}")
         ids.append(pid)
         vals.append(v)
     dup = sorted({i for i in ids if ids.count(i) > 1})
@@ -246,7 +249,8 @@ def read_recording(folder, allow_symlinks: bool = False) -> Recording:
     measurement stage rejects those poses with a reason); a missing recording.yaml or poses.csv,
     an unknown key (closest key suggested), a missing ``camera.dist``, a malformed or non-UTF-8 CSV,
     unknown/missing/duplicate CSV columns, NaN or implausible values, duplicate pose ids, more images
-    per pose than ``frames_per_pose`` are (DataError/ConfigError naming the file, key, line or pose).
+    per pose than ``frames_per_pose``, an image whose header size differs from the camera's width x height
+    are (DataError/ConfigError naming the file, key, line or pose).
     allow_symlinks: follow symbolic links that lead out of the folder (refused by default)."""
     from ..config import check_keys
     from ..targets import target_from_dict
@@ -290,6 +294,11 @@ def read_recording(folder, allow_symlinks: bool = False) -> Recording:
     ids, poses = _read_poses_csv(cpath, pose_kind, Lf, Af)
     images, extra = _find_images(folder, ids, frames, allow_symlinks)
     camera, size = _recording_camera(cam_data, top.section("camera", {}), images)
+    if size is not None:  # every image header against the declared (or first image's) size
+        from types import SimpleNamespace
+
+        check_image_sizes([f for pid in ids for f in images.get(pid, ())], SimpleNamespace(width=size[0], height=size[1]),
+                          f"{ypath} camera")
     return Recording(folder, camera, mount, target, scene_path, pose_kind, tuple(ids), poses, images, frames,
                      tuple(extra), averaging, tuple(notes), size)
 

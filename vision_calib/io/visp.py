@@ -1,4 +1,5 @@
-"""Readers for ViSP files: camera XML (vpXmlParserCamera) and pose YAML (t + theta-u vectors)."""
+"""ViSP files: camera XML (vpXmlParserCamera), pose YAML (t + theta-u vectors), and hand-eye folders
+(AprilTag eye-to-hand, chessboard tutorials) converted into recorded folders."""
 
 from __future__ import annotations
 
@@ -116,25 +117,16 @@ def _copy_no_looser(src_file: Path, dst_file: Path) -> None:
     os.chmod(dst_file, (dst_file.stat().st_mode & 0o777) & mode)
 
 
-def import_visp_eye_to_hand(src, dst, tag_m: float | None = None, tag_id: int | None = None,
-                            dictionary: str = "DICT_APRILTAG_36h11", allow_symlinks: bool = False):
-    """Convert a ViSP hand-eye folder (``*_camera.xml``, ``*_pose_rPe_N.yaml`` flange poses in the
-    base as t + theta-u, ``*_image-N.png``) into a recorded folder (DESIGN.md §5) with flange poses:
-    fixed camera, one AprilTag on the flange. tag_m: tag side [m] (default: read from
-    ``apriltag-data.txt`` 'size: 0.048 m'). Files that are symbolic links leading out of ``src`` are
-    refused unless allow_symlinks; copied images keep no looser permissions than their source.
-    Returns the destination Path."""
-    import csv
-    import io
+def _collect(src: Path, allow_symlinks: bool):
+    """(camera, {n: T_base_flange}, {n: image path}) of a ViSP hand-eye folder: ``*camera*.xml``,
+    ``*pose_rPe_N.yaml`` or ``*pose_fPe_N.yaml`` (flange in the robot base/reference frame, t [m] +
+    theta-u [rad]), ``*image-N.<png|jpg|bmp|tif>``. DataError naming the file for a missing part, a
+    translation beyond 20 m (millimetres?) or an image whose size differs from the camera XML's."""
     import re
 
-    from .recording import check_inside
+    from .images import IMAGE_EXT, check_image_sizes
+    from .recording import MAX_ABS_POSITION_M, check_inside
 
-    import yaml
-
-    from .atomic import write_text_atomic
-
-    src, dst = Path(src), Path(dst)
     if not src.is_dir():
         raise DataError(f"{src}: ViSP folder not found")
     cams = [check_inside(p, src, allow_symlinks) for p in sorted(src.glob("*camera*.xml"))]
@@ -142,41 +134,42 @@ def import_visp_eye_to_hand(src, dst, tag_m: float | None = None, tag_id: int | 
         raise DataError(f"{src}: no ViSP camera XML (*camera*.xml)")
     intr = read_visp_camera_xml(cams[0])
     poses = {}
-    for p in src.glob("*pose_rPe_*.yaml"):
+    for p in src.glob("*pose_[rf]Pe_*.yaml"):
         m = re.search(r"_(\d+)\.yaml$", p.name)
         if m:
-            poses[int(m.group(1))] = read_visp_pose_yaml(check_inside(p, src, allow_symlinks))
+            T = read_visp_pose_yaml(check_inside(p, src, allow_symlinks))
+            if np.max(np.abs(T[:3, 3])) > MAX_ABS_POSITION_M:
+                raise DataError(f"{p}: data: translation {np.max(np.abs(T[:3, 3])):.4g} m from the robot base "
+                                f"(limit {MAX_ABS_POSITION_M:g} m): millimetres written as metres? ViSP poses are in m")
+            poses[int(m.group(1))] = T
     if not poses:
-        raise DataError(f"{src}: no ViSP flange poses (*_pose_rPe_N.yaml)")
+        raise DataError(f"{src}: no ViSP flange poses (*_pose_rPe_N.yaml or *pose_fPe_N.yaml)")
     images = {}
-    for p in src.glob("*image-*.png"):
-        m = re.search(r"-(\d+)\.png$", p.name)
-        if m:
+    for p in sorted(src.glob("*image-*.*")):
+        m = re.search(r"-(\d+)\.[A-Za-z]+$", p.name)
+        if m and p.suffix.lower() in IMAGE_EXT:
             images[int(m.group(1))] = check_inside(p, src, allow_symlinks)
-    if tag_m is None:
-        info = src / "apriltag-data.txt"
-        text = check_inside(info, src, allow_symlinks).read_text(errors="replace") if info.is_file() else ""
-        m = re.search(r"size:\s*([0-9.eE+-]+)\s*m", text)
-        if not m:
-            raise DataError(f"{src}: tag size unknown: give tag_m (no 'size: <x> m' in apriltag-data.txt)")
-        try:
-            tag_m = float(m.group(1))
-        except ValueError:
-            raise DataError(f"{info}: tag size {m.group(1)!r} is not a number; give tag_m") from None
-    if not (tag_m > 0 and np.isfinite(tag_m)):
-        raise DataError(f"tag size must be > 0 m, got {tag_m}")
-    if tag_id is None:
-        tag_id = _detect_tag_id(images[min(images)], dictionary) if images else 0
+    check_image_sizes([images[k] for k in sorted(images)], intr, str(cams[0]))
+    return intr, poses, images
+
+
+def _write_visp_recording(src, dst, intr, poses, images, mount: str, target: dict) -> Path:
+    """recording.yaml + poses.csv (flange poses) + images/<n>/00.<ext> of a ViSP folder."""
+    import csv
+    import io
+
+    import yaml
+
+    from .atomic import write_text_atomic
+
     dst.mkdir(parents=True, exist_ok=True)
     doc = {
         "format": "vision_calib.recording/1",
         "source": f"imported from ViSP folder {src}",
         "units": {"length": "m", "angle": "rad"},
         "camera": intr.to_dict(),
-        "camera_mount": "fixed",
-        "target": {"kind": "apriltag_grid", "name": f"tag36h11_{tag_id}", "rows": 1, "cols": 1,
-                   "dictionary": dictionary, "tag_m": float(tag_m), "spacing_m": 0.01, "first_id": int(tag_id),
-                   "margin_m": 0.01},
+        "camera_mount": mount,
+        "target": target,
         "poses": "flange_pose",
         "frames_per_pose": 1,
     }
@@ -191,5 +184,75 @@ def import_visp_eye_to_hand(src, dst, tag_m: float | None = None, tag_id: int | 
     for k, p in images.items():
         d = dst / "images" / str(k)
         d.mkdir(parents=True, exist_ok=True)
-        _copy_no_looser(p, d / "00.png")
+        _copy_no_looser(p, d / f"00{p.suffix.lower()}")
     return dst
+
+
+def import_visp_eye_to_hand(src, dst, tag_m: float | None = None, tag_id: int | None = None,
+                            dictionary: str = "DICT_APRILTAG_36h11", allow_symlinks: bool = False):
+    """Convert a ViSP hand-eye folder (``*_camera.xml``, ``*_pose_rPe_N.yaml`` flange poses in the
+    base as t + theta-u, ``*_image-N.png``) into a recorded folder (DESIGN.md §5) with flange poses:
+    fixed camera, one AprilTag on the flange. tag_m: tag side [m] (default: read from
+    ``apriltag-data.txt`` 'size: 0.048 m'). Files that are symbolic links leading out of ``src`` are
+    refused unless allow_symlinks; copied images keep no looser permissions than their source.
+    Returns the destination Path."""
+    import re
+
+    from .recording import check_inside
+
+    src, dst = Path(src), Path(dst)
+    intr, poses, images = _collect(src, allow_symlinks)
+    if tag_m is None:
+        info = src / "apriltag-data.txt"
+        text = check_inside(info, src, allow_symlinks).read_text(errors="replace") if info.is_file() else ""
+        m = re.search(r"size:\s*([0-9.eE+-]+)\s*m", text)
+        if not m:
+            raise DataError(f"{src}: tag size unknown: give tag_m (no 'size: <x> m' in apriltag-data.txt); "
+                            "a chessboard folder needs --chessboard COLSxROWS --square-m S")
+        try:
+            tag_m = float(m.group(1))
+        except ValueError:
+            raise DataError(f"{info}: tag size {m.group(1)!r} is not a number; give tag_m") from None
+    if not (tag_m > 0 and np.isfinite(tag_m)):
+        raise DataError(f"tag size must be > 0 m, got {tag_m}")
+    if tag_id is None:
+        tag_id = _detect_tag_id(images[min(images)], dictionary) if images else 0
+    target = {"kind": "apriltag_grid", "name": f"tag36h11_{tag_id}", "rows": 1, "cols": 1,
+              "dictionary": dictionary, "tag_m": float(tag_m), "spacing_m": 0.01, "first_id": int(tag_id),
+              "margin_m": 0.01}
+    return _write_visp_recording(src, dst, intr, poses, images, "fixed", target)
+
+
+def import_visp_chessboard(src, dst, inner_cols: int, inner_rows: int, square_m: float,
+                           mount: str = "eye_in_hand", allow_symlinks: bool = False) -> Path:
+    """Convert a ViSP hand-eye folder of the chessboard tutorials (``camera.xml``, ``image-N.png``,
+    ``pose_fPe_N.yaml`` / ``pose_rPe_N.yaml`` flange poses; ``tutorial-chessboard-pose -w W -h H
+    --square_size S``) into a recorded folder with flange poses. inner_cols x inner_rows: ViSP's ``-w`` x
+    ``-h``, the *inner* corners (OpenCV's pattern size; ViSP's default 9 x 6); the target written has
+    ``rows``/``cols`` = number of squares = inner + 1. square_m: square side [m]. mount: "eye_in_hand"
+    (ViSP's tutorial-hand-eye-calibration: camera on the flange, board fixed) or "fixed". The pattern
+    size is checked on the first image (cv2.findChessboardCorners); DataError names the image."""
+    import cv2
+
+    src, dst = Path(src), Path(dst)
+    for name, v in (("inner_cols", inner_cols), ("inner_rows", inner_rows)):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 2:
+            raise ConfigError(f"chessboard {name} (inner corners) must be an integer >= 2, got {v!r}")
+    if not (isinstance(square_m, (int, float)) and np.isfinite(square_m) and 0 < square_m <= 1.0):
+        raise ConfigError(f"chessboard square size must be in (0, 1] m, got {square_m!r} (millimetres?)")
+    if mount not in ("eye_in_hand", "fixed"):
+        raise ConfigError(f"mount must be 'eye_in_hand' or 'fixed', got {mount!r}")
+    intr, poses, images = _collect(src, allow_symlinks)
+    if images:
+        first = images[min(images)]
+        img = cv2.imread(str(first), cv2.IMREAD_GRAYSCALE)
+        if img is None:
+            raise DataError(f"{first}: unreadable image")
+        found, _ = cv2.findChessboardCorners(img, (int(inner_cols), int(inner_rows)),
+                                             cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
+        if not found:
+            raise DataError(f"{first}: no chessboard of {inner_cols}x{inner_rows} inner corners found; check "
+                            "--chessboard COLSxROWS (ViSP's -w x -h: inner corners, not squares)")
+    target = {"kind": "chessboard", "rows": int(inner_rows) + 1, "cols": int(inner_cols) + 1,
+              "square_m": float(square_m), "margin_m": float(square_m)}
+    return _write_visp_recording(src, dst, intr, poses, images, mount, target)

@@ -128,14 +128,25 @@ def _invalid(reason, frame_index, image_size=None, **diag) -> Detection:
 
 # ----------------------------------------------------------------------------- image loading
 def load_gray(image) -> tuple[np.ndarray | None, str]:
-    """Image path or array -> (uint8 (H, W) grey image, "") or (None, reason). Never raises."""
+    """Image path or array -> (uint8 (H, W) grey image, "") or (None, reason naming the file). Never raises.
+
+    Files: any format OpenCV reads (PNG, JPEG, BMP, TIFF, ...), 8 or 16 bit, grey or colour (BGR/BGRA ->
+    grey with ``cv2.cvtColor``). A JPEG without its end-of-image marker (truncated: OpenCV would decode the
+    top part and leave the rest grey) is refused. 16-bit images are scaled by their *used* bit depth,
+    ``b = max(8, bit_length(max pixel))``: ``img >> (b - 8)``, so a 12-bit camera in a 16-bit container
+    (max <= 4095) keeps its full contrast (>> 4) and a full-range 16-bit image gets >> 8; the brightest
+    pixel never clips. Float arrays are rounded and clipped to 0..255."""
     src = ""
     try:
         if isinstance(image, (str, Path)):
             src = str(image)
             if not Path(src).is_file():
                 return None, f"image file not found: {src}"
-            img = cv2.imread(src, cv2.IMREAD_UNCHANGED)
+            data = np.fromfile(src, dtype=np.uint8)
+            # JPEG (starts FF D8) must hold its end-of-image marker FF D9 (some writers pad after it)
+            if data.size >= 2 and data[0] == 0xFF and data[1] == 0xD8 and b"\xff\xd9" not in data[-64:].tobytes():
+                return None, f"truncated JPEG file (no end-of-image marker): {src}"
+            img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
             if img is None:
                 return None, f"unreadable or corrupt image file: {src}"
         else:
@@ -150,7 +161,8 @@ def load_gray(image) -> tuple[np.ndarray | None, str]:
             else:
                 return None, f"image with {img.shape[2]} channels not supported {src}".strip()
         if img.dtype == np.uint16:
-            img = (img >> 8).astype(np.uint8)
+            bits = max(8, int(img.max()).bit_length())
+            img = (img >> (bits - 8)).astype(np.uint8)
         elif img.dtype != np.uint8:
             f = img.astype(np.float64)
             if not np.all(np.isfinite(f)):

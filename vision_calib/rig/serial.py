@@ -51,6 +51,10 @@ def remount_chain(chain, left: str, right: str, T_left_base, T_flange_right):
     return new.with_params(replace(ps, free=free))
 
 
+#: |q| [rad] above which a revolute joint without finite limits is refused (degrees read as radians)
+MAX_FREE_REVOLUTE_RAD = 2 * np.pi + 0.1
+
+
 @dataclass(frozen=True)
 class SerialSetup(Setup):
     """Serial arm + camera. ``chain``: chain whose left/right mounts are (T_target_base,
@@ -145,12 +149,21 @@ class SerialSetup(Setup):
         return self.chain.meta.get("trials", {})
 
     def check_joints(self, q, where: str, ids=None) -> None:
-        """:meth:`Setup.check_joints`, and DataError for a value outside the robot's joint limits (a likely
-        unit error)."""
+        """:meth:`Setup.check_joints`, and DataError for a value outside the robot's joint limits, or, for a
+        revolute joint without finite limits, beyond +-(2 pi + 0.1) rad (both: likely an angle unit error)."""
         super().check_joints(q, where, ids)
         q = np.asarray(q, float)
         ids = list(ids) if ids is not None else list(range(len(q)))
+        # revolute joints without finite limits: |q| > 2 pi + margin is degrees read as radians
+        revolute = ~np.asarray(getattr(self.chain, "prismatic", np.zeros(q.shape[1], bool)), bool)
         lim = self.chain.joint_limits
+        free = revolute & (np.ones(q.shape[1], bool) if lim is None else ~np.all(np.isfinite(lim), axis=1))
+        big = np.argwhere((np.abs(q) > MAX_FREE_REVOLUTE_RAD) & free)
+        if big.size:
+            k, j = (int(v) for v in big[0])
+            raise DataError(f"{where}: pose {ids[k]!r} joint q{j + 1} = {q[k, j]:.4g} rad is more than a turn "
+                            f"(|q| > 2 pi + {MAX_FREE_REVOLUTE_RAD - 2 * np.pi:.2g}) for a revolute joint: degrees "
+                            "declared as radians? (set units.angle: deg)")
         if lim is None:
             return
         bad = np.argwhere((q < lim[:, 0]) | (q > lim[:, 1]))

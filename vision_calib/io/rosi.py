@@ -1,0 +1,303 @@
+"""ROS-Industrial ``industrial_calibration`` extrinsic hand-eye data sets <-> recorded folders.
+
+The ROS-I layout (``examples/data/test_set_charuco`` of ros-industrial/industrial_calibration)::
+
+    cal_data.yaml
+        data:                          # one entry per observation (image + robot pose)
+          - {image: images/0.png, pose: poses/0.yaml}
+        intrinsics: {fx, fy, cx, cy}   # [px]; no distortion: ROS-I expects undistorted images
+        static_camera: true            # or (newer GUI) eye_in_hand: false
+        camera_mount_to_camera_guess: {x, y, z, qx, qy, qz, qw}   # ignored here
+        target_mount_to_target_guess: {...}                       # ignored here
+        homography_threshold: 2.0                                 # ignored here
+        target_finder: {type: CharucoGridTargetFinder, rows, cols, chessboard_dim, aruco_marker_dim,
+                        dictionary: 10}
+    poses/0.yaml                       # {x, y, z, qw, qx, qy, qz}
+    images/0.png
+
+``intrinsics`` may also come from ``camera_intr.yaml`` and ``target_finder`` from ``target_finder.yaml``
+next to ``cal_data.yaml`` (both exist in ROS-I's examples).
+
+Mapping (ROS-I -> ours):
+
+- pose files: ``x, y, z`` [m] and the quaternion ``qw, qx, qy, qz`` (named keys; written to poses.csv
+  scalar-last) are the robot base -> flange transform ``T_base_flange`` (ROS-I's ``to_camera_mount``
+  for an eye-in-hand camera, ``to_target_mount`` for a static camera: in both, the mount pose in the
+  robot base) -> ``poses.csv`` ``x,y,z,qx,qy,qz,qw`` with ``poses: flange_pose``.
+- ``static_camera: true`` / ``eye_in_hand: false`` -> ``camera_mount: fixed`` (target on the flange);
+  ``static_camera: false`` / ``eye_in_hand: true`` -> ``eye_in_hand``.
+- ``intrinsics`` -> camera fx, fy, cx, cy; width x height from the first image (all images must match);
+  ``dist`` zeros (ROS-I's hand-eye has no distortion model).
+- ``CharucoGridTargetFinder``: rows, cols (squares along y, x: ROS-I calls
+  ``CharucoBoard::create(cols, rows, ...)``), chessboard_dim -> square_m, aruco_marker_dim -> marker_m,
+  dictionary (OpenCV's enum value) -> its ``cv2.aruco`` name, ``legacy_pattern: true`` (ROS-I builds
+  against OpenCV < 4.6, whose ChArUco layout is the legacy one; it matters only for an even number of
+  rows). Circle-grid / ArUco-grid targets are refused (no such target kind here).
+- Entries that share a pose file become the frames of one pose (pose id = the pose file's stem).
+
+Two extension keys, written by :func:`export_rosi` and ignored by ROS-I (it reads only the keys it
+knows): ``distortion: [k1, k2, p1, p2, k3]`` and ``target_finder.legacy_pattern``; a real ROS-I data
+set has neither (zero distortion, legacy layout).
+
+Checks up front (DataError naming the file and key): a translation beyond 20 m (millimetres?), a
+quaternion whose norm is off 1 by more than 1e-3 (smaller: renormalised), an image missing or of
+another size than the first one.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import shutil
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from ..errors import ConfigError, DataError
+from .atomic import write_text_atomic
+from .images import check_image_sizes, image_size, is_image
+from .recording import FORMAT, MAX_ABS_POSITION_M, check_inside
+
+POSE_KEYS = ("x", "y", "z", "qw", "qx", "qy", "qz")
+CHARUCO_TYPES = ("CharucoGridTargetFinder", "industrial_calibration::CharucoGridTargetFinderPlugin")
+QUAT_TOL = 1e-3
+
+
+def _load(path: Path, what: str):
+    try:
+        return yaml.safe_load(path.read_text(encoding="utf-8-sig"))
+    except FileNotFoundError:
+        raise DataError(f"{path}: {what} not found") from None
+    except (OSError, yaml.YAMLError, UnicodeDecodeError) as exc:
+        raise DataError(f"{path}: cannot read {what} ({' '.join(str(exc).split())})") from None
+
+
+def _num(d: dict, key: str, where: str) -> float:
+    if not isinstance(d, dict) or key not in d:
+        raise DataError(f"{where}: missing key {key!r}")
+    v = d[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
+        raise DataError(f"{where}: key {key!r}: expected a finite number, got {v!r}")
+    return float(v)
+
+
+def read_rosi_pose(path) -> tuple[np.ndarray, np.ndarray]:
+    """ROS-I pose YAML {x, y, z [m], qw, qx, qy, qz} -> (xyz (3,) m, quaternion (4,) scalar-last, as
+    written: renormalised where it is read); DataError naming the file and key for a missing/non-numeric
+    key, |t| > 20 m (mm?) or a non-unit quaternion (|norm - 1| > 1e-3)."""
+    path = Path(path)
+    d = _load(path, "ROS-I pose file")
+    if not isinstance(d, dict):
+        raise DataError(f"{path}: expected a mapping with keys {', '.join(POSE_KEYS)}")
+    v = {k: _num(d, k, str(path)) for k in POSE_KEYS}
+    t = np.array([v["x"], v["y"], v["z"]])
+    if np.max(np.abs(t)) > MAX_ABS_POSITION_M:
+        raise DataError(f"{path}: keys x, y, z: {np.max(np.abs(t)):.4g} m from the robot base (limit "
+                        f"{MAX_ABS_POSITION_M:g} m): millimetres written as metres? ROS-I poses are in metres")
+    q = np.array([v["qx"], v["qy"], v["qz"], v["qw"]])
+    n = float(np.linalg.norm(q))
+    if abs(n - 1) > QUAT_TOL:
+        raise DataError(f"{path}: keys qw, qx, qy, qz: quaternion norm {n:.6g} is not 1 (tolerance {QUAT_TOL:g})")
+    return t, q
+
+
+def _dictionary_name(value, where: str) -> str:
+    import cv2
+
+    if isinstance(value, str) and value.startswith("DICT_") and hasattr(cv2.aruco, value):
+        return value
+    names = sorted(n for n in dir(cv2.aruco) if n.startswith("DICT_") and getattr(cv2.aruco, n) == value)
+    if isinstance(value, bool) or not isinstance(value, int) or not names:
+        raise ConfigError(f"{where}: key 'dictionary': {value!r} is not an OpenCV predefined dictionary id")
+    return names[0]
+
+
+def _target(tf, where: str) -> dict:
+    """Our target dict from a ROS-I target_finder mapping."""
+    if not isinstance(tf, dict) or "type" not in tf:
+        raise ConfigError(f"{where}: expected a mapping with a 'type' key")
+    if tf["type"] not in CHARUCO_TYPES:
+        raise ConfigError(f"{where}: type {tf['type']!r} is not supported (only ChArUco boards: "
+                          f"{', '.join(CHARUCO_TYPES)}); circle grids and ArUco grids have no target kind here")
+    ints = {}
+    for k in ("rows", "cols"):
+        v = tf.get(k)
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise ConfigError(f"{where}: key {k!r}: expected an integer (squares), got {v!r}")
+        ints[k] = v
+    try:
+        sq, mk = _num(tf, "chessboard_dim", where), _num(tf, "aruco_marker_dim", where)
+    except DataError as exc:
+        raise ConfigError(str(exc)) from None
+    return {"kind": "charuco", "name": "rosi_charuco", "rows": ints["rows"], "cols": ints["cols"],
+            "dictionary": _dictionary_name(tf.get("dictionary"), where), "square_m": sq, "marker_m": mk,
+            "legacy_pattern": bool(tf.get("legacy_pattern", True)), "margin_m": sq / 2}
+
+
+def _mount(doc: dict, where: str) -> str:
+    if "eye_in_hand" in doc:
+        return "eye_in_hand" if bool(doc["eye_in_hand"]) else "fixed"
+    if "static_camera" in doc:
+        return "fixed" if bool(doc["static_camera"]) else "eye_in_hand"
+    raise ConfigError(f"{where}: neither 'static_camera' nor 'eye_in_hand' is given: where is the camera?")
+
+
+def _index(src: Path) -> Path:
+    if src.is_file():
+        return src
+    if not src.is_dir():
+        raise DataError(f"{src}: ROS-I data set not found")
+    cand = src / "cal_data.yaml"
+    if cand.is_file():
+        return cand
+    found = [p for p in sorted(src.glob("*.yaml")) if isinstance(_load(p, "YAML"), dict) and "data" in _load(p, "YAML")]
+    if len(found) != 1:
+        raise DataError(f"{src}: no cal_data.yaml (a YAML file with a 'data' list of image/pose entries)"
+                        + (f"; several candidates: {[p.name for p in found]}" if found else ""))
+    return found[0]
+
+
+def _section(doc: dict, key: str, folder: Path, fallback: str, index: Path):
+    """doc[key], else the ``key`` section (or the whole mapping) of ``folder/fallback``."""
+    if key in doc:
+        return doc[key], f"{index}: {key}"
+    p = folder / fallback
+    if not p.is_file():
+        raise ConfigError(f"{index}: no {key!r} key and no {fallback} next to it")
+    d = _load(p, fallback)
+    if isinstance(d, dict) and key in d:
+        return d[key], f"{p}: {key}"
+    return d, str(p)
+
+
+def import_rosi(src, dst, allow_symlinks: bool = False) -> Path:
+    """Convert a ROS-I hand-eye data set (folder with ``cal_data.yaml``, or that file) into a recorded
+    folder ``dst`` (flange poses; the mapping is in the module docstring). Images are copied in their own
+    format. Returns dst; the written folder is read back with :func:`read_recording`."""
+    from ..camera import CameraIntrinsics
+    from .recording import read_recording
+    from .visp import _copy_no_looser
+
+    index = _index(Path(src))
+    folder = index.parent
+    doc = _load(index, "ROS-I data set index")
+    if not isinstance(doc, dict) or not isinstance(doc.get("data"), list) or not doc["data"]:
+        raise DataError(f"{index}: key 'data': expected a non-empty list of {{image, pose}} entries")
+    mount = _mount(doc, str(index))
+    intr, where_i = _section(doc, "intrinsics", folder, "camera_intr.yaml", index)
+    k = {key: _num(intr, key, where_i) for key in ("fx", "fy", "cx", "cy")}
+    tf, where_t = _section(doc, "target_finder", folder, "target_finder.yaml", index)
+    target = _target(tf, where_t)
+    dist = doc.get("distortion", [0.0] * 5)
+    if not (isinstance(dist, list) and len(dist) == 5 and all(isinstance(v, (int, float)) for v in dist)):
+        raise ConfigError(f"{index}: key 'distortion': expected [k1, k2, p1, p2, k3], got {dist!r}")
+
+    poses: dict[str, tuple[Path, list[Path]]] = {}
+    for i, e in enumerate(doc["data"]):
+        where = f"{index}: data[{i}]"
+        if not isinstance(e, dict) or not isinstance(e.get("image"), str) or not isinstance(e.get("pose"), str):
+            raise DataError(f"{where}: expected {{image: <file>, pose: <file>}}, got {e!r}")
+        img, pose = folder / e["image"], folder / e["pose"]
+        for p in (img, pose):
+            if not p.is_file():
+                raise DataError(f"{where}: file not found: {p}")
+            check_inside(p, folder, allow_symlinks)
+        if not is_image(img):
+            raise DataError(f"{where}: {img.name}: not an image format read here ({img.suffix})")
+        pid = pose.stem
+        if pid in poses and poses[pid][0].resolve() != pose.resolve():
+            pid = f"{pid}_{i}"
+        poses.setdefault(pid, (pose, []))[1].append(img)
+
+    first = next(iter(poses.values()))[1][0]
+    size = image_size(first)
+    if size is None:
+        raise DataError(f"{first}: unreadable image (its size gives the camera width x height)")
+    camera = CameraIntrinsics(size[0], size[1], k["fx"], k["fy"], k["cx"], k["cy"], tuple(float(v) for v in dist))
+    check_image_sizes([p for _, imgs in poses.values() for p in imgs], camera, f"the first image {first}")
+    T = {pid: read_rosi_pose(p) for pid, (p, _) in poses.items()}
+
+    dst = Path(dst)
+    rec_doc = {"format": FORMAT, "source": f"imported from ROS-I industrial_calibration data set {index}",
+               "units": {"length": "m", "angle": "rad"}, "camera": camera.to_dict(), "camera_mount": mount,
+               "target": target, "poses": "flange_pose",
+               "frames_per_pose": max(len(imgs) for _, imgs in poses.values()), "averaging": "corners"}
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(["pose_id", "x", "y", "z", "qx", "qy", "qz", "qw"])
+    for pid, (xyz, q) in T.items():  # the file's own numbers: a round trip changes no bit
+        w.writerow([pid] + [repr(float(v)) for v in (*xyz, *q)])
+    for pid, (_, imgs) in poses.items():
+        d = dst / "images" / pid
+        d.mkdir(parents=True, exist_ok=True)
+        for j, p in enumerate(imgs):
+            _copy_no_looser(p, d / f"{j:02d}{p.suffix.lower()}")
+    write_text_atomic(dst / "poses.csv", buf.getvalue())
+    write_text_atomic(dst / "recording.yaml", yaml.safe_dump(rec_doc, sort_keys=False))
+    read_recording(dst)
+    return dst
+
+
+def _csv_poses(path: Path) -> dict:
+    """{pose_id: (xyz, quaternion scalar-last)} as written in a (validated) flange-pose poses.csv."""
+    from .recording import read_text_utf8
+
+    rows = [r for r in csv.reader(io.StringIO(read_text_utf8(path), newline="")) if r and any(c.strip() for c in r)]
+    head = [h.strip() for h in rows[0]]
+    col = {h: head.index(h) for h in head}
+    out = {}
+    for r in rows[1:]:
+        v = [float(r[col[k]]) for k in ("x", "y", "z", "qx", "qy", "qz", "qw")]
+        out[r[col["pose_id"]].strip()] = (np.array(v[:3]), np.array(v[3:]))
+    return out
+
+
+def export_rosi(rec_folder, dst) -> Path:
+    """Write a recorded folder with flange poses (and a ChArUco target) as a ROS-I hand-eye data set:
+    ``dst/cal_data.yaml``, ``dst/poses/<pose_id>.yaml``, ``dst/images/<pose_id>_<frame><ext>`` (one
+    ``data`` entry per frame, the frames of a pose sharing its pose file). Camera distortion and the
+    ChArUco layout go to the extension keys ``distortion`` and ``target_finder.legacy_pattern``."""
+    import cv2
+
+    from .recording import read_recording
+
+    rec = read_recording(rec_folder)
+    if rec.pose_kind != "flange_pose":
+        raise DataError(f"{rec.folder / 'recording.yaml'}: poses: {rec.pose_kind!r}; a ROS-I data set holds "
+                        "flange poses (poses: flange_pose)")
+    t = rec.target
+    if t.kind != "charuco":
+        raise ConfigError(f"{rec.folder / 'recording.yaml'}: target.kind {t.kind!r}: ROS-I's finders here are "
+                          "ChArUco only")
+    dst = Path(dst)
+    (dst / "poses").mkdir(parents=True, exist_ok=True)
+    (dst / "images").mkdir(parents=True, exist_ok=True)
+    data = []
+    raw = _csv_poses(rec.folder / "poses.csv")
+    for pid in rec.pose_ids:
+        xyz, q = raw[pid]
+        pose = dict(zip(("x", "y", "z"), map(float, xyz))) | {"qw": float(q[3]), "qx": float(q[0]),
+                                                                "qy": float(q[1]), "qz": float(q[2])}
+        write_text_atomic(dst / "poses" / f"{pid}.yaml", yaml.safe_dump(pose, sort_keys=False))
+        for j, img in enumerate(rec.images.get(pid, ())):
+            name = f"images/{pid}_{j:02d}{img.suffix.lower()}"
+            shutil.copyfile(img, dst / name)
+            data.append({"image": name, "pose": f"poses/{pid}.yaml"})
+    c = rec.camera
+    identity = {"x": 0.0, "y": 0.0, "z": 0.0, "qx": 0.0, "qy": 0.0, "qz": 0.0, "qw": 1.0}
+    doc = {"data": data, "intrinsics": {"fx": c.fx, "fy": c.fy, "cx": c.cx, "cy": c.cy},
+           "camera_mount_to_camera_guess": identity, "target_mount_to_target_guess": identity,
+           "homography_threshold": 2.0, "static_camera": rec.camera_mount != "eye_in_hand",
+           "eye_in_hand": rec.camera_mount == "eye_in_hand",
+           "target_finder": {"type": "CharucoGridTargetFinder", "rows": int(t.rows), "cols": int(t.cols),
+                             "chessboard_dim": float(t.square_m), "aruco_marker_dim": float(t.marker_m),
+                             "dictionary": int(getattr(cv2.aruco, t.dictionary)),
+                             "legacy_pattern": bool(t.legacy_pattern)}}
+    if any(float(v) != 0.0 for v in c.dist):
+        doc["distortion"] = [float(v) for v in c.dist]
+    write_text_atomic(dst / "cal_data.yaml", yaml.safe_dump(doc, sort_keys=False))
+    return dst
+
+
+__all__ = ["import_rosi", "export_rosi", "read_rosi_pose"]
