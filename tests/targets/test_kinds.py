@@ -193,3 +193,22 @@ def test_printable_export_detects_at_geometry(tmp_path, target):
     x0, y0, _, _ = target.texture_extent_m()
     xy = np.column_stack([x0 + (d.uv_px[:, 0] + 0.5) / ppm, y0 + (d.uv_px[:, 1] + 0.5) / ppm])
     np.testing.assert_allclose(xy, target.corner_points()[1][d.ids, :2], atol=0.5 / ppm)  # 0.5 px; a wrong id is off by a square
+
+
+def test_image_bound_for_new_kinds():
+    """The image-model bound runs through the kind's info model: positive definite, and a dot of twice the
+    diameter (twice the edge length) halves the variance of a circle grid's orientation (all else equal)."""
+    from vision_calib.measure.covariance import image_bound_pose_cov
+
+    T = _pose(CIRCLES, 0.7, (0.2, 0.1, 0.0))
+    for t in (CHESS, CIRCLES):
+        C = image_bound_pose_cov(t, INTR, _pose(t, 0.7, (0.2, 0.1, 0.0)), SensorEffects())
+        assert np.all(np.linalg.eigvalsh(C) > 0)
+    small = circles(rows=9, cols=6, spacing_m=0.018, diameter_m=0.005)
+    big = circles(rows=9, cols=6, spacing_m=0.018, diameter_m=0.010)
+    # same centres up to the radius offset of the frame: compare at poses of the same dot centres
+    Tb = T @ frames.make_T(t=[-0.0025, -0.0025, 0.0])
+    Cs = image_bound_pose_cov(small, INTR, T, SensorEffects())
+    Cb = image_bound_pose_cov(big, INTR, Tb, SensorEffects())
+    # the rotation block does not depend on the frame origin (the translation block moves with the lever arm)
+    np.testing.assert_allclose(Cb[3:, 3:] / Cs[3:, 3:], 0.5, rtol=1e-6)
