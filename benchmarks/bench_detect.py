@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/bench_detect.py [--poses 6] [--seeds 4] [--frames 10] [--seed 0]
                                                 [--targets charuco,apriltag_grid] [--read-noise 1.0]
+    .venv/bin/python benchmarks/bench_detect.py --targets chessboard,circles_asymmetric --poses 8 --seeds 2 --frames 5
 
 For each target (bench_measure's ChArUco 7 x 10 and AprilTag grid 4 x 5, 1024 x 768 with distortion,
 SensorEffects() defaults unless --read-noise): P random poses (TargetRenderer, supersample 2), S noise
@@ -14,6 +15,11 @@ seeds of N frames each. Both DetectConfig.batch modes run on the same frames, in
 - corners: per-corner bias (mean over frames and seeds of the error vs the projected truth, RMS over
   corners) and scatter (std over frames, pooled), px;
 - the largest |seeded - per_frame| pose difference.
+
+Target kinds chessboard / circles_asymmetric (targets/chessboard_a4.yaml, targets/circles_asymmetric_a4.yaml)
+run at the H4 viewing geometry (1024 x 768, f = 1013 px, no distortion, 0.6-0.76 m, tilt <= 35 deg), default
+DetectConfig, polygon renderer; every other pose is seen with the camera rolled 180 degrees. Printed: corner
+bias / scatter (as above), pose error systematic / random (as above) and the total RMS pose error.
 """
 
 from __future__ import annotations
@@ -133,6 +139,54 @@ def run_target(target, n_poses, n_seeds, n_frames, seed, effects):
     print(f"    max |seeded - per_frame| pose difference: {np.nanmax(d[..., :3]):.5f} mm, {np.nanmax(d[..., 3:]):.5f} deg")
 
 
+def run_new_kind(name, n_poses, n_seeds, n_frames, seed, effects):
+    """Accuracy of a chessboard / circle-grid target at the H4 geometry (module docstring)."""
+    from vision_calib.camera import CameraIntrinsics
+    from vision_calib.render import TargetRenderer
+    from vision_calib.targets import load_target
+
+    target = load_target(Path(__file__).resolve().parents[1] / "targets" / f"{name}_a4.yaml")
+    intr = CameraIntrinsics(1024, 768, 1013.0, 1013.0, 511.5, 383.5)
+    lookup = target_lookup(target)
+    rng = np.random.default_rng(seed)
+    roll = frames.make_T(np.diag([-1.0, -1.0, 1.0]), np.zeros(3))
+    Ts = [(roll if k % 2 else np.eye(4)) @ random_view_pose(rng, target, intr, dist_range=(0.6, 0.76))
+          for k in range(n_poses)]
+    seeds = pose_seeds(seed + 1, n_poses * n_seeds)
+    r = TargetRenderer(target, intr, backend="polygon")
+    err = np.full((n_poses, n_seeds, 6), np.nan)
+    corners, t_det, n_img = [], 0.0, 0
+    for k, T in enumerate(Ts):
+        ideal = r.render(T)
+        acc = {}
+        for s in range(n_seeds):
+            imgs = apply_effects(ideal, effects, n_frames, seeds[k * n_seeds + s], intr)
+            t0 = time.perf_counter()
+            dets = detect_batch(imgs, target, intr)
+            t_det += time.perf_counter() - t0
+            n_img += n_frames
+            pm = measure_pose(dets, target, intr, k)
+            if pm.valid:
+                err[k, s] = frames.pose_error(T, pm.T_cam_target)
+            for d in dets:
+                if d.valid:
+                    e = d.uv_px - intr.project(frames.transform_points(T, np.array([lookup[int(i)] for i in d.ids])))
+                    for i, ee in zip(d.ids, e):
+                        acc.setdefault(int(i), []).append(ee)
+        corners += [np.array(v) for v in acc.values() if len(v) > 1]
+    e = err * SCALE
+    sysm, rnd = np.nanmean(e, axis=1), np.nanstd(e, axis=1, ddof=1)
+    cb = np.sqrt(np.mean([np.sum(c.mean(0) ** 2) / 2 for c in corners]))
+    sc = np.sqrt(np.mean([c.var(0, ddof=1).mean() for c in corners]))
+    print(f"  {target.name}: {target.n_corners} points, {n_poses} poses (every other rolled 180 deg) x {n_seeds} "
+          f"seeds x {n_frames} frames, detect {t_det / n_img * 1e3:.0f} ms/frame")
+    print(f"    corner bias {cb:.4f} px, scatter {sc:.4f} px (per coordinate)")
+    print(f"    pose error systematic t {np.sqrt(np.mean(sysm[:, :3] ** 2)):.4f} mm, r {np.sqrt(np.mean(sysm[:, 3:] ** 2)):.4f} deg;"
+          f" random t {np.sqrt(np.mean(rnd[:, :3] ** 2)):.4f} mm, r {np.sqrt(np.mean(rnd[:, 3:] ** 2)):.4f} deg;"
+          f" total RMS t {np.sqrt(np.nanmean(e[..., :3] ** 2)):.4f} mm, r {np.sqrt(np.nanmean(e[..., 3:] ** 2)):.4f} deg;"
+          f" valid {int(np.isfinite(e[..., 0]).sum())}/{e.shape[0] * e.shape[1]}")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--poses", type=int, default=6)
@@ -146,6 +200,11 @@ def main(argv=None):
     effects = SensorEffects() if a.read_noise is None else SensorEffects(read_noise_grey=a.read_noise)
     _FLOOR[CHARUCO.name] = cv2.aruco.CharucoDetector(CHARUCO.cv_board())
     _FLOOR[APRILGRID.name] = cv2.aruco.ArucoDetector(APRILGRID.cv_dictionary(), cv2.aruco.DetectorParameters())
+    for name in ("chessboard", "circles_asymmetric"):
+        if name in a.targets.split(","):
+            print(f"\n=== {name} at the H4 geometry, read noise {effects.read_noise_grey} grey, seed {a.seed} ===",
+                  flush=True)
+            run_new_kind(name, a.poses, a.seeds, a.frames, a.seed, effects)
     for target in (CHARUCO, APRILGRID):
         if target.kind not in a.targets.split(","):
             continue

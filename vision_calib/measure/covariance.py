@@ -87,8 +87,16 @@ def _apriltag_terms(ids: np.ndarray, uv_px: np.ndarray) -> np.ndarray:
     return np.column_stack([APRILTAG_SHIFT_PX * np.tile(np.eye(2), (len(ids), 1)), APRILTAG_GROWTH_PX * n.ravel()])
 
 
-#: per target kind: (corner ids (K,), uv (K, 2) px) -> (2K, m) detector-bias columns of S (module docstring)
-DETECTOR_TERMS = {"apriltag_grid": _apriltag_terms}
+#: per bias model (``TargetKind.bias_model``): (corner ids (K,), uv (K, 2) px) -> (2K, m) detector-bias
+#: columns of S (module docstring)
+DETECTOR_TERMS = {"apriltag": _apriltag_terms}
+
+
+def _bias_model(target_kind):
+    from ..targets.kinds import KINDS
+
+    kind = KINDS.get(target_kind)
+    return None if kind is None else kind.bias_model
 
 
 @dataclass(frozen=True)
@@ -155,8 +163,9 @@ def pose_covariance(T_cam_target: np.ndarray, p_target: np.ndarray, mean_uv_px: 
         field_std = LENS_FIELD_STD if any(intr.dist) else (0.0,) * 4
     uv = project_pinhole(T_cam_target, p_target, intr)
     S = field_directions(uv) * np.asarray(field_std, float)
-    if target_kind in DETECTOR_TERMS and ids is not None:
-        S = np.column_stack([S, DETECTOR_TERMS[target_kind](np.asarray(ids, dtype=int), uv)])
+    model = _bias_model(target_kind)
+    if model in DETECTOR_TERMS and ids is not None:
+        S = np.column_stack([S, DETECTOR_TERMS[model](np.asarray(ids, dtype=int), uv)])
     S_perp = S - J @ (Jp @ (J.T @ S))
     ss_field = float(np.sum(S_perp**2))  # expected share of the strain in r^T r
     if np.isfinite(sigma_frame_px):
@@ -197,6 +206,8 @@ def corner_error_split(T_true: np.ndarray, p_target: np.ndarray, mean_uv_px: np.
 # - ChArUco (saddle corner refined by cv2.cornerSubPix in a (2 w + 1)^2 window, w = DetectConfig.subpix_win):
 #   mu = mid + C/2 erf(n1.x / (sqrt2 s)) erf(n2.x / (sqrt2 s)), n1, n2 the image normals of the two
 #   board edges through the corner; F summed over the window's pixels.
+# - Chessboard: the same saddle model (findChessboardCornersSB corners; the window is an approximation).
+# - Circle grid (dark-area centroid of each dot): see :func:`circle_info`.
 # - AprilTag grid (OpenCV's AprilTag refinement fits a line to each tag side and intersects them): per
 #   unit length an edge of contrast C gives I1 = C^2 / (2 sqrt(pi) s var_mid); a line fitted over a side of
 #   L px locates its end (the corner) along its normal with variance 4 / (I1 L); F = sum_i n_i n_i^T I1 L_i / 4.
@@ -257,14 +268,24 @@ def corner_info(target, T_cam_target, p_target, intr: CameraIntrinsics, effects,
 
     cfg = detect_config or DetectConfig()
     normals, scale = corner_edge_normals(T_cam_target, p_target, intr)
-    return CORNER_INFO[target.kind](target, normals, scale, effects, cfg)
+    return CORNER_INFO[target.kind_impl.info_model](target, normals, scale, effects, cfg)
 
 
-#: per target kind: (target, normals (K, 2, 2), px per metre along the target axes (K, 2), effects,
-#: DetectConfig) -> Fisher blocks (K, 2, 2)
+def circle_info(radius_px: np.ndarray, effects) -> np.ndarray:
+    """(K, 2, 2) Fisher information [1/px^2] of dot centres from their whole edge: a dot of radius R px
+    (mean over the two axes) is an edge of length 2 pi R whose normals cover all directions, so
+    F = I1 pi R I2 (I1 as for a tag side)."""
+    s, C = _edge_sigma_px(effects), _contrast(effects)
+    I1 = C**2 / (2 * np.sqrt(np.pi) * s) / pixel_variance(C / 2 + effects.black_level_grey, effects)
+    return np.einsum("k,ab->kab", I1 * np.pi * np.asarray(radius_px, float), np.eye(2))
+
+
+#: per corner image model (``TargetKind.info_model``): (target, normals (K, 2, 2), px per metre along the
+#: target axes (K, 2), effects, DetectConfig) -> Fisher blocks (K, 2, 2)
 CORNER_INFO = {
-    "charuco": lambda t, n, sc, eff, cfg: saddle_info(n, eff, cfg.subpix_win),
-    "apriltag_grid": lambda t, n, sc, eff, cfg: tag_edge_info(n, sc * t.tag_m, eff),
+    "saddle": lambda t, n, sc, eff, cfg: saddle_info(n, eff, cfg.subpix_win),
+    "tag_edge": lambda t, n, sc, eff, cfg: tag_edge_info(n, sc * t.tag_m, eff),
+    "circle": lambda t, n, sc, eff, cfg: circle_info(sc.mean(axis=1) * t.diameter_m / 2, eff),
 }
 
 

@@ -1,4 +1,6 @@
-"""Corner detection for ChArUco boards and AprilTag grids (cv2.aruco), never raising on bad input.
+"""Corner detection of calibration targets, never raising on bad input. What is detected and how is
+the target kind's (:mod:`vision_calib.targets.kinds`: cv2.aruco for ChArUco boards and AprilTag grids,
+``findChessboardCornersSB`` for chessboards, ``findCirclesGrid`` for asymmetric circle grids).
 
 Corner ids follow ``TargetSpec.corner_points()``: ChArUco corners use OpenCV's ChArUco corner
 ids; AprilTag-grid corners are ``4 * marker_id + k`` with k the OpenCV marker corner index.
@@ -21,10 +23,11 @@ from ..errors import ConfigError
 from ..io.atomic import jsonable
 
 
-#: per target kind, what ``refine="auto"`` uses (AprilTag's own edge refinement) and whether the extra
-#: cornerSubPix pass runs by default (ChArUco corners)
-AUTO_REFINE = {"apriltag_grid": "apriltag"}
-AUTO_EXTRA_SUBPIX = {"charuco": True}
+def _kind(kind: str):
+    """The registered target kind (its ``auto_refine`` / ``auto_extra_subpix`` defaults)."""
+    from ..targets.kinds import get_kind
+
+    return get_kind(kind, "DetectConfig")
 
 
 @dataclass(frozen=True)
@@ -77,7 +80,7 @@ class DetectConfig:
 
     def refine_for(self, kind: str) -> str:
         """The marker refinement actually used for a target kind (per-frame detection)."""
-        return AUTO_REFINE.get(kind, "none") if self.refine == "auto" else self.refine
+        return _kind(kind).auto_refine if self.refine == "auto" else self.refine
 
     def seed_config(self) -> "DetectConfig":
         """The per-frame config used for full detections in the seeded batch mode: refine "auto" ->
@@ -86,7 +89,7 @@ class DetectConfig:
 
     def extra_subpix_for(self, kind: str) -> bool:
         """Whether the extra cornerSubPix pass runs for a target kind."""
-        return AUTO_EXTRA_SUBPIX.get(kind, False) if self.extra_subpix is None else bool(self.extra_subpix)
+        return _kind(kind).auto_extra_subpix if self.extra_subpix is None else bool(self.extra_subpix)
 
 
 @dataclass(frozen=True, eq=False)
@@ -176,15 +179,9 @@ def load_gray(image) -> tuple[np.ndarray | None, str]:
 # ----------------------------------------------------------------------------- detectors (thread-local cache)
 _local = threading.local()
 
-_REFINE = {
-    "apriltag": cv2.aruco.CORNER_REFINE_APRILTAG,
-    "subpix": cv2.aruco.CORNER_REFINE_SUBPIX,
-    "contour": cv2.aruco.CORNER_REFINE_CONTOUR,
-    "none": cv2.aruco.CORNER_REFINE_NONE,
-}
-
 
 def _detector(target, config: DetectConfig):
+    """(kind's detector object, frozenset of the target's corner ids), cached per thread."""
     cache = getattr(_local, "cache", None)
     if cache is None:
         cache = _local.cache = {}
@@ -192,16 +189,7 @@ def _detector(target, config: DetectConfig):
     hit = cache.get(key)
     if hit is not None:
         return hit
-    params = cv2.aruco.DetectorParameters()
-    params.cornerRefinementMethod = _REFINE[config.refine_for(target.kind)]
-    params.cornerRefinementWinSize = 3
-    if target.kind == "charuco":
-        cp = cv2.aruco.CharucoParameters()
-        det = cv2.aruco.CharucoDetector(target.cv_board(), cp, params)
-    elif target.kind == "apriltag_grid":
-        det = cv2.aruco.ArucoDetector(target.cv_dictionary(), params)
-    else:
-        raise ConfigError(f"unknown target kind {target.kind!r} (charuco | apriltag_grid)")
+    det = target.kind_impl.make_detector(target, config)
     ids, _ = target.corner_points()
     cache[key] = (det, frozenset(int(i) for i in ids))
     return cache[key]
@@ -231,39 +219,13 @@ def detect(image, target, intrinsics: CameraIntrinsics | None = None, frame_inde
     img, size, source, bad = _load_checked(image, intrinsics, frame_index)
     if bad is not None:
         return bad
-    return _detect_gray(img, size, source, target, frame_index, config, t0)
+    return _detect_gray(img, size, source, target, frame_index, config, t0, intrinsics=intrinsics)
 
 
-def _find_corners(img, target, config: DetectConfig, diag: dict):
-    """Marker detection + ChArUco interpolation on a grey image: (ids, uv) or (None, reason)."""
-    det, target_ids = _detector(target, config)
-    if target.kind == "charuco":
-        ch_corners, ch_ids, m_corners, m_ids = det.detectBoard(img)
-        n_markers = 0 if m_ids is None else len(m_ids)
-        diag["n_markers"] = n_markers
-        diag["marker_ids"] = [] if m_ids is None else sorted(int(i) for i in m_ids.ravel())
-        if ch_ids is None or len(ch_ids) == 0:
-            return None, ("target not visible: no marker of the target dictionary detected" if n_markers == 0
-                          else f"no ChArUco corner interpolated from {n_markers} marker(s)")
-        return ch_ids.ravel().astype(int), ch_corners.reshape(-1, 2).astype(np.float64)
-    m_corners, m_ids, _rej = det.detectMarkers(img)
-    all_ids = [] if m_ids is None else [int(i) for i in m_ids.ravel()]
-    diag["n_markers"] = len(all_ids)
-    diag["marker_ids"] = sorted(all_ids)
-    ids_l, uv_l = [], []
-    for mid, c in zip(all_ids, m_corners):
-        cid = 4 * mid + np.arange(4)
-        if int(cid[0]) in target_ids:
-            ids_l.append(cid)
-            uv_l.append(c.reshape(4, 2))
-    if not ids_l:
-        return None, ("target not visible: no marker of the target dictionary detected" if not all_ids
-                      else f"detected marker ids {sorted(all_ids)} do not belong to the target "
-                           f"(wrong dictionary or wrong board?)")
-    uv = np.concatenate(uv_l).astype(np.float64)
-    if config.refine_for(target.kind) == "apriltag":
-        uv += config.apriltag_offset_px
-    return np.concatenate(ids_l), uv
+def _find_corners(img, target, config: DetectConfig, diag: dict, intrinsics=None):
+    """The target kind's corner finder on a grey image: (ids, uv) or (None, reason)."""
+    det, _ = _detector(target, config)
+    return target.kind_impl.find_corners(target, det, img, config, diag, intrinsics)
 
 
 def _subpix(img, uv, win):
@@ -274,13 +236,14 @@ def _subpix(img, uv, win):
 
 
 def _detect_gray(img, size, source, target, frame_index, config: DetectConfig, t0,
-                 post=None) -> Detection:
+                 post=None, intrinsics=None) -> Detection:
     """Detection on a loaded grey image. post: optional (img, ids, uv) -> (ids, uv) refinement replacing
-    the extra cornerSubPix pass (the seeded batch mode's per-frame estimator)."""
+    the extra cornerSubPix pass (the seeded batch mode's per-frame estimator). intrinsics: passed to the
+    kind's corner finder (circle grids correct the perspective offset of the dot centres with it)."""
     _, target_ids = _detector(target, config)
     diag = {"source": source}
     try:
-        ids, uv = _find_corners(img, target, config, diag)
+        ids, uv = _find_corners(img, target, config, diag, intrinsics)
         if ids is None:
             diag["time_s"] = time.perf_counter() - t0
             return _invalid(uv, frame_index, size, **diag)

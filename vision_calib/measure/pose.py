@@ -110,8 +110,11 @@ def _rms(res: np.ndarray) -> float:
 def measure_pose(detections: Sequence[Detection], target, intrinsics: CameraIntrinsics, pose_id=0,
                  config: MeasureConfig = MeasureConfig()) -> PoseMeasurement:
     """Average the frames of one pose into a PoseMeasurement; never raises on bad frames
-    (invalid frames are skipped and recorded; an unusable pose gives valid=False + reason).
+    (invalid frames are skipped and recorded; an unusable pose gives valid=False + reason). ConfigError for a
+    target whose poses are ambiguous (a 180-degree-symmetric board, ``allow_symmetric``).
     Longer than 80 lines: one pass over the frames' detections (validity, averaging, PnP, residuals, covariance, diagnostics) sharing the per-corner arrays."""
+    if hasattr(target, "check_pose_measurable"):
+        target.check_pose_measurable()  # ConfigError: a 180-degree-symmetric board gives ambiguous poses
     lookup = target_lookup(target)
     fdiag = []
     obs = []  # (frame_index, ids, uv_undist)

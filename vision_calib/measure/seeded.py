@@ -1,11 +1,12 @@
 """Seeded batch detection (``DetectConfig.batch == "seeded"``): detect once per pose, refine per frame.
 
 The markers/board are detected on the first frame that gives a valid detection (the *seed*); every
-other frame's corners are refined from the seed's corners with the target kind's per-frame estimator:
-- ChArUco: ``cv2.cornerSubPix`` (window ``subpix_win``, eps 1e-4 px), the same estimator as the
+other frame's corners are refined from the seed's corners with the per-frame estimator the target kind
+names (``TargetKind.seeded_mode``; None -> every frame gets a full detection):
+- "subpix" (ChArUco): ``cv2.cornerSubPix`` (window ``subpix_win``, eps 1e-4 px), the same estimator as the
   per-frame path's extra pass, started from the seed frame's refined corners instead of the frame's
   own OpenCV corners (it converges to the same point: poses equal within 1e-4 mm, measured);
-- AprilTag grid: straight-edge fits of each tag's border (:func:`.tag_edges.refine_quads`); the seed
+- "tag_edges" (AprilTag grid): straight-edge fits of each tag's border (:func:`.tag_edges.refine_quads`); the seed
   frame and every fully detected frame are refined the same way (twice, from OpenCV's unrefined
   marker corners), so all frames of a pose share one estimator.
 Validity per frame: the frame's 1/8-scale image must correlate with the seed's (NCC >=
@@ -59,16 +60,18 @@ class _Seed:
 class _Refiner:
     """Per-frame corner estimator of a target kind: refine(img, ids, uv, passes) -> (ids, uv, ok (K,) bool)."""
 
-    def __init__(self, target, intrinsics: CameraIntrinsics | None, config: DetectConfig):
-        self.kind = target.kind
+    def __init__(self, target, intrinsics: CameraIntrinsics | None, config: DetectConfig, mode: str):
+        self.mode = mode
         self.win = config.subpix_win
         self.intr = intrinsics
-        self.cells = target.cv_dictionary().markerSize + 2 if self.kind == "apriltag_grid" else 0
+        self.cells = target.kind_impl.tag_cells(target) if mode == "tag_edges" else 0
+        self.refine = {"subpix": self._subpix, "tag_edges": self._tag_edges}[mode]
 
-    def refine(self, img, ids, uv, passes=1):
-        if self.kind == "charuco":
-            out = _subpix(img, uv, self.win)
-            return ids, out, np.all(np.isfinite(out), axis=1)
+    def _subpix(self, img, ids, uv, passes=1):
+        out = _subpix(img, uv, self.win)
+        return ids, out, np.all(np.isfinite(out), axis=1)
+
+    def _tag_edges(self, img, ids, uv, passes=1):
         q = uv.reshape(-1, 4, 2)
         ok = np.ones(len(q), dtype=bool)
         for _ in range(passes):
@@ -107,12 +110,12 @@ def _from_seed(img, size, source, i, seed: _Seed, ref: _Refiner, config: DetectC
 
 def detect_seeded(images, target, intrinsics: CameraIntrinsics | None, config: DetectConfig) -> list[Detection]:
     """N Detections of one pose's frames (see the module docstring); never raises on a bad frame."""
-    if target.kind == "charuco" and not config.extra_subpix_for(target.kind):
-        # without the cornerSubPix pass there is no per-frame estimator to seed: per-frame path
+    mode = target.kind_impl.seeded_mode(config)
+    if mode is None:  # no per-frame estimator to seed: per-frame path
         return [detect(im, target, intrinsics, i, config) for i, im in enumerate(images)]
-    ref = _Refiner(target, intrinsics, config)
+    ref = _Refiner(target, intrinsics, config, mode)
     full_cfg = config.seed_config()
-    post = ref.full_post if target.kind == "apriltag_grid" else None
+    post = ref.full_post if mode == "tag_edges" else None
     seed, out = None, []
     for i, im in enumerate(images):
         t0 = time.perf_counter()
@@ -127,7 +130,7 @@ def detect_seeded(images, target, intrinsics: CameraIntrinsics | None, config: D
                 seed.confirmed = True
                 out.append(d)
                 continue
-        d = _detect_gray(img, size, source, target, i, full_cfg, t0, post=post)
+        d = _detect_gray(img, size, source, target, i, full_cfg, t0, post=post, intrinsics=intrinsics)
         d.diagnostics["batch"] = "full"
         if why:
             d.diagnostics["fallback"] = why

@@ -1,9 +1,10 @@
 """Exact pixel-area coverage of a planar target under a homography (the ``"polygon"`` backend).
 
-Every target is white inside its outline with non-overlapping, axis-aligned black rectangles
-(:meth:`TargetSpec.black_rects`, the same rectangles its texture is drawn from). A homography maps
-straight lines to straight lines, so each rectangle projects to an exact convex quadrilateral whose
-vertices are the projected corners; the ideal image (pixel value = mean of the board's radiance over
+Every target is white inside its outline with non-overlapping black shapes: axis-aligned rectangles
+(:meth:`TargetSpec.black_rects`) and polygons (:meth:`TargetSpec.black_polygons`: a circle grid's dots as
+area-preserving 128-gons), the same shapes its texture is drawn from. A homography maps straight lines
+to straight lines, so each shape projects to an exact polygon whose vertices are the projected
+vertices; the ideal image (pixel value = mean of the board's radiance over
 the pixel's square, the limit of supersampling by s -> infinity) is then
 
     I = background + (face - background) * cover(outline) - face * sum_k cover(rect_k)   (front face)
@@ -101,7 +102,9 @@ class PolygonRenderer:
         self.background, self.back_grey = float(background), float(back_grey)
         x0, y0, x1, y1 = target.texture_extent_m()
         self._outline = _rect_corners(np.array([[x0, y0, x1, y1]], float))  # (1, 4, 2)
-        self._rects = _rect_corners(np.array(target.black_rects(), float).reshape(-1, 4))  # (N, 4, 2)
+        rects = _rect_corners(np.array(target.black_rects(), float).reshape(-1, 4))  # (N, 4, 2)
+        polys = target.black_polygons()  # (M, V, 2)
+        self._shapes = [g for g in (rects, polys) if len(g)]  # groups of equal vertex count
         self._blank = np.full((intrinsics.height, intrinsics.width), self.background, np.float32)
 
     def _project(self, T: np.ndarray, pts: np.ndarray) -> np.ndarray:
@@ -129,10 +132,11 @@ class PolygonRenderer:
         front = float(T[:3, 2] @ T[:3, 3]) > 0  # camera on the -z side of the board: printed face
         shift = np.array([u0, v0], float)
         if front:
-            polys = np.concatenate([outline, self._project(T, self._rects)]) - shift
-            weights = sign * np.concatenate([[255.0 - bg], np.full(len(self._rects), -255.0)])
+            cov = accumulate_coverage(outline - shift, sign * np.array([255.0 - bg]), v1 - v0, u1 - u0)
+            for g in self._shapes:
+                cov += accumulate_coverage(self._project(T, g) - shift, np.full(len(g), -255.0 * sign),
+                                           v1 - v0, u1 - u0)
         else:
-            polys, weights = outline - shift, sign * np.array([self.back_grey - bg])
-        cov = accumulate_coverage(polys, weights, v1 - v0, u1 - u0)
+            cov = accumulate_coverage(outline - shift, sign * np.array([self.back_grey - bg]), v1 - v0, u1 - u0)
         out[v0:v1, u0:u1] += cov.astype(np.float32)
         return out

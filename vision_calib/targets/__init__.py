@@ -1,6 +1,7 @@
-"""targets stage: ChArUco / AprilTag-grid definitions (3-D corners, texture, printable export). cv2 only.
+"""targets stage: ChArUco / AprilTag-grid / chessboard / asymmetric-circle-grid definitions (3-D corners, texture, printable export). cv2 only.
 
-Frame and id conventions are written in :mod:`vision_calib.targets.spec`.
+Frame and id conventions are written in :mod:`vision_calib.targets.spec`; the kinds are registered in
+:mod:`vision_calib.targets.kinds`.
 """
 
 from .printable import export_printable, read_png_phys

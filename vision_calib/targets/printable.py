@@ -20,8 +20,8 @@ from .spec import TargetSpec
 M_PER_INCH = 0.0254
 
 
-def _png_chunk(kind: bytes, data: bytes) -> bytes:
-    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+def _png_chunk(ctype: bytes, data: bytes) -> bytes:
+    return struct.pack(">I", len(data)) + ctype + data + struct.pack(">I", zlib.crc32(ctype + data) & 0xFFFFFFFF)
 
 
 def png_with_phys(img: np.ndarray, px_per_m: int) -> bytes:
@@ -42,15 +42,15 @@ def read_png_phys(path) -> tuple[int, int, int, int]:
         raise ConfigError(f"{path}: not a PNG file")
     pos, w, h, ppx, ppy = 8, 0, 0, 0, 0
     while pos + 8 <= len(b):
-        n, kind = struct.unpack(">I4s", b[pos:pos + 8])
+        n, ctype = struct.unpack(">I4s", b[pos:pos + 8])
         data = b[pos + 8:pos + 8 + n]
-        if kind == b"IHDR":
+        if ctype == b"IHDR":
             w, h = struct.unpack(">II", data[:8])
-        elif kind == b"pHYs":
+        elif ctype == b"pHYs":
             ppx, ppy, unit = struct.unpack(">IIB", data)
             if unit != 1:
                 ppx = ppy = 0
-        elif kind == b"IEND":
+        elif ctype == b"IEND":
             break
         pos += 12 + n
     return w, h, ppx, ppy

@@ -1,10 +1,13 @@
-"""Calibration target definitions: ChArUco boards and AprilTag grids (cv2 + numpy only).
+"""Calibration target definitions (cv2 + numpy only). The kinds (ChArUco boards, AprilTag grids,
+chessboards, asymmetric circle grids) live in :mod:`vision_calib.targets.kinds`, the one registry of kinds;
+:class:`TargetSpec` holds the YAML values and delegates everything kind-specific to it.
 
 Target frame (the same as OpenCV 4.14's board object points, ``board.getChessboardCorners()`` /
 ``board.getObjPoints()``; checked in ``tests/targets/test_spec.py``):
 
-- origin at the *outer* top-left corner of the pattern (first chessboard square for ChArUco, top-left
-  corner of tag 0's black border for an AprilTag grid), as seen in the texture / printed image;
+- origin at the *outer* top-left corner of the pattern (first chessboard square for ChArUco and
+  chessboards, top-left corner of tag 0's black border for an AprilTag grid, top-left corner of the
+  bounding box of the dots for a circle grid), as seen in the texture / printed image;
 - x along the pattern's columns (to the right in the image), y along its rows (down in the image);
 - z = x × y points *into* the board, away from a viewer who looks at the printed face. A camera seeing
   the board upright therefore has ``R_cam_target ~= I`` (OpenCV camera: x right, y down, z forward).
@@ -12,14 +15,16 @@ Target frame (the same as OpenCV 4.14's board object points, ``board.getChessboa
   ``[-margin_m, width_pattern + margin_m] x [-margin_m, height_pattern + margin_m]`` (:meth:`texture_extent_m`).
 
 Corner ids:
-- ChArUco: OpenCV's charuco ids (``CharucoDetector.detectBoard`` returns them); inner chessboard corners,
-  row-major from the origin, id = r * (cols - 1) + c, at ((c + 1) * square_m, (r + 1) * square_m, 0).
+- ChArUco and chessboard: inner chessboard corners, row-major from the origin, id = r * (cols - 1) + c,
+  at ((c + 1) * square_m, (r + 1) * square_m, 0) (ChArUco: OpenCV's charuco ids).
 - AprilTag grid: id = 4 * tag_id + k, k = 0..3 in OpenCV's marker corner order (top-left, top-right,
   bottom-right, bottom-left of the tag's black border, i.e. +x then +y in the target frame).
   Tag ids are ``first_id .. first_id + rows*cols - 1``, row-major.
+- Asymmetric circle grid: dot centres, id = i * cols + j (:mod:`.kinds.circles`).
 
 Texture (:meth:`TargetSpec.texture`): white = 255, black = 0, drawn with exact *area coverage* of every
-pixel (all features are axis-aligned rectangles), so edges are not quantised to texture pixels.
+pixel (rectangles exactly; dots as area-preserving 128-gons, exact by signed-area accumulation), so
+edges are not quantised to texture pixels.
 """
 
 from __future__ import annotations
@@ -29,39 +34,37 @@ import os
 from dataclasses import dataclass, fields
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from ..errors import ConfigError
+from .kinds import KINDS as _REGISTRY
+from .kinds import get_kind
 
-KINDS = ("charuco", "apriltag_grid")
+KINDS = tuple(_REGISTRY)  # names of the registered kinds (the registry: targets/kinds/__init__.py)
 MAX_TARGET_M = 10.0  # a larger board is a unit mistake (mm given as m), refused on load
-_BORDER_BITS = 1  # OpenCV markers: one black border bit around the data bits
-
-
-def _dictionary_id(name: str) -> int:
-    if not isinstance(name, str) or not name.startswith("DICT_") or not hasattr(cv2.aruco, name):
-        known = sorted(n for n in dir(cv2.aruco) if n.startswith("DICT_"))
-        raise ConfigError(f"unknown dictionary {name!r}; expected one of cv2.aruco's names: {', '.join(known)}")
-    return int(getattr(cv2.aruco, name))
+_COMMON = ("kind", "name", "rows", "cols", "margin_m")
+_LENGTHS = ("square_m", "marker_m", "tag_m", "spacing_m", "diameter_m", "margin_m")
 
 
 @dataclass(frozen=True)
 class TargetSpec:
-    """A planar calibration target. Lengths in metres.
+    """A planar calibration target. Lengths in metres. Which keys a kind uses: :mod:`.kinds`.
 
-    kind: "charuco" | "apriltag_grid". rows, cols: number of squares (charuco) or tags (apriltag_grid)
-    along y and x. dictionary: cv2.aruco dictionary name ("DICT_5X5_100", "DICT_APRILTAG_36h11").
-    square_m, marker_m: charuco square and marker sides. tag_m: apriltag side (outer edge of the black
-    border); spacing_m: white gap between tags. legacy_pattern: OpenCV < 4.6 charuco layout.
-    margin_m: white margin around the pattern. first_id: id of the first marker/tag.
+    kind: a registered kind ("charuco" | "apriltag_grid" | "chessboard" | "circles_asymmetric").
+    rows, cols: squares (charuco, chessboard), tags (apriltag_grid), rows / dots per row
+    (circles_asymmetric, OpenCV's patternSize = (cols, rows)). dictionary: cv2.aruco dictionary name
+    ("DICT_5X5_100", "DICT_APRILTAG_36h11"; ArUco kinds). square_m, marker_m: square and marker sides.
+    tag_m: apriltag side (outer edge of the black border); spacing_m: white gap between tags, or the
+    circle grid's spacing. diameter_m: dot diameter. legacy_pattern: OpenCV < 4.6 charuco layout.
+    margin_m: white margin around the pattern. first_id: id of the first marker/tag. allow_symmetric:
+    accept a 180-degree-symmetric board (intrinsics calibration only; poses are refused).
     """
 
     kind: str
     name: str
     rows: int
     cols: int
-    dictionary: str
+    dictionary: str = ""
     square_m: float = 0.0
     marker_m: float = 0.0
     tag_m: float = 0.0
@@ -69,70 +72,62 @@ class TargetSpec:
     legacy_pattern: bool = False
     margin_m: float = 0.01
     first_id: int = 0
+    diameter_m: float = 0.0
+    allow_symmetric: bool = False
 
     def __post_init__(self):
         where = f"target {self.name!r}"
         if not isinstance(self.name, str):
             raise ConfigError(f"{where}: key 'name' must be a string, got {self.name!r}")
-        if self.kind not in KINDS:
-            raise ConfigError(f"{where}: key 'kind' must be one of {KINDS}, got {self.kind!r}")
+        kind = get_kind(self.kind, where)
         for key in ("rows", "cols", "first_id"):
             v = getattr(self, key)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
                 raise ConfigError(f"{where}: key {key!r} must be an integer, got {v!r}")
-        for key in ("square_m", "marker_m", "tag_m", "spacing_m", "margin_m"):
+        for key in _LENGTHS:
             v = getattr(self, key)
             if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) or not math.isfinite(v):
                 raise ConfigError(f"{where}: key {key!r} must be a finite number [m], got {v!r}")
             object.__setattr__(self, key, float(v))
-        if not isinstance(self.legacy_pattern, (bool, np.bool_)):
-            raise ConfigError(f"{where}: key 'legacy_pattern' must be true or false, got {self.legacy_pattern!r}")
-        try:
-            _dictionary_id(self.dictionary)
-        except ConfigError as exc:
-            raise ConfigError(f"{where}: key 'dictionary': {exc}") from None
+        for key in ("legacy_pattern", "allow_symmetric"):
+            if not isinstance(getattr(self, key), (bool, np.bool_)):
+                raise ConfigError(f"{where}: key {key!r} must be true or false, got {getattr(self, key)!r}")
+        for f in fields(self):  # keys of other kinds must keep their defaults
+            if f.name not in _COMMON and f.name not in kind.keys and getattr(self, f.name) != f.default:
+                raise ConfigError(f"{where}: key {f.name!r} does not apply to kind {self.kind!r} "
+                                  f"(its keys: {', '.join(_COMMON[2:] + kind.keys)})")
         if self.margin_m < 0:
             raise ConfigError(f"{where}: key 'margin_m' must be >= 0 [m], got {self.margin_m}")
         if self.first_id < 0:
             raise ConfigError(f"{where}: key 'first_id' must be >= 0, got {self.first_id}")
-        if self.kind == "charuco":
-            if self.rows < 2 or self.cols < 2:
-                raise ConfigError(f"{where}: charuco keys 'rows' and 'cols' (squares) must be >= 2, got {self.rows}x{self.cols}")
-            for key in ("square_m", "marker_m"):
-                if getattr(self, key) <= 0:
-                    raise ConfigError(f"{where}: key {key!r} must be > 0 [m], got {getattr(self, key)}")
-            if self.marker_m >= self.square_m:
-                raise ConfigError(
-                    f"{where}: key 'marker_m' ({self.marker_m}) must be smaller than 'square_m' ({self.square_m})"
-                )
-            n_markers = (self.rows * self.cols) // 2
-        else:
-            if self.rows < 1 or self.cols < 1:
-                raise ConfigError(f"{where}: apriltag_grid keys 'rows' and 'cols' (tags) must be >= 1")
-            for key in ("tag_m", "spacing_m"):
-                if getattr(self, key) <= 0:
-                    raise ConfigError(f"{where}: key {key!r} must be > 0 [m], got {getattr(self, key)}")
-            n_markers = self.rows * self.cols
+        kind.validate(self, where)
         size = max(self.outline_m())
         if size > MAX_TARGET_M:
             raise ConfigError(f"{where}: the board would be {size:.4g} m wide, more than {MAX_TARGET_M:g} m "
-                              "(lengths are in metres: square_m, marker_m, tag_m, spacing_m, margin_m)")
-        dict_size = self.cv_dictionary().bytesList.shape[0]
-        if self.first_id + n_markers > dict_size:
-            raise ConfigError(
-                f"{where}: needs marker ids {self.first_id}..{self.first_id + n_markers - 1} but dictionary "
-                f"{self.dictionary} has only {dict_size} markers (keys 'dictionary', 'first_id', 'rows', 'cols')"
-            )
+                              f"(lengths are in metres: {', '.join(k for k in _LENGTHS if k in kind.keys)}, margin_m)")
+
+    @property
+    def kind_impl(self):
+        """The registered :class:`~vision_calib.targets.kinds.TargetKind` of this target."""
+        return _REGISTRY[self.kind]
+
+    def symmetric(self) -> str:
+        """Why the board looks the same after a 180-degree rotation ("" when it does not)."""
+        return self.kind_impl.symmetric(self)
+
+    def check_pose_measurable(self, where: str = "") -> None:
+        """ConfigError when poses cannot be measured with this target (180-degree-symmetric board)."""
+        why = self.symmetric()
+        if why:
+            raise ConfigError(f"{where or 'target ' + repr(self.name)}: {why}: the detected ids can be those of the "
+                              "board rotated by 180 degrees, so poses measured with it are ambiguous; it is allowed "
+                              "(allow_symmetric) for intrinsics calibration only. Use a board with rows + cols odd "
+                              "(chessboard) or an odd number of rows (circles_asymmetric)")
 
     # ------------------------------------------------------------------ geometry
     def pattern_size_m(self) -> tuple[float, float]:
         """(width, height) [m] of the pattern without margin (along target x and y)."""
-        if self.kind == "charuco":
-            return self.cols * self.square_m, self.rows * self.square_m
-        return (
-            self.cols * self.tag_m + (self.cols - 1) * self.spacing_m,
-            self.rows * self.tag_m + (self.rows - 1) * self.spacing_m,
-        )
+        return self.kind_impl.pattern_size_m(self)
 
     def outline_m(self) -> tuple[float, float]:
         """(width, height) [m] of the physical board including the white margin."""
@@ -146,103 +141,49 @@ class TargetSpec:
         return (-m, -m, w + m, h + m)
 
     def marker_ids(self) -> np.ndarray:
-        """(M,) int ids of the board's markers/tags, in the order of :meth:`marker_corners`."""
-        return np.asarray(self.cv_board().getIds(), dtype=int).reshape(-1)
+        """(M,) int ids of the board's markers/tags, in the order of :meth:`marker_corners` (ArUco kinds)."""
+        return self._aruco("marker_ids")
 
     def marker_corners(self) -> np.ndarray:
-        """(M, 4, 3) float64 [m, target frame] marker corners in OpenCV order (TL, TR, BR, BL).
+        """(M, 4, 3) float64 [m, target frame] marker corners in OpenCV order (TL, TR, BR, BL) (ArUco kinds).
 
         Computed in float64 (OpenCV stores float32); which squares hold markers comes from OpenCV's board.
         """
-        cv_pts = np.asarray(self.cv_board().getObjPoints(), dtype=float).reshape(-1, 4, 3)
-        if self.kind == "charuco":
-            s, m = self.square_m, self.marker_m
-            sq = np.floor(cv_pts.mean(axis=1)[:, :2] / s)  # (M, 2) square column, row
-            tl = sq * s + (s - m) / 2
-            side = m
-        else:
-            pitch = self.tag_m + self.spacing_m
-            i = np.arange(self.rows * self.cols)
-            tl = np.column_stack([(i % self.cols) * pitch, (i // self.cols) * pitch]).astype(float)
-            side = self.tag_m
-        out = np.zeros((tl.shape[0], 4, 3))
-        out[:, :, :2] = tl[:, None, :] + side * np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=float)
-        return out
+        return self._aruco("marker_corners")
 
     def corner_points(self) -> tuple[np.ndarray, np.ndarray]:
         """Corner ids (K,) int and their 3-D positions p_target (K, 3) float64 [m], z = 0, sorted by id."""
-        if self.kind == "charuco":
-            r, c = np.divmod(np.arange(self.n_corners), self.cols - 1)
-            p = np.column_stack([(c + 1) * self.square_m, (r + 1) * self.square_m, np.zeros(r.size)])
-            return np.arange(p.shape[0]), p
-        ids = self.marker_ids()
-        corners = self.marker_corners()
-        cid = (4 * ids[:, None] + np.arange(4)[None, :]).reshape(-1)
-        p = corners.reshape(-1, 3)
-        order = np.argsort(cid, kind="stable")
-        return cid[order], p[order]
+        return self.kind_impl.corner_points(self)
 
     @property
     def n_corners(self) -> int:
         """Number of corner points K."""
-        if self.kind == "charuco":
-            return (self.rows - 1) * (self.cols - 1)
-        return 4 * self.rows * self.cols
+        return self.kind_impl.n_corners(self)
 
     # ------------------------------------------------------------------ OpenCV objects
+    def _aruco(self, method):
+        fn = getattr(self.kind_impl, method, None)
+        if fn is None:
+            raise ConfigError(f"target {self.name!r}: kind {self.kind!r} has no markers ({method})")
+        return fn(self)
+
     def cv_dictionary(self):
-        """cv2.aruco.Dictionary of this target."""
-        return cv2.aruco.getPredefinedDictionary(_dictionary_id(self.dictionary))
+        """cv2.aruco.Dictionary of this target (ArUco kinds)."""
+        return self._aruco("cv_dictionary")
 
     def cv_board(self):
         """A fresh cv2.aruco.CharucoBoard (charuco) or cv2.aruco.GridBoard (apriltag_grid)."""
-        d = self.cv_dictionary()
-        if self.kind == "charuco":
-            n = (self.rows * self.cols) // 2
-            ids = np.arange(self.first_id, self.first_id + n, dtype=np.int32)
-            board = cv2.aruco.CharucoBoard((self.cols, self.rows), self.square_m, self.marker_m, d, ids)
-            board.setLegacyPattern(bool(self.legacy_pattern))
-            return board
-        n = self.rows * self.cols
-        ids = np.arange(self.first_id, self.first_id + n, dtype=np.int32)
-        return cv2.aruco.GridBoard((self.cols, self.rows), self.tag_m, self.spacing_m, d, ids)
+        return self.kind_impl.cv_board(self)
 
     # ------------------------------------------------------------------ texture
     def black_rects(self) -> list[tuple[float, float, float, float]]:
-        """Non-overlapping black rectangles (x0, y0, x1, y1) [m, target frame] making up the pattern."""
-        rects = []
-        d = self.cv_dictionary()
-        ids = self.marker_ids()
-        corners = self.marker_corners()
-        nb = d.markerSize + 2 * _BORDER_BITS
-        for mid, c in zip(ids, corners):
-            x0, y0 = c[0, 0], c[0, 1]
-            x1, y1 = c[2, 0], c[2, 1]
-            bits = np.zeros((nb, nb), dtype=np.uint8)
-            data = cv2.aruco.Dictionary.getBitsFromByteList(d.bytesList[int(mid)][None], d.markerSize)
-            bits[_BORDER_BITS:-_BORDER_BITS, _BORDER_BITS:-_BORDER_BITS] = data
-            xs = np.linspace(x0, x1, nb + 1)
-            ys = np.linspace(y0, y1, nb + 1)
-            for r in range(nb):  # merge runs of black bits along each row
-                c0 = None
-                for cc in range(nb + 1):
-                    black = cc < nb and bits[r, cc] == 0
-                    if black and c0 is None:
-                        c0 = cc
-                    elif not black and c0 is not None:
-                        rects.append((xs[c0], ys[r], xs[cc], ys[r + 1]))
-                        c0 = None
-        if self.kind == "charuco":
-            s = self.square_m
-            marker_centres = corners.mean(axis=1)[:, :2]
-            has_marker = np.zeros((self.rows, self.cols), dtype=bool)
-            for cx, cy in marker_centres:
-                has_marker[int(cy // s), int(cx // s)] = True
-            for r in range(self.rows):
-                for c in range(self.cols):
-                    if not has_marker[r, c]:
-                        rects.append((c * s, r * s, (c + 1) * s, (r + 1) * s))
-        return rects
+        """Non-overlapping black rectangles (x0, y0, x1, y1) [m, target frame] making up the pattern
+        (with :meth:`black_polygons`)."""
+        return self.kind_impl.black_rects(self)
+
+    def black_polygons(self) -> np.ndarray:
+        """(M, V, 2) further black polygons [m, target frame] (circle dots), TL -> TR -> BR -> BL order."""
+        return np.asarray(self.kind_impl.black_polygons(self), dtype=float)
 
     def texture_shape(self, px_per_m: float) -> tuple[int, int]:
         """(H, W) of :meth:`texture` for a requested resolution px_per_m [px/m]."""
@@ -274,11 +215,18 @@ class TargetSpec:
             oy, j0 = _overlap_1d((y0 - y_min) * sy, (y1 - y_min) * sy, H)
             if ox.size and oy.size:
                 img[j0:j0 + oy.size, i0:i0 + ox.size] -= oy[:, None] * ox[None, :]
+        polys = self.black_polygons()
+        if len(polys):
+            from ..render.coverage import accumulate_coverage  # exact signed-area coverage (no import cycle)
+
+            px = (polys - [x_min, y_min]) * [sx, sy]
+            img -= accumulate_coverage(px, -np.ones(len(px)), H, W)  # TL->TR->BR->BL counts -1 per area
         return np.clip(img, 0.0, 1.0)
 
     def to_dict(self) -> dict:
-        """Plain dict (the YAML schema of :func:`load_target`)."""
-        return {f.name: getattr(self, f.name) for f in fields(self)}
+        """Plain dict of the kind's keys (the YAML schema of :func:`load_target`)."""
+        keep = _COMMON + self.kind_impl.keys
+        return {f.name: getattr(self, f.name) for f in fields(self) if f.name in keep}
 
 
 def available_memory() -> int | None:
@@ -333,9 +281,11 @@ def target_from_dict(d: dict, where: str = "target") -> TargetSpec:
             raise ConfigError(f"{where}: {key}: unknown key{did_you_mean(key, allowed)}; allowed: {', '.join(allowed)}")
     if "units" in d and d["units"] not in ("m", "metre", "meter", "metres", "meters"):
         raise ConfigError(f"{where}: key 'units' must be 'm' (lengths are in metres), got {d['units']!r}")
-    missing = [k for k in ("kind", "rows", "cols", "dictionary") if k not in d]
+    missing = [k for k in ("kind", "rows", "cols") if k not in d]
+    if not missing:
+        missing = [k for k in get_kind(d["kind"], where).required if k not in d]
     if missing:
-        raise ConfigError(f"{where}: missing key(s) {missing}")
+        raise ConfigError(f"{where}: missing key(s) {missing} (kind {d.get('kind')!r})")
     kw = {k: v for k, v in d.items() if k in _YAML_KEYS}
     kw.setdefault("name", where)
     try:
