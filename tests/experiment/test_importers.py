@@ -227,3 +227,60 @@ def test_free_revolute_joints_in_degrees_are_refused():
     q[1, 2] = 2 * np.pi + 0.2
     with pytest.raises(DataError, match=r"poses.csv: pose 'b' joint q3 = 6.483 rad is more than a turn.*degrees"):
         free.check_joints(q, "poses.csv", ["a", "b"])
+
+
+# ----------------------------------------------------------------------------- ViSP chessboard: end to end
+@pytest.mark.slow
+def test_visp_chessboard_round_trip_processes_like_the_direct_folder(tmp_path):
+    """A simulated eye-in-hand recording of a chessboard (targets/chessboard_a4.yaml, no lens distortion:
+    ViSP's kud/kdu model is refused) written as a ViSP hand-eye folder (camera.xml, image-N.png,
+    pose_fPe_N.yaml flange poses as translation + theta-u), imported with ``import-visp --chessboard`` and
+    processed: the hand-eye transforms equal those of the same data processed as our own flange-pose
+    folder (to rounding of the theta-u conversion)."""
+    from vision_calib.experiment.simulate import run_simulation
+    from vision_calib.rig import load_scene
+
+    scene = yaml.safe_load((REPO / "scenes" / "rx90_eye_in_hand.yaml").read_text())
+    scene["robot"] = str(REPO / "scenes" / "robots" / "rx90.yaml")
+    scene["target"] = str(REPO / "targets" / "chessboard_a4.yaml")
+    scene["camera"]["dist"] = [0.0] * 5
+    (tmp_path / "scene.yaml").write_text(yaml.safe_dump(scene))
+    run_simulation(tmp_path / "scene.yaml", out_dir=tmp_path / "sim", seed=5, n_poses=10, frames=1,
+                         export_recording=tmp_path / "rec", workers=1, progress=False, plots=False)
+    rec = read_recording(tmp_path / "rec")
+    setup = load_scene(rec.scene_path).setup
+    T = setup.chain.forward(rec.poses, setup.params.nominal)  # flange poses as the robot controller reports them
+    c = rec.camera
+    visp = tmp_path / "visp"
+    visp.mkdir()
+    (visp / "camera.xml").write_text(
+        f"<root><camera><name>Camera</name><image_width>{c.width}</image_width><image_height>{c.height}"
+        f"</image_height><model><type>perspectiveProjWithoutDistortion</type><px>{c.fx!r}</px><py>{c.fy!r}</py>"
+        f"<u0>{c.cx!r}</u0><v0>{c.cy!r}</v0></model></camera></root>")
+    flange = tmp_path / "flange"
+    (flange / "images").mkdir(parents=True)
+    for i, (pid, Ti) in enumerate(zip(rec.pose_ids, T), start=1):
+        v = F.xyz_rotvec_from_T(Ti)
+        (visp / f"pose_fPe_{i}.yaml").write_text("rows: 6\ncols: 1\ndata:\n" + "".join(f"  - [{x!r}]\n" for x in map(float, v)))
+        shutil.copy(rec.images[pid][0], visp / f"image-{i}.png")
+        (flange / "images" / str(i)).mkdir()
+        shutil.copy(rec.images[pid][0], flange / "images" / str(i) / "00.png")
+    doc = yaml.safe_load((tmp_path / "rec" / "recording.yaml").read_text())
+    doc = {k: v for k, v in doc.items() if k not in ("scene", "scene_name")} | {"poses": "flange_pose",
+                                                                                 "frames_per_pose": 1}
+    (flange / "recording.yaml").write_text(yaml.safe_dump(doc))
+    xyz, q = F.xyz_quat_from_T(T)
+    (flange / "poses.csv").write_text("pose_id,x,y,z,qx,qy,qz,qw\n" + "".join(
+        ",".join([str(i)] + [repr(float(v)) for v in (*a, *b)]) + "\n" for i, (a, b) in enumerate(zip(xyz, q), 1)))
+    tgt = yaml.safe_load((REPO / "targets" / "chessboard_a4.yaml").read_text())
+    assert main(["import-visp", str(visp), "--out", str(tmp_path / "back"), "--chessboard",
+                 f"{tgt['cols'] - 1}x{tgt['rows'] - 1}", "--square-m", str(tgt["square_m"])]) == 0
+    reports = []
+    for folder in (flange, tmp_path / "back"):
+        out = tmp_path / f"out_{folder.name}"
+        assert main(["process", str(folder), "--out", str(out), "--json", "--no-plots"]) == 0
+        reports.append(json.loads((out / "report.json").read_text()))
+    a, b = (r["handeye"]["transforms"] for r in reports)
+    assert a.keys() == b.keys()
+    for k in a:
+        np.testing.assert_allclose(np.array(b[k]["matrix"]), np.array(a[k]["matrix"]), rtol=0, atol=1e-9, err_msg=k)
