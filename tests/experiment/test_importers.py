@@ -14,7 +14,7 @@ from vision_calib import frames as F
 from vision_calib.cli import main
 from vision_calib.errors import ConfigError, DataError
 from vision_calib.io.recording import read_recording
-from vision_calib.io.rosi import export_rosi, import_rosi
+from vision_calib.io.rosi import import_rosi
 from vision_calib.io.visp import import_visp_chessboard
 
 REPO = Path(__file__).resolve().parents[2]
