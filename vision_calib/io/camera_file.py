@@ -29,7 +29,8 @@ from .atomic import write_text_atomic
 
 FORMAT = "vision_calib.camera/1"
 _CAMERA_KEYS = ("width", "height", "fx", "fy", "cx", "cy", "dist")
-_SCHEMA = {"format": None, **{k: None for k in _CAMERA_KEYS}, "std": None, "rms_px": None, "n_views_used": None,
+_SCHEMA = {"format": None, **{k: None for k in _CAMERA_KEYS}, "std": None, "distortion_px": None, "rms_px": None,
+           "n_views_used": None,
            "n_views_rejected": None, "coverage": None, "warnings": None, "views": None}
 
 
