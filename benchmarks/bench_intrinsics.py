@@ -1,11 +1,12 @@
 """Camera calibration benchmark (measure.intrinsics): recovered vs true intrinsics, std and z per seed,
 RMS, time; the spread over seeds vs the mean reported std; a white-noise check of the std.
 
-    .venv/bin/python benchmarks/bench_intrinsics.py [--seeds 0,1,2,3] [--views 20]
+    .venv/bin/python benchmarks/bench_intrinsics.py [--seeds 0,1,2,3,4] [--views 20] [--resampled]
 
 Setting: 1024 x 768, fx = fy = 1100 px, distortion (-0.1, 0.05, 5e-4, -5e-4, 0), ChArUco 7 x 10 (30 mm),
-views from ``measure.intrinsics_sim.calibration_poses`` (tilt 20-45 deg, 0.4-0.65 m), CPU polygon render +
-SensorEffects() defaults (blur 0.6 px, ~2 grey levels noise), one frame per view.
+views from ``measure.intrinsics_sim.calibration_poses`` (tilt 20-45 deg, 0.4-0.65 m), distortion drawn
+geometrically (``render_views``; --resampled: the sensor stage's bilinear resampling instead, for comparison)
++ SensorEffects() defaults (blur 0.6 px, ~2 grey levels noise), one frame per view.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ import numpy as np  # noqa: E402
 
 from vision_calib.camera import CameraIntrinsics  # noqa: E402
 from vision_calib.measure.detect import Detection, DetectConfig, detect  # noqa: E402
-from vision_calib.measure.intrinsics import PARAM_NAMES, calibrate_intrinsics  # noqa: E402
+from vision_calib.measure.intrinsics import PARAM_NAMES, calibrate_intrinsics, distortion_displacement  # noqa: E402
 from vision_calib.measure.intrinsics_sim import calibration_poses, render_views  # noqa: E402
 from vision_calib.targets.spec import TargetSpec  # noqa: E402
 
@@ -31,13 +32,14 @@ CHARUCO = TargetSpec(kind="charuco", name="bench_charuco_7x10", rows=7, cols=10,
 TRUE = np.array([INTR.fx, INTR.fy, INTR.cx, INTR.cy, *INTR.dist])
 
 
-def rendered(seeds, n_views):
-    print(f"=== rendered views: {n_views} per seed ===")
+def rendered(seeds, n_views, exact=True):
+    print(f"=== rendered views: {n_views} per seed, distortion {'drawn exactly' if exact else 'resampled'} ===")
     print("per seed: value ± std (z = (value - true) / std)")
-    est, std = [], []
+    est, std, zd = [], [], []
     for seed in seeds:
         t0 = time.perf_counter()
-        imgs = render_views(CHARUCO, INTR, calibration_poses(CHARUCO, INTR, n_views, seed), seed)
+        imgs = render_views(CHARUCO, INTR, calibration_poses(CHARUCO, INTR, n_views, seed), seed,
+                            exact_distortion=exact)
         dets = [detect(im, CHARUCO, None, config=DetectConfig(batch="per_frame")) for im in imgs]
         t1 = time.perf_counter()
         res = calibrate_intrinsics(dets, list(range(len(dets))), CHARUCO)
@@ -49,12 +51,21 @@ def rendered(seeds, n_views):
               f"calibrate {t2 - t1:.3f} s")
         print("   " + "  ".join(f"{n} {x:.6g}±{e:.2g} (z {(x - t) / e:+.1f})" for n, x, e, t in
                                 zip(PARAM_NAMES, v, s, TRUE)))
+        d = res.distortion
+        err = np.linalg.norm(distortion_displacement(res.camera, d["corners_xy"])
+                             - distortion_displacement(INTR, d["corners_xy"]), axis=1)
+        zd.append(err / d["std_corners_px"])
+        print("   distortion at the image corners TL TR BL BR: error " + " ".join(f"{e:.3f}" for e in err)
+              + " px, std " + " ".join(f"{e:.3f}" for e in d["std_corners_px"]) + " px")
         for w in res.warnings:
             print(f"      warning: {w}")
     est, std = np.array(est), np.array(std)
     z = (est - TRUE) / std
     print("true: " + "  ".join(f"{n} {t:.6g}" for n, t in zip(PARAM_NAMES, TRUE)))
     print("RMS z over seeds:           " + "  ".join(f"{n} {x:.2f}" for n, x in zip(PARAM_NAMES, np.sqrt(np.mean(z**2, 0)))))
+    print("max |z| over seeds:         " + "  ".join(f"{n} {x:.2f}" for n, x in zip(PARAM_NAMES, np.abs(z).max(0))))
+    zd = np.array(zd)
+    print(f"distortion at the image corners, |error| / std: RMS {np.sqrt(np.mean(zd**2)):.2f}, max {zd.max():.2f}")
     if len(seeds) > 1:
         print("spread over seeds / mean std: " + "  ".join(f"{n} {x:.2f}" for n, x in
                                                     zip(PARAM_NAMES, est.std(0, ddof=1) / std.mean(0))))
@@ -86,10 +97,13 @@ def white_noise(trials=100, sigma=0.1):
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--seeds", default="0,1,2,3")
+    ap.add_argument("--seeds", default="0,1,2,3,4")
     ap.add_argument("--views", type=int, default=20)
+    ap.add_argument("--resampled", action="store_true", help="also run with the sensor stage's resampled distortion")
     a = ap.parse_args()
     rendered([int(s) for s in a.seeds.split(",")], a.views)
+    if a.resampled:
+        rendered([int(s) for s in a.seeds.split(",")], a.views, exact=False)
     white_noise()
 
 

@@ -133,6 +133,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="follow symbolic links that lead out of the recorded folder (refused by default)")
     p.add_argument("--refine-intrinsics", action="store_true",
                    help="calibrate the camera from the recording's images even when recording.yaml gives intrinsics")
+    p.add_argument("--camera", default=None, metavar="CAMERA_YAML",
+                   help="camera intrinsics from this camera.yaml (calibrate-camera's output) instead of recording.yaml's")
     p.add_argument("--json", action="store_true")
 
     p = sub.add_parser("calibrate-camera", help="camera intrinsics + distortion from images of a target")
@@ -227,7 +229,8 @@ def _dispatch(args) -> int:
 
         report = process_folder(args.folder, out_dir=args.out, method=args.method, progress=not args.json,
                                 plots=not args.no_plots, fix_unidentifiable=args.fix_unidentifiable,
-                                allow_symlinks=args.allow_symlinks, refine_intrinsics=args.refine_intrinsics)
+                                allow_symlinks=args.allow_symlinks, refine_intrinsics=args.refine_intrinsics,
+                                camera_file=args.camera)
         print(to_json(report) if args.json else report["summary_text"])
         return _status(report["verdict"])
     if args.command == "calibrate-camera":

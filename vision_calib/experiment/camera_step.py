@@ -1,6 +1,6 @@
-"""The camera intrinsics a recorded folder is processed with: recording.yaml's, or calibrated from the
-recording's own images (no fx/fy/cx/cy in recording.yaml, or ``process --refine-intrinsics``), and the
-report's ``intrinsics`` block that says which."""
+"""The camera intrinsics a recorded folder is processed with: ``process --camera camera.yaml``'s,
+recording.yaml's (``camera`` or ``camera_file``), or calibrated from the recording's own images (no
+intrinsics given, or ``process --refine-intrinsics``), and the report's ``intrinsics`` block that says which."""
 
 from __future__ import annotations
 
@@ -11,18 +11,30 @@ from ..measure.intrinsics import PARAM_NAMES, calibrate_from_images
 
 SOURCE_FILE = "recording.yaml"
 SOURCE_CALIBRATED = "calibrated from the recording"
+SOURCE_CAMERA_FILE = "camera file"
 
 
-def recording_intrinsics(rec, refine: bool = False, progress: bool = False):
-    """(Recording with its camera set, report block). The calibration uses the first frame of every pose
+def recording_intrinsics(rec, refine: bool = False, progress: bool = False, camera_file=None):
+    """(Recording with its camera set, report block). camera_file: a camera.yaml (``process --camera``)
+    that replaces recording.yaml's intrinsics (size checked against the images; ConfigError naming it).
+    The calibration uses the first frame of every pose
     (one view per pose; the other frames of a pose add noise averaging, not geometry). Report block:
     {source, values {fx, fy, cx, cy, k1, k2, p1, p2, k3}, std (None when given), rms_px, n_views_used,
     n_views_rejected, rejected_views [{name, reason}], coverage, warnings, given (recording.yaml's values
     when refined)}. DataError naming the folder when the calibration is impossible."""
+    if camera_file is not None:
+        from pathlib import Path
+
+        from ..io.camera_file import load_camera_for_images
+
+        rec = replace(rec, camera=load_camera_for_images(camera_file, rec.image_size, "process --camera"),
+                      camera_file=Path(camera_file))
     if rec.camera is not None and not refine:
         c = rec.camera
-        return rec, {"source": SOURCE_FILE, "values": dict(zip(PARAM_NAMES, (c.fx, c.fy, c.cx, c.cy, *c.dist))),
-                     "std": None, "rms_px": None, "warnings": []}
+        block = {"source": SOURCE_FILE if rec.camera_file is None else f"{SOURCE_CAMERA_FILE} {rec.camera_file}",
+                 "values": dict(zip(PARAM_NAMES, (c.fx, c.fy, c.cx, c.cy, *c.dist))),
+                 "std": None, "rms_px": None, "warnings": []}
+        return rec, block
     pids = [pid for pid in rec.pose_ids if rec.images.get(pid)]
     try:
         res = calibrate_from_images([rec.images[p][0] for p in pids], rec.target, rec.image_size,

@@ -63,15 +63,16 @@ def _recording_setup(rec):
 
 
 def process_folder(folder, out_dir, method=None, progress=False, plots=True, fix_unidentifiable=False,
-                   allow_symlinks=False, refine_intrinsics=False) -> dict:
+                   allow_symlinks=False, refine_intrinsics=False, camera_file=None) -> dict:
     """Process a recorded folder; writes DIR/measurements.json, DIR/report.json (+ plots, model).
     refine_intrinsics: calibrate the camera from the recording's images even when recording.yaml gives
-    intrinsics (always done when it gives none); the report's ``intrinsics`` block says which were used."""
+    intrinsics (always done when it gives none); camera_file: a camera.yaml (``calibrate-camera``) used
+    instead of recording.yaml's intrinsics; the report's ``intrinsics`` block says which were used."""
     from .camera_step import recording_intrinsics
 
     t0 = time.perf_counter()
     rec = read_recording(folder, allow_symlinks=allow_symlinks)
-    rec, intr = recording_intrinsics(rec, refine_intrinsics, progress)
+    rec, intr = recording_intrinsics(rec, refine_intrinsics, progress, camera_file)
     out = Path(out_dir)
     scene, setup = _recording_setup(rec) if rec.pose_kind != "flange_pose" else (None, None)
     method = None if scene is None else check_method(setup, method or scene.identification.method, "--method")

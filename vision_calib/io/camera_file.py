@@ -25,11 +25,13 @@ import yaml
 
 from ..camera import CameraIntrinsics
 from ..config import Section, check_keys, load_yaml
+from ..errors import ConfigError
 from .atomic import write_text_atomic
 
 FORMAT = "vision_calib.camera/1"
 _CAMERA_KEYS = ("width", "height", "fx", "fy", "cx", "cy", "dist")
-_SCHEMA = {"format": None, **{k: None for k in _CAMERA_KEYS}, "std": None, "rms_px": None, "n_views_used": None,
+_SCHEMA = {"format": None, **{k: None for k in _CAMERA_KEYS}, "std": None, "distortion_px": None, "rms_px": None,
+           "n_views_used": None,
            "n_views_rejected": None, "coverage": None, "warnings": None, "views": None}
 
 
@@ -49,3 +51,17 @@ def load_camera_yaml(path) -> CameraIntrinsics:
         raise top.error("format", f"expected {FORMAT!r}, got {fmt!r}")
     return CameraIntrinsics.from_dict({k: top.data[k] for k in _CAMERA_KEYS if k in top.data},
                                       where=str(path), require_dist=True)
+
+
+def load_camera_for_images(path, image_size, where: str) -> CameraIntrinsics:
+    """:func:`load_camera_yaml`, its width x height checked against the images' (width, height) image_size
+    (None: not checked). where: who names the file (``recording.yaml camera_file``, ``--camera``), quoted
+    in the ConfigError for a missing file or a size mismatch."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"{where}: camera file {path} not found (write one with `vision-calib calibrate-camera`)")
+    cam = load_camera_yaml(path)
+    if image_size is not None and tuple(image_size) != cam.size:
+        raise ConfigError(f"{where}: {path} is for {cam.width}x{cam.height} px images but the recording's are "
+                          f"{image_size[0]}x{image_size[1]} px")
+    return cam

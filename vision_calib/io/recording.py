@@ -18,6 +18,8 @@ recording.yaml::
                                             # width/height optional (read from the images; a given size
                                             # must match them); no fx/fy/cx/cy: `process` calibrates the
                                             # intrinsics from the recording's own images
+    camera_file: camera.yaml                # instead of camera: a `calibrate-camera` output (relative to this
+                                            # file or absolute), its size checked against the images
     camera_mount: eye_in_hand | fixed | base
     target: {kind: charuco, rows: .., cols: .., dictionary: .., square_m: .., marker_m: .., ...}
     scene: /path/to/scene.yaml              # robot model + free parameters (relative to this file or absolute)
@@ -51,7 +53,8 @@ class Recording:
     """A recorded folder, validated. poses: (N, n) joints [rad] or (N, 4, 4) T_base_flange.
     images: {pose_id: [paths of its frames, sorted]} (missing poses absent). camera: None when
     recording.yaml gives no intrinsics (calibrate them from the images: ``experiment.camera_step``);
-    image_size: (width, height) [px] of the images (None without a readable image)."""
+    image_size: (width, height) [px] of the images (None without a readable image). camera_file: the
+    camera.yaml the intrinsics come from (recording.yaml ``camera_file``), else None."""
 
     folder: Path
     camera: CameraIntrinsics
@@ -67,6 +70,7 @@ class Recording:
     averaging: str = "corners"
     notes: tuple[str, ...] = ()
     image_size: tuple[int, int] | None = None
+    camera_file: Path | None = None
 
 
 def _target_dict(spec) -> dict:
@@ -113,6 +117,7 @@ _SCHEMA = {
     "format": None, "source": None, "description": None, "notes": None,
     "units": {"length", "angle"},
     "camera": None,  # CameraIntrinsics.from_dict checks its keys
+    "camera_file": None,  # a camera.yaml (io.camera_file), instead of camera
     "camera_mount": None, "target": None,  # target_from_dict checks its keys
     "scene": None, "scene_name": None, "poses": None, "frames_per_pose": None, "averaging": None,
 }
@@ -299,8 +304,17 @@ def read_recording(folder, allow_symlinks: bool = False) -> Recording:
 
         check_image_sizes([f for pid in ids for f in images.get(pid, ())], SimpleNamespace(width=size[0], height=size[1]),
                           f"{ypath} camera")
+    camera_file = None
+    if "camera_file" in top:
+        from .camera_file import load_camera_for_images
+
+        if camera is not None:
+            raise top.error("camera_file", "given together with camera fx/fy/cx/cy: give one of them")
+        camera_file = Path(top.get("camera_file", str))
+        camera_file = camera_file if camera_file.is_absolute() else ypath.parent / camera_file
+        camera = load_camera_for_images(camera_file, size, f"{ypath}: camera_file")
     return Recording(folder, camera, mount, target, scene_path, pose_kind, tuple(ids), poses, images, frames,
-                     tuple(extra), averaging, tuple(notes), size)
+                     tuple(extra), averaging, tuple(notes), size, camera_file)
 
 
 def _recording_camera(d: dict, sec: Section, images: dict) -> tuple[CameraIntrinsics | None, tuple | None]:

@@ -82,7 +82,8 @@ class IntrinsicsResult:
     """camera: the calibrated CameraIntrinsics. std: {name: 1-sigma} for PARAM_NAMES [px; dist unitless].
     rms_px: overall reprojection RMS of the used views [px, 2-D error per point]. views: every view,
     used or rejected with its reason. coverage: {grid, fraction, radius_frac, warnings}; warnings: all
-    warnings (coverage + dropped outlier views)."""
+    warnings (coverage + dropped outlier views). cov: (9, 9) covariance of PARAM_NAMES. distortion:
+    :func:`distortion_uncertainty` at the image corners and the farthest detected corner (px)."""
 
     camera: CameraIntrinsics
     std: dict
@@ -90,6 +91,8 @@ class IntrinsicsResult:
     views: tuple
     coverage: dict
     warnings: tuple = field(default=())
+    cov: np.ndarray | None = None
+    distortion: dict | None = None
 
     @property
     def n_used(self) -> int:
@@ -106,6 +109,7 @@ class IntrinsicsResult:
                                                                                   for k in PARAM_NAMES[4:]]},
                 "rms_px": float(self.rms_px), "n_views_used": self.n_used,
                 "n_views_rejected": len(self.views) - self.n_used,
+                **({"distortion_px": distortion_summary(self.distortion)} if self.distortion else {}),
                 "coverage": self.coverage, "warnings": list(self.warnings),
                 "views": [v.to_dict() for v in self.views]}
 
@@ -227,6 +231,70 @@ def intrinsics_covariance(objs, imgs, rvecs, tvecs, K, dist, free) -> tuple[np.n
     return cov, float(np.sqrt(sigma2)), cond
 
 
+def distortion_displacement(cam: CameraIntrinsics, xy: np.ndarray) -> np.ndarray:
+    """(N, 2) [px] displacement the lens distortion of cam gives the ideal points xy (N, 2) [normalised
+    image coordinates x/z, y/z]: (fx (x_d - x), fy (y_d - y)), (x_d, y_d) OpenCV's Brown–Conrady model."""
+    x, y = np.asarray(xy, float).T
+    k1, k2, p1, p2, k3 = cam.dist
+    r2 = x * x + y * y
+    rad = k1 * r2 + k2 * r2**2 + k3 * r2**3
+    dx = x * rad + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+    dy = y * rad + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+    return np.column_stack([cam.fx * dx, cam.fy * dy])
+
+
+def _displacement_jacobian(cam: CameraIntrinsics, xy: np.ndarray) -> np.ndarray:
+    """(N, 2, 9) d displacement [px] / d PARAM_NAMES at fixed normalised points xy (N, 2)."""
+    x, y = np.asarray(xy, float).T
+    r2 = x * x + y * y
+    d = distortion_displacement(cam, xy)
+    J = np.zeros((len(x), 2, 9))
+    J[:, 0, 0], J[:, 1, 1] = d[:, 0] / cam.fx, d[:, 1] / cam.fy
+    for j, g in ((4, r2), (5, r2**2), (8, r2**3)):
+        J[:, 0, j], J[:, 1, j] = cam.fx * x * g, cam.fy * y * g
+    J[:, 0, 6], J[:, 1, 6] = cam.fx * 2 * x * y, cam.fy * (r2 + 2 * y * y)
+    J[:, 0, 7], J[:, 1, 7] = cam.fx * (r2 + 2 * x * x), cam.fy * 2 * x * y
+    return J
+
+
+def distortion_uncertainty(cam: CameraIntrinsics, cov: np.ndarray, uv_far) -> dict:
+    """How well the distortion is known in pixels, where it matters most. cov: (9, 9) of PARAM_NAMES;
+    uv_far: (2,) px, the detected corner farthest from the principal point (None: none).
+    Returns {corners_xy (4, 2): normalised ideal points seen at the centres of the image-corner pixels
+    (TL, TR, BL, BR), displacement_corners_px (4,) |distortion displacement| there, std_corners_px (4,):
+    1-sigma of that displacement vector along its worst direction (sqrt of the largest eigenvalue of its
+    2 x 2 covariance, fx .. k3 all propagated), and the same at uv_far: max_radius_px (its distance from
+    the principal point), displacement_max_radius_px, std_max_radius_px}. The points are held fixed in
+    normalised coordinates: the std is that of the pixel correction undistortion applies there."""
+    w, h = cam.width, cam.height
+    uv = np.array([[0, 0], [w - 1, 0], [0, h - 1], [w - 1, h - 1]]
+                  + ([list(uv_far)] if uv_far is not None else []), float)
+    crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-14)
+    xy = cv2.undistortPointsIter(uv.reshape(-1, 1, 2), cam.K, cam.dist_array, None, None, crit).reshape(-1, 2)
+    J = _displacement_jacobian(cam, xy)
+    if np.isfinite(cov).all():
+        std = np.sqrt(np.maximum(np.linalg.eigvalsh(np.einsum("nai,ij,nbj->nab", J, cov, J))[:, -1], 0.0))
+    else:
+        std = np.full(len(xy), np.inf)
+    mag = np.linalg.norm(distortion_displacement(cam, xy), axis=1)
+    out = {"corners_xy": xy[:4], "displacement_corners_px": mag[:4], "std_corners_px": std[:4]}
+    if uv_far is not None:
+        out |= {"max_radius_px": float(np.hypot(uv[4, 0] - cam.cx, uv[4, 1] - cam.cy)),
+                "displacement_max_radius_px": float(mag[4]), "std_max_radius_px": float(std[4])}
+    return out
+
+
+def distortion_summary(d: dict) -> dict:
+    """YAML-ready part of :func:`distortion_uncertainty` (floats; image corners TL, TR, BL, BR)."""
+    out = {"image_corners": {"displacement": [round(float(v), 4) for v in d["displacement_corners_px"]],
+                             "std": [float(v) for v in d["std_corners_px"]]}}
+    if "max_radius_px" in d:
+        out["max_radius"] = {"radius": round(d["max_radius_px"], 2),
+                             "displacement": round(d["displacement_max_radius_px"], 4),
+                             "std": d["std_max_radius_px"]}
+    return out
+
+
 def calibrate_intrinsics(detections, names, target, image_size=None,
                          config: CalibrationConfig = CalibrationConfig()) -> IntrinsicsResult:
     """Calibrate from per-view detections (``measure.detect.Detection``; invalid ones are rejected with
@@ -291,8 +359,12 @@ def calibrate_intrinsics(detections, names, target, image_size=None,
                         f"{stds[worst]:.3g} px > {config.max_std_frac:g} x width; condition number {cond:.3g}); "
                         "the views are too close to fronto-parallel or too few: tilt the target (20-45 deg) "
                         "about different axes")
-    cov = coverage([i for _, _, i in data], size, config.grid, (cam.cx, cam.cy))
-    return IntrinsicsResult(cam, stds, float(rms), tuple(views), cov, tuple(warnings + cov["warnings"]))
+    uv_all = np.concatenate([i for _, _, i in data]).reshape(-1, 2)
+    uv_far = uv_all[np.argmax(np.hypot(uv_all[:, 0] - cam.cx, uv_all[:, 1] - cam.cy))]
+    dist_u = distortion_uncertainty(cam, cov, uv_far)
+    cov_img = coverage([i for _, _, i in data], size, config.grid, (cam.cx, cam.cy))
+    return IntrinsicsResult(cam, stds, float(rms), tuple(views), cov_img, tuple(warnings + cov_img["warnings"]),
+                            cov, dist_u)
 
 
 def find_images(folder) -> list[Path]:
@@ -326,7 +398,8 @@ def calibrate_from_images(paths, target, image_size=None, names=None, config: Ca
 
 
 __all__ = ["CalibrationConfig", "IntrinsicsResult", "ViewInfo", "calibrate_intrinsics", "calibrate_from_images",
-           "intrinsics_covariance", "summary_text",
+           "intrinsics_covariance", "summary_text", "distortion_displacement", "distortion_uncertainty",
+           "distortion_summary",
            "coverage", "find_images", "PARAM_NAMES", "IMAGE_SUFFIXES"]
 
 
@@ -337,6 +410,13 @@ def summary_text(res: IntrinsicsResult) -> str:
              f"{res.n_used} views ({len(res.views) - res.n_used} rejected)"]
     lines += [f"  {k} = {v[k]:.3f} ± {s[k]:.3f} px" for k in PARAM_NAMES[:4]]
     lines += [f"  {k} = {v[k]:.5g} ± {s[k]:.2g}" for k in PARAM_NAMES[4:]]
+    if res.distortion:
+        d = res.distortion
+        lines.append("  distortion displacement at the image corners (TL, TR, BL, BR): " + ", ".join(
+            f"{m:.2f} ± {e:.3f}" for m, e in zip(d["displacement_corners_px"], d["std_corners_px"])) + " px")
+        if "max_radius_px" in d:
+            lines.append(f"  ... at the farthest detected corner (r = {d['max_radius_px']:.0f} px): "
+                         f"{d['displacement_max_radius_px']:.2f} ± {d['std_max_radius_px']:.3f} px")
     c = res.coverage
     lines.append(f"coverage: {100 * c['fraction']:.0f} % of {c['grid'][0]}x{c['grid'][1]} image cells, corners up to "
                  f"{100 * c['radius_frac']:.0f} % of the principal point-to-corner distance")
