@@ -461,16 +461,14 @@ def _array(sec, key, ndim, last, what, default=None):
 
 
 def _mount_from_section(sec, default_name, known, Lf, Af) -> tuple[str, np.ndarray]:
-    """Nominal mount (name, (4, 4) in m) from ``{name, xyz, rpy}``; R = Rz(yaw) Ry(pitch) Rx(roll)."""
-    from ..frames import T_from_xyz_rpy
+    """Nominal mount (name, (4, 4) in m) from ``{name, xyz, rpy}`` (R = Rz(yaw) Ry(pitch) Rx(roll)) or
+    ``{name, xyz, quat: [qx, qy, qz, qw]}`` (:func:`vision_calib.config.transform_from`)."""
+    from ..config import transform_from
 
-    _check_keys(sec, ("name", "xyz", "rpy"))
     name = sec.get("name", str, default_name)
     if name not in known:
         raise sec.error("name", f"expected one of {', '.join(known)}, got {name!r}")
-    xyz = _array(sec, "xyz", 1, 3, "a list of 3 numbers [x, y, z]", default=np.zeros(3)) * Lf
-    rpy = _array(sec, "rpy", 1, 3, "a list of 3 numbers [roll, pitch, yaw]", default=np.zeros(3)) * Af
-    return name, T_from_xyz_rpy(xyz, rpy)
+    return name, transform_from(sec, Lf, Af, extra=("name",))
 
 
 def load_serial_robot(path: str | os.PathLike) -> SerialChain:
