@@ -24,12 +24,13 @@ import numpy as np
 from ..errors import DataError, ParameterError
 from ..frames import perturb_pose, pose_error, so3_right_jacobian_inv  # noqa: F401 (re-exported)
 from ..kinematics.serial import SerialChain
-from .problem import IdentificationProblem
+from .problem import NOISE_ESTIMATED, IdentificationProblem
 
 POSE_COMPONENTS = ("dt_x", "dt_y", "dt_z", "dtheta_x", "dtheta_y", "dtheta_z")
-#: default measurement noise when neither obs_cov nor sigmas are given (1 mm, 1 mrad)
-DEFAULT_SIGMA_T_M = 1e-3
-DEFAULT_SIGMA_R_RAD = 1e-3
+#: relative weights (not noise) when neither obs_cov nor sigmas are given: 1 mm per 1 mrad (a pose error
+#: of 1 mrad moves a point 1 m away by 1 mm); the noise scale is then estimated from the residuals
+RELATIVE_WEIGHT_T_M = 1e-3
+RELATIVE_WEIGHT_R_RAD = 1e-3
 
 
 def _check_poses(T, n, name="T_meas") -> np.ndarray:
@@ -72,12 +73,15 @@ def _obs_cov(n, m, obs_cov, sigma_t_m, sigma_r_rad) -> tuple[np.ndarray, str]:
         if np.any(ev[:, 0] <= 0):
             raise DataError(f"obs_cov of pose {int(np.flatnonzero(ev[:, 0] <= 0)[0])} is not positive definite")
         return C, "given"
-    st = DEFAULT_SIGMA_T_M if sigma_t_m is None else float(sigma_t_m)
-    sr = DEFAULT_SIGMA_R_RAD if sigma_r_rad is None else float(sigma_r_rad)
+    if (sigma_t_m is None) != (sigma_r_rad is None) and m == 6:
+        raise ParameterError("give both sigma_t_m and sigma_r_rad for a pose residual (or obs_cov), or neither "
+                             "(noise then estimated from the residuals)")
+    st = RELATIVE_WEIGHT_T_M if sigma_t_m is None else float(sigma_t_m)
+    sr = RELATIVE_WEIGHT_R_RAD if sigma_r_rad is None else float(sigma_r_rad)
     if not (st > 0 and sr > 0 and np.isfinite(st) and np.isfinite(sr)):
         raise ParameterError(f"sigma_t_m and sigma_r_rad must be positive, got {st}, {sr}")
     d = np.array([st, st, st, sr, sr, sr])[:m] ** 2
-    src = "sigmas" if (sigma_t_m is not None or sigma_r_rad is not None) else "default 1 mm / 1 mrad"
+    src = "sigmas" if (sigma_t_m is not None or sigma_r_rad is not None) else NOISE_ESTIMATED
     return np.broadcast_to(np.diag(d), (n, m, m)).copy(), src
 
 
@@ -98,7 +102,9 @@ def serial_problem(
     residual: "pose" (6 components [dt (m), dtheta (rad)] in frame ``chain.left``) or "position"
     (the first 3). obs_cov: (N, m, m) or (m, m) measurement covariance (a (N, 6, 6) pose
     covariance is cut to (N, 3, 3) for "position"); or sigma_t_m / sigma_r_rad (isotropic);
-    neither -> 1 mm / 1 mrad (recorded in ``meta["obs_cov_source"]``). labels: (N,) pose ids
+    neither -> no noise is invented: relative weights 1 mm : 1 mrad, the noise scale is estimated from
+    the residuals by the solvers (a-posteriori variance factor chi2/dof; ``meta["noise"]`` and
+    ``IdentificationResult.noise`` say "estimated from residuals, not given"). labels: (N,) pose ids
     (default "0".."N-1"). free: names to identify (default: the chain's free mask).
     Raises ParameterError if two exactly redundant parameters (``chain.redundant_pairs()``, e.g.
     a Hayati ``beta3`` and ``d3``) are both free.
@@ -164,6 +170,7 @@ def serial_problem(
             "measured": chain.measured_name,
             "frame": chain.left,
             "obs_cov_source": cov_src,
+            **({"noise": NOISE_ESTIMATED} if cov_src == NOISE_ESTIMATED else {}),
         },
     )
 
