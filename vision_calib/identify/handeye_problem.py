@@ -347,7 +347,8 @@ def _transform_dict(T: np.ndarray, cov: np.ndarray | None, unknown: np.ndarray |
     return d
 
 
-def handeye_report(result: IdentificationResult, A, B, problem: IdentificationProblem) -> dict:
+def handeye_report(result: IdentificationResult, A, B, problem: IdentificationProblem, detections=None,
+                   target=None, intrinsics=None) -> dict:
     """JSON-ready summary of a hand-eye identification.
 
     ``transforms``: for A, B and their inverses (named after the frames, e.g. ``T_cam_base`` and
@@ -357,7 +358,10 @@ def handeye_report(result: IdentificationResult, A, B, problem: IdentificationPr
     parent frame; None for a component that a fixed (non-identifiable) parameter enters).
     ``parameters``: the raw parameter table (:meth:`IdentificationResult.to_dict`). ``noise``: the
     observation noise model used. ``residuals``: per pose, translation norm [mm] and rotation
-    angle [deg] (measured - model), plus their RMS and max.
+    angle [deg] (measured - model), plus their RMS and max. ``reprojection`` (when ``detections``
+    {pose label: [Detection per frame]}, ``target`` and ``intrinsics`` are given): the target corners
+    projected through the calibrated chain A G_k B of each pose vs the detected corners, RMS px overall,
+    per pose and the worst poses (:func:`vision_calib.measure.reprojection.chain_reprojection`).
     """
     A = np.asarray(A, float)
     B = np.asarray(B, float)
@@ -384,6 +388,12 @@ def handeye_report(result: IdentificationResult, A, B, problem: IdentificationPr
     t_mm = 1e3 * np.linalg.norm(r[:, :3], axis=1)
     rot_deg = np.degrees(np.linalg.norm(r[:, 3:], axis=1))
     labels = result.labels or tuple(range(r.shape[0]))
+    reproj = None
+    if detections is not None and target is not None and intrinsics is not None:
+        from ..measure.reprojection import chain_reprojection
+
+        keep = [problem.labels.index(lab) for lab in labels]
+        reproj = chain_reprojection(A @ problem.meta["G"][keep] @ B, detections, labels, target, intrinsics)
     return {
         "model": "handeye",
         "mount": problem.meta["mount"],
@@ -404,4 +414,5 @@ def handeye_report(result: IdentificationResult, A, B, problem: IdentificationPr
             "max_translation_mm": float(t_mm.max()),
             "max_rotation_deg": float(rot_deg.max()),
         },
+        "reprojection": reproj,
     }

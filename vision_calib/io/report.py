@@ -173,6 +173,10 @@ def summary_text(report: dict) -> str:
     if "residuals" in report:
         lines.append("residual RMS: " + "; ".join(f"{k} " + ", ".join(f"{x:.4g}" for x in vals)
                                                   for k, vals in report["residuals"].items()))
+    if "reprojection" in report:
+        from ..measure.reprojection import reprojection_line
+
+        lines.append(reprojection_line(report["reprojection"]))
     if "accuracy" in report:
         b, a = report["accuracy"]["before"], report["accuracy"]["after"]
         lines.append(f"validation ({b['n_poses']} poses): position RMS {b['position_rms_mm']:.3f} -> "
