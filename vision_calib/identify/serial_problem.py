@@ -22,7 +22,7 @@ from typing import Mapping
 import numpy as np
 
 from ..errors import DataError, ParameterError
-from ..frames import perturb_pose, pose_error, so3_right_jacobian_inv  # noqa: F401 (re-exported)
+from ..frames import inv_T, inverse_error_map, perturb_pose, pose_error, so3_right_jacobian_inv  # noqa: F401
 from ..kinematics.serial import SerialChain
 from .problem import NOISE_ESTIMATED, IdentificationProblem
 
@@ -95,6 +95,8 @@ def serial_problem(
     sigma_r_rad: float | None = None,
     labels=None,
     free=None,
+    check_limits: bool = True,
+    measured: str | None = None,
 ) -> IdentificationProblem:
     """Identification problem for ``chain`` from joint sets ``q`` (N, n) rad and measured
     ``T_meas`` (N, 4, 4) = ``T_left_right`` (m).
@@ -105,7 +107,15 @@ def serial_problem(
     neither -> no noise is invented: relative weights 1 mm : 1 mrad, the noise scale is estimated from
     the residuals by the solvers (a-posteriori variance factor chi2/dof; ``meta["noise"]`` and
     ``IdentificationResult.noise`` say "estimated from residuals, not given"). labels: (N,) pose ids
-    (default "0".."N-1"). free: names to identify (default: the chain's free mask).
+    (default "0".."N-1"). free: names to identify (default: the chain's free mask). check_limits: a
+    joint value outside the chain's ``joint_limits`` is a DataError naming the pose and joint, the same
+    check (and message) as the pipelines' input files (``check_limits=False`` to fit such data anyway).
+    measured: the transform the rows of ``T_meas`` AND their noise (obs_cov / sigmas) hold, in the
+    ``frames.pose_error`` convention of that transform (the convention of ``docs/measured_poses.md``):
+    ``chain.measured_name`` (default, e.g. ``T_target_cam`` eye-in-hand) or its inverse (e.g.
+    ``T_cam_target``, what solvePnP gives); the inverse is carried into the chain's direction exactly
+    (poses inverted, covariance ``G C G^T`` with ``frames.inverse_error_map``), so equal sigmas give the
+    same answer here and in ``vision-calib process-poses`` when both name the same direction.
     Raises ParameterError if two exactly redundant parameters (``chain.redundant_pairs()``, e.g.
     a Hayati ``beta3`` and ``d3``) are both free.
     Longer than 80 lines: input validation then the residual and Jacobian closures over the same checked arrays.
@@ -117,6 +127,11 @@ def serial_problem(
         raise ParameterError(f"residual must be 'pose' or 'position', got {residual!r}")
     q = chain.check_joints(q)
     n = q.shape[0]
+    if check_limits:
+        from ..kinematics.serial import check_joint_limits
+
+        check_joint_limits(q, getattr(chain, "joint_limits", None), f"{chain.name}: joint values",
+                           labels if labels is not None and len(labels) == n else None)
     T_meas = _check_poses(T_meas, n)
     m = 6 if residual == "pose" else 3
     params = chain.params if free is None else chain.params.only_free(list(free))
@@ -124,7 +139,23 @@ def serial_problem(
     for a, b, why in chain.redundant_pairs():
         if a in free_set and b in free_set:
             raise ParameterError(f"{a} and {b} cannot both be free: {why}; fix one of them")
-    cov, cov_src = _obs_cov(n, m, obs_cov, sigma_t_m, sigma_r_rad)
+    own = chain.measured_name
+    a, b = own[2:].split("_", 1) if own.count("_") == 2 else (None, None)
+    inverse = f"T_{b}_{a}" if a else None
+    measured = own if measured is None else str(measured)
+    if measured not in (own, inverse):
+        raise ParameterError(f"measured={measured!r}: the chain {chain.name!r} computes {own}; give {own!r} or "
+                             f"{inverse!r} (the direction the rows of T_meas and their noise hold)")
+    if measured == own:
+        cov, cov_src = _obs_cov(n, m, obs_cov, sigma_t_m, sigma_r_rad)
+    else:  # rows and noise in the inverse direction: carry both into the chain's direction exactly
+        if obs_cov is not None and np.shape(obs_cov)[-1] != 6:
+            raise DataError(f"measured={measured!r}: mapping the noise to {own} needs the full (6, 6) pose "
+                            f"covariance, got {np.shape(obs_cov)}")
+        cov6, cov_src = _obs_cov(n, 6, obs_cov, sigma_t_m, sigma_r_rad)
+        G = inverse_error_map(T_meas)
+        cov = np.ascontiguousarray((G @ cov6 @ np.swapaxes(G, -1, -2))[:, :m, :m])
+        T_meas = inv_T(T_meas)
     if labels is None:
         labels = tuple(str(i) for i in range(n))
     else:
@@ -170,6 +201,7 @@ def serial_problem(
             "measured": chain.measured_name,
             "frame": chain.left,
             "obs_cov_source": cov_src,
+            "measured_as_given": measured,
             **({"noise": NOISE_ESTIMATED} if cov_src == NOISE_ESTIMATED else {}),
         },
     )

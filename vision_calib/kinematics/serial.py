@@ -120,6 +120,12 @@ class JointChainChecks:
             return np.ones(q.shape[0], dtype=bool)
         return np.all((q >= self.joint_limits[:, 0]) & (q <= self.joint_limits[:, 1]), axis=1)
 
+    def check_limits(self, q, where: str = "", ids=None) -> None:
+        """DataError naming ``where``, the pose id and the joint for a joint value outside joint_limits
+        (the same check for the library path, :func:`~vision_calib.identify.serial_problem.serial_problem`,
+        and the pipelines' input files); nothing when the chain has no limits."""
+        check_joint_limits(self.check_joints(q), self.joint_limits, where or self.name, ids)
+
     def check_joints(self, q) -> np.ndarray:
         """Joint sets as a (N, n) float array (a single (n,) set becomes (1, n)); DataError naming
         the pose on a wrong shape or a non-finite value."""
@@ -429,6 +435,21 @@ class SerialChain(JointChainChecks):
     def position_jacobian(self, q, x=None) -> np.ndarray:
         """(N, 3, n_params): translation rows of :meth:`pose_jacobian` (m per unit parameter, in ``left``)."""
         return self.pose_jacobian(q, x)[:, :3, :]
+
+
+def check_joint_limits(q, limits, where: str, ids=None) -> None:
+    """DataError ``"{where}: pose {id} joint q{j} = ... deg is outside the robot's limits [...] deg (wrong
+    angle unit?)"`` for the first joint value of q (N, n) rad outside limits (n, 2) (None: no check)."""
+    if limits is None:
+        return
+    q = np.asarray(q, float)
+    bad = np.argwhere((q < limits[:, 0]) | (q > limits[:, 1]))
+    if bad.size:
+        k, j = (int(v) for v in bad[0])
+        pid = list(ids)[k] if ids is not None else k
+        raise DataError(
+            f"{where}: pose {pid!r} joint q{j + 1} = {np.degrees(q[k, j]):.4g} deg is outside the robot's "
+            f"limits [{np.degrees(limits[j, 0]):.4g}, {np.degrees(limits[j, 1]):.4g}] deg (wrong angle unit?)")
 
 
 # ----------------------------------------------------------------------------- YAML loader

@@ -147,18 +147,10 @@ class SerialSetup(Setup):
     def check_joints(self, q, where: str, ids=None) -> None:
         """:meth:`Setup.check_joints`, and DataError for a value outside the robot's joint limits (a likely
         unit error)."""
+        from ..kinematics.serial import check_joint_limits
+
         super().check_joints(q, where, ids)
-        q = np.asarray(q, float)
-        ids = list(ids) if ids is not None else list(range(len(q)))
-        lim = self.chain.joint_limits
-        if lim is None:
-            return
-        bad = np.argwhere((q < lim[:, 0]) | (q > lim[:, 1]))
-        if bad.size:
-            k, j = (int(v) for v in bad[0])
-            raise DataError(
-                f"{where}: pose {ids[k]!r} joint q{j + 1} = {np.degrees(q[k, j]):.4g} deg is outside the robot's "
-                f"limits [{np.degrees(lim[j, 0]):.4g}, {np.degrees(lim[j, 1]):.4g}] deg (wrong angle unit?)")
+        check_joint_limits(q, self.chain.joint_limits, where, ids)
 
     def fixed_note(self, name: str) -> str:
         for a, b, why in self.chain.redundant_pairs():
