@@ -93,3 +93,15 @@ def test_single_tag_target_keeps_its_four_corners():
     _, dets = _view(tag, n=1)
     m = measure_pose(dets, tag, DIST_INTR)
     assert m.valid, m.reason
+
+
+def test_dropped_corners_and_rejections_reach_the_report(charuco):
+    from vision_calib.io.report import measurements_block
+
+    _, dets = _view(charuco, move=(17, np.array([4.0, -3.0])))
+    good = measure_pose(dets, charuco, DIST_INTR, pose_id="a")
+    few = measure_pose(_view(charuco, _grid_index(charuco, [(3, 2), (4, 2), (3, 3), (4, 3)]))[1], charuco,
+                       DIST_INTR, pose_id="b")
+    mb = measurements_block([good, few])
+    assert mb["rejected"] == [{"pose_id": "b", "reason": few.reason}] and "4 < 6" in few.reason
+    assert [(d["pose_id"], len(d["corners"])) for d in mb["dropped_corners"]] == [("a", 1)] * 3  # 3 frames
