@@ -55,7 +55,8 @@ def h4_igm_problem(
     q_meas: (N, 4) measured joint values, rad. T_cam_target_meas: (N, 4, 4) measured target
     poses in the camera frame. sigma_q_rad: joint noise std (rad); None -> 0 when pose_cov is
     given, else no noise is invented: equal joint weights and the noise scale estimated from the
-    residuals (``meta["noise"]`` = "estimated from residuals, not given"; solvers scale the covariance). pose_cov: (N, 6, 6) or (6, 6) covariance of the measured
+    residuals (``meta["noise"]`` = "estimated from residuals, not given"; solvers scale the covariance).
+    pose_cov: (N, 6, 6) or (6, 6) covariance of the measured
     pose error [dt (m), drot (rad)], camera frame. labels: (N,) pose identifiers.
     Raises DataError on bad shapes, NaN, or a pose the nominal model cannot reach.
     """

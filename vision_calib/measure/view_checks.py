@@ -83,8 +83,9 @@ def check_view(ids: np.ndarray, p_target: np.ndarray, uv_undist: np.ndarray, min
     if not keep.all():
         diag["dropped_corners"] = [{"id": int(i), "residual_px": float(e)} for i, e in zip(ids[~keep], r[~keep])]
     if (~keep).sum() > MAX_DROPPED_FRACTION * K:
-        return keep, (f"corners inconsistent with one plane: {int((~keep).sum())} of {K} off the homography by > "
-                      f"{OUTLIER_K * corner_noise_px:.2g} px ({OUTLIER_K:g} x corner noise {corner_noise_px:g} px)"), diag
+        return keep, (f"corners inconsistent with one plane: {int((~keep).sum())} of {K} off the homography "
+                      f"by > {OUTLIER_K * corner_noise_px:.2g} px ({OUTLIER_K:g} x corner noise "
+                      f"{corner_noise_px:g} px)"), diag
     if keep.sum() < min_corners:
         return keep, (f"too few corners consistent with one plane: {int(keep.sum())} < {min_corners} "
                       f"({int((~keep).sum())} off the homography by > {OUTLIER_K * corner_noise_px:.2g} px)"), diag
