@@ -252,3 +252,33 @@ def angle_key(sec: Section, base: str, default: Any = _MISSING) -> float:
     if default is _MISSING:
         raise sec.error(base + "_deg", f"missing required key (give {base}_deg or {base}_rad)")
     return default
+
+
+#: tolerance on |quaternion norm - 1| of a mount read from a file (pose loggers write unit quaternions
+#: to 6+ digits; a larger error is a wrong field order or a truncated value, not rounding)
+QUAT_NORM_TOL = 1e-3
+
+
+def transform_from(sec: Section, Lf: float = 1.0, Af: float = 1.0, extra=()):
+    """(4, 4) transform [m] of a mapping ``{xyz: [x, y, z], rpy: [roll, pitch, yaw]}`` or
+    ``{xyz: [..], quat: [qx, qy, qz, qw]}`` (scalar-last, the pose loggers' form; unit norm within
+    QUAT_NORM_TOL, normalised). xyz in the file's length unit (factor ``Lf`` to m), rpy in its angle
+    unit (``Af`` to rad; R = Rz(yaw) Ry(pitch) Rx(roll)); the quaternion has no unit. Missing xyz /
+    rotation -> zero / identity. ``extra``: other keys allowed in the mapping. ConfigError naming the
+    file and key on unknown keys, both rpy and quat, or a non-unit quaternion."""
+    import numpy as np
+
+    from .frames import T_from_xyz_quat, T_from_xyz_rpy
+
+    sec.check_known(("xyz", "rpy", "quat") + tuple(extra))
+    xyz = sec.floats("xyz", 3, np.zeros(3)) * Lf
+    if "quat" in sec:
+        if "rpy" in sec:
+            raise sec.error("quat", "give either rpy or quat, not both")
+        q = sec.floats("quat", 4)
+        norm = float(np.linalg.norm(q))
+        if abs(norm - 1.0) > QUAT_NORM_TOL:
+            raise sec.error("quat", f"expected a unit quaternion [qx, qy, qz, qw] (scalar last), got norm "
+                                    f"{norm:.6g} (|norm - 1| > {QUAT_NORM_TOL:g})")
+        return T_from_xyz_quat(xyz, q / norm)
+    return T_from_xyz_rpy(xyz, sec.floats("rpy", 3, np.zeros(3)) * Af)

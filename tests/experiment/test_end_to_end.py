@@ -55,6 +55,11 @@ def test_process_of_the_export_gives_the_same_parameters(exported, tmp_path):
         s = sim[p["name"]]
         assert abs(p["identified"] - s["identified"]) <= 1e-9 * max(1.0, abs(s["identified"])), p["name"]
     assert (tmp_path / "proc" / "report.json").exists() and (tmp_path / "proc" / "measurements.json").exists()
+    # reprojection of the identified chain into the images: the corners' own noise level (sub-pixel)
+    rp = out["reprojection"]
+    assert rp["n_poses"] >= 20 and rp["n_corners"] > 20 * 2 * 6
+    assert 0 < rp["rms_px"] < 1.0 and rp["worst_poses"][0]["rms_px"] == max(e["rms_px"] for e in rp["per_pose"])
+    assert "reprojection: RMS" in out["summary_text"]
     # an independent measurement of the exported images (plain OpenCV: ChArUco detection + solvePnP with the
     # recording's distortion, frame by frame) agrees with the pipeline's poses within the single-frame noise
     import yaml

@@ -34,6 +34,14 @@ def test_import_and_process_visp_eye_to_hand(tmp_path, capsys):
     assert np.linalg.norm(tag["xyz_m"]) < 0.2  # the tag sits on the flange
     # the 8 tag poses fit one rigid pair of mounts to a few mm / degrees
     assert he["residuals"]["rms_translation_mm"] < 5 and he["residuals"]["rms_rotation_deg"] < 4
+    # reprojection error in pixels of the calibrated chain base -> flange -> tag into each image
+    rp = rep["reprojection"]
+    assert rp is he["reprojection"] or rp == he["reprojection"]
+    assert rp["n_poses"] == 8 and rp["n_corners"] == 32 and len(rp["worst_poses"]) == 5
+    per = np.array([e["rms_px"] for e in rp["per_pose"]])
+    assert rp["rms_px"] == pytest.approx(np.sqrt(np.mean(per**2)), rel=1e-9)
+    assert 0.5 < rp["rms_px"] < 20 and rp["worst_poses"][0]["rms_px"] == per.max()
+    assert "reprojection: RMS" in rep["summary_text"]
     # agreement with OpenCV's closed-form hand-eye (Shah) within 4 std per translation component
     from vision_calib.identify.handeye_problem import handeye_initial_guess
     from vision_calib.io.recording import read_recording

@@ -137,7 +137,7 @@ def test_covariance_inputs():
     q = _q(ch, 4)
     T = ch.forward(q)
     pb = serial_problem(ch, q, T)
-    assert pb.meta["obs_cov_source"].startswith("default")
+    assert pb.meta["obs_cov_source"] == pb.meta["noise"] == "estimated from residuals, not given"
     np.testing.assert_allclose(pb.obs_cov[2], np.eye(6) * 1e-6)
     C = np.diag([1e-8, 2e-8, 3e-8, 1e-6, 2e-6, 3e-6])
     pb = serial_problem(ch, q, T, obs_cov=np.broadcast_to(C, (4, 6, 6)), residual="position")

@@ -24,8 +24,9 @@ from .checks import screen_measurements
 from .steps import check_method, identify_measurements, rejection_summary
 
 
-def measure_recording(rec, progress=False):
-    """PoseMeasurement per pose id of a Recording (invalid ones carry a reason)."""
+def measure_recording(rec, progress=False, detections=None):
+    """PoseMeasurement per pose id of a Recording (invalid ones carry a reason). detections: a dict to
+    fill with {pose id: [Detection per frame]} (for the reprojection error of the calibrated chain)."""
     from ..measure import MeasureConfig, PoseMeasurement, measure_images
 
     out = []
@@ -40,9 +41,11 @@ def measure_recording(rec, progress=False):
             out.append(PoseMeasurement(pid, False, f"no images in images/{pid}/", np.full((4, 4), np.nan),
                                        np.full((6, 6), np.nan), 0, 0, float("nan")))
             continue
-        pm, _ = measure_images([str(f) for f in files], rec.target, rec.camera, pose_id=pid,
-                               config=MeasureConfig(mode=rec.averaging))
+        pm, dets = measure_images([str(f) for f in files], rec.target, rec.camera, pose_id=pid,
+                                  config=MeasureConfig(mode=rec.averaging))
         out.append(pm)
+        if detections is not None:
+            detections[pid] = dets
     return out
 
 
@@ -76,12 +79,13 @@ def process_folder(folder, out_dir, method=None, progress=False, plots=True, fix
     out = Path(out_dir)
     scene, setup = _recording_setup(rec) if rec.pose_kind != "flange_pose" else (None, None)
     method = None if scene is None else check_method(setup, method or scene.identification.method, "--method")
-    pms = measure_recording(rec, progress)
+    dets = {}
+    pms = measure_recording(rec, progress, dets)
     mblock = measurements_block(pms, extra_files_ignored=list(rec.extra_files))
     write_json_atomic(out / "measurements.json", {"version": REPORT_VERSION, "folder": str(rec.folder), **mblock})
     t_meas = time.perf_counter() - t0
     if scene is None:
-        return _process_handeye(rec, out, pms, mblock, t0, plots, intr)
+        return _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets)
 
     meas, ok = Measurements.from_pose_measurements(rec.poses, rec.poses, pms)
     residual = scene.identification.residual
@@ -106,13 +110,24 @@ def process_folder(folder, out_dir, method=None, progress=False, plots=True, fix
         measurements=mblock, warnings=[*rec.notes, *intr["warnings"]], identifiability=rep,
         parameters=parameters_table(ps.names, ps.nominal, None, result), result=result, identified=ident,
         motion=motion,
-        residuals=residual_stats(result.residuals, problem.residual_kind), extra={"intrinsics": intr},
+        residuals=residual_stats(result.residuals, problem.residual_kind),
+        extra={"intrinsics": intr, "reprojection": _chain_reprojection(setup, meas, problem, result, dets, rec)},
         timings={"measure": t_meas, "identify": t_id, "total": time.perf_counter() - t0})
     write_report(out, report, setup, result, problem, plots=plots)
     return report
 
 
-def _process_handeye(rec, out, pms, mblock, t0, plots, intr) -> dict:
+def _chain_reprojection(setup, meas, problem, result, dets, rec) -> dict:
+    """Reprojection RMS px of the identified robot chain over the poses the fit kept."""
+    from ..measure.reprojection import chain_reprojection
+
+    kept = set(problem.labels)
+    idx = [k for k, lab in enumerate(meas.labels) if lab in kept]
+    T = setup.predict_from_joints(meas.joints[idx], result.identified)
+    return chain_reprojection(T, dets, [meas.labels[k] for k in idx], rec.target, rec.camera)
+
+
+def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None) -> dict:
     """Flange poses known: identify the camera mount and the target mount only."""
     from ..identify.handeye_problem import handeye_report, solve_handeye, stack_measurements
 
@@ -127,12 +142,13 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr) -> dict:
     # variance factor (whitened cost / degrees of freedom), reported as such
     result, A, B, problem = solve_handeye(rec.poses[ok], T, mount, pose_cov=cov, labels=labels,
                                           scale_cov_by_residual=True)
-    he = handeye_report(result, A, B, problem)
+    he = handeye_report(result, A, B, problem, detections=dets, target=rec.target, intrinsics=rec.camera)
     report = build_report(
         "process_handeye", source={"folder": str(rec.folder)},
         settings={"poses": mblock["n_poses"], "mount": mount, "camera": rec.camera.to_dict(), "method": "lse"},
         measurements=mblock, warnings=[*rec.notes, *intr["warnings"]], result=result,
-        residuals=residual_stats(result.residuals, "pose"), extra={"handeye": he, "intrinsics": intr},
+        residuals=residual_stats(result.residuals, "pose"),
+        extra={"handeye": he, "intrinsics": intr, "reprojection": he["reprojection"]},
         timings={"total": time.perf_counter() - t0})
     write_report(out, report, plots=plots)
     return report

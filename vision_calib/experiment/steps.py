@@ -200,23 +200,42 @@ def identify_measurements(setup: Setup, meas: Measurements, method, residual, an
     return Identified(result, problem, params, rep, tuple(rejected), adequacy, max(factor, 1.0), setup, prepared)
 
 
+#: a large move is unexplained when the data do not determine it (|move| < MOVE_SIGMAS x its std) or the fit
+#: leaves residuals far above the noise (chi2/dof > UNEXPLAINED_CHI2_DOF: residual std twice the predicted)
+MOVE_SIGMAS = 3.0
+UNEXPLAINED_CHI2_DOF = 4.0
+
+
 def plausibility_warnings(params, result, rel: float = 0.2, length_floor_m: float = 0.05,
                           angle_limit_rad: float = 0.2) -> list[str]:
-    """Warnings for identified deviations too large to be calibration corrections: a length moved
-    by more than ``rel`` of max(|nominal|, length_floor_m), an angle by more than angle_limit_rad.
-    Typical causes: wrong units in a file, a wrong target size, a wrong robot model."""
+    """Warnings for identified deviations too large to be calibration corrections that the data do not
+    explain: a length moved by more than ``rel`` of max(|nominal|, length_floor_m), an angle by more than
+    angle_limit_rad, AND either the move is not determined by the data (|move| < MOVE_SIGMAS x its std:
+    a weakly identifiable direction absorbed it) or the fit leaves residuals far above the noise
+    (``result.chi2_dof`` > UNEXPLAINED_CHI2_DOF). A large, well-determined move of a fit at the noise
+    level (a roughly known mount) is a correction, not warned. Typical causes of a warning: wrong units in
+    a file, a wrong target size, a wrong robot model, a parameter the poses do not excite."""
     out = []
+    chi2 = float(getattr(result, "chi2_dof", np.nan))
+    bad_fit = np.isfinite(chi2) and chi2 > UNEXPLAINED_CHI2_DOF
     for i in np.flatnonzero(result.free):
         dev = result.identified[i] - params.nominal[i]
+        std = float(result.std[i])
         name = params.names[i]
+        weak = not (np.isfinite(std) and abs(dev) >= MOVE_SIGMAS * std)
+        if not (weak or bad_fit):
+            continue
+        why = (f"std {std * (1e3 if params.kinds[i] == 'length' else np.degrees(1)):.3g} "
+               f"{'mm' if params.kinds[i] == 'length' else 'deg'}: the data do not determine it" if weak
+               else f"the fit leaves residuals above the noise (chi2/dof = {chi2:.3g})")
         if params.kinds[i] == "length":
             lim = rel * max(abs(params.nominal[i]), length_floor_m)
             if abs(dev) > lim:
-                out.append(f"{name} moved by {dev * 1e3:+.1f} mm from its nominal {params.nominal[i] * 1e3:.1f} mm: "
-                           "too large for a calibration correction (units, target size, robot model?)")
+                out.append(f"{name} moved by {dev * 1e3:+.1f} mm from its nominal {params.nominal[i] * 1e3:.1f} mm "
+                           f"({why}): too large for a calibration correction (units, target size, robot model?)")
         elif abs(dev) > angle_limit_rad:
-            out.append(f"{name} moved by {np.degrees(dev):+.2f} deg: too large for a calibration correction "
-                       "(units, robot model?)")
+            out.append(f"{name} moved by {np.degrees(dev):+.2f} deg ({why}): too large for a calibration "
+                       "correction (units, robot model?)")
     return out
 
 

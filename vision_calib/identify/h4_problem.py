@@ -24,10 +24,11 @@ import numpy as np
 from ..errors import DataError
 from ..frames import perturb_pose
 from ..kinematics.h4 import H4Robot
-from .problem import IdentificationProblem
+from .problem import NOISE_ESTIMATED, IdentificationProblem
 
-#: joint noise used when neither sigma_q_rad nor pose_cov is given (encoder-level, rad)
-DEFAULT_SIGMA_Q_RAD = 1e-4
+#: relative joint weight (rad) when neither sigma_q_rad nor pose_cov is given: the noise scale is then
+#: estimated from the residuals (``problem.NOISE_ESTIMATED``)
+RELATIVE_WEIGHT_Q_RAD = 1e-4
 
 
 def _check(name, a, shape_tail):
@@ -53,7 +54,9 @@ def h4_igm_problem(
     robot: model and parameter set (nominal = starting point, free mask = what is identified).
     q_meas: (N, 4) measured joint values, rad. T_cam_target_meas: (N, 4, 4) measured target
     poses in the camera frame. sigma_q_rad: joint noise std (rad); None -> 0 when pose_cov is
-    given, else DEFAULT_SIGMA_Q_RAD. pose_cov: (N, 6, 6) or (6, 6) covariance of the measured
+    given, else no noise is invented: equal joint weights and the noise scale estimated from the
+    residuals (``meta["noise"]`` = "estimated from residuals, not given"; solvers scale the covariance).
+    pose_cov: (N, 6, 6) or (6, 6) covariance of the measured
     pose error [dt (m), drot (rad)], camera frame. labels: (N,) pose identifiers.
     Raises DataError on bad shapes, NaN, or a pose the nominal model cannot reach.
     """
@@ -65,7 +68,10 @@ def h4_igm_problem(
     if N == 0:
         raise DataError("H4 IGM problem needs at least one pose")
     if sigma_q_rad is None:
-        sigma_q_rad = 0.0 if pose_cov is not None else DEFAULT_SIGMA_Q_RAD
+        estimated = pose_cov is None
+        sigma_q_rad = 0.0 if pose_cov is not None else RELATIVE_WEIGHT_Q_RAD
+    else:
+        estimated = False
     if not np.isfinite(sigma_q_rad) or sigma_q_rad < 0:
         raise DataError(f"sigma_q_rad must be a finite number >= 0, got {sigma_q_rad}")
     x0 = robot.params.nominal
@@ -102,7 +108,8 @@ def h4_igm_problem(
         residual_kind="joint",
         labels=tuple(labels) if labels is not None else tuple(range(N)),
         component_names=("q1", "q2", "q3", "q4"),
-        meta={"robot": "h4", "model": robot.model, "sigma_q_rad": float(sigma_q_rad)},
+        meta={"robot": "h4", "model": robot.model, "sigma_q_rad": float(sigma_q_rad),
+              **({"noise": NOISE_ESTIMATED} if estimated else {})},
     )
 
 

@@ -44,16 +44,17 @@ from ..errors import ConfigError, DataError
 from ..kinematics.params import DEFAULT_SCALE, ParameterSet
 from ..frames import so3_exp, so3_right_jacobian
 from ..kinematics.serial import MOUNT_SUFFIXES
-from .problem import IdentificationProblem, IdentificationResult
+from .problem import NOISE_ESTIMATED, IdentificationProblem, IdentificationResult
 
 #: unknown transforms (A, B) named after the frames, per mount
 MOUNT_NAMES = {"fixed": ("T_cam_base", "T_flange_target"), "eye_in_hand": ("T_cam_flange", "T_base_target")}
 #: names of the inverse transforms reported beside A and B
 INVERSE_NAMES = {"T_cam_base": "T_base_cam", "T_flange_target": "T_target_flange",
                  "T_cam_flange": "T_flange_cam", "T_base_target": "T_target_base"}
-#: default measurement noise when neither pose_cov nor sigmas are given (m, rad)
-DEFAULT_SIGMA_T_M = 1e-3
-DEFAULT_SIGMA_ROT_RAD = np.radians(0.1)
+#: relative weights (not noise) when neither pose_cov nor sigmas are given (m, rad): the noise scale is then
+#: estimated from the residuals (a-posteriori variance factor, ``problem.NOISE_ESTIMATED``)
+RELATIVE_WEIGHT_T_M = 1e-3
+RELATIVE_WEIGHT_ROT_RAD = np.radians(0.1)
 
 _POSE_COMPONENTS = ("dx", "dy", "dz", "drx", "dry", "drz")
 
@@ -166,8 +167,8 @@ def _obs_cov(N, pose_cov, sigma_t_m, sigma_rot_rad) -> tuple[np.ndarray, dict]:
     """(N, 6, 6) observation covariances: pose_cov (N, 6, 6) or (6, 6), plus diag(sigmas^2) when given."""
     meta = {}
     if pose_cov is None and sigma_t_m is None and sigma_rot_rad is None:
-        sigma_t_m, sigma_rot_rad = DEFAULT_SIGMA_T_M, DEFAULT_SIGMA_ROT_RAD
-        meta["noise"] = "default sigmas"
+        sigma_t_m, sigma_rot_rad = RELATIVE_WEIGHT_T_M, RELATIVE_WEIGHT_ROT_RAD
+        meta["noise"] = NOISE_ESTIMATED
     cov = np.zeros((N, 6, 6))
     if pose_cov is not None:
         pc = np.asarray(pose_cov, dtype=float)
@@ -208,7 +209,9 @@ def handeye_problem(T_base_flange, T_cam_target_meas, mount: str = "fixed", A0=N
     (:func:`handeye_initial_guess`, both must be None or both given).
     pose_cov: (N, 6, 6) or (6, 6) covariance of the measured pose error [dt (m), drot (rad)],
     camera frame (``PoseMeasurement.cov``). sigma_t_m / sigma_rot_rad: isotropic noise added to
-    pose_cov (robot repeatability, model error); with neither pose_cov nor sigmas: 1 mm / 0.1 deg.
+    pose_cov (robot repeatability, model error); with neither pose_cov nor sigmas no noise is invented:
+    relative weights 1 mm : 0.1 deg and the noise scale estimated from the residuals (``meta["noise"]`` =
+    "estimated from residuals, not given"; the solvers scale the covariance by chi2/dof).
     labels: (N,) pose identifiers. ``meta`` holds mount, the A/B names, G (N, 4, 4) and the
     nominal rotations used by :func:`transforms_from_x`.
     Longer than 80 lines: input checks, initial guess, covariance and the two closures share one scope.
@@ -344,7 +347,8 @@ def _transform_dict(T: np.ndarray, cov: np.ndarray | None, unknown: np.ndarray |
     return d
 
 
-def handeye_report(result: IdentificationResult, A, B, problem: IdentificationProblem) -> dict:
+def handeye_report(result: IdentificationResult, A, B, problem: IdentificationProblem, detections=None,
+                   target=None, intrinsics=None) -> dict:
     """JSON-ready summary of a hand-eye identification.
 
     ``transforms``: for A, B and their inverses (named after the frames, e.g. ``T_cam_base`` and
@@ -354,7 +358,10 @@ def handeye_report(result: IdentificationResult, A, B, problem: IdentificationPr
     parent frame; None for a component that a fixed (non-identifiable) parameter enters).
     ``parameters``: the raw parameter table (:meth:`IdentificationResult.to_dict`). ``noise``: the
     observation noise model used. ``residuals``: per pose, translation norm [mm] and rotation
-    angle [deg] (measured - model), plus their RMS and max.
+    angle [deg] (measured - model), plus their RMS and max. ``reprojection`` (when ``detections``
+    {pose label: [Detection per frame]}, ``target`` and ``intrinsics`` are given): the target corners
+    projected through the calibrated chain A G_k B of each pose vs the detected corners, RMS px overall,
+    per pose and the worst poses (:func:`vision_calib.measure.reprojection.chain_reprojection`).
     """
     A = np.asarray(A, float)
     B = np.asarray(B, float)
@@ -381,6 +388,12 @@ def handeye_report(result: IdentificationResult, A, B, problem: IdentificationPr
     t_mm = 1e3 * np.linalg.norm(r[:, :3], axis=1)
     rot_deg = np.degrees(np.linalg.norm(r[:, 3:], axis=1))
     labels = result.labels or tuple(range(r.shape[0]))
+    reproj = None
+    if detections is not None and target is not None and intrinsics is not None:
+        from ..measure.reprojection import chain_reprojection
+
+        keep = [problem.labels.index(lab) for lab in labels]
+        reproj = chain_reprojection(A @ problem.meta["G"][keep] @ B, detections, labels, target, intrinsics)
     return {
         "model": "handeye",
         "mount": problem.meta["mount"],
@@ -401,4 +414,5 @@ def handeye_report(result: IdentificationResult, A, B, problem: IdentificationPr
             "max_translation_mm": float(t_mm.max()),
             "max_rotation_deg": float(rot_deg.max()),
         },
+        "reprojection": reproj,
     }

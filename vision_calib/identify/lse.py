@@ -26,7 +26,7 @@ from scipy.optimize import least_squares
 
 from ..errors import ConfigError, DataError, ParameterError, VisionCalibError
 from .identifiability import analyze, base_problem, check_problem, pose_labels, whitened_free_jacobian
-from .problem import STATUS_CONVERGED, STATUS_NOT_FINITE, IdentificationProblem, IdentificationResult
+from .problem import NOISE_ESTIMATED, STATUS_CONVERGED, STATUS_NOT_FINITE, IdentificationProblem, IdentificationResult
 from .threads import single_threaded_blas
 
 #: |correlation| above which a pair of free parameters is reported
@@ -181,6 +181,15 @@ def finish_result(method, original, problem, x0, x, cov, cost0, iterations, conv
         chi2_k = pose_chi2(problem, r, W)
         cost = 0.5 * float(np.sum(chi2_k))
     dof = problem.n_obs * problem.m - fi.size
+    noise = "given"
+    if problem.meta.get("noise") == NOISE_ESTIMATED:  # relative weights only: the scale comes from the residuals
+        noise = NOISE_ESTIMATED
+        factor = 2.0 * cost / dof if dof > 0 and np.isfinite(cost) else float("nan")
+        if not info.get("scale_cov_by_residual"):
+            cov = cov * factor
+            std = std * np.sqrt(factor)
+        warnings.append(f"noise: {NOISE_ESTIMATED} (std scaled by sqrt(chi2/dof) = {np.sqrt(factor):.3g}"
+                        + ("; no degrees of freedom left: std unknown" if not np.isfinite(factor) else "") + ")")
     return IdentificationResult(
         method=method,
         names=params.names,
@@ -205,6 +214,7 @@ def finish_result(method, original, problem, x0, x, cov, cost0, iterations, conv
         dof=int(dof),
         chi2_dof=2.0 * cost / dof if dof > 0 and np.isfinite(cost) else float("nan"),
         pose_chi2=chi2_k,
+        noise=noise,
     )
 
 

@@ -27,6 +27,10 @@ STATUS_MAX_ITERATIONS = 0
 #: IdentificationResult.status: non-finite parameters, residuals, cost, Jacobian or covariance at the end
 STATUS_NOT_FINITE = -2
 
+#: ``problem.meta["noise"]`` / ``IdentificationResult.noise`` when the caller gave no measurement noise: obs_cov
+#: holds relative weights only, and the solvers scale the covariance by the a-posteriori variance factor
+NOISE_ESTIMATED = "estimated from residuals, not given"
+
 ResidualFn = Callable[..., np.ndarray]  # (x (n,), idx=None) -> (k, m)
 JacobianFn = Callable[..., np.ndarray]  # (x (n,), idx=None) -> (k, m, n)
 
@@ -45,6 +49,8 @@ class IdentificationProblem:
     prior_std: (n,) prior standard deviation of each parameter around nominal (EKF P0);
         None -> 100 x params.scale (effectively uninformative).
     component_names: names of the m residual components, for reports.
+    meta: builder-specific data; ``meta["noise"] == NOISE_ESTIMATED`` marks an obs_cov of relative weights
+        (no noise given): the solvers then scale the parameter covariance by chi2/dof.
     """
 
     params: ParameterSet
@@ -105,6 +111,9 @@ class IdentificationResult:
     a-posteriori variance factor (about 1 when the model and obs_cov are right; NaN when dof <= 0).
     pose_chi2: (n_obs,) squared norm of each pose's whitened final residual (see
     :func:`~vision_calib.identify.adequacy.model_adequacy`).
+    noise: "given" (obs_cov is the measurement covariance) or NOISE_ESTIMATED (no noise given: obs_cov
+    held relative weights, std and covariance are scaled by chi2/dof, which is then the noise variance
+    in those weights' units rather than a model-adequacy figure).
     """
 
     method: str
@@ -130,6 +139,7 @@ class IdentificationResult:
     dof: int = 0
     chi2_dof: float = float("nan")
     pose_chi2: np.ndarray | None = field(default=None, repr=False)
+    noise: str = "given"
 
     @property
     def deviation(self) -> np.ndarray:
@@ -167,4 +177,5 @@ class IdentificationResult:
             "message": self.message,
             "dof": int(self.dof),
             "chi2_dof": float(self.chi2_dof) if np.isfinite(self.chi2_dof) else None,
+            "noise": self.noise,
         }

@@ -22,14 +22,15 @@ from typing import Mapping
 import numpy as np
 
 from ..errors import DataError, ParameterError
-from ..frames import perturb_pose, pose_error, so3_right_jacobian_inv  # noqa: F401 (re-exported)
+from ..frames import inv_T, inverse_error_map, perturb_pose, pose_error, so3_right_jacobian_inv  # noqa: F401
 from ..kinematics.serial import SerialChain
-from .problem import IdentificationProblem
+from .problem import NOISE_ESTIMATED, IdentificationProblem
 
 POSE_COMPONENTS = ("dt_x", "dt_y", "dt_z", "dtheta_x", "dtheta_y", "dtheta_z")
-#: default measurement noise when neither obs_cov nor sigmas are given (1 mm, 1 mrad)
-DEFAULT_SIGMA_T_M = 1e-3
-DEFAULT_SIGMA_R_RAD = 1e-3
+#: relative weights (not noise) when neither obs_cov nor sigmas are given: 1 mm per 1 mrad (a pose error
+#: of 1 mrad moves a point 1 m away by 1 mm); the noise scale is then estimated from the residuals
+RELATIVE_WEIGHT_T_M = 1e-3
+RELATIVE_WEIGHT_R_RAD = 1e-3
 
 
 def _check_poses(T, n, name="T_meas") -> np.ndarray:
@@ -72,12 +73,15 @@ def _obs_cov(n, m, obs_cov, sigma_t_m, sigma_r_rad) -> tuple[np.ndarray, str]:
         if np.any(ev[:, 0] <= 0):
             raise DataError(f"obs_cov of pose {int(np.flatnonzero(ev[:, 0] <= 0)[0])} is not positive definite")
         return C, "given"
-    st = DEFAULT_SIGMA_T_M if sigma_t_m is None else float(sigma_t_m)
-    sr = DEFAULT_SIGMA_R_RAD if sigma_r_rad is None else float(sigma_r_rad)
+    if (sigma_t_m is None) != (sigma_r_rad is None) and m == 6:
+        raise ParameterError("give both sigma_t_m and sigma_r_rad for a pose residual (or obs_cov), or neither "
+                             "(noise then estimated from the residuals)")
+    st = RELATIVE_WEIGHT_T_M if sigma_t_m is None else float(sigma_t_m)
+    sr = RELATIVE_WEIGHT_R_RAD if sigma_r_rad is None else float(sigma_r_rad)
     if not (st > 0 and sr > 0 and np.isfinite(st) and np.isfinite(sr)):
         raise ParameterError(f"sigma_t_m and sigma_r_rad must be positive, got {st}, {sr}")
     d = np.array([st, st, st, sr, sr, sr])[:m] ** 2
-    src = "sigmas" if (sigma_t_m is not None or sigma_r_rad is not None) else "default 1 mm / 1 mrad"
+    src = "sigmas" if (sigma_t_m is not None or sigma_r_rad is not None) else NOISE_ESTIMATED
     return np.broadcast_to(np.diag(d), (n, m, m)).copy(), src
 
 
@@ -91,6 +95,8 @@ def serial_problem(
     sigma_r_rad: float | None = None,
     labels=None,
     free=None,
+    check_limits: bool = True,
+    measured: str | None = None,
 ) -> IdentificationProblem:
     """Identification problem for ``chain`` from joint sets ``q`` (N, n) rad and measured
     ``T_meas`` (N, 4, 4) = ``T_left_right`` (m).
@@ -98,8 +104,18 @@ def serial_problem(
     residual: "pose" (6 components [dt (m), dtheta (rad)] in frame ``chain.left``) or "position"
     (the first 3). obs_cov: (N, m, m) or (m, m) measurement covariance (a (N, 6, 6) pose
     covariance is cut to (N, 3, 3) for "position"); or sigma_t_m / sigma_r_rad (isotropic);
-    neither -> 1 mm / 1 mrad (recorded in ``meta["obs_cov_source"]``). labels: (N,) pose ids
-    (default "0".."N-1"). free: names to identify (default: the chain's free mask).
+    neither -> no noise is invented: relative weights 1 mm : 1 mrad, the noise scale is estimated from
+    the residuals by the solvers (a-posteriori variance factor chi2/dof; ``meta["noise"]`` and
+    ``IdentificationResult.noise`` say "estimated from residuals, not given"). labels: (N,) pose ids
+    (default "0".."N-1"). free: names to identify (default: the chain's free mask). check_limits: a
+    joint value outside the chain's ``joint_limits`` is a DataError naming the pose and joint, the same
+    check (and message) as the pipelines' input files (``check_limits=False`` to fit such data anyway).
+    measured: the transform the rows of ``T_meas`` AND their noise (obs_cov / sigmas) hold, in the
+    ``frames.pose_error`` convention of that transform (the convention of ``docs/measured_poses.md``):
+    ``chain.measured_name`` (default, e.g. ``T_target_cam`` eye-in-hand) or its inverse (e.g.
+    ``T_cam_target``, what solvePnP gives); the inverse is carried into the chain's direction exactly
+    (poses inverted, covariance ``G C G^T`` with ``frames.inverse_error_map``), so equal sigmas give the
+    same answer here and in ``vision-calib process-poses`` when both name the same direction.
     Raises ParameterError if two exactly redundant parameters (``chain.redundant_pairs()``, e.g.
     a Hayati ``beta3`` and ``d3``) are both free.
     Longer than 80 lines: input validation then the residual and Jacobian closures over the same checked arrays.
@@ -111,6 +127,11 @@ def serial_problem(
         raise ParameterError(f"residual must be 'pose' or 'position', got {residual!r}")
     q = chain.check_joints(q)
     n = q.shape[0]
+    if check_limits:
+        from ..kinematics.serial import check_joint_limits
+
+        check_joint_limits(q, getattr(chain, "joint_limits", None), f"{chain.name}: joint values",
+                           labels if labels is not None and len(labels) == n else None)
     T_meas = _check_poses(T_meas, n)
     m = 6 if residual == "pose" else 3
     params = chain.params if free is None else chain.params.only_free(list(free))
@@ -118,7 +139,23 @@ def serial_problem(
     for a, b, why in chain.redundant_pairs():
         if a in free_set and b in free_set:
             raise ParameterError(f"{a} and {b} cannot both be free: {why}; fix one of them")
-    cov, cov_src = _obs_cov(n, m, obs_cov, sigma_t_m, sigma_r_rad)
+    own = chain.measured_name
+    a, b = own[2:].split("_", 1) if own.count("_") == 2 else (None, None)
+    inverse = f"T_{b}_{a}" if a else None
+    measured = own if measured is None else str(measured)
+    if measured not in (own, inverse):
+        raise ParameterError(f"measured={measured!r}: the chain {chain.name!r} computes {own}; give {own!r} or "
+                             f"{inverse!r} (the direction the rows of T_meas and their noise hold)")
+    if measured == own:
+        cov, cov_src = _obs_cov(n, m, obs_cov, sigma_t_m, sigma_r_rad)
+    else:  # rows and noise in the inverse direction: carry both into the chain's direction exactly
+        if obs_cov is not None and np.shape(obs_cov)[-1] != 6:
+            raise DataError(f"measured={measured!r}: mapping the noise to {own} needs the full (6, 6) pose "
+                            f"covariance, got {np.shape(obs_cov)}")
+        cov6, cov_src = _obs_cov(n, 6, obs_cov, sigma_t_m, sigma_r_rad)
+        G = inverse_error_map(T_meas)
+        cov = np.ascontiguousarray((G @ cov6 @ np.swapaxes(G, -1, -2))[:, :m, :m])
+        T_meas = inv_T(T_meas)
     if labels is None:
         labels = tuple(str(i) for i in range(n))
     else:
@@ -164,6 +201,8 @@ def serial_problem(
             "measured": chain.measured_name,
             "frame": chain.left,
             "obs_cov_source": cov_src,
+            "measured_as_given": measured,
+            **({"noise": NOISE_ESTIMATED} if cov_src == NOISE_ESTIMATED else {}),
         },
     )
 

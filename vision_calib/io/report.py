@@ -69,8 +69,11 @@ def residual_stats(r, kind) -> dict:
 def measurements_block(pms, **extra) -> dict:
     """Per-pose measurement summary of a list of measure.PoseMeasurement."""
     rejected = [{"pose_id": pm.pose_id, "reason": pm.reason} for pm in pms if not pm.valid]
+    # corners the per-view rule dropped (measure/view_checks.py) from views it kept
+    dropped = [{"pose_id": pm.pose_id, "frame_index": f["frame_index"], "corners": f["dropped_corners"]}
+               for pm in pms for f in pm.frames if f.get("dropped_corners")]
     return {"n_poses": len(pms), "n_valid": len(pms) - len(rejected), "n_rejected": len(rejected),
-            "rejected": rejected, **extra, "poses": [pm.to_dict() for pm in pms]}
+            "rejected": rejected, "dropped_corners": dropped, **extra, "poses": [pm.to_dict() for pm in pms]}
 
 
 def result_is_finite(result) -> bool:
@@ -158,6 +161,11 @@ def summary_text(report: dict) -> str:
     if m:
         lines.append(f"measurement: {m['n_valid']} of {m['n_poses']} poses valid, {m['n_rejected']} rejected")
         lines += [f"  pose {rj['pose_id']}: {rj['reason']}" for rj in m["rejected"][:10]]
+        if m.get("dropped_corners"):
+            dc = m["dropped_corners"]
+            lines.append(f"  {sum(len(d['corners']) for d in dc)} corners off the target-plane homography dropped "
+                         f"in {len(dc)} views (first: pose {dc[0]['pose_id']} frame {dc[0]['frame_index']}, "
+                         f"ids {[c['id'] for c in dc[0]['corners']]})")
         acc = m.get("accuracy_vs_truth")
         if acc:
             lines.append("  pose error vs truth, RMS per component: t = "
@@ -177,6 +185,10 @@ def summary_text(report: dict) -> str:
     if "residuals" in report:
         lines.append("residual RMS: " + "; ".join(f"{k} " + ", ".join(f"{x:.4g}" for x in vals)
                                                   for k, vals in report["residuals"].items()))
+    if "reprojection" in report:
+        from ..measure.reprojection import reprojection_line
+
+        lines.append(reprojection_line(report["reprojection"]))
     if "accuracy" in report:
         b, a = report["accuracy"]["before"], report["accuracy"]["after"]
         lines.append(f"validation ({b['n_poses']} poses): position RMS {b['position_rms_mm']:.3f} -> "

@@ -120,6 +120,12 @@ class JointChainChecks:
             return np.ones(q.shape[0], dtype=bool)
         return np.all((q >= self.joint_limits[:, 0]) & (q <= self.joint_limits[:, 1]), axis=1)
 
+    def check_limits(self, q, where: str = "", ids=None) -> None:
+        """DataError naming ``where``, the pose id and the joint for a joint value outside joint_limits
+        (the same check for the library path, :func:`~vision_calib.identify.serial_problem.serial_problem`,
+        and the pipelines' input files); nothing when the chain has no limits."""
+        check_joint_limits(self.check_joints(q), self.joint_limits, where or self.name, ids)
+
     def check_joints(self, q) -> np.ndarray:
         """Joint sets as a (N, n) float array (a single (n,) set becomes (1, n)); DataError naming
         the pose on a wrong shape or a non-finite value."""
@@ -431,6 +437,21 @@ class SerialChain(JointChainChecks):
         return self.pose_jacobian(q, x)[:, :3, :]
 
 
+def check_joint_limits(q, limits, where: str, ids=None) -> None:
+    """DataError ``"{where}: pose {id} joint q{j} = ... deg is outside the robot's limits [...] deg (wrong
+    angle unit?)"`` for the first joint value of q (N, n) rad outside limits (n, 2) (None: no check)."""
+    if limits is None:
+        return
+    q = np.asarray(q, float)
+    bad = np.argwhere((q < limits[:, 0]) | (q > limits[:, 1]))
+    if bad.size:
+        k, j = (int(v) for v in bad[0])
+        pid = list(ids)[k] if ids is not None else k
+        raise DataError(
+            f"{where}: pose {pid!r} joint q{j + 1} = {np.degrees(q[k, j]):.4g} deg is outside the robot's "
+            f"limits [{np.degrees(limits[j, 0]):.4g}, {np.degrees(limits[j, 1]):.4g}] deg (wrong angle unit?)")
+
+
 # ----------------------------------------------------------------------------- YAML loader
 _TOP_KEYS = ("name", "description", "source", "notes", "units", "joints", "mounts", "joint_limits",
              "configurations", "trials")
@@ -461,16 +482,14 @@ def _array(sec, key, ndim, last, what, default=None):
 
 
 def _mount_from_section(sec, default_name, known, Lf, Af) -> tuple[str, np.ndarray]:
-    """Nominal mount (name, (4, 4) in m) from ``{name, xyz, rpy}``; R = Rz(yaw) Ry(pitch) Rx(roll)."""
-    from ..frames import T_from_xyz_rpy
+    """Nominal mount (name, (4, 4) in m) from ``{name, xyz, rpy}`` (R = Rz(yaw) Ry(pitch) Rx(roll)) or
+    ``{name, xyz, quat: [qx, qy, qz, qw]}`` (:func:`vision_calib.config.transform_from`)."""
+    from ..config import transform_from
 
-    _check_keys(sec, ("name", "xyz", "rpy"))
     name = sec.get("name", str, default_name)
     if name not in known:
         raise sec.error("name", f"expected one of {', '.join(known)}, got {name!r}")
-    xyz = _array(sec, "xyz", 1, 3, "a list of 3 numbers [x, y, z]", default=np.zeros(3)) * Lf
-    rpy = _array(sec, "rpy", 1, 3, "a list of 3 numbers [roll, pitch, yaw]", default=np.zeros(3)) * Af
-    return name, T_from_xyz_rpy(xyz, rpy)
+    return name, transform_from(sec, Lf, Af, extra=("name",))
 
 
 def load_serial_robot(path: str | os.PathLike) -> SerialChain:

@@ -26,6 +26,7 @@ from .covariance import pose_covariance
 from .detect import DetectConfig, Detection, detect_batch
 from .pnp import (project_pinhole, solve_pnp_planar,
                   target_lookup, undistort_px)
+from .view_checks import check_view, hull_area
 
 
 @dataclass(frozen=True)
@@ -34,13 +35,19 @@ class MeasureConfig:
     for "poses", averaged for "corners"). max_rms_px: reject when the final reprojection RMS (over
     all frames' corners, px) exceeds it. pnp_method: "ippe" | "sqpnp". lens_field_std: (4,) stds of
     the smooth corner error field of the lens model in the covariance (None: the measured default of
-    ``covariance.LENS_FIELD_STD`` for cameras with distortion; zeros for corners without that error)."""
+    ``covariance.LENS_FIELD_STD`` for cameras with distortion; zeros for corners without that error).
+    min_view_corners, min_area_fraction, corner_noise_px: the per-view rule of
+    :mod:`vision_calib.measure.view_checks` (>= 6 corners, or all of a smaller target; corner hull >= 10 %
+    of the board's; homography consistency within multiples of the corner noise)."""
 
     mode: str = "corners"
     min_corners: int = 4
     max_rms_px: float = 1.5
     pnp_method: str = "ippe"
     lens_field_std: tuple | None = None
+    min_view_corners: int = 6
+    min_area_fraction: float = 0.1
+    corner_noise_px: float = 0.3
 
     def __post_init__(self):
         if self.mode not in ("corners", "poses"):
@@ -49,6 +56,10 @@ class MeasureConfig:
             raise ConfigError(f"MeasureConfig.pnp_method must be 'ippe' or 'sqpnp', got {self.pnp_method!r}")
         if self.min_corners < 4:
             raise ConfigError(f"MeasureConfig.min_corners must be >= 4 (planar PnP), got {self.min_corners}")
+        if not 0 <= self.min_area_fraction <= 1:
+            raise ConfigError(f"MeasureConfig.min_area_fraction must be in [0, 1], got {self.min_area_fraction}")
+        if not self.corner_noise_px > 0:
+            raise ConfigError(f"MeasureConfig.corner_noise_px must be > 0, got {self.corner_noise_px}")
         if not self.max_rms_px > 0:
             raise ConfigError(f"MeasureConfig.max_rms_px must be > 0, got {self.max_rms_px}")
 
@@ -62,7 +73,8 @@ class PoseMeasurement:
     n_frames_used: frames with a valid detection that entered the average. n_corners: distinct
     corner ids used. reprojection_rms_px: RMS of the 2-D reprojection residual of the final pose
     over all used frames' corners. sigma_px: corner noise std used for cov. frames: per-frame
-    diagnostics (dicts: frame_index, valid, reason, n_corners, rms_px)."""
+    diagnostics (dicts: frame_index, valid, reason, n_corners, rms_px, and the view rule's
+    area_fraction, homography_rms_px, dropped_corners [{id, residual_px}])."""
 
     pose_id: int | str
     valid: bool
@@ -116,6 +128,8 @@ def measure_pose(detections: Sequence[Detection], target, intrinsics: CameraIntr
     if hasattr(target, "check_pose_measurable"):
         target.check_pose_measurable()  # ConfigError: a 180-degree-symmetric board gives ambiguous poses
     lookup = target_lookup(target)
+    need = max(config.min_corners, min(config.min_view_corners, len(lookup)))  # per-view rule: view_checks
+    board_area = hull_area(np.array([p[:2] for p in lookup.values()]))
     fdiag = []
     obs = []  # (frame_index, ids, uv_undist)
     for d in detections:
@@ -132,7 +146,14 @@ def measure_pose(detections: Sequence[Detection], target, intrinsics: CameraIntr
         if not np.all(np.isfinite(uv_u)):
             fd.update(valid=False, reason="undistortion produced non-finite coordinates")
             continue
-        obs.append((len(fdiag) - 1, d.ids[keep].astype(int), uv_u))
+        ids_k = d.ids[keep].astype(int)
+        kv, why, vdiag = check_view(ids_k, np.array([lookup[int(i)] for i in ids_k]), uv_u, need,
+                                    config.min_area_fraction, board_area, config.corner_noise_px)
+        fd.update(vdiag)
+        if why:
+            fd.update(valid=False, reason=why)
+            continue
+        obs.append((len(fdiag) - 1, ids_k[kv], uv_u[kv]))
     if not obs:
         reasons = sorted({f["reason"] for f in fdiag if f["reason"]})
         return _invalid(pose_id, "no valid frame" + (f" ({'; '.join(reasons)})" if reasons else " (no frames)"),

@@ -31,9 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import frames as F
 from ..camera import CameraIntrinsics
-from ..config import Section, load_yaml
+from ..config import Section, load_yaml, transform_from
 from ..errors import ConfigError, ParameterError
 from .base import Setup
 from .registry import kind_of_robot_file
@@ -124,11 +123,9 @@ class SceneContext:
         return params
 
     def xyz_rpy(self, sec: Section, key: str) -> np.ndarray:
-        """(4, 4) transform of ``sec[key] = {xyz: [..], rpy: [..]}`` in the scene's units."""
-        s = sec.section(key).check_known(("xyz", "rpy"))
-        xyz = s.floats("xyz", 3, np.zeros(3))
-        rpy = s.floats("rpy", 3, np.zeros(3))
-        return F.T_from_xyz_rpy(xyz * self.Lf, rpy * self.Af)
+        """(4, 4) transform of ``sec[key] = {xyz: [..], rpy: [..]}`` or ``{xyz: [..], quat: [qx, qy, qz, qw]}``
+        in the scene's units (:func:`vision_calib.config.transform_from`)."""
+        return transform_from(sec.section(key), self.Lf, self.Af)
 
 
 @dataclass(frozen=True)

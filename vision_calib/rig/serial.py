@@ -164,14 +164,9 @@ class SerialSetup(Setup):
             raise DataError(f"{where}: pose {ids[k]!r} joint q{j + 1} = {q[k, j]:.4g} rad is more than a turn "
                             f"(|q| > 2 pi + {MAX_FREE_REVOLUTE_RAD - 2 * np.pi:.2g}) for a revolute joint: degrees "
                             "declared as radians? (set units.angle: deg)")
-        if lim is None:
-            return
-        bad = np.argwhere((q < lim[:, 0]) | (q > lim[:, 1]))
-        if bad.size:
-            k, j = (int(v) for v in bad[0])
-            raise DataError(
-                f"{where}: pose {ids[k]!r} joint q{j + 1} = {np.degrees(q[k, j]):.4g} deg is outside the robot's "
-                f"limits [{np.degrees(lim[j, 0]):.4g}, {np.degrees(lim[j, 1]):.4g}] deg (wrong angle unit?)")
+        from ..kinematics.serial import check_joint_limits
+
+        check_joint_limits(q, lim, where, ids)
 
     def fixed_note(self, name: str) -> str:
         for a, b, why in self.chain.redundant_pairs():

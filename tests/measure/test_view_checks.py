@@ -1,0 +1,107 @@
+"""Per-view acceptance rule (measure/view_checks.py): too few corners, corners that do not span the board,
+and corners inconsistent with one plane seen by a pinhole are rejected or dropped, with the reason."""
+
+import numpy as np
+import pytest
+
+from vision_calib import frames
+from vision_calib.measure import Detection, MeasureConfig, measure_pose
+from vision_calib.targets.spec import TargetSpec
+
+from measure_helpers import random_pose
+from test_pnp import DIST_INTR
+
+
+def _view(target, sel=None, sigma=0.05, seed=0, n=3, move=None):
+    """n frames of the target's corners (subset ``sel`` of the corner indices) with Gaussian noise;
+    ``move``: (index into the selection, 2-D offset px) added to one corner in every frame."""
+    rng = np.random.default_rng(seed)
+    T = random_pose(rng, target)
+    ids, p = target.corner_points()
+    sel = np.arange(len(ids)) if sel is None else np.asarray(sel)
+    uv = DIST_INTR.project(frames.transform_points(T, p[sel]))
+    if move is not None:
+        uv[move[0]] += move[1]
+    return T, [Detection(True, "", ids[sel], uv + rng.normal(0, sigma, uv.shape), DIST_INTR.size, f)
+               for f in range(n)]
+
+
+def _grid_index(target, cells):
+    """Indices of the corners at (column, row) positions of the inner-corner grid."""
+    ids, p = target.corner_points()
+    xs, ys = np.unique(np.round(p[:, 0], 6)), np.unique(np.round(p[:, 1], 6))
+    out = []
+    for c, r in cells:
+        out.append(int(np.flatnonzero((np.abs(p[:, 0] - xs[c]) < 1e-9) & (np.abs(p[:, 1] - ys[r]) < 1e-9))[0]))
+    return out
+
+
+def test_good_view_is_accepted_with_its_diagnostics(charuco):
+    T, dets = _view(charuco)
+    m = measure_pose(dets, charuco, DIST_INTR)
+    assert m.valid, m.reason
+    f = m.frames[0]
+    assert f["area_fraction"] == pytest.approx(1.0) and f["homography_rms_px"] < 0.1 and "dropped_corners" not in f
+
+
+def test_four_corner_view_is_rejected(charuco):
+    _, dets = _view(charuco, _grid_index(charuco, [(3, 2), (4, 2), (3, 3), (4, 3)]))
+    m = measure_pose(dets, charuco, DIST_INTR)
+    assert not m.valid and "too few corners: 4 < 6" in m.reason
+    assert measure_pose(dets, charuco, DIST_INTR, config=MeasureConfig(min_view_corners=4,
+                                                                       min_area_fraction=0)).valid
+
+
+def test_clustered_eight_corner_view_is_rejected(charuco):
+    # 4 x 2 corners in one part of a 9 x 6 inner-corner board: 3 / 40 = 7.5 % of its corner area
+    cells = [(c, r) for c in range(4) for r in range(2)]
+    _, dets = _view(charuco, _grid_index(charuco, cells))
+    m = measure_pose(dets, charuco, DIST_INTR)
+    assert not m.valid and "corners span 7.5 % of the board < 10 %" in m.reason
+    assert m.frames[0]["area_fraction"] == pytest.approx(3 / 40)
+    # the same count spread over the board passes
+    spread = [(0, 0), (8, 0), (0, 5), (8, 5), (4, 2), (4, 3), (2, 1), (6, 4)]
+    assert measure_pose(_view(charuco, _grid_index(charuco, spread))[1], charuco, DIST_INTR).valid
+
+
+def test_collinear_corners_are_rejected(charuco):
+    _, dets = _view(charuco, _grid_index(charuco, [(c, 2) for c in range(9)]))
+    m = measure_pose(dets, charuco, DIST_INTR)
+    assert not m.valid and "corners span 0.0 %" in m.reason
+
+
+def test_outlier_corner_is_dropped_and_named(charuco):
+    T, dets = _view(charuco, move=(17, np.array([4.0, -3.0])))
+    ids = dets[0].ids
+    m = measure_pose(dets, charuco, DIST_INTR)
+    assert m.valid, m.reason
+    dropped = m.frames[0]["dropped_corners"]
+    assert [d["id"] for d in dropped] == [int(ids[17])] and dropped[0]["residual_px"] == pytest.approx(5.0, abs=0.5)
+    e = frames.pose_error(T, m.T_cam_target)
+    assert np.all(np.abs(e) < 5 * m.std)  # the pose is not pulled by the moved corner
+
+
+def test_view_inconsistent_with_one_plane_is_rejected(charuco):
+    _, dets = _view(charuco, sigma=1.0)
+    m = measure_pose(dets, charuco, DIST_INTR)
+    assert not m.valid and "one plane" in m.reason
+
+
+def test_single_tag_target_keeps_its_four_corners():
+    tag = TargetSpec(kind="apriltag_grid", name="one_tag", rows=1, cols=1, dictionary="DICT_APRILTAG_36h11",
+                     tag_m=0.048, spacing_m=0.01)
+    _, dets = _view(tag, n=1)
+    m = measure_pose(dets, tag, DIST_INTR)
+    assert m.valid, m.reason
+
+
+def test_dropped_corners_and_rejections_reach_the_report(charuco):
+    from vision_calib.io.report import measurements_block
+
+    _, dets = _view(charuco, move=(17, np.array([4.0, -3.0])))
+    good = measure_pose(dets, charuco, DIST_INTR, pose_id="a")
+    few = measure_pose(_view(charuco, _grid_index(charuco, [(3, 2), (4, 2), (3, 3), (4, 3)]))[1], charuco,
+                       DIST_INTR, pose_id="b")
+    mb = measurements_block([good, few])
+    assert mb["rejected"] == [{"pose_id": "b", "reason": few.reason}] and "4 < 6" in few.reason
+    assert [(d["pose_id"], len(d["corners"])) for d in mb["dropped_corners"]] == [("a", 1)] * 3  # 3 frames
