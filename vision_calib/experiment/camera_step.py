@@ -47,9 +47,91 @@ def recording_intrinsics(rec, refine: bool = False, progress: bool = False, came
     block = {"source": SOURCE_CALIBRATED, "values": res.values(), "std": dict(res.std), "rms_px": res.rms_px,
              "n_views_used": d["n_views_used"], "n_views_rejected": d["n_views_rejected"],
              "rejected_views": [{"name": v.name, "reason": v.reason} for v in res.views if not v.used],
-             "coverage": res.coverage, "warnings": [f"camera intrinsics: {w}" for w in res.warnings]}
+             "coverage": res.coverage, "warnings": [f"camera intrinsics: {w}" for w in res.warnings],
+             "covariance": None if res.cov is None else res.cov.tolist()}
     if rec.camera is not None:
         c = rec.camera
         block["given"] = dict(zip(PARAM_NAMES, (c.fx, c.fy, c.cx, c.cy, *c.dist)))
     return replace(rec, camera=res.camera), block
 
+
+
+def intrinsics_directions(block: dict, camera):
+    """[(CameraIntrinsics moved by one std along an eigenvector of the intrinsics covariance)] for a
+    report block of intrinsics calibrated from the recording (``covariance`` (9, 9) of PARAM_NAMES), else []."""
+    import numpy as np
+
+    from ..camera import CameraIntrinsics
+
+    cov = block.get("covariance")
+    if block.get("source") != SOURCE_CALIBRATED or cov is None:
+        return []
+    cov = np.asarray(cov, float)
+    cov = np.where(np.isfinite(cov), cov, 0.0)
+    lam, V = np.linalg.eigh(0.5 * (cov + cov.T))
+    theta = np.array([camera.fx, camera.fy, camera.cx, camera.cy, *camera.dist], float)
+    out = []
+    for k in np.flatnonzero(lam > 1e-12 * max(lam.max(), 1e-300)):
+        t = theta + np.sqrt(lam[k]) * V[:, k]
+        out.append(CameraIntrinsics(camera.width, camera.height, *t[:4], tuple(float(v) for v in t[4:])))
+    return out
+
+
+def remeasure(dets: dict, labels, target, camera, mode: str):
+    """(N, 4, 4) T_cam_target of the poses ``labels`` re-measured from their detections with ``camera``
+    (undistortion + PnP only; no detection); None when one of them is no longer valid."""
+    import numpy as np
+
+    from ..measure import MeasureConfig, measure_pose
+
+    T = []
+    for lab in labels:
+        pm = measure_pose(dets[lab], target, camera, pose_id=lab, config=MeasureConfig(mode=mode))
+        if not pm.valid:
+            return None
+        T.append(pm.T_cam_target)
+    return np.array(T)
+
+
+def with_intrinsics_uncertainty(result, problem, setup, meas, dets, rec, block: dict, residual: str):
+    """The identification ``result`` with the uncertainty of intrinsics calibrated from the same recording
+    added to its covariance and std: for each eigen-direction i of their covariance (one std, camera
+    moved by ``intrinsics_directions``) the poses are re-measured from their detections and the fit's
+    linear response dx_i = -(J^T W J)^-1 J^T W dr_i is computed at the solution (J, W: the fit's Jacobian
+    and weights, dr_i: the change of the residuals), then covariance += sum_i dx_i dx_i^T (first order;
+    the intrinsics' errors are treated as independent of the pose noise). Unchanged when the intrinsics
+    were given. Also returns {n_directions, std_inflation {name: factor}}."""
+    import numpy as np
+
+    dirs = intrinsics_directions(block, rec.camera)
+    if not dirs or result.covariance is None:
+        return result, None
+    labels = list(problem.labels)
+    pos = {lab: k for k, lab in enumerate(meas.labels)}
+    sub = meas.subset([pos[lab] for lab in labels])
+    x = np.asarray(result.identified, float)
+    free = np.asarray(problem.params.free, bool)
+    J = np.asarray(problem.jacobian(x), float)[..., free]  # (k, m, nf)
+    W = np.linalg.inv(problem.obs_cov)  # (k, m, m)
+    N = np.einsum("kmi,kmn,knj->ij", J, W, J)
+    r0 = np.asarray(problem.residual(x), float)
+    C = np.zeros_like(N)
+    for cam in dirs:
+        T = remeasure(dets, labels, rec.target, cam, rec.averaging)
+        if T is None:
+            continue
+        p2 = setup.problem(type(sub)(sub.poses, sub.joints, T, sub.cov, sub.labels), residual,
+                           params=problem.params)
+        dr = np.asarray(p2.residual(x), float) - r0
+        dx = -np.linalg.solve(N, np.einsum("kmi,kmn,kn->i", J, W, dr))
+        C += np.outer(dx, dx)
+    from dataclasses import replace
+
+    cov = np.asarray(result.covariance, float) + C
+    std = np.array(result.std, float)
+    old = std[free].copy()
+    std[free] = np.sqrt(np.diag(cov))
+    names = [n for n, f in zip(problem.params.names, free) if f]
+    info = {"n_directions": len(dirs), "std_inflation": {n: float(s / o) for n, s, o in zip(names, std[free], old)
+                                                        if o > 0}}
+    return replace(result, covariance=cov, std=std), info

@@ -71,7 +71,7 @@ def process_folder(folder, out_dir, method=None, progress=False, plots=True, fix
     refine_intrinsics: calibrate the camera from the recording's images even when recording.yaml gives
     intrinsics (always done when it gives none); camera_file: a camera.yaml (``calibrate-camera``) used
     instead of recording.yaml's intrinsics; the report's ``intrinsics`` block says which were used."""
-    from .camera_step import recording_intrinsics
+    from .camera_step import recording_intrinsics, with_intrinsics_uncertainty
 
     t0 = time.perf_counter()
     rec = read_recording(folder, allow_symlinks=allow_symlinks)
@@ -100,6 +100,9 @@ def process_folder(folder, out_dir, method=None, progress=False, plots=True, fix
     ident = identify_measurements(setup, meas, method, residual, context=rejection_summary(pms), where=where,
                                   fix_unidentifiable=fix_unidentifiable, rejected=inconsistent)
     result, problem, rep, setup = ident.result, ident.problem, ident.analysis, ident.setup
+    result, prop = with_intrinsics_uncertainty(result, problem, setup, meas, dets, rec, intr, residual)
+    if prop is not None:
+        intr = {**intr, "propagated": prop}
     t_id = time.perf_counter() - t1
     ps = setup.params
     report = build_report(
@@ -142,6 +145,9 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None) -> dict:
     # variance factor (whitened cost / degrees of freedom), reported as such
     result, A, B, problem = solve_handeye(rec.poses[ok], T, mount, pose_cov=cov, labels=labels,
                                           scale_cov_by_residual=True)
+    result, prop = _handeye_intrinsics_uncertainty(result, rec, pms, ok, dets, intr, mount, cov, labels)
+    if prop is not None:
+        intr = {**intr, "propagated": prop}
     he = handeye_report(result, A, B, problem, detections=dets, target=rec.target, intrinsics=rec.camera)
     report = build_report(
         "process_handeye", source={"folder": str(rec.folder)},
@@ -152,6 +158,36 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None) -> dict:
         timings={"total": time.perf_counter() - t0})
     write_report(out, report, plots=plots)
     return report
+
+
+def _handeye_intrinsics_uncertainty(result, rec, pms, ok, dets, intr, mount, cov, labels):
+    """Hand-eye result with the uncertainty of intrinsics calibrated from the recording added (re-fit per
+    eigen-direction of their covariance, poses re-measured from the detections; see
+    ``camera_step.with_intrinsics_uncertainty``); (result, None) when the intrinsics were given."""
+    from dataclasses import replace
+
+    from ..identify.handeye_problem import solve_handeye
+    from .camera_step import intrinsics_directions, remeasure
+
+    dirs = intrinsics_directions(intr, rec.camera)
+    if not dirs or result.covariance is None or not dets:
+        return result, None
+    free = np.asarray(result.free, bool)
+    C = np.zeros_like(np.asarray(result.covariance, float))
+    for cam in dirs:
+        T = remeasure(dets, [str(pms[i].pose_id) for i in ok], rec.target, cam, rec.averaging)
+        if T is None:
+            continue
+        r2 = solve_handeye(rec.poses[ok], T, mount, pose_cov=cov, labels=labels, scale_cov_by_residual=True)[0]
+        dx = (np.asarray(r2.identified) - np.asarray(result.identified))[free]
+        C += np.outer(dx, dx)
+    cov2 = np.asarray(result.covariance, float) + C
+    std = np.array(result.std, float)
+    old = std[free].copy()
+    std[free] = np.sqrt(np.diag(cov2))
+    names = [n for n, f in zip(result.names, free) if f]
+    return replace(result, covariance=cov2, std=std), {
+        "n_directions": len(dirs), "std_inflation": {n: float(a / b) for n, a, b in zip(names, std[free], old) if b > 0}}
 
 
 __all__ = ["process_folder", "measure_recording"]

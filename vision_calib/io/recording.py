@@ -331,6 +331,8 @@ def _recording_camera(d: dict, sec: Section, images: dict) -> tuple[CameraIntrin
             break
     for i, key in enumerate(("width", "height")):
         v = d.get(key)
+        if v is not None and (isinstance(v, bool) or not isinstance(v, int) or v <= 0):
+            raise sec.error(key, f"expected a positive integer (pixels), got {v!r}")
         if v is None:
             if size is None:
                 raise sec.error(key, "not given and no readable image to read it from")

@@ -47,44 +47,11 @@ def calibration_poses(target, intr: CameraIntrinsics, n: int, seed: int, tilt_de
     return np.array(out)
 
 
-class _DistortedPolygons:
-    """Exact pixel-area render of the target through the *distorted* camera: the polygon backend's
-    coverage accumulation (``render.coverage``) over the board's black rectangles and outline with every
-    edge cut into ``n_sub`` chords whose end points are projected by ``CameraIntrinsics.project`` (OpenCV's
-    Brown–Conrady model, forward, no inverse). The chord error is the sagitta of a distorted edge,
-    L^2 kappa / 8 < 1e-3 px for 30 mm squares at 0.4 m, 1100 px focal length, k1 = -0.1 and n_sub = 16;
-    every board corner is a vertex, so corners are exact."""
-
-    def __init__(self, target, intr: CameraIntrinsics, n_sub: int = 16, background: float = 128,
-                 back_grey: float = 200):
-        from ..render.coverage import PolygonRenderer
-
-        self._r = PolygonRenderer(target, intr.without_distortion(), background, back_grey)
-        self._intr = intr
-        t = np.arange(n_sub) / n_sub
-
-        def subdivide(q):  # (N, 4, 2) quads -> (N, 4 n_sub, 2) polygons along the same edges
-            a, b = q, np.roll(q, -1, axis=1)
-            return (a[:, :, None, :] + t[None, None, :, None] * (b - a)[:, :, None, :]).reshape(len(q), -1, 2)
-
-        self._r._outline = subdivide(self._r._outline)
-        self._r._rects = subdivide(self._r._rects)
-        self._r._project = self._project
-
-    def _project(self, T: np.ndarray, pts: np.ndarray) -> np.ndarray:
-        """(..., 2) target points [m] -> distorted pixel-border coordinates (u + 0.5, v + 0.5)."""
-        pc = pts.reshape(-1, 2) @ T[:3, :2].T + T[:3, 3]
-        return self._intr.project(pc).reshape(pts.shape) + 0.5
-
-    def render(self, T: np.ndarray) -> np.ndarray:
-        return self._r.render(T)
-
-
 def render_views(target, intr: CameraIntrinsics, T_cam_targets, seed: int, effects=None,
                  exact_distortion: bool = True) -> list[np.ndarray]:
     """One uint8 (H, W) image per pose, noise seeded by (seed, view index). effects: ``SensorEffects()``
     defaults unless given (blur 0.6 px, photon + read noise). exact_distortion (default): the distortion
-    of ``intr`` drawn geometrically (:class:`_DistortedPolygons`, exact pixel areas), then blur and noise;
+    of ``intr`` drawn geometrically (``PolygonRenderer(distort=True)``, exact pixel areas), then blur and noise;
     False: ideal pinhole render (CPU polygon backend) resampled by the sensor stage (bilinear, see
     README "Camera calibration" for the corner bias this adds)."""
     from dataclasses import replace
@@ -95,7 +62,10 @@ def render_views(target, intr: CameraIntrinsics, T_cam_targets, seed: int, effec
     effects = effects or SensorEffects()
     images = []
     if exact_distortion and effects.apply_distortion and any(intr.dist):
-        r, effects = _DistortedPolygons(target, intr), replace(effects, apply_distortion=False)
+        from ..render.coverage import PolygonRenderer
+
+        r = PolygonRenderer(target, intr, 128.0, 200.0, distort=True)
+        effects = replace(effects, apply_distortion=False)
     else:
         r = TargetRenderer(target, intr.without_distortion(), backend="polygon")
     for i, T in enumerate(T_cam_targets):

@@ -91,13 +91,26 @@ def accumulate_coverage(polys: np.ndarray, weights: np.ndarray, height: int, wid
     return np.cumsum(acc, axis=1)[:, :width]
 
 
+def _subdivide(q: np.ndarray, n_sub: int) -> np.ndarray:
+    """(N, V, 2) polygons -> (N, V n_sub, 2): every edge cut into n_sub equal chords (same shape)."""
+    t = np.arange(n_sub) / n_sub
+    a, b = q, np.roll(q, -1, axis=1)
+    return (a[:, :, None, :] + t[None, None, :, None] * (b - a)[:, :, None, :]).reshape(len(q), -1, 2)
+
+
 class PolygonRenderer:
     """Exact area-coverage image of a planar target (see the module docstring).
 
-    target: TargetSpec; intrinsics: pinhole camera (distortion ignored); background, back_grey: grey
-    levels [0, 255] of empty pixels and of the board's back face; the printed face is white 255 / black 0."""
+    target: TargetSpec; intrinsics: camera; background, back_grey: grey levels [0, 255] of empty pixels and
+    of the board's back face; the printed face is white 255 / black 0.
+    distort: False (default): pinhole projection, the intrinsics' distortion ignored (the sensor stage
+    resamples the image); True: the distortion drawn geometrically: every edge cut into ``n_sub`` chords
+    whose end points go through OpenCV's forward model (``CameraIntrinsics.project``), so pixel areas stay
+    exact and every board corner is a vertex (exact); the chord error is the sagitta of a distorted edge,
+    L^2 kappa / 8 < 1e-3 px for 30 mm squares at 0.4 m, f = 1100 px, k1 = -0.1, n_sub = 16."""
 
-    def __init__(self, target: TargetSpec, intrinsics: CameraIntrinsics, background: float, back_grey: float):
+    def __init__(self, target: TargetSpec, intrinsics: CameraIntrinsics, background: float, back_grey: float,
+                 distort: bool = False, n_sub: int = 16):
         self.K = intrinsics
         self.background, self.back_grey = float(background), float(back_grey)
         x0, y0, x1, y1 = target.texture_extent_m()
@@ -105,10 +118,17 @@ class PolygonRenderer:
         rects = _rect_corners(np.array(target.black_rects(), float).reshape(-1, 4))  # (N, 4, 2)
         polys = target.black_polygons()  # (M, V, 2)
         self._shapes = [g for g in (rects, polys) if len(g)]  # groups of equal vertex count
+        self.distort = bool(distort and np.any(np.asarray(intrinsics.dist) != 0))
+        if self.distort:
+            self._outline = _subdivide(self._outline, n_sub)
+            self._shapes = [_subdivide(g, n_sub) for g in self._shapes]
         self._blank = np.full((intrinsics.height, intrinsics.width), self.background, np.float32)
 
     def _project(self, T: np.ndarray, pts: np.ndarray) -> np.ndarray:
         """(..., 2) target points [m] -> pixel-border coordinates (u + 0.5, v + 0.5)."""
+        if self.distort:
+            pc = pts.reshape(-1, 2) @ T[:3, :2].T + T[:3, 3]
+            return self.K.project(pc).reshape(pts.shape) + 0.5
         Hm = self.K.K @ np.column_stack([T[:3, 0], T[:3, 1], T[:3, 3]])
         p = pts @ Hm[:, :2].T + Hm[:, 2]
         return p[..., :2] / p[..., 2:] + 0.5
