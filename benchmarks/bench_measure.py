@@ -33,7 +33,7 @@ from vision_calib.camera import CameraIntrinsics  # noqa: E402
 from vision_calib.measure import DetectConfig, MeasureConfig, detect_batch, measure_pose  # noqa: E402
 from vision_calib.measure.accuracy import (accuracy_study, format_study, pose_seeds,  # noqa: E402
                                            random_view_pose)
-from vision_calib.sensor import SensorEffects, apply_effects  # noqa: E402
+from vision_calib.sensor import SensorEffects, apply_effects, ideal_render_grid  # noqa: E402
 from vision_calib.targets.spec import TargetSpec  # noqa: E402
 
 INTR = CameraIntrinsics(1024, 768, 1100.0, 1100.0, 515.3, 380.7, (-0.1, 0.05, 0.0005, -0.0005, 0.0))
@@ -99,7 +99,7 @@ def run_sweep(n_poses, seed):
     rng = np.random.default_rng(seed)
     Ts = [random_view_pose(rng, CHARUCO, INTR) for _ in range(n_poses)]
     seeds = pose_seeds(seed + 1, n_poses)
-    renderer = TargetRenderer(CHARUCO, INTR.without_distortion(), supersample=2)
+    renderer = TargetRenderer(CHARUCO, *ideal_render_grid(INTR, 2))
     try:
         ideals = [renderer.render(T) for T in Ts]
         clean = SensorEffects(full_well_e=0.0, read_noise_grey=0.0)
@@ -156,7 +156,7 @@ def _worker_init(gl_threads=None):
     cv2.setNumThreads(1)
     from vision_calib.render import TargetRenderer
 
-    _W["r"] = TargetRenderer(CHARUCO, INTR.without_distortion(), supersample=2)
+    _W["r"] = TargetRenderer(CHARUCO, *ideal_render_grid(INTR, 2))
 
 
 def _chain(args):

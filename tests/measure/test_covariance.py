@@ -128,7 +128,7 @@ def test_rendered_h4_poses_are_whitened():
     from vision_calib.measure.accuracy import random_only_cov
     from vision_calib.render import TargetRenderer
     from vision_calib.rig import load_scene, scene_poses
-    from vision_calib.sensor import apply_effects
+    from vision_calib.sensor import apply_effects, ideal_render_grid
     from vision_calib.targets import load_target
 
     scene = load_scene("scenes/h4_vision.yaml")
@@ -136,7 +136,7 @@ def test_rendered_h4_poses_are_whitened():
     target, intr = load_target(chain.target_path), chain.camera
     Ts = scene.setup.T_cam_target(scene_poses(scene, np.random.default_rng(123), 24), scene_truth(scene))
     z_new, z_old = [], []
-    with TargetRenderer(target, intr.without_distortion(), supersample=chain.supersample) as r:
+    with TargetRenderer(target, *ideal_render_grid(intr, chain.supersample)) as r:
         for k, T in enumerate(Ts):
             ideal = r.render(T)
             for s in (1,):

@@ -27,21 +27,18 @@ accounted for by propagation: the pose error of the (unweighted) PnP is delta = 
     Cov(delta) = (J^T J)^-1 J^T D J (J^T J)^-1      [m, rad; frames.pose_error convention].
 
 A *correlated* corner error (the same shift or scale on all corners, e.g. a depth bias) does not
-show in r: a rigid pose absorbs it. Measured against the renderer's truth (:func:`corner_error_split`
-on rendered poses of the scenes): without lens distortion the part of the true corner error that moves
-the pose is the share independent errors predict (|J delta| / |r| = 0.27 vs 0.28 expected, H4 scene;
-RX-90 A5 board 0.36 vs 0.38); with distortion it is larger (0.42 and 0.59), and the independent model
-alone then leaves z RMS up to 2.1 (H4 tz, rx) and 2.3 (RX-90 ry). The excess is a smooth per-pose error
-field over the board: fitting per pose a scale strain (e = eps_u x_u, eps_v x_v) and a keystone term
-(e = x (kappa . x)) to the true corner errors, beyond what the independent part leaks into such a fit,
-gives strain about 1e-4 of the normalised image coordinate (0.01-0.02 px at the board's edge) and
-keystone 0.01-0.03 px at the edge, none without distortion. Its origin is the lens model chain: the
-image is resampled through the distortion map and the corners are undistorted with the model, and the
-residual of that correction varies smoothly over the board (a real camera has the same kind of term from
-the residual of its calibrated lens model). The four terms are modelled as random amplitudes in px at
-the pattern's edge (x = corner offset from the pattern's centroid / the largest such offset: a corner
-error does not grow with the board's size), std :data:`LENS_FIELD_STD` = 0.015 px each for cameras
-with distortion (0 without; ``MeasureConfig.lens_field_std`` overrides), propagated like the rest:
+show in r: a rigid pose absorbs it. Measured against the renderer's truth (:func:`corner_error_split`,
+``benchmarks/bench_zscores.py --corner-bias``): with the distortion applied on the supersampled render
+(``sensor.ideal_render_grid``) the mean true corner error over 27 H4 poses is below 0.004 px at every
+image radius and the pose z RMS with the independent model alone is 0.71-1.13 per component (H4 and
+RX-90 scenes, 40 poses x 2 seeds). (Distorting the coarse, pixel-integrated render instead left a smooth
+radial corner error of up to 0.024 px, common to all poses, that this module once modelled as a per-pose
+"lens field"; it was a simulation artefact and is fixed at its source.) An optional smooth per-pose error
+field over the board (a real camera's residual of its calibrated lens model) can still be modelled: scale
+strain (e = eps_u x_u, eps_v x_v) and keystone (e = x (kappa . x)) as random amplitudes in px at the
+pattern's edge (x = corner offset from the pattern's centroid / the largest such offset), stds
+``MeasureConfig.lens_field_std`` (default :data:`LENS_FIELD_STD` = 0: none measured in simulation),
+propagated like the rest:
 
     D = diag(sigma_f^2 / n_k + sigma_s^2) + S S^T,   S = d u / d(field terms) x their stds  (2K x 4),
 
@@ -68,9 +65,10 @@ from ..camera import CameraIntrinsics
 from .pnp import project_pinhole, reprojection_jacobian
 
 
-#: stds [px at the pattern's edge] of the smooth per-pose corner error field left by the lens-distortion
-#: chain: scale strain (u, v) and keystone (u, v); measured on rendered H4 and RX-90 poses (module docstring)
-LENS_FIELD_STD = (0.015, 0.015, 0.015, 0.015)
+#: default stds [px at the pattern's edge] of a smooth per-pose corner error field: scale strain (u, v) and
+#: keystone (u, v); zero: none left in simulation once the distortion is applied on the supersampled render
+#: (module docstring); a real camera's lens-model residual can be given with MeasureConfig.lens_field_std
+LENS_FIELD_STD = (0.0, 0.0, 0.0, 0.0)
 APRILTAG_SHIFT_PX = 0.05
 APRILTAG_GROWTH_PX = 0.015
 
@@ -140,8 +138,7 @@ def pose_covariance(T_cam_target: np.ndarray, p_target: np.ndarray, mean_uv_px: 
     frame-averaged undistorted corners (px); n_obs: (K,) frames per corner; sigma_frame_px: pooled
     frame-to-frame corner std (px, per coordinate; NaN with a single frame: then the random and
     systematic parts cannot be told apart and the whole residual variance is used as one sigma);
-    field_std: (4,) stds of the smooth error field terms (None: :data:`LENS_FIELD_STD` if the camera
-    has distortion, else zeros); target_kind, ids (K,) corner ids: add the kind's detector-bias terms
+    field_std: (4,) stds of the smooth error field terms (None: :data:`LENS_FIELD_STD`); target_kind, ids (K,) corner ids: add the kind's detector-bias terms
     (:data:`DETECTOR_TERMS`)."""
     p_target = np.asarray(p_target, dtype=float)
     n_obs = np.asarray(n_obs, dtype=float)
@@ -152,7 +149,7 @@ def pose_covariance(T_cam_target: np.ndarray, p_target: np.ndarray, mean_uv_px: 
     Jp = np.linalg.pinv(J.T @ J)
     h = np.einsum("ij,jk,ik->i", J, Jp, J)  # leverages H_ii
     if field_std is None:
-        field_std = LENS_FIELD_STD if any(intr.dist) else (0.0,) * 4
+        field_std = LENS_FIELD_STD
     uv = project_pinhole(T_cam_target, p_target, intr)
     S = field_directions(uv) * np.asarray(field_std, float)
     if target_kind in DETECTOR_TERMS and ids is not None:

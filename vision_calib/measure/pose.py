@@ -33,8 +33,8 @@ class MeasureConfig:
     """mode: "corners" | "poses". min_corners: PnP needs at least this many corners (per frame
     for "poses", averaged for "corners"). max_rms_px: reject when the final reprojection RMS (over
     all frames' corners, px) exceeds it. pnp_method: "ippe" | "sqpnp". lens_field_std: (4,) stds of
-    the smooth corner error field of the lens model in the covariance (None: the measured default of
-    ``covariance.LENS_FIELD_STD`` for cameras with distortion; zeros for corners without that error)."""
+    a smooth per-pose corner error field (a lens-model residual) in the covariance (None:
+    ``covariance.LENS_FIELD_STD``, zeros: none measured in simulation)."""
 
     mode: str = "corners"
     min_corners: int = 4
