@@ -44,15 +44,19 @@ propagated like the rest:
 
 and their expected share of r^T r, tr((I - H) S S^T), is removed before sigma_s is estimated.
 
-A common shift of all corners is a detector bias for AprilTag grids: OpenCV's AprilTag refinement
-returns corners +0.46 to +0.49 px off the pixel-centre convention depending on blur (measure/detect.py,
-``apriltag_offset_px`` = -0.5 corrects the mean), and the per-pose mean true corner error measured on
-12 rendered bench poses is (-0.036, -0.049) px, RMS (0.04, 0.06) px (ChArUco: 0.004 / 0.003 px, the
-leak of the independent part). It moves tx / ty and never shows in r. The same refinement also places
-the tag sides slightly off (a tag looks smaller or larger by delta px at each corner, along the direction
-from the tag's centre): measured delta per pose on the same poses: mean -0.011 px, RMS 0.015 px; a
-uniform growth of all tags biases the depth. :data:`DETECTOR_TERMS` adds both for AprilTag grids as
-columns of S (shift std 0.05 px per axis, growth std 0.015 px).
+AprilTag grids have detector errors common to the corners of a pose, which never show in r. Measured
+on 30 rendered bench poses (noise-free, distortion on the supersampled render; least-squares fit per pose
+of a common shift, a tag growth -- each tag looks larger by delta px at each corner, along the direction
+from the tag's centre, which biases the depth -- and the smooth field terms above, compared with the leak
+of the independent part into the same fit):
+- the default seeded detection (straight-edge fits of each tag's border, :mod:`.tag_edges`): growth mean
+  +0.002-0.003 px, RMS 0.0063-0.0067 px (leak 0.001-0.0015); shift and field terms at the leak;
+- OpenCV's AprilTag refinement (``DetectConfig(batch="per_frame")``): shift mean (-0.037, -0.050) px,
+  RMS (0.045, 0.055) px (leak 0.02; ``apriltag_offset_px`` = -0.5 has corrected its +0.46 to +0.49 px
+  convention offset); strain and keystone 0.045-0.087 px (leak 0.036-0.074; on a second pose set
+  0.033-0.053, leak 0.032-0.064); growth at the leak.
+:data:`DETECTOR_TERMS` adds them as columns of S, per kind and corner estimator (measured with
+``benchmarks/bench_measure.py --detector-terms``).
 """
 
 from __future__ import annotations
@@ -69,12 +73,16 @@ from .pnp import project_pinhole, reprojection_jacobian
 #: keystone (u, v); zero: none left in simulation once the distortion is applied on the supersampled render
 #: (module docstring); a real camera's lens-model residual can be given with MeasureConfig.lens_field_std
 LENS_FIELD_STD = (0.0, 0.0, 0.0, 0.0)
-APRILTAG_SHIFT_PX = 0.05
-APRILTAG_GROWTH_PX = 0.015
+#: stds [px] of the AprilTag detector terms, per corner estimator (module docstring): common shift per axis,
+#: tag growth, smooth field (strain u, v, keystone u, v; px at the pattern's edge)
+APRILTAG_TERMS = {"edges": (0.0, 0.007, (0.0, 0.0, 0.0, 0.0)),
+                  "opencv": (0.05, 0.015, (0.05, 0.05, 0.05, 0.05))}
 
 
-def _apriltag_terms(ids: np.ndarray, uv_px: np.ndarray) -> np.ndarray:
-    """(2K, 3) columns of S for AprilTag-grid corners (ids 4 marker + k): common shift u, v and tag growth."""
+def _apriltag_terms(ids: np.ndarray, uv_px: np.ndarray, estimator: str = "edges") -> np.ndarray:
+    """(2K, m) columns of S for AprilTag-grid corners (ids 4 marker + k): common shift u, v, tag growth and
+    the smooth field terms, scaled by :data:`APRILTAG_TERMS` of the corner estimator; zero columns dropped."""
+    shift, growth, field = APRILTAG_TERMS[estimator]
     tag = np.asarray(ids) // 4
     centre = np.zeros_like(uv_px)
     for t in np.unique(tag):
@@ -82,11 +90,20 @@ def _apriltag_terms(ids: np.ndarray, uv_px: np.ndarray) -> np.ndarray:
     d = uv_px - centre
     n = d / np.maximum(np.linalg.norm(d, axis=1), 1e-9)[:, None]
     n[np.bincount(tag)[tag] < 2] = 0.0  # a lone corner of its tag: no growth direction
-    return np.column_stack([APRILTAG_SHIFT_PX * np.tile(np.eye(2), (len(ids), 1)), APRILTAG_GROWTH_PX * n.ravel()])
+    S = np.column_stack([shift * np.tile(np.eye(2), (len(ids), 1)), growth * n.ravel(),
+                         field_directions(uv_px) * np.asarray(field, float)])
+    return S[:, np.any(S != 0, axis=0)]
 
 
-#: per target kind: (corner ids (K,), uv (K, 2) px) -> (2K, m) detector-bias columns of S (module docstring)
+#: per target kind: (corner ids (K,), uv (K, 2) px, corner estimator) -> (2K, m) detector-bias columns of S
 DETECTOR_TERMS = {"apriltag_grid": _apriltag_terms}
+
+
+def corner_estimator(detections) -> str:
+    """"edges" when every valid detection's corners come from the seeded batch's per-frame estimator
+    (diagnostics "batch": "seeded" / "full"), else "opencv" (OpenCV's own refinement, per-frame detection)."""
+    ok = [d for d in detections if d.valid]
+    return "edges" if ok and all(d.diagnostics.get("batch") in ("seeded", "full") for d in ok) else "opencv"
 
 
 @dataclass(frozen=True)
@@ -131,15 +148,17 @@ def field_directions(uv_px: np.ndarray) -> np.ndarray:
 
 def pose_covariance(T_cam_target: np.ndarray, p_target: np.ndarray, mean_uv_px: np.ndarray, n_obs: np.ndarray,
                     sigma_frame_px: float, intr: CameraIntrinsics,
-                    field_std=None, target_kind: str | None = None, ids=None) -> PoseCovariance:
+                    field_std=None, target_kind: str | None = None, ids=None,
+                    estimator: str = "edges") -> PoseCovariance:
     """Covariance of the pose measured from frame-averaged corners (see the module docstring).
 
     T_cam_target: (4, 4) the measured pose; p_target: (K, 3) m corner points; mean_uv_px: (K, 2)
     frame-averaged undistorted corners (px); n_obs: (K,) frames per corner; sigma_frame_px: pooled
     frame-to-frame corner std (px, per coordinate; NaN with a single frame: then the random and
     systematic parts cannot be told apart and the whole residual variance is used as one sigma);
-    field_std: (4,) stds of the smooth error field terms (None: :data:`LENS_FIELD_STD`); target_kind, ids (K,) corner ids: add the kind's detector-bias terms
-    (:data:`DETECTOR_TERMS`)."""
+    field_std: (4,) stds of the smooth error field terms (None: :data:`LENS_FIELD_STD`); target_kind, ids
+    (K,) corner ids: add the kind's detector-bias terms (:data:`DETECTOR_TERMS`) of the corner estimator
+    ("edges" | "opencv", :func:`corner_estimator`)."""
     p_target = np.asarray(p_target, dtype=float)
     n_obs = np.asarray(n_obs, dtype=float)
     J = reprojection_jacobian(T_cam_target, p_target, intr)
@@ -153,7 +172,7 @@ def pose_covariance(T_cam_target: np.ndarray, p_target: np.ndarray, mean_uv_px: 
     uv = project_pinhole(T_cam_target, p_target, intr)
     S = field_directions(uv) * np.asarray(field_std, float)
     if target_kind in DETECTOR_TERMS and ids is not None:
-        S = np.column_stack([S, DETECTOR_TERMS[target_kind](np.asarray(ids, dtype=int), uv)])
+        S = np.column_stack([S, DETECTOR_TERMS[target_kind](np.asarray(ids, dtype=int), uv, estimator)])
     S_perp = S - J @ (Jp @ (J.T @ S))
     ss_field = float(np.sum(S_perp**2))  # expected share of the strain in r^T r
     if np.isfinite(sigma_frame_px):
