@@ -121,7 +121,7 @@ def test_rendered_h4_poses_are_whitened():
     """H4 demo scene (camera, board, sensor effects): 24 poses rendered; the pose error vs the true pose
     whitened by the covariance has z RMS in [0.5, 1.6] per component (24 poses: sampling std of an RMS
     ~15 %; on 100 poses x seeds it is 0.73-1.09, benchmarks/bench_measure.py) and no |z| > 4; the
-    frame-scatter-only covariance gives z RMS > 3 on the same data."""
+    frame-scatter-only covariance gives z RMS more than twice as large on the same data (bench: 3.7-4.9)."""
     from vision_calib.experiment.simulate import image_chain_of
     from vision_calib.experiment.steps import scene_truth
     from vision_calib.measure import detect_batch
@@ -149,7 +149,8 @@ def test_rendered_h4_poses_are_whitened():
     rms_new = np.sqrt((np.array(z_new) ** 2).mean(0))
     assert np.all((rms_new > 0.5) & (rms_new < 1.6)), rms_new
     assert np.abs(z_new).max() < 4
-    assert np.all(np.sqrt((np.array(z_old) ** 2).mean(0)) > 3)
+    rms_old = np.sqrt((np.array(z_old) ** 2).mean(0))
+    assert np.all(rms_old > 2 * rms_new), (rms_old, rms_new)
 
 
 def _apriltag_pose(rng, target, intr, growth_px, batch):
