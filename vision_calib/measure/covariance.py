@@ -29,8 +29,8 @@ accounted for by propagation: the pose error of the (unweighted) PnP is delta = 
 A *correlated* corner error (the same shift or scale on all corners, e.g. a depth bias) does not
 show in r: a rigid pose absorbs it. Measured against the renderer's truth (:func:`corner_error_split`,
 ``benchmarks/bench_zscores.py --corner-bias``): with the distortion applied on the supersampled render
-(``sensor.ideal_render_grid``) the mean true corner error over 27 H4 poses is below 0.004 px at every
-image radius and the pose z RMS with the independent model alone is 0.71-1.13 per component (H4 and
+(``sensor.ideal_render_grid``) the mean radial corner error over 27 H4 poses is 0.0043 px or less in every
+image-radius band and the pose z RMS with the independent model alone is 0.71-1.13 per component (H4 and
 RX-90 scenes, 40 poses x 2 seeds). (Distorting the coarse, pixel-integrated render instead left a smooth
 radial corner error of up to 0.024 px, common to all poses, that this module once modelled as a per-pose
 "lens field"; it was a simulation artefact and is fixed at its source.) An optional smooth per-pose error
