@@ -4,6 +4,7 @@
     .venv/bin/python benchmarks/bench_measure.py [--poses 50] [--sweep-poses 12] [--speed-poses 12]
                                                  [--workers 2] [--seed 0] [--skip accuracy,scenes,sweep,speed]
                                                  [--scene-poses 20] [--scene-seeds 1,2,3,4,5]
+                                                 [--detector-terms N]
 
 Default setting: 1024 x 768, fx = fy = 1100 px, mild Brown–Conrady distortion, ChArUco 7 x 10
 (30 mm squares, DICT_5X5_100) at 0.4-0.8 m, tilt up to 35 deg, SensorEffects() defaults (blur
@@ -33,7 +34,7 @@ from vision_calib.camera import CameraIntrinsics  # noqa: E402
 from vision_calib.measure import DetectConfig, MeasureConfig, detect_batch, measure_pose  # noqa: E402
 from vision_calib.measure.accuracy import (accuracy_study, format_study, pose_seeds,  # noqa: E402
                                            random_view_pose)
-from vision_calib.sensor import SensorEffects, apply_effects  # noqa: E402
+from vision_calib.sensor import SensorEffects, apply_effects, ideal_render_grid  # noqa: E402
 from vision_calib.targets.spec import TargetSpec  # noqa: E402
 
 INTR = CameraIntrinsics(1024, 768, 1100.0, 1100.0, 515.3, 380.7, (-0.1, 0.05, 0.0005, -0.0005, 0.0))
@@ -69,6 +70,46 @@ def run_accuracy(n_poses, seed, supersample=2, targets=(CHARUCO, APRILGRID)):
         print(f"  ({time.perf_counter() - t0:.1f} s)")
 
 
+def run_detector_terms(n_poses, seed):
+    """Corner errors common to a pose (pose covariance model, measure/covariance.py): per pose, a least-squares
+    fit to the true corner error (noise-free frame) of a common shift, tag growth (AprilTag) and the smooth
+    field terms; mean / RMS over poses and the leak of the independent part into the same fit (RMS)."""
+    from vision_calib.measure.covariance import field_directions
+    from vision_calib.render import TargetRenderer
+
+    clean = SensorEffects(full_well_e=0.0, read_noise_grey=0.0)
+    cases = ((APRILGRID, "seeded edges", DetectConfig()), (APRILGRID, "per-frame OpenCV", DetectConfig(batch="per_frame")),
+             (CHARUCO, "ChArUco", DetectConfig()))
+    section(f"detector terms: {n_poses} random poses, noise-free; columns shift u, v, growth, strain u, v, "
+            "keystone u, v [px; field terms at the pattern's edge]")
+    for target, name, cfg in cases:
+        lut = dict(zip(*[list(a) for a in target.corner_points()]))
+        rng = np.random.default_rng(seed)
+        coef, leak = [], []
+        with TargetRenderer(target, *ideal_render_grid(INTR, 2)) as r:
+            for k in range(n_poses):
+                T = random_view_pose(rng, target, INTR)
+                d = detect_batch(apply_effects(r.render(T), clean, 1, 0, INTR), target, INTR, cfg)[0]
+                if not d.valid:
+                    continue
+                uv = INTR.project(frames.transform_points(T, np.array([lut[int(i)] for i in d.ids])))
+                e = (d.uv_px - uv).ravel()
+                n = np.zeros_like(uv)
+                if target.kind == "apriltag_grid":
+                    tag = d.ids // 4
+                    c = np.array([uv[tag == t].mean(axis=0) for t in tag])
+                    n = (uv - c) / np.maximum(np.linalg.norm(uv - c, axis=1), 1e-9)[:, None]
+                A = np.column_stack([np.tile(np.eye(2), (len(uv), 1)), n.ravel(), field_directions(uv)])
+                x, *_ = np.linalg.lstsq(A, e, rcond=None)
+                res = e - A @ x
+                coef.append(x)
+                leak.append(res @ res / (len(e) - 7) * np.diag(np.linalg.pinv(A.T @ A)))
+        coef, leak = np.array(coef), np.array(leak)
+        print(f"  {name:<17} mean " + " ".join(f"{v:+.4f}" for v in coef.mean(0)))
+        print(f"  {'':<17} RMS  " + " ".join(f"{v:.4f}" for v in np.sqrt((coef**2).mean(0))))
+        print(f"  {'':<17} leak " + " ".join(f"{v:.4f}" for v in np.sqrt(leak.mean(0))))
+
+
 def run_scene_z(scenes, n_poses, seeds):
     from vision_calib.measure.accuracy import scene_z_study
 
@@ -99,7 +140,7 @@ def run_sweep(n_poses, seed):
     rng = np.random.default_rng(seed)
     Ts = [random_view_pose(rng, CHARUCO, INTR) for _ in range(n_poses)]
     seeds = pose_seeds(seed + 1, n_poses)
-    renderer = TargetRenderer(CHARUCO, INTR.without_distortion(), supersample=2)
+    renderer = TargetRenderer(CHARUCO, *ideal_render_grid(INTR, 2))
     try:
         ideals = [renderer.render(T) for T in Ts]
         clean = SensorEffects(full_well_e=0.0, read_noise_grey=0.0)
@@ -156,7 +197,7 @@ def _worker_init(gl_threads=None):
     cv2.setNumThreads(1)
     from vision_calib.render import TargetRenderer
 
-    _W["r"] = TargetRenderer(CHARUCO, INTR.without_distortion(), supersample=2)
+    _W["r"] = TargetRenderer(CHARUCO, *ideal_render_grid(INTR, 2))
 
 
 def _chain(args):
@@ -234,10 +275,15 @@ def main(argv=None):
     ap.add_argument("--supersample", type=int, default=2, help="TargetRenderer supersampling for the accuracy study")
     ap.add_argument("--charuco-only", action="store_true", help="accuracy study on the ChArUco board only")
     ap.add_argument("--skip", default="", help="comma-separated: accuracy,scenes,sweep,speed")
+    ap.add_argument("--detector-terms", type=int, default=0, metavar="N",
+                    help="only: fit the per-pose common corner error terms on N poses (measure/covariance.py)")
     ap.add_argument("--scene-poses", type=int, default=20)
     ap.add_argument("--scene-seeds", default="1,2,3,4,5")
     a = ap.parse_args(argv)
     skip = set(filter(None, a.skip.split(",")))
+    if a.detector_terms:
+        run_detector_terms(a.detector_terms, a.seed)
+        return
     if "speed" not in skip:
         run_speed(a.speed_poses, a.workers, a.seed)
     if "accuracy" not in skip:

@@ -97,7 +97,10 @@ def _worker_init(target_path, intrinsics, supersample, main_pid=None):
     target = load_target(target_path)
     _W["target"] = target
     _W["intr"] = intrinsics
-    _W["renderer"] = TargetRenderer(target, intrinsics.without_distortion(), supersample=supersample)
+    from ..sensor import ideal_render_grid
+
+    # with distortion: render on the supersampled grid, distort there, then box-average (sensor.ideal_render_grid)
+    _W["renderer"] = TargetRenderer(target, *ideal_render_grid(intrinsics, supersample))
 
 
 def _worker_pose(job):

@@ -109,11 +109,11 @@ def accuracy_study(target, intr: CameraIntrinsics, effects, n_poses: int = 50, n
     "random_over_bound", "bias_over_random" (6,), "z_new", "z_old" (P, 6) and their "_rms"/"_max" (6,),
     "n_valid", "errors" (P, 6), "bias" (P, 6)}}."""
     from ..render import TargetRenderer
-    from ..sensor import apply_effects
+    from ..sensor import apply_effects, ideal_render_grid
 
     own = renderer is None
     if own:
-        renderer = TargetRenderer(target, intr.without_distortion(), supersample=supersample)
+        renderer = TargetRenderer(target, *ideal_render_grid(intr, supersample))
     try:
         rng = np.random.default_rng(seed)
         seeds = pose_seeds(seed, n_poses)
@@ -184,7 +184,7 @@ def scene_z_study(scene_path, n_poses: int = 20, seeds=(1, 2, 3, 4, 5), pose_see
     from ..experiment.steps import scene_truth
     from ..render import TargetRenderer
     from ..rig import load_scene, scene_poses
-    from ..sensor import apply_effects
+    from ..sensor import apply_effects, ideal_render_grid
     from ..targets import load_target
 
     scene = load_scene(scene_path)
@@ -192,7 +192,7 @@ def scene_z_study(scene_path, n_poses: int = 20, seeds=(1, 2, 3, 4, 5), pose_see
     target, intr = load_target(chain.target_path), chain.camera
     Ts = scene.setup.T_cam_target(scene_poses(scene, np.random.default_rng(pose_seed), n_poses), scene_truth(scene))
     z_new, z_old = [], []
-    with TargetRenderer(target, intr.without_distortion(), supersample=chain.supersample) as r:
+    with TargetRenderer(target, *ideal_render_grid(intr, chain.supersample)) as r:
         for k, T in enumerate(Ts):
             ideal = r.render(T)
             for s in seeds:

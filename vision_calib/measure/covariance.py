@@ -27,35 +27,36 @@ accounted for by propagation: the pose error of the (unweighted) PnP is delta = 
     Cov(delta) = (J^T J)^-1 J^T D J (J^T J)^-1      [m, rad; frames.pose_error convention].
 
 A *correlated* corner error (the same shift or scale on all corners, e.g. a depth bias) does not
-show in r: a rigid pose absorbs it. Measured against the renderer's truth (:func:`corner_error_split`
-on rendered poses of the scenes): without lens distortion the part of the true corner error that moves
-the pose is the share independent errors predict (|J delta| / |r| = 0.27 vs 0.28 expected, H4 scene;
-RX-90 A5 board 0.36 vs 0.38); with distortion it is larger (0.42 and 0.59), and the independent model
-alone then leaves z RMS up to 2.1 (H4 tz, rx) and 2.3 (RX-90 ry). The excess is a smooth per-pose error
-field over the board: fitting per pose a scale strain (e = eps_u x_u, eps_v x_v) and a keystone term
-(e = x (kappa . x)) to the true corner errors, beyond what the independent part leaks into such a fit,
-gives strain about 1e-4 of the normalised image coordinate (0.01-0.02 px at the board's edge) and
-keystone 0.01-0.03 px at the edge, none without distortion. Its origin is the lens model chain: the
-image is resampled through the distortion map and the corners are undistorted with the model, and the
-residual of that correction varies smoothly over the board (a real camera has the same kind of term from
-the residual of its calibrated lens model). The four terms are modelled as random amplitudes in px at
-the pattern's edge (x = corner offset from the pattern's centroid / the largest such offset: a corner
-error does not grow with the board's size), std :data:`LENS_FIELD_STD` = 0.015 px each for cameras
-with distortion (0 without; ``MeasureConfig.lens_field_std`` overrides), propagated like the rest:
+show in r: a rigid pose absorbs it. Measured against the renderer's truth (:func:`corner_error_split`,
+``benchmarks/bench_zscores.py --corner-bias``): with the distortion applied on the supersampled render
+(``sensor.ideal_render_grid``) the mean radial corner error over 27 H4 poses is 0.0043 px or less in every
+image-radius band and the pose z RMS with the independent model alone is 0.71-1.13 per component (H4 and
+RX-90 scenes, 40 poses x 2 seeds). (Distorting the coarse, pixel-integrated render instead left a smooth
+radial corner error of up to 0.024 px, common to all poses, that this module once modelled as a per-pose
+"lens field"; it was a simulation artefact and is fixed at its source.) An optional smooth per-pose error
+field over the board (a real camera's residual of its calibrated lens model) can still be modelled: scale
+strain (e = eps_u x_u, eps_v x_v) and keystone (e = x (kappa . x)) as random amplitudes in px at the
+pattern's edge (x = corner offset from the pattern's centroid / the largest such offset), stds
+``MeasureConfig.lens_field_std`` (default :data:`LENS_FIELD_STD` = 0: none measured in simulation),
+propagated like the rest:
 
     D = diag(sigma_f^2 / n_k + sigma_s^2) + S S^T,   S = d u / d(field terms) x their stds  (2K x 4),
 
 and their expected share of r^T r, tr((I - H) S S^T), is removed before sigma_s is estimated.
 
-A common shift of all corners is a detector bias for AprilTag grids: OpenCV's AprilTag refinement
-returns corners +0.46 to +0.49 px off the pixel-centre convention depending on blur (measure/detect.py,
-``apriltag_offset_px`` = -0.5 corrects the mean), and the per-pose mean true corner error measured on
-12 rendered bench poses is (-0.036, -0.049) px, RMS (0.04, 0.06) px (ChArUco: 0.004 / 0.003 px, the
-leak of the independent part). It moves tx / ty and never shows in r. The same refinement also places
-the tag sides slightly off (a tag looks smaller or larger by delta px at each corner, along the direction
-from the tag's centre): measured delta per pose on the same poses: mean -0.011 px, RMS 0.015 px; a
-uniform growth of all tags biases the depth. :data:`DETECTOR_TERMS` adds both for AprilTag grids as
-columns of S (shift std 0.05 px per axis, growth std 0.015 px).
+AprilTag grids have detector errors common to the corners of a pose, which never show in r. Measured
+on 30 rendered bench poses (noise-free, distortion on the supersampled render; least-squares fit per pose
+of a common shift, a tag growth -- each tag looks larger by delta px at each corner, along the direction
+from the tag's centre, which biases the depth -- and the smooth field terms above, compared with the leak
+of the independent part into the same fit):
+- the default seeded detection (straight-edge fits of each tag's border, :mod:`.tag_edges`): growth mean
+  +0.002-0.003 px, RMS 0.0063-0.0067 px (leak 0.001-0.0015); shift and field terms at the leak;
+- OpenCV's AprilTag refinement (``DetectConfig(batch="per_frame")``): shift mean (-0.037, -0.050) px,
+  RMS (0.045, 0.055) px (leak 0.02; ``apriltag_offset_px`` = -0.5 has corrected its +0.46 to +0.49 px
+  convention offset); strain and keystone 0.045-0.087 px (leak 0.036-0.074; on a second pose set
+  0.033-0.053, leak 0.032-0.064); growth at the leak.
+:data:`DETECTOR_TERMS` adds them as columns of S, per kind and corner estimator (measured with
+``benchmarks/bench_measure.py --detector-terms``).
 """
 
 from __future__ import annotations
@@ -68,15 +69,20 @@ from ..camera import CameraIntrinsics
 from .pnp import project_pinhole, reprojection_jacobian
 
 
-#: stds [px at the pattern's edge] of the smooth per-pose corner error field left by the lens-distortion
-#: chain: scale strain (u, v) and keystone (u, v); measured on rendered H4 and RX-90 poses (module docstring)
-LENS_FIELD_STD = (0.015, 0.015, 0.015, 0.015)
-APRILTAG_SHIFT_PX = 0.05
-APRILTAG_GROWTH_PX = 0.015
+#: default stds [px at the pattern's edge] of a smooth per-pose corner error field: scale strain (u, v) and
+#: keystone (u, v); zero: none left in simulation once the distortion is applied on the supersampled render
+#: (module docstring); a real camera's lens-model residual can be given with MeasureConfig.lens_field_std
+LENS_FIELD_STD = (0.0, 0.0, 0.0, 0.0)
+#: stds [px] of the AprilTag detector terms, per corner estimator (module docstring): common shift per axis,
+#: tag growth, smooth field (strain u, v, keystone u, v; px at the pattern's edge)
+APRILTAG_TERMS = {"edges": (0.0, 0.007, (0.0, 0.0, 0.0, 0.0)),
+                  "opencv": (0.05, 0.015, (0.05, 0.05, 0.05, 0.05))}
 
 
-def _apriltag_terms(ids: np.ndarray, uv_px: np.ndarray) -> np.ndarray:
-    """(2K, 3) columns of S for AprilTag-grid corners (ids 4 marker + k): common shift u, v and tag growth."""
+def _apriltag_terms(ids: np.ndarray, uv_px: np.ndarray, estimator: str = "edges") -> np.ndarray:
+    """(2K, m) columns of S for AprilTag-grid corners (ids 4 marker + k): common shift u, v, tag growth and
+    the smooth field terms, scaled by :data:`APRILTAG_TERMS` of the corner estimator; zero columns dropped."""
+    shift, growth, field = APRILTAG_TERMS[estimator]
     tag = np.asarray(ids) // 4
     centre = np.zeros_like(uv_px)
     for t in np.unique(tag):
@@ -84,11 +90,13 @@ def _apriltag_terms(ids: np.ndarray, uv_px: np.ndarray) -> np.ndarray:
     d = uv_px - centre
     n = d / np.maximum(np.linalg.norm(d, axis=1), 1e-9)[:, None]
     n[np.bincount(tag)[tag] < 2] = 0.0  # a lone corner of its tag: no growth direction
-    return np.column_stack([APRILTAG_SHIFT_PX * np.tile(np.eye(2), (len(ids), 1)), APRILTAG_GROWTH_PX * n.ravel()])
+    S = np.column_stack([shift * np.tile(np.eye(2), (len(ids), 1)), growth * n.ravel(),
+                         field_directions(uv_px) * np.asarray(field, float)])
+    return S[:, np.any(S != 0, axis=0)]
 
 
-#: per bias model (``TargetKind.bias_model``): (corner ids (K,), uv (K, 2) px) -> (2K, m) detector-bias
-#: columns of S (module docstring)
+#: per bias model (``TargetKind.bias_model``): (corner ids (K,), uv (K, 2) px, corner estimator) -> (2K, m)
+#: detector-bias columns of S (module docstring)
 DETECTOR_TERMS = {"apriltag": _apriltag_terms}
 
 
@@ -97,6 +105,13 @@ def _bias_model(target_kind):
 
     kind = KINDS.get(target_kind)
     return None if kind is None else kind.bias_model
+
+
+def corner_estimator(detections) -> str:
+    """"edges" when every valid detection's corners come from the seeded batch's per-frame estimator
+    (diagnostics "batch": "seeded" / "full"), else "opencv" (OpenCV's own refinement, per-frame detection)."""
+    ok = [d for d in detections if d.valid]
+    return "edges" if ok and all(d.diagnostics.get("batch") in ("seeded", "full") for d in ok) else "opencv"
 
 
 @dataclass(frozen=True)
@@ -141,16 +156,17 @@ def field_directions(uv_px: np.ndarray) -> np.ndarray:
 
 def pose_covariance(T_cam_target: np.ndarray, p_target: np.ndarray, mean_uv_px: np.ndarray, n_obs: np.ndarray,
                     sigma_frame_px: float, intr: CameraIntrinsics,
-                    field_std=None, target_kind: str | None = None, ids=None) -> PoseCovariance:
+                    field_std=None, target_kind: str | None = None, ids=None,
+                    estimator: str = "edges") -> PoseCovariance:
     """Covariance of the pose measured from frame-averaged corners (see the module docstring).
 
     T_cam_target: (4, 4) the measured pose; p_target: (K, 3) m corner points; mean_uv_px: (K, 2)
     frame-averaged undistorted corners (px); n_obs: (K,) frames per corner; sigma_frame_px: pooled
     frame-to-frame corner std (px, per coordinate; NaN with a single frame: then the random and
     systematic parts cannot be told apart and the whole residual variance is used as one sigma);
-    field_std: (4,) stds of the smooth error field terms (None: :data:`LENS_FIELD_STD` if the camera
-    has distortion, else zeros); target_kind, ids (K,) corner ids: add the kind's detector-bias terms
-    (:data:`DETECTOR_TERMS`)."""
+    field_std: (4,) stds of the smooth error field terms (None: :data:`LENS_FIELD_STD`); target_kind, ids
+    (K,) corner ids: add the kind's detector-bias terms (:data:`DETECTOR_TERMS`) of the corner estimator
+    ("edges" | "opencv", :func:`corner_estimator`)."""
     p_target = np.asarray(p_target, dtype=float)
     n_obs = np.asarray(n_obs, dtype=float)
     J = reprojection_jacobian(T_cam_target, p_target, intr)
@@ -160,12 +176,12 @@ def pose_covariance(T_cam_target: np.ndarray, p_target: np.ndarray, mean_uv_px: 
     Jp = np.linalg.pinv(J.T @ J)
     h = np.einsum("ij,jk,ik->i", J, Jp, J)  # leverages H_ii
     if field_std is None:
-        field_std = LENS_FIELD_STD if any(intr.dist) else (0.0,) * 4
+        field_std = LENS_FIELD_STD
     uv = project_pinhole(T_cam_target, p_target, intr)
     S = field_directions(uv) * np.asarray(field_std, float)
     model = _bias_model(target_kind)
     if model in DETECTOR_TERMS and ids is not None:
-        S = np.column_stack([S, DETECTOR_TERMS[model](np.asarray(ids, dtype=int), uv)])
+        S = np.column_stack([S, DETECTOR_TERMS[model](np.asarray(ids, dtype=int), uv, estimator)])
     S_perp = S - J @ (Jp @ (J.T @ S))
     ss_field = float(np.sum(S_perp**2))  # expected share of the strain in r^T r
     if np.isfinite(sigma_frame_px):

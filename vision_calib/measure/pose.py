@@ -22,7 +22,7 @@ from .. import frames
 from ..camera import CameraIntrinsics
 from ..errors import ConfigError
 from ..io.atomic import jsonable
-from .covariance import pose_covariance
+from .covariance import corner_estimator, pose_covariance
 from .detect import DetectConfig, Detection, detect_batch
 from .pnp import (project_pinhole, solve_pnp_planar,
                   target_lookup, undistort_px)
@@ -34,8 +34,8 @@ class MeasureConfig:
     """mode: "corners" | "poses". min_corners: PnP needs at least this many corners (per frame
     for "poses", averaged for "corners"). max_rms_px: reject when the final reprojection RMS (over
     all frames' corners, px) exceeds it. pnp_method: "ippe" | "sqpnp". lens_field_std: (4,) stds of
-    the smooth corner error field of the lens model in the covariance (None: the measured default of
-    ``covariance.LENS_FIELD_STD`` for cameras with distortion; zeros for corners without that error).
+    a smooth per-pose corner error field (a lens-model residual) in the covariance (None:
+    ``covariance.LENS_FIELD_STD``, zeros: none measured in simulation).
     min_view_corners, min_area_fraction, corner_noise_px: the per-view rule of
     :mod:`vision_calib.measure.view_checks` (>= 6 corners, or all of a smaller target; corner hull >= 10 %
     of the board's; homography consistency within multiples of the corner noise)."""
@@ -222,7 +222,8 @@ def measure_pose(detections: Sequence[Detection], target, intrinsics: CameraIntr
         sigma = float(np.sqrt(np.sum(all_res**2) / max(n_res - 6, 1)))
     used = cnt > 0  # random (frame scatter / n) + systematic per-corner + lens field: measure/covariance.py
     cov = pose_covariance(T, p_all[used], mean_uv[used], cnt[used], sigma if len(obs) >= 2 else float("nan"),
-                          intrinsics, config.lens_field_std, getattr(target, "kind", None), all_ids[used]).cov
+                          intrinsics, config.lens_field_std, getattr(target, "kind", None), all_ids[used],
+                          corner_estimator(detections)).cov
     if not rms <= config.max_rms_px:
         return PoseMeasurement(pose_id, False, f"reprojection RMS {rms:.3f} px > {config.max_rms_px} px",
                                np.full((4, 4), np.nan), np.full((6, 6), np.nan), len(obs), len(all_ids), rms,
