@@ -1,0 +1,85 @@
+"""Validation position error of the H4 demo scene with an unmodelled camera/target tilt in the truth.
+
+Per seed: RMS validation position error [mm] after calibration for
+  no-tilt   : truth without tilt (tilt mode "identify", which then measures ~0)
+  no-axis   : truth tilts drawn (std --tilt-deg), nominal tilts kept (tilt_mode "off")
+  axis      : tilts measured from the rotation axis, then fixed (paper §4.1, tilt_mode "axis")
+  identified: axis values as initial values, camera tilts identified (tilt_mode "identify", the default)
+plus the error of the estimated camera tilt vs the truth [deg] (axis-only and identified).
+Image mode (render + detect + PnP; --poses / --frames subsets to save time) and synthetic mode
+(pose noise from the scene). Ratios are to the no-tilt case of the same seed and mode.
+
+    PYTHONPATH=. python benchmarks/bench_tilt.py [--seeds 0 1 2] [--poses 81] [--frames 10] [--no-image]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from vision_calib.experiment.simulate import run_simulation  # noqa: E402
+from vision_calib.experiment.synthetic import run_synthetic  # noqa: E402
+from vision_calib.kinematics.h4 import TILT_NAMES  # noqa: E402
+from vision_calib.rig import load_scene  # noqa: E402
+
+SCENE = Path(__file__).resolve().parents[1] / "scenes" / "h4_vision.yaml"
+MODES = ("off", "axis", "identify")
+
+
+def scene_with(tilt_deg: float, mode: str):
+    sc = load_scene(SCENE)
+    unm = {k: v for k, v in sc.truth.unmodelled.items() if k != "tilt_deg"}
+    unm.pop("model", None)  # only the tilt is studied here: the truth model is the identified one
+    if tilt_deg > 0:
+        unm["tilt_deg"] = tilt_deg
+    sc = replace(sc, truth=replace(sc.truth, unmodelled=unm))
+    return sc.with_setup(replace(sc.setup, tilt_mode=mode))
+
+
+def cam_tilt_err(params_rows) -> float:
+    """Max |identified - true| [deg] of the camera tilts in a report's parameter table (NaN if absent)."""
+    rows = {r["name"]: r for r in params_rows}
+    e = [abs(rows[n]["identified"] - rows[n]["true"]) for n in TILT_NAMES[:2] if n in rows and rows[n].get("true")
+         is not None]
+    return float(np.degrees(max(e))) if e else float("nan")
+
+
+def image_run(tilt, mode, seed, poses, frames):
+    rep = run_simulation(scene_with(tilt, mode), seed=seed, n_poses=poses, frames=frames, plots=False)
+    acc = rep["accuracy"]["after"]
+    return acc["position_rms_mm"], rep
+
+
+def synthetic_run(tilt, mode, seed, poses):
+    sc = scene_with(tilt, mode)
+    out = run_synthetic(sc, seed=seed, n_poses=poses, prepare=True)
+    return out.after.to_dict()["position_rms_mm"], out
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    ap.add_argument("--poses", type=int, default=None, help="random subset of the 81-pose grid")
+    ap.add_argument("--frames", type=int, default=None)
+    ap.add_argument("--tilt-deg", type=float, default=0.5)
+    ap.add_argument("--no-image", action="store_true")
+    a = ap.parse_args(argv)
+    runs = [("synthetic", synthetic_run)] + ([] if a.no_image else [("image", image_run)])
+    for name, fn in runs:
+        print(f"{name} mode: validation position RMS [mm] (ratio to no-tilt), tilt std {a.tilt_deg} deg")
+        print(f"{'seed':>4} {'no-tilt':>8} {'no-axis':>15} {'axis':>15} {'identified':>15}")
+        for s in a.seeds:
+            args = (s, a.poses) if name == "synthetic" else (s, a.poses, a.frames)
+            e0, _ = fn(0.0, "identify", *args)
+            es = [fn(a.tilt_deg, m, *args)[0] for m in MODES]
+            print(f"{s:>4} {e0:8.3f} " + " ".join(f"{e:8.3f} ({e / e0:4.1f})" for e in es), flush=True)
+
+
+if __name__ == "__main__":
+    main()
