@@ -19,7 +19,7 @@ def to_model31(robot: H4Robot, x=None) -> H4Robot:
         return robot
     if robot.tilt_params:
         v = robot.params.values(robot._x(x))
-        out = to_model31(without_tilt_params(robot), robot._x(x)[: -len(TILT_NAMES)])
+        out = to_model31(without_tilt_params(robot, fold=False), robot._x(x)[: -len(TILT_NAMES)])
         return with_tilt_params(out, [v[n] for n in TILT_NAMES], free=[robot.params.free[robot.params.index(n)]
                                                                          for n in TILT_NAMES])
     v = robot.params.values(robot._x(x))
@@ -57,7 +57,7 @@ def variant(robot: H4Robot, letter: str) -> H4Robot:
     if robot.tilt_params:  # the variant's mask on the rest; the tilts keep theirs
         free = [robot.params.free[robot.params.index(n)] for n in TILT_NAMES]
         tv = [robot.params.values()[n] for n in TILT_NAMES]
-        return with_tilt_params(variant(without_tilt_params(robot), letter), tv, free)
+        return with_tilt_params(variant(without_tilt_params(robot, fold=False), letter), tv, free)
     if letter in "ABCD" and len(letter) == 1:
         if robot.model != "12":
             raise ParameterError(f"H4 variant {letter} is built on model 12, this robot is model {robot.model}")
