@@ -60,9 +60,14 @@ def scene_with(tilt_deg: float, mode: str):
     return sc.with_setup(replace(sc.setup, tilt_mode=mode))
 
 
-def cam_tilt_err(params_rows) -> float:
-    """Max |identified - true| [deg] of the camera tilts in a report's parameter table (NaN if absent)."""
-    rows = {r["name"]: r for r in params_rows}
+def cam_tilt_err(out) -> float:
+    """Max |model value - true| [deg] of the camera tilts after identification (NaN if absent); out: an
+    image report (dict) or a SyntheticRun."""
+    if not isinstance(out, dict):
+        ps, tv = out.setup.params, out.truth.params.values(out.x_true)
+        e = [abs(out.result.identified[ps.index(n)] - tv[n]) for n in TILT_NAMES[:2] if n in ps.names]
+        return float(np.degrees(max(e))) if e else float("nan")
+    rows = {r["name"]: r for r in out["parameters"]}
     e = [abs(rows[n]["identified"] - rows[n]["true"]) for n in TILT_NAMES[:2] if n in rows and rows[n].get("true")
          is not None]
     return float(np.degrees(max(e))) if e else float("nan")
@@ -90,13 +95,17 @@ def main(argv=None):
     a = ap.parse_args(argv)
     runs = [("synthetic", synthetic_run)] + ([] if a.no_image else [("image", image_run)])
     for name, fn in runs:
-        print(f"{name} mode: validation position RMS [mm] (ratio to no-tilt), tilt std {a.tilt_deg} deg")
-        print(f"{'seed':>4} {'no-tilt':>8} {'no-axis':>15} {'axis':>15} {'identified':>15}")
+        print(f"{name} mode: validation position RMS [mm] (ratio to no-tilt/identify), tilt std {a.tilt_deg} deg")
+        print(f"{'seed':>4} {'no-tilt/off':>11} {'no-tilt/identify':>16} {'tilt/no-axis':>15} {'tilt/axis':>15} "
+              f"{'tilt/identified':>15}  cam-tilt err axis / identified [deg]")
         for s in a.seeds:
             args = (s, a.poses) if name == "synthetic" else (s, a.poses, a.frames)
-            e0, _ = fn(NO_TILT, "identify", *args)
-            es = [fn(a.tilt_deg, m, *args)[0] for m in MODES]
-            print(f"{s:>4} {e0:8.3f} " + " ".join(f"{e:8.3f} ({e / e0:4.1f})" for e in es), flush=True)
+            e00 = fn(NO_TILT, "off", *args)[0]
+            e0 = fn(NO_TILT, "identify", *args)[0]
+            res = [fn(a.tilt_deg, m, *args) for m in MODES]
+            errs = [cam_tilt_err(r[1]) for r in res[1:]]
+            print(f"{s:>4} {e00:11.3f} {e0:16.3f} " + " ".join(f"{r[0]:8.3f} ({r[0] / e0:4.1f})" for r in res)
+                  + f"  {errs[0]:.4f} / {errs[1]:.4f}", flush=True)
 
 
 if __name__ == "__main__":

@@ -27,34 +27,46 @@ AXIS_LEVEL = 1e-3
 TILT_FREE_RATIO = 1.0
 
 
-def _tilts_to_free(setup, robot, meas, axis_std) -> tuple[list[bool], np.ndarray]:
-    """Which of the four tilt parameters to identify, and their predicted std (4,) rad from the IGM problem
-    with the setup's free parameters plus all four tilts (inf where not identifiable): free when the
-    identifiability analysis keeps it (identify.analyze) and that std is below TILT_FREE_RATIO x the
-    rotation-axis std ``axis_std`` (4,) rad."""
-    from ..identify import analyze
+def _tilts_to_free(setup, robot, meas, axis_std, axis_shown) -> tuple[list[bool], np.ndarray, list[float]]:
+    """Which of the four tilt parameters to identify: (free (4,), their std (4,) rad from the IGM problem
+    with the setup's free parameters plus all four tilts (inf where not identifiable), chi2 (2,) of the
+    camera and target pairs' change from their initial value in that fit).
+
+    A pair is freed when the identifiability analysis keeps both (identify.analyze), the IGM determines them
+    better than the rotation axis (std below TILT_FREE_RATIO x ``axis_std`` (4,) rad) and the data show a
+    tilt: the axis estimate was significant (``axis_shown`` (2,) bool: camera, target) or the fit moves the
+    pair significantly (chi2, 2 dof, AXIS_LEVEL). The last test matters in image mode: the IGM std of the
+    camera tilt (~1e-4 rad, limited by the PnP depth noise) costs ~0.05 mm of validation error (0.5 mm per
+    mrad on the demo scene, docs/h4_fidelity.md), more than the no-tilt case's whole error: a tilt the data
+    do not show is better left at its nominal value than identified."""
+    from scipy.stats import chi2 as chi2_dist
+
+    from ..identify import analyze, solve_lse
     from ..identify.h4_problem import h4_igm_problem
-    from ..kinematics.h4 import TILT_NAMES
 
     ps = robot.params.with_free(TILT_NAMES, True)
-    r = replace(robot, params=ps)
-    std = np.full(4, np.inf)
+    std, q = np.full(4, np.inf), [0.0, 0.0]
     try:
-        prob = h4_igm_problem(r, meas.joints, meas.T_cam_target, sigma_q_rad=setup.sigma_q_rad or None, pose_cov=meas.cov)
-        rep = analyze(prob, selection="order")
-        keep = ps.only_free(rep.base_parameters)
-        fi = keep.free_index
-        J = prob.jacobian(keep.nominal)[:, :, fi]
-        L = np.linalg.cholesky(np.linalg.inv(prob.obs_cov))  # L L^T = cov^-1
-        A = np.einsum("kji,kjp->kip", L, J).reshape(-1, len(fi))
-        C = np.linalg.pinv(A.T @ A)
-        names = [keep.names[i] for i in fi]
-        for k, n in enumerate(TILT_NAMES):
-            if n in names:
-                std[k] = float(np.sqrt(C[names.index(n), names.index(n)]))
+        prob = h4_igm_problem(replace(robot, params=ps), meas.joints, meas.T_cam_target,
+                              sigma_q_rad=setup.sigma_q_rad or None, pose_cov=meas.cov)
+        keep = ps.only_free(analyze(prob, selection="order").base_parameters)
+        names = [keep.names[i] for i in keep.free_index]
+        if not any(n in names for n in TILT_NAMES):
+            return [False] * 4, std, q
+        fit = solve_lse(h4_igm_problem(replace(robot, params=keep), meas.joints, meas.T_cam_target,
+                                       sigma_q_rad=setup.sigma_q_rad or None, pose_cov=meas.cov))
+        for pair in (0, 1):
+            nn = TILT_NAMES[2 * pair: 2 * pair + 2]
+            if all(n in names for n in nn):
+                k = [names.index(n) for n in nn]
+                C = fit.covariance[np.ix_(k, k)]
+                d = fit.identified[[keep.index(n) for n in nn]] - keep.nominal[[keep.index(n) for n in nn]]
+                std[2 * pair: 2 * pair + 2] = np.sqrt(np.diag(C))
+                q[pair] = float(d @ np.linalg.solve(C, d))
     except (DataError, ParameterError, np.linalg.LinAlgError):
-        pass
-    return [bool(s < TILT_FREE_RATIO * a) for s, a in zip(std, axis_std)], std
+        return [False] * 4, std, q
+    sig = [qq > chi2_dist.isf(AXIS_LEVEL, 2) or shown for qq, shown in zip(q, axis_shown)]
+    return [bool(s < TILT_FREE_RATIO * a and sig[k // 2]) for k, (s, a) in enumerate(zip(std, axis_std))], std, q
 
 
 @dataclass(frozen=True)
@@ -180,10 +192,10 @@ class H4Setup(Setup):
         """Camera and target tilts (paper §4.1): measured from the rotation axis of the nacelle
         (``identify.camera_axis``), then carried by the four tilt parameters TILT_NAMES
         (``kinematics.h4_variants.with_tilt_params``) at the measured values when these are significant
-        (chi2, 2 dof, AXIS_LEVEL), else 0. A tilt is then also identified (free) when the IGM problem
-        determines it better than the axis did (:func:`_tilts_to_free`): the camera tilts, whose lever
-        is the camera distance; the target tilts enter the joints only at second order and stay at the
-        axis value. The info dict (report's ``prepared`` block) has both estimates."""
+        (chi2, 2 dof, AXIS_LEVEL), else 0. A tilt pair is then also identified (free) when the IGM problem
+        determines it better than the axis did and moves it significantly (:func:`_tilts_to_free`): the
+        camera tilts can be (lever: the camera distance); the target tilts enter the joints only at second
+        order and stay at the axis value. The info dict (report's ``prepared`` block) has both estimates."""
         from ..identify.camera_axis import estimate_camera_axis
         from ..kinematics.h4_variants import with_tilt_params, without_tilt_params
 
@@ -207,7 +219,8 @@ class H4Setup(Setup):
         vals = np.concatenate([est.tilt_cam_rad, est.tilt_target_rad]) if applied else np.zeros(4)
         axis_std = np.concatenate([est.tilt_cam_std_rad, est.tilt_target_std_rad])
         robot = with_tilt_params(base, vals)
-        free, igm_std = _tilts_to_free(self, robot, meas, axis_std)
+        shown = [qq > chi2.isf(AXIS_LEVEL, 2) for qq in q]
+        free, igm_std, q_igm = _tilts_to_free(self, robot, meas, axis_std, shown)
         if self.tilt_mode == "axis":
             free = [False] * 4
         robot = with_tilt_params(base, vals, free)
@@ -219,6 +232,7 @@ class H4Setup(Setup):
                 "applied": bool(applied), "chi2_camera_target": q,
                 "identified": [n for n, f in zip(TILT_NAMES, free) if f],
                 "igm_std_deg": {n: float(np.degrees(s)) for n, s in zip(TILT_NAMES, igm_std)},
+                "chi2_igm_change_camera_target": q_igm,
                 "method": "rotation axis of the nacelle (paper 4.1); tilts relative to the nominal, about the camera "
                           f"x/y and target x/y axes; initial values when significant (chi2, 2 dof, level {AXIS_LEVEL}); "
                           "tilts listed in 'identified' are then identified with the other parameters (see the "
