@@ -56,7 +56,8 @@ def scene_with(tilt_deg: float, mode: str):
     unm.pop("model", None)  # only the tilt is studied here: the truth model is the identified one
     if tilt_deg > 0:
         unm["tilt_deg"] = tilt_deg
-    sc = replace(sc, truth=replace(sc.truth, unmodelled=unm))
+    # the deviations of the scene before its demo truth got per-chain errors (1 mm, 0.2 deg per parameter)
+    sc = replace(sc, truth=replace(sc.truth, unmodelled=unm, sigma_length_m=1e-3, sigma_angle_rad=np.radians(0.2)))
     return sc.with_setup(replace(sc.setup, tilt_mode=mode))
 
 

@@ -20,6 +20,8 @@ SCENE = Path(__file__).resolve().parents[2] / "scenes" / "h4_vision.yaml"
 
 def scene(unmodelled, **truth):
     sc = load_scene(SCENE)
+    # paper-level deviations: 1 mm and 0.2 deg per parameter
+    truth = {"sigma_length_m": 1e-3, "sigma_angle_rad": np.radians(0.2), **truth}
     return replace(sc, truth=replace(sc.truth, unmodelled=unmodelled, **truth))
 
 

@@ -70,7 +70,7 @@ def test_fold_keeps_the_camera_view_and_variants_keep_the_tilts(r12):
 def tilt_scene(tilt_deg=0.5, mode="identify"):
     sc = load_scene(ROOT / "scenes" / "h4_vision.yaml")
     unm = {"tilt_deg": tilt_deg} if tilt_deg else {}
-    sc = replace(sc, truth=replace(sc.truth, unmodelled=unm))
+    sc = replace(sc, truth=replace(sc.truth, unmodelled=unm, sigma_length_m=1e-3, sigma_angle_rad=np.radians(0.2)))
     return sc.with_setup(replace(sc.setup, tilt_mode=mode))
 
 
