@@ -146,12 +146,12 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
     sr = float(np.sqrt(np.mean(err[:, 3:] ** 2)))
     meas_val = tsetup.synthetic_measurements(validation, x_true, rv, st, sr)
     # before: the nominal model; after: the identified one (with what prepare() determined); truth: tsetup
-    evals = {"before": scene.setup.evaluate(setup.params.nominal, x_true, validation, meas_val, truth=tsetup),
+    evals = {"before": scene.setup.evaluate(scene.setup.params.nominal, x_true, validation, meas_val, truth=tsetup),
              "after": setup.evaluate(result.identified, x_true, validation, meas_val, truth=tsetup)}
     # reference: the same experiment with synthetic pose measurements of the same noise level
     ref = run_synthetic(scene, method=method, residual=residual, sigma_t_m=st, sigma_r_rad=sr, seed=seed,
                         poses=poses, validation=validation, base=setup.params.mask(rep.base_parameters),
-                        x_true=x_true, truth=truth)
+                        x_true=x_true, truth=truth, prepare=True)
     timings["evaluate"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t_start
 
@@ -164,7 +164,7 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
                   "averaging": scene.measurement.averaging, "camera": setup.camera.to_dict(),
                   "effects": scene.effects.to_dict(), "validation_poses": int(len(validation))},
         measurements=mblock, identifiability=rep, parameters=parameters_table(
-            ps.names, ps.nominal, x_true if truth is None else shared_truth(setup, truth, x_true), result),
+            ps.names, ps.nominal, shared_truth(setup, truth or scene.setup, x_true), result),
         result=result, identified=ident, motion=motion, accuracy=evals, timings=timings,
         extra={"synthetic_reference": {"sigma_mm": st * 1e3, "sigma_deg": float(np.degrees(sr)),
                                        "accuracy_after": ref.after.to_dict()}})

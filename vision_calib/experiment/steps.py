@@ -158,8 +158,9 @@ def identify_measurements(setup: Setup, meas: Measurements, method, residual, an
     from .checks import structural_rank_check
 
     where = where or setup.name
+    before = setup.params.free_names
     setup, prepared = setup.prepare(meas)
-    rep = analysis
+    rep = analysis if setup.params.free_names == before else None  # prepare() freed parameters: analyse again
     if rep is None:
         if len(meas.T_cam_target) == 0:
             raise IdentifiabilityError(f"{where}: no usable pose" + (f" ({context})" if context else ""))

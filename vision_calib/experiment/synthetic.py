@@ -39,6 +39,7 @@ class SyntheticRun:
     residual: str
     base: np.ndarray
     truth: object = None  #: the truth setup when it is not the identified model (x_true is then its vector)
+    setup: object = None  #: the setup identified (after ``Setup.prepare`` when asked; its params match result)
 
 
 def identifiability_json(scene, residual=None, n_poses=None, seed=None, all_params=False) -> dict:
@@ -53,13 +54,15 @@ def identifiability_json(scene, residual=None, n_poses=None, seed=None, all_para
 
 
 def run_synthetic(scene, method=None, residual=None, n_poses=None, sigma_t_m=None, sigma_r_rad=None, seed=0,
-                  poses=None, validation=None, base=None, x_true=None, truth=None) -> SyntheticRun:
+                  poses=None, validation=None, base=None, x_true=None, truth=None, prepare=False) -> SyntheticRun:
     """One synthetic identification (see :class:`SyntheticRun`).
 
     poses / validation: commanded poses (default: drawn from the scene with the run seed).
     base: identifiable mask (n,) from a previous analysis (saves one SVD in Monte Carlo loops).
     truth: the setup that produces the measurements (default the scene's; another model, e.g. an H4
     model-31 robot identified as model 12, to study model error), with parameters x_true.
+    prepare: run ``Setup.prepare`` on the measurements first, as measured data do (H4: camera axis and
+    tilt parameters; the base mask is then re-analysed when prepare frees parameters).
     """
     scene = _scene(scene)
     setup = scene.setup
@@ -83,14 +86,22 @@ def run_synthetic(scene, method=None, residual=None, n_poses=None, sigma_t_m=Non
         x_true = scene_truth(scene)
     truth_setup = truth or setup
     meas = truth_setup.synthetic_measurements(poses, x_true, rn, st, sr, m.sigma_q_rad)
+    if prepare:
+        free0 = setup.params.free_names
+        setup, _ = setup.prepare(meas)
+        if setup.params.free_names != free0:
+            from ..identify import analyze
+            from .steps import BASE_SELECTION
+
+            base = setup.params.mask(analyze(setup.problem(meas, residual), selection=BASE_SELECTION).base_parameters)
     problem, _ = base_problem(setup, meas, residual, base)
     result = solve(problem, method)
     seconds = time.perf_counter() - t0
     meas_val = truth_setup.synthetic_measurements(validation, x_true, rv, st, sr, m.sigma_q_rad)
-    before = setup.evaluate(setup.params.nominal, x_true, validation, meas_val, truth=truth)
-    after = setup.evaluate(result.identified, x_true, validation, meas_val, truth=truth)
+    before = setup.evaluate(setup.params.nominal, x_true, validation, meas_val, truth=truth_setup)
+    after = setup.evaluate(result.identified, x_true, validation, meas_val, truth=truth_setup)
     return SyntheticRun(scene, result, x_true, poses, validation, meas, problem, before, after, seconds, method,
-                        residual, base, truth)
+                        residual, base, truth, setup)
 
 
 def identify_synthetic_json(scene, method=None, residual=None, n_poses=None, sigma_mm=None, sigma_deg=None,

@@ -70,6 +70,17 @@ theta = atan2(R10 - R01, R00 + R11), the angle of the z-rotation closest to R (F
 equals theta exactly when R = Rz(theta), and ignores a small residual tilt from noise.
 Only 7 of the 8 external parameters are identifiable: M_T_E.z (target offset along its normal)
 acts exactly like B_T_C.z (seed eq. 24); it is fixed by default.
+
+Tilt parameters (optional, ``tilt_params=True``, :func:`.h4_variants.with_tilt_params`): four more
+angles (rad) after the externals, TILT_NAMES = B_T_C.tilt_x, B_T_C.tilt_y (camera tilt w about the
+camera x / y axes) and M_T_E.tilt_x, M_T_E.tilt_y (target tilt u about the target x / y axes):
+
+    R_BC = Rz(B_T_C.theta) R_BC0 so3_exp(w),   R_ME = so3_exp(u) Rz(M_T_E.theta) R_ME0
+
+(the conventions of ``identify.camera_axis``: its tilt_cam_rad / tilt_target_rad are w and u).
+The camera tilt moves every measured position (about the camera, ~0.65 m lever) and is identified
+with the rest; the target tilt enters X only through the yaw, to second order (not identifiable
+from the IGM residuals: it stays at the value measured from the rotation axis).
 """
 
 from __future__ import annotations
@@ -79,7 +90,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..errors import DataError, ParameterError, UnreachablePoseError
-from ..frames import inv_T, make_T, rot_x, rot_z, skew
+from ..frames import inv_T, make_T, rot_x, rot_z, skew, so3_exp, so3_right_jacobian
 from .params import ParameterSet
 
 #: corner signs of chains 1..4: (+h,+d), (-h,+d), (-h,-d), (+h,-d)
@@ -89,6 +100,8 @@ EXTERNAL_NAMES = (
     "B_T_C.x", "B_T_C.y", "B_T_C.z", "B_T_C.theta",
     "M_T_E.x", "M_T_E.y", "M_T_E.z", "M_T_E.theta",
 )  # fmt: skip
+#: optional camera / target tilt parameters (rad), see the module doc
+TILT_NAMES = ("B_T_C.tilt_x", "B_T_C.tilt_y", "M_T_E.tilt_x", "M_T_E.tilt_y")
 EXTERNAL_KINDS = ("length",) * 3 + ("angle",) + ("length",) * 3 + ("angle",)
 MODEL12_NAMES = ("h4.R", "h4.L", "h4.l", "h4.h") + tuple(f"h4.alpha{i}" for i in range(1, 5)) + tuple(
     f"q0_{i}" for i in range(1, 5)
@@ -211,6 +224,7 @@ class H4Robot:
     influence in model 12 (kept for drawing/conversion). R_BC0, R_ME0: (3, 3) fixed tilts of
     the camera and of the target (see module doc). center (3,) m, size (3,) m, theta_deg:
     workspace of the seed's 81-pose grid. shared_L: model 31 with one arm length "h4.L".
+    tilt_params: params end with TILT_NAMES (camera and target tilts, module doc).
     """
 
     model: str
@@ -223,12 +237,13 @@ class H4Robot:
     size: np.ndarray = field(default_factory=lambda: DEFAULT_SIZE.copy())
     theta_deg: tuple = DEFAULT_THETA_DEG
     shared_L: bool = False
+    tilt_params: bool = False
 
     def __post_init__(self):
         if self.model not in ("12", "31"):
             raise ParameterError(f"H4 model must be '12' or '31', got {self.model!r}")
         geo = MODEL12_NAMES if self.model == "12" else model31_names(self.shared_L)
-        want = geo + EXTERNAL_NAMES
+        want = geo + EXTERNAL_NAMES + (TILT_NAMES if self.tilt_params else ())
         if tuple(self.params.names) != want:
             missing = sorted(set(want) - set(self.params.names))
             extra = sorted(set(self.params.names) - set(want))
@@ -246,7 +261,7 @@ class H4Robot:
 
     @property
     def n_geometric(self) -> int:
-        return len(self.params) - len(EXTERNAL_NAMES)
+        return len(self.params) - len(EXTERNAL_NAMES) - (len(TILT_NAMES) if self.tilt_params else 0)
 
     def _x(self, x):
         if x is None:
@@ -454,7 +469,16 @@ class H4Robot:
         t_BC = np.array([v["B_T_C.x"], v["B_T_C.y"], v["B_T_C.z"]])
         R_ME = rot_z(v["M_T_E.theta"]) @ self.R_ME0
         t_ME = np.array([v["M_T_E.x"], v["M_T_E.y"], v["M_T_E.z"]])
+        if self.tilt_params:
+            w, u = self._tilts(v)
+            R_BC, R_ME = R_BC @ so3_exp(w), so3_exp(u) @ R_ME
         return R_BC, t_BC, R_ME, t_ME
+
+    @staticmethod
+    def _tilts(v):
+        """Camera tilt w (3,) and target tilt u (3,) rad (z components 0) from a name -> value dict."""
+        return (np.array([v["B_T_C.tilt_x"], v["B_T_C.tilt_y"], 0.0]),
+                np.array([v["M_T_E.tilt_x"], v["M_T_E.tilt_y"], 0.0]))
 
     def T_base_cam(self, x=None) -> np.ndarray:
         """(4, 4) pose of the camera in B."""
@@ -508,6 +532,15 @@ class H4Robot:
         J[:, :3, ix["B_T_C.theta"]] = np.cross(ez, p - t_BC)
         J[:, 3, ix["B_T_C.theta"]] = _dyaw(R, skew(ez) @ R)
         J[:, 3, ix["M_T_E.theta"]] = _dyaw(R, R @ self.R_ME0.T @ skew(ez) @ self.R_ME0)
+        if self.tilt_params:
+            w, u = self._tilts(dict(zip(self.names, x)))
+            # exp(w + dw) = exp(w) exp(Jr(w) dw); exp(u + du) = exp(Jl(u) du) exp(u), Jl(u) = Jr(-u)
+            Jw, Ju = so3_right_jacobian(w), so3_right_jacobian(-u)
+            for k, c in enumerate("xy"):
+                S = skew(Jw[:, k])
+                J[:, :3, ix[f"B_T_C.tilt_{c}"]] = v @ (R_BC @ S).T
+                J[:, 3, ix[f"B_T_C.tilt_{c}"]] = _dyaw(R, R_BC @ S @ R_CM @ R_ME)
+                J[:, 3, ix[f"M_T_E.tilt_{c}"]] = _dyaw(R, R_BM @ skew(Ju[:, k]) @ R_ME)
         return X, J
 
     def nacelle_pose_jacobian_meas(self, T_cam_target, x=None) -> np.ndarray:

@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..errors import ParameterError
-from .h4 import EPS_D, EPS_H, EXTERNAL_NAMES, H4Robot, _kind, model31_names
+from .h4 import EPS_D, EPS_H, EXTERNAL_NAMES, TILT_NAMES, H4Robot, _kind, model31_names
 from .params import ParameterSet
 
 
@@ -17,6 +17,11 @@ def to_model31(robot: H4Robot, x=None) -> H4Robot:
     Free mask: variant H (d and B_T_C.theta fixed as well as M_T_E.z)."""
     if robot.model == "31":
         return robot
+    if robot.tilt_params:
+        v = robot.params.values(robot._x(x))
+        out = to_model31(without_tilt_params(robot, fold=False), robot._x(x)[: -len(TILT_NAMES)])
+        return with_tilt_params(out, [v[n] for n in TILT_NAMES], free=[robot.params.free[robot.params.index(n)]
+                                                                         for n in TILT_NAMES])
     v = robot.params.values(robot._x(x))
     names = model31_names(False)
     val = {}
@@ -49,6 +54,10 @@ def variant(robot: H4Robot, letter: str) -> H4Robot:
     F fixes h and l1..4 (31), E also shares one arm length h4.L (28). A model-12 robot
     asked for E-H is converted with :meth:`to_model31` first."""
     letter = str(letter).upper()
+    if robot.tilt_params:  # the variant's mask on the rest; the tilts keep theirs
+        free = [robot.params.free[robot.params.index(n)] for n in TILT_NAMES]
+        tv = [robot.params.values()[n] for n in TILT_NAMES]
+        return with_tilt_params(variant(without_tilt_params(robot, fold=False), letter), tv, free)
     if letter in "ABCD" and len(letter) == 1:
         if robot.model != "12":
             raise ParameterError(f"H4 variant {letter} is built on model 12, this robot is model {robot.model}")
@@ -79,3 +88,39 @@ def _share_L(robot: H4Robot) -> H4Robot:
     ps = ParameterSet(tuple(names), nominal, tuple(p.kinds[i] for i in keep), p.free[keep], p.scale[keep])
     return replace(robot, params=ps, shared_L=True)
 
+
+
+def with_tilt_params(robot: H4Robot, values=(0.0, 0.0, 0.0, 0.0), free=(False, False, False, False)) -> H4Robot:
+    """Copy of robot with the four tilt parameters TILT_NAMES (camera tilt about camera x/y, target tilt
+    about target x/y, rad; see :mod:`.h4`) appended: nominal ``values`` (4,), free mask ``free`` (4,);
+    scale that of the robot's angles. R_BC0 / R_ME0 unchanged (the tilts are relative to them).
+    A robot that has them already gets the new values / mask."""
+    if robot.tilt_params:
+        robot = without_tilt_params(robot, fold=False)
+    p = robot.params
+    ang = [s for s, k in zip(p.scale, p.kinds) if k == "angle"]
+    sc = ang[0] if ang else 1e-3
+    ps = ParameterSet(tuple(p.names) + TILT_NAMES, np.concatenate([p.nominal, np.asarray(values, float)]),
+                      tuple(p.kinds) + ("angle",) * 4, np.concatenate([p.free, np.asarray(free, bool)]),
+                      np.concatenate([p.scale, np.full(4, sc)]))
+    return replace(robot, params=ps, tilt_params=True)
+
+
+def without_tilt_params(robot: H4Robot, x=None, fold: bool = True) -> H4Robot:
+    """Copy of robot without the tilt parameters; with ``fold`` their values (at x (n,), default nominal)
+    go into the fixed tilts: R_BC0 <- R_BC0 so3_exp(w), R_ME0 <- Rz(-th) so3_exp(u) Rz(th) R_ME0 (th =
+    M_T_E.theta), so that the robot's camera and target frames are unchanged."""
+    from ..frames import rot_z, so3_exp
+
+    if not robot.tilt_params:
+        return robot
+    p, n = robot.params, len(robot.params) - len(TILT_NAMES)
+    x = p.nominal if x is None else np.asarray(x, float)
+    ps = ParameterSet(tuple(p.names[:n]), x[:n].copy(), tuple(p.kinds[:n]), p.free[:n].copy(), p.scale[:n].copy())
+    out = replace(robot, params=ps, tilt_params=False)
+    if fold:
+        v = p.values(x)
+        w, u = robot._tilts(v)
+        th = v["M_T_E.theta"]
+        out = replace(out, R_BC0=robot.R_BC0 @ so3_exp(w), R_ME0=rot_z(-th) @ so3_exp(u) @ rot_z(th) @ robot.R_ME0)
+    return out

@@ -18,10 +18,55 @@ from typing import ClassVar
 import numpy as np
 
 from ..errors import ConfigError, DataError, ParameterError
+from ..kinematics.h4 import TILT_NAMES
 from .base import Evaluation, Setup
 
 #: significance level at which a measured camera/target tilt replaces the nominal one (chi-square, 2 dof)
 AXIS_LEVEL = 1e-3
+#: a tilt is identified when the IGM problem's predicted std of it is below this fraction of the axis std
+TILT_FREE_RATIO = 1.0
+
+
+def _tilts_to_free(setup, robot, meas, axis_std, axis_shown) -> tuple[list[bool], np.ndarray, list[float]]:
+    """Which of the four tilt parameters to identify: (free (4,), their std (4,) rad from the IGM problem
+    with the setup's free parameters plus all four tilts (inf where not identifiable), chi2 (2,) of the
+    camera and target pairs' change from their initial value in that fit).
+
+    A pair is freed when the identifiability analysis keeps both (identify.analyze), the IGM determines them
+    better than the rotation axis (std below TILT_FREE_RATIO x ``axis_std`` (4,) rad) and the data show a
+    tilt: the axis estimate was significant (``axis_shown`` (2,) bool: camera, target) or the fit moves the
+    pair significantly (chi2, 2 dof, AXIS_LEVEL). The last test matters in image mode: the IGM std of the
+    camera tilt (~1e-4 rad, limited by the PnP depth noise) costs ~0.05 mm of validation error (0.5 mm per
+    mrad on the demo scene, docs/h4_fidelity.md), more than the no-tilt case's whole error: a tilt the data
+    do not show is better left at its nominal value than identified."""
+    from scipy.stats import chi2 as chi2_dist
+
+    from ..identify import analyze, solve_lse
+    from ..identify.h4_problem import h4_igm_problem
+
+    ps = robot.params.with_free(TILT_NAMES, True)
+    std, q = np.full(4, np.inf), [0.0, 0.0]
+    try:
+        prob = h4_igm_problem(replace(robot, params=ps), meas.joints, meas.T_cam_target,
+                              sigma_q_rad=setup.sigma_q_rad or None, pose_cov=meas.cov)
+        keep = ps.only_free(analyze(prob, selection="order").base_parameters)
+        names = [keep.names[i] for i in keep.free_index]
+        if not any(n in names for n in TILT_NAMES):
+            return [False] * 4, std, q
+        fit = solve_lse(h4_igm_problem(replace(robot, params=keep), meas.joints, meas.T_cam_target,
+                                       sigma_q_rad=setup.sigma_q_rad or None, pose_cov=meas.cov))
+        for pair in (0, 1):
+            nn = TILT_NAMES[2 * pair: 2 * pair + 2]
+            if all(n in names for n in nn):
+                k = [names.index(n) for n in nn]
+                C = fit.covariance[np.ix_(k, k)]
+                d = fit.identified[[keep.index(n) for n in nn]] - keep.nominal[[keep.index(n) for n in nn]]
+                std[2 * pair: 2 * pair + 2] = np.sqrt(np.diag(C))
+                q[pair] = float(d @ np.linalg.solve(C, d))
+    except (DataError, ParameterError, np.linalg.LinAlgError):
+        return [False] * 4, std, q
+    sig = [qq > chi2_dist.isf(AXIS_LEVEL, 2) or shown for qq, shown in zip(q, axis_shown)]
+    return [bool(s < TILT_FREE_RATIO * a and sig[k // 2]) for k, (s, a) in enumerate(zip(std, axis_std))], std, q
 
 
 @dataclass(frozen=True)
@@ -34,6 +79,9 @@ class H4Setup(Setup):
     sigma_q_rad: float = 0.0
     robot_path: str = ""
     variant: str | None = None
+    #: what :meth:`prepare` does with the camera/target tilts: "identify" (measure, then identify what the IGM
+    #: determines better), "axis" (measure only, paper §4.1), "off" (keep the scene's nominal tilts)
+    tilt_mode: str = "identify"
 
     kind: ClassVar[str] = "h4"
     residuals: ClassVar[tuple[str, ...]] = ("joint",)
@@ -141,39 +189,63 @@ class H4Setup(Setup):
         return replace(self, params=params, robot=replace(robot, params=params), variant=variant)
 
     def prepare(self, meas) -> tuple["H4Setup", dict]:
-        """The camera and target tilts from the measured rotation axis of the nacelle (paper §4.1,
-        ``identify.camera_axis``): the fixed tilts R_BC0 / R_ME0 of the model take the measured axes (the
-        4-parameter external transforms cannot represent a tilt), then the identification runs as usual."""
-        from ..identify.camera_axis import estimate_camera_axis, robot_with_camera_axis
+        """Camera and target tilts (paper §4.1): measured from the rotation axis of the nacelle
+        (``identify.camera_axis``), then carried by the four tilt parameters TILT_NAMES
+        (``kinematics.h4_variants.with_tilt_params``) at the measured values when these are significant
+        (chi2, 2 dof, AXIS_LEVEL), else 0. A tilt pair is then also identified (free) when the IGM problem
+        determines it better than the axis did and moves it significantly (:func:`_tilts_to_free`): the
+        camera tilts can be (lever: the camera distance); the target tilts enter the joints only at second
+        order and stay at the axis value. The info dict (report's ``prepared`` block) has both estimates."""
+        from ..identify.camera_axis import estimate_camera_axis
+        from ..kinematics.h4_variants import with_tilt_params, without_tilt_params
 
         from scipy.stats import chi2
 
+        if self.tilt_mode not in ("identify", "axis", "off"):
+            raise ConfigError(f"H4Setup.tilt_mode: expected 'identify', 'axis' or 'off', got {self.tilt_mode!r}")
+        if self.tilt_mode == "off":
+            return self, {"applied": False, "reason": "tilt_mode off"}
+        base = without_tilt_params(self.robot)
         # rotation noise from the residuals of the axis fit, not from the per-pose covariances: the measured
         # rotations carry a systematic part (detector bias) that the covariances miss, and an estimate that is
         # not significant against the real scatter would only move the model by that bias
         try:
-            est = estimate_camera_axis(meas.T_cam_target, R_BC0=self.robot.R_BC0, R_ME0=self.robot.R_ME0)
+            est = estimate_camera_axis(meas.T_cam_target, R_BC0=base.R_BC0, R_ME0=base.R_ME0)
         except DataError as exc:  # e.g. all poses at one theta: the axis is not determined, keep the nominal
             return self, {"applied": False, "reason": str(exc)}
         q = [float(w @ np.linalg.solve(c, w)) for w, c in ((est.tilt_cam_rad, est.cov_tilt_cam),
                                                              (est.tilt_target_rad, est.cov_tilt_target))]
         applied = max(q) > chi2.isf(AXIS_LEVEL, 2)
-        robot = robot_with_camera_axis(self.robot, est) if applied else self.robot
+        vals = np.concatenate([est.tilt_cam_rad, est.tilt_target_rad]) if applied else np.zeros(4)
+        axis_std = np.concatenate([est.tilt_cam_std_rad, est.tilt_target_std_rad])
+        robot = with_tilt_params(base, vals)
+        shown = [qq > chi2.isf(AXIS_LEVEL, 2) for qq in q]
+        free, igm_std, q_igm = _tilts_to_free(self, robot, meas, axis_std, shown)
+        if self.tilt_mode == "axis":
+            free = [False] * 4
+        robot = with_tilt_params(base, vals, free)
+        out = replace(self, params=robot.params, robot=robot)
         sd_c, sd_t = np.sqrt(np.diag(est.cov_tilt_cam)), np.sqrt(np.diag(est.cov_tilt_target))
         info = {"camera_tilt_deg": np.degrees(est.tilt_cam_rad).tolist(), "camera_tilt_std_deg": np.degrees(sd_c).tolist(),
                 "target_tilt_deg": np.degrees(est.tilt_target_rad).tolist(),
                 "target_tilt_std_deg": np.degrees(sd_t).tolist(), "rms_residual_deg": float(np.degrees(est.rms_residual_rad)),
                 "applied": bool(applied), "chi2_camera_target": q,
+                "identified": [n for n, f in zip(TILT_NAMES, free) if f],
+                "igm_std_deg": {n: float(np.degrees(s)) for n, s in zip(TILT_NAMES, igm_std)},
+                "chi2_igm_change_camera_target": q_igm,
                 "method": "rotation axis of the nacelle (paper 4.1); tilts relative to the nominal, about the camera "
-                          f"x/y and target x/y axes; applied when significant (chi2, 2 dof, level {AXIS_LEVEL})"}
-        return replace(self, robot=robot), info
+                          f"x/y and target x/y axes; initial values when significant (chi2, 2 dof, level {AXIS_LEVEL}); "
+                          "tilts listed in 'identified' are then identified with the other parameters (see the "
+                          "parameter table), the others stay at the axis value"}
+        return out, info
 
     def truth_model(self, spec: dict, rng: np.random.Generator, where: str = "truth") -> "H4Setup":
         """A true H4 the identified model does not share: ``model: "31"`` (per-chain geometry, free mask H:
         the caller draws deviations on all of it; the paper's real robot needed model 31) and/or
-        ``tilt_deg``: std [deg] of random tilts of the camera and of the target mounts about the base x/y
-        axes, not represented by the 4-parameter external transforms (the paper estimates the camera axis
-        first, §4.1)."""
+        ``tilt_deg``: std [deg] of random tilts of the camera (about the camera x/y axes) and of the target
+        mount (about the target x/y axes), not represented by the 4-parameter external transforms: the truth
+        carries them as its (fixed) tilt parameters TILT_NAMES, the identified model measures them from the
+        rotation axis (§4.1, :meth:`prepare`)."""
         bad = set(spec) - set(self.truth_keys)
         if bad:
             raise ConfigError(f"{where}: unknown unmodelled-truth keys {sorted(bad)} (known: {self.truth_keys})")
@@ -189,17 +261,17 @@ class H4Setup(Setup):
             raise ConfigError(f"{where}.tilt_deg: expected a number of degrees, got {spec['tilt_deg']!r}") from None
         if not (np.isfinite(tilt) and 0 <= tilt < np.radians(10)):
             raise ConfigError(f"{where}.tilt_deg: expected 0 <= tilt < 10 deg, got {spec['tilt_deg']!r}")
-        if tilt > 0:
-            from ..frames import so3_exp
+        if tilt > 0:  # carried by the (fixed) tilt parameters, so the report can compare them with the estimate
+            from ..kinematics.h4_variants import with_tilt_params
 
-            r1, r2 = (np.append(rng.normal(size=2) * tilt, 0.0) for _ in range(2))
-            robot = replace(setup.robot, R_BC0=so3_exp(r1) @ setup.robot.R_BC0, R_ME0=so3_exp(r2) @ setup.robot.R_ME0)
-            setup = replace(setup, robot=robot)
+            robot = with_tilt_params(setup.robot, rng.normal(size=4) * tilt)
+            setup = replace(setup, robot=robot, params=robot.params)
         return setup
 
     def model_dict(self) -> dict:
         return {"model": self.robot.model, "variant": self.variant, "shared_L": bool(self.robot.shared_L),
-                "tilts": {"R_BC0": self.robot.R_BC0.tolist(), "R_ME0": self.robot.R_ME0.tolist()}}
+                "tilts": {"R_BC0": self.robot.R_BC0.tolist(), "R_ME0": self.robot.R_ME0.tolist()},
+                "tilt_params": bool(self.robot.tilt_params)}
 
     # ------------------------------------------------------------------ registry hooks
     @staticmethod
@@ -241,4 +313,8 @@ class H4Setup(Setup):
         if "R_BC0" in tilts:
             robot = replace(robot, R_BC0=np.asarray(tilts.get("R_BC0", list), float),
                             R_ME0=np.asarray(tilts.get("R_ME0", list), float))
+        if doc.get("tilt_params", bool, False):
+            from ..kinematics.h4_variants import with_tilt_params
+
+            robot = with_tilt_params(robot)
         return robot
