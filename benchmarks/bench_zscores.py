@@ -46,11 +46,24 @@ def zscores(scene: str, seeds, poses=None, frames=None, workers=2, vary_truth=Tr
     return out
 
 
+def z_matrix(res: dict) -> tuple[list, np.ndarray]:
+    """(names, Z (seeds, n)) of :func:`zscores`: the union of the free parameters over the seeds (a data-
+    dependent choice, e.g. the H4 mount tilts freed only when the data determine them), NaN where a seed
+    did not identify one."""
+    names = []
+    for nm, _, _, _ in res.values():
+        names += [n for n in nm if n not in names]
+    Z = np.full((len(res), len(names)), np.nan)
+    for i, (nm, z, _, _) in enumerate(res.values()):
+        Z[i, [names.index(n) for n in nm]] = z
+    return names, Z
+
+
 def per_parameter(res: dict) -> tuple[list, np.ndarray, np.ndarray, np.ndarray]:
-    """(names, z RMS (n,), max |z| (n,), mean z (n,)) over the seeds of :func:`zscores`."""
-    names = next(iter(res.values()))[0]
-    Z = np.array([z for _, z, _, _ in res.values()])
-    return names, np.sqrt(np.mean(Z**2, axis=0)), np.max(np.abs(Z), axis=0), np.mean(Z, axis=0)
+    """(names, z RMS (n,), max |z| (n,), mean z (n,)) over the seeds of :func:`zscores` that identified
+    each parameter."""
+    names, Z = z_matrix(res)
+    return names, np.sqrt(np.nanmean(Z**2, axis=0)), np.nanmax(np.abs(Z), axis=0), np.nanmean(Z, axis=0)
 
 
 def chi2_rms_band(n_seeds: int, p: float = 0.001) -> tuple[float, float]:
@@ -144,8 +157,8 @@ def main(argv=None):
     for n, r, m, mu in zip(names, rms, mx, mean):
         flag = "" if 0.7 <= r <= 1.5 and m <= 4 else "   <- outside RMS 0.7-1.5 / max 4"
         print(f"  {n:<24} {r:6.2f} {m:8.2f} {mu:+7.2f}{flag}")
-    Z = np.array([z for _, z, _, _ in res.values()])
-    print(f"over {len(args.seeds)} seeds: z RMS {np.sqrt(np.mean(Z**2)):.2f}, max |z| {np.max(np.abs(Z)):.2f}; "
+    Z = z_matrix(res)[1]
+    print(f"over {len(args.seeds)} seeds: z RMS {np.sqrt(np.nanmean(Z**2)):.2f}, max |z| {np.nanmax(np.abs(Z)):.2f}; "
           f"per-parameter z RMS from {rms.min():.2f} ({names[int(np.argmin(rms))]}) to {rms.max():.2f} "
           f"({names[int(np.argmax(rms))]})")
 

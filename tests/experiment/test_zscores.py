@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-from bench_zscores import chi2_rms_band, per_parameter, zscores  # noqa: E402
+from bench_zscores import chi2_rms_band, per_parameter, z_matrix, zscores  # noqa: E402
 
 pytestmark = pytest.mark.slow
 
@@ -26,14 +26,15 @@ pytestmark = pytest.mark.slow
 def test_image_mode_z_scores_over_ten_seeds_every_parameter():
     seeds = list(range(1, 11))
     res = zscores("scenes/h4_vision.yaml", seeds, poses=40, frames=4)
-    Z = np.array([z for _, z, _, _ in res.values()])
-    assert Z.shape == (10, 19)
+    names, Z = z_matrix(res)
+    n_seen = np.sum(np.isfinite(Z), axis=0)  # the mount tilts are freed only where the data determine them
+    assert Z.shape[1] >= 19 and np.all(n_seen[:19] == len(seeds)), dict(zip(names, n_seen))
     names, rms, mx, mean = per_parameter(res)
-    lo, hi = chi2_rms_band(len(seeds))
-    report = dict(zip(names, zip(rms.round(2), mx.round(2), mean.round(2))))
-    assert 0.7 < np.sqrt(np.mean(Z**2)) < 1.5, report
+    report = dict(zip(names, zip(rms.round(2), mx.round(2), mean.round(2), n_seen)))
+    assert 0.7 < np.sqrt(np.nanmean(Z**2)) < 1.5, report
     assert np.all(mx <= 4), report
-    assert np.all((rms > lo) & (rms < hi)), report
-    assert np.all(np.abs(mean) < 4 / np.sqrt(len(seeds))), report
+    for k in range(len(names)):  # chi-square band and common error for the seeds that identified it
+        lo, hi = chi2_rms_band(int(n_seen[k]))
+        assert lo < rms[k] < hi and abs(mean[k]) < 4 / np.sqrt(n_seen[k]), (names[k], report)
     # the per-pose covariances hold the systematic part: chi2/dof near 1 (about 40 with the frame scatter alone)
     assert all(0.5 < c < 2.0 for _, _, c, _ in res.values())
