@@ -119,7 +119,7 @@ def _wobbling(meas, setup, amp_rad):
 
 def test_prepare_refuses_tilts_when_the_rotation_axis_is_not_fixed():
     sc = load_scene(VISION)
-    out = run_synthetic(sc, seed=1)  # 0.2 mm / 0.03 deg noise, truth tilts 0.5 deg
+    out = run_synthetic(sc, seed=1, prepare=True)  # 0.2 mm / 0.03 deg noise, truth tilts 0.5 deg
     ok_setup, ok = sc.setup.prepare(out.measurements)
     assert ok["applied"] and ok["axis_fixed"] and "warning" not in ok
     # noise only: the axis fit's chi2/dof is inside the central 99.9 % interval of chi2(dof)/dof

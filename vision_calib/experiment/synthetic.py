@@ -56,7 +56,7 @@ def identifiability_json(scene, residual=None, n_poses=None, seed=None, all_para
 
 
 def run_synthetic(scene, method=None, residual=None, n_poses=None, sigma_t_m=None, sigma_r_rad=None, seed=0,
-                  poses=None, validation=None, base=None, x_true=None, truth=None, prepare=True) -> SyntheticRun:
+                  poses=None, validation=None, base=None, x_true=None, truth=None, prepare=False) -> SyntheticRun:
     """One synthetic identification (see :class:`SyntheticRun`).
 
     poses / validation: commanded poses (default: drawn from the scene with the run seed).
@@ -64,8 +64,9 @@ def run_synthetic(scene, method=None, residual=None, n_poses=None, sigma_t_m=Non
     truth: the setup that produces the measurements (default the scene's; another model, e.g. an H4
     model-31 robot identified as model 12, to study model error), with parameters x_true.
     prepare: run ``Setup.prepare`` on the measurements first, as measured data do (H4: camera axis and
-    tilt parameters; the base mask is then re-analysed when prepare frees parameters). False only to study
-    what skipping it costs: an H4 truth with mount tilts then ends 7-10 mm off after calibration (README).
+    tilt parameters; the base mask is then re-analysed when prepare frees parameters; the result then has
+    the prepared setup's parameters, H4: 4 tilt parameters appended). Without it an H4 truth with mount
+    tilts ends ~10 mm off after calibration (the kinematic parameters absorb the camera tilt, README).
     """
     scene = _scene(scene)
     setup = scene.setup
@@ -116,7 +117,7 @@ def identify_synthetic_json(scene, method=None, residual=None, n_poses=None, sig
     st = scene.measurement.sigma_t_m if sigma_mm is None else sigma_mm * 1e-3
     sr = scene.measurement.sigma_r_rad if sigma_deg is None else float(np.radians(sigma_deg))
     out = run_synthetic(scene, method=method, residual=residual, n_poses=n_poses, sigma_t_m=st, sigma_r_rad=sr,
-                        seed=seed)
+                        seed=seed, prepare=True)  # as measured data (simulate, process) do
     res = out.result
     ps = out.setup.params  # after Setup.prepare (H4: the tilt parameters)
     adequacy = model_adequacy(res)
