@@ -210,7 +210,7 @@ def _dispatch(args) -> int:
             sigma_mm=args.sigma_mm, sigma_deg=args.sigma_deg, seed=args.seed,
         )
         print(to_json(out) if args.json else _summary_synthetic(out))
-        return _status({"ok": out["converged"], "message": "the identification did not converge"})
+        return _status(out["verdict"])
     if args.command in ("simulate", "demo"):
         from .experiment.simulate import run_simulation, DEFAULT_SCENE
 
@@ -292,8 +292,12 @@ EXIT_NOT_CONVERGED = 3
 
 
 def _status(verdict: dict) -> int:
-    """0 for a good result; 3 (outputs kept, no calibrated model) otherwise, with the reason on stderr."""
+    """0 for a good result, and for a "warning" verdict (outputs and calibrated model written; the model does
+    not explain the data: the reason on stderr); 3 (outputs kept, no calibrated model) otherwise."""
     if verdict["ok"]:
+        return 0
+    if verdict.get("status") == "warning":
+        print(f"vision-calib: warning: {verdict.get('message')}", file=sys.stderr)
         return 0
     why = verdict.get("message") or "the identification did not converge"
     print(f"vision-calib: error: the result is not good ({why}); outputs written without a calibrated model",
@@ -313,10 +317,14 @@ def _summary_identifiability(out: dict) -> str:
 
 
 def _summary_synthetic(out: dict) -> str:
+    from .io.report import verdict_line
+
     b, a = out["accuracy"]["before"], out["accuracy"]["after"]
     return (
+        f"{verdict_line(out['verdict'])}\n"
         f"{out['scene']} [{out['method']}] converged={out['converged']} iterations={out['iterations']} "
         f"({out['seconds']:.3f} s)\n"
+        + "".join(f"warning: {w}\n" for w in out["warnings"]) +
         f"validation position RMS: {b['position_rms_mm']:.4g} mm -> {a['position_rms_mm']:.4g} mm; "
         f"max {b['position_max_mm']:.4g} -> {a['position_max_mm']:.4g} mm; "
         f"rotation RMS {b['rotation_rms_deg']:.4g} -> {a['rotation_rms_deg']:.4g} deg"

@@ -187,7 +187,7 @@ def identify_measurements(setup: Setup, meas: Measurements, method, residual, an
     factor = float(result.chi2_dof) if robust and np.isfinite(result.chi2_dof) else 1.0
     if factor > 1:
         result = replace(result, std=result.std * np.sqrt(factor), covariance=result.covariance * factor)
-    extra = tuple(plausibility_warnings(params, result))
+    extra = tuple(plausibility_warnings(params, result)) + ((prepared["warning"],) if prepared.get("warning") else ())
     if adequacy.get("verdict") == "too large":
         worst = ", ".join(str(w["label"]) for w in adequacy["worst_poses"][:3])
         extra += (f"the model does not explain the data at the measurement noise: chi2/dof = "

@@ -11,7 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..io.report import parameters_table
+from ..identify import model_adequacy
+from ..io.report import misfit_message, parameters_table, verdict
 from ..rig import Evaluation, Measurements, Scene, load_scene, scene_poses
 from .steps import analyze_setup, base_problem, check_method, rngs, scene_truth, shared_truth, solve, unmodelled_truth
 
@@ -40,6 +41,7 @@ class SyntheticRun:
     base: np.ndarray
     truth: object = None  #: the truth setup when it is not the identified model (x_true is then its vector)
     setup: object = None  #: the setup identified (after ``Setup.prepare`` when asked; its params match result)
+    prepared: dict = None  #: what ``Setup.prepare`` determined from the data (report's ``prepared`` block)
 
 
 def identifiability_json(scene, residual=None, n_poses=None, seed=None, all_params=False) -> dict:
@@ -62,7 +64,9 @@ def run_synthetic(scene, method=None, residual=None, n_poses=None, sigma_t_m=Non
     truth: the setup that produces the measurements (default the scene's; another model, e.g. an H4
     model-31 robot identified as model 12, to study model error), with parameters x_true.
     prepare: run ``Setup.prepare`` on the measurements first, as measured data do (H4: camera axis and
-    tilt parameters; the base mask is then re-analysed when prepare frees parameters).
+    tilt parameters; the base mask is then re-analysed when prepare frees parameters; the result then has
+    the prepared setup's parameters, H4: 4 tilt parameters appended). Without it an H4 truth with mount
+    tilts ends ~10 mm off after calibration (the kinematic parameters absorb the camera tilt, README).
     """
     scene = _scene(scene)
     setup = scene.setup
@@ -86,9 +90,10 @@ def run_synthetic(scene, method=None, residual=None, n_poses=None, sigma_t_m=Non
         x_true = scene_truth(scene)
     truth_setup = truth or setup
     meas = truth_setup.synthetic_measurements(poses, x_true, rn, st, sr, m.sigma_q_rad)
+    prepared = {}
     if prepare:
         free0 = setup.params.free_names
-        setup, _ = setup.prepare(meas)
+        setup, prepared = setup.prepare(meas)
         if setup.params.free_names != free0:
             from ..identify import analyze
             from .steps import BASE_SELECTION
@@ -101,7 +106,7 @@ def run_synthetic(scene, method=None, residual=None, n_poses=None, sigma_t_m=Non
     before = setup.evaluate(setup.params.nominal, x_true, validation, meas_val, truth=truth_setup)
     after = setup.evaluate(result.identified, x_true, validation, meas_val, truth=truth_setup)
     return SyntheticRun(scene, result, x_true, poses, validation, meas, problem, before, after, seconds, method,
-                        residual, base, truth, setup)
+                        residual, base, truth, setup, prepared)
 
 
 def identify_synthetic_json(scene, method=None, residual=None, n_poses=None, sigma_mm=None, sigma_deg=None,
@@ -112,9 +117,13 @@ def identify_synthetic_json(scene, method=None, residual=None, n_poses=None, sig
     st = scene.measurement.sigma_t_m if sigma_mm is None else sigma_mm * 1e-3
     sr = scene.measurement.sigma_r_rad if sigma_deg is None else float(np.radians(sigma_deg))
     out = run_synthetic(scene, method=method, residual=residual, n_poses=n_poses, sigma_t_m=st, sigma_r_rad=sr,
-                        seed=seed)
+                        seed=seed, prepare=True)  # as measured data (simulate, process) do
     res = out.result
-    ps = scene.setup.params
+    ps = out.setup.params  # after Setup.prepare (H4: the tilt parameters)
+    adequacy = model_adequacy(res)
+    warnings = list(res.warnings) + ([out.prepared["warning"]] if out.prepared.get("warning") else [])
+    if adequacy["verdict"] == "too large":
+        warnings.append("the model does not explain the data at the measurement noise: " + misfit_message(adequacy))
     return {
         "scene": scene.name,
         "method": out.method,
@@ -123,15 +132,18 @@ def identify_synthetic_json(scene, method=None, residual=None, n_poses=None, sig
         "n_poses": int(len(out.poses)),
         "sigma_mm": float(st * 1e3),
         "sigma_deg": float(np.degrees(sr)),
-        "parameters": parameters_table(ps.names, ps.nominal, out.x_true if out.truth is None else
-                                       shared_truth(scene.setup, out.truth, out.x_true), res),
+        "verdict": verdict(res, warnings=warnings[len(res.warnings):], adequacy=adequacy),
+        "parameters": parameters_table(ps.names, ps.nominal, shared_truth(out.setup, out.truth or scene.setup,
+                                                                          out.x_true), res),
         "accuracy": {"before": out.before.to_dict(), "after": out.after.to_dict()},
         "converged": bool(res.converged),
         "iterations": int(res.iterations),
         "cost_initial": float(res.cost_initial),
         "cost_final": float(res.cost_final),
         "seconds": float(out.seconds),
-        "warnings": list(res.warnings),
+        "adequacy": adequacy,
+        "prepared": out.prepared or None,
+        "warnings": warnings,
         "correlation_warnings": list(res.correlation_warnings),
     }
 

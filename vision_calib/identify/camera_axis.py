@@ -65,6 +65,24 @@ class CameraAxisEstimate:
     estimated_sigma: bool
     rms_residual_rad: float
     theta_span_rad: float
+    residuals_rad: np.ndarray = None  #: (N, 3) rotation residuals delta_k at the solution, camera frame
+
+    def consistency(self, rot_cov) -> dict:
+        """Is the nacelle's rotation axis fixed within the noise? Chi-square of the residuals against
+        ``rot_cov`` (N, 3, 3) or (3, 3) rad^2 (camera frame, the measurements' predicted rotation noise):
+        {chi2, dof (= 2N - 3), chi2_dof, p_value}; chi2 None (not tested) when rot_cov is not positive
+        definite (e.g. exact synthetic data). A fixed axis gives chi2_dof ~ 1; an axis that moves with the
+        pose (a nacelle that tilts, a mount that flexes) leaves rotation residuals far above the noise."""
+        from scipy.stats import chi2 as chi2_dist
+
+        r = np.asarray(self.residuals_rad, float)
+        N = len(r)
+        S = np.broadcast_to(np.asarray(rot_cov, float), (N, 3, 3))
+        dof = 2 * N - 3
+        if dof <= 0 or not np.all(np.isfinite(S)) or np.any(np.linalg.eigvalsh(S) <= 0):
+            return {"chi2": None, "dof": int(dof), "chi2_dof": None, "p_value": None}
+        q = float(np.einsum("ki,ki->", r, np.linalg.solve(S, r[..., None])[..., 0]))
+        return {"chi2": q, "dof": int(dof), "chi2_dof": q / dof, "p_value": float(chi2_dist.sf(q, dof))}
 
     @property
     def tilt_cam_std_rad(self) -> np.ndarray:
@@ -178,8 +196,8 @@ def estimate_camera_axis(T_cam_target, rot_cov=None, R_BC0=None, R_ME0=None, min
         s2 = float(rw @ rw) / dof
     # the common offset of phi is not a gauge here (A and B yaws are excluded from the basis), so J is full rank
     C = np.linalg.inv(Jw.T @ Jw) * s2
-    return _finish(A, B, phi, Uc, Un, C, R_BC0, R_ME0, np.sqrt(s2) if estimated else float("nan"),
-                   estimated, float(np.sqrt(np.mean(np.sum(r * r, 1)))))
+    return replace(_finish(A, B, phi, Uc, Un, C, R_BC0, R_ME0, np.sqrt(s2) if estimated else float("nan"),
+                           estimated, float(np.sqrt(np.mean(np.sum(r * r, 1))))), residuals_rad=r)
 
 
 def _system(R, A, B, phi, W):

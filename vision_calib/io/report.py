@@ -5,7 +5,7 @@ report.json, version 2 (each value once)::
 
     version: "2.0"
     kind: simulation | process | process_handeye
-    verdict: {ok, converged, n_rejected_poses, warnings: n}      # what to read first
+    verdict: {ok, status, usable, converged, adequacy, message, n_rejected_poses, warnings: n}  # read first
     source: {scene: {name, path, robot_kind}} or {folder: ...}
     seed: int                                                    # simulation only
     settings: {...}                                              # poses, frames, method, residual, camera, ...
@@ -83,15 +83,40 @@ def result_is_finite(result) -> bool:
                 and np.isfinite(result.cost_final))
 
 
-def verdict(result, measurements: dict | None = None, identified=None, warnings=()) -> dict:
-    """What to read first: ok (converged with finite values: only then is a calibrated model written),
-    the poses rejected (measurement + outliers), the adequacy verdict and the warning count."""
+def verdict(result, measurements: dict | None = None, identified=None, warnings=(), adequacy: dict | None = None) -> dict:
+    """What to read first. status: "failed" (not converged or not finite: no calibrated model is written),
+    "warning" (the chi-square model-adequacy test says the model does not explain the data: chi2/dof above
+    its expected interval; the calibrated model is written, but it may be worse than the nominal one), else
+    "ok"; ok = (status == "ok"); usable = converged with finite values (a calibrated model is written). Also
+    the poses rejected (measurement + outliers), the adequacy verdict, a note ("too small": the noise is
+    overestimated, not a failure) and the warning count. adequacy: ``identify.model_adequacy`` dict
+    (default: ``identified.adequacy``)."""
     finite = result_is_finite(result)
     n_out = len(identified.rejected) if identified is not None else 0
-    return {"ok": bool(result.converged and finite), "converged": bool(result.converged), "finite": finite,
-            "n_rejected_poses": (measurements or {}).get("n_rejected", 0) + n_out, "n_outliers": n_out,
-            "adequacy": identified.adequacy.get("verdict") if identified is not None else None,
-            "message": getattr(result, "message", ""), "warnings": len(warnings) + len(result.warnings)}
+    if adequacy is None and identified is not None:
+        adequacy = identified.adequacy
+    usable = bool(result.converged and finite)
+    adq = (adequacy or {}).get("verdict")
+    status = "failed" if not usable else ("warning" if adq == "too large" else "ok")
+    message = getattr(result, "message", "") if not usable else (misfit_message(adequacy) if status == "warning"
+                                                                 else "")
+    out = {"ok": status == "ok", "status": status, "usable": usable, "converged": bool(result.converged),
+           "finite": finite, "n_rejected_poses": (measurements or {}).get("n_rejected", 0) + n_out,
+           "n_outliers": n_out, "adequacy": adq, "message": message,
+           "warnings": len(warnings) + len(result.warnings)}
+    if adq == "too small":
+        out["note"] = (f"chi2/dof {adequacy['chi2_dof']:.3g} below its expected interval: the measurement noise is "
+                       "overestimated (predicted std are pessimistic)")
+    return out
+
+
+def misfit_message(adequacy: dict) -> str:
+    """'model does not explain the data (chi2/dof X, expected lo-hi, p Y); largest residual poses: a, b, c'
+    for a "too large" ``identify.model_adequacy`` dict."""
+    lo, hi = adequacy.get("expected_chi2_dof") or (float("nan"), float("nan"))
+    worst = ", ".join(str(w["label"]) for w in adequacy.get("worst_poses", [])[:5]) or "n/a"
+    return (f"model does not explain the data (chi2/dof {adequacy['chi2_dof']:.3g}, expected {lo:.2f}-{hi:.2f}, "
+            f"p {adequacy['p_value']:.2g}); largest residual poses: {worst}")
 
 
 def build_report(kind: str, *, source: dict, settings: dict, result, measurements: dict | None = None,
@@ -149,14 +174,25 @@ def _what(report) -> str:
     return f"{src.get('folder')}"
 
 
+def verdict_line(v: dict) -> str:
+    """First line of a summary: 'verdict: ok; ...', 'verdict: WARNING: model does not explain the data (...)'
+    or 'verdict: NOT CONVERGED; ... -- why' (v: the report's ``verdict`` block)."""
+    status = v.get("status", "ok" if v["ok"] else "failed")
+    if status == "failed":
+        state = "NOT FINITE" if not v.get("finite", True) else "NOT CONVERGED"
+    else:
+        state = "WARNING: " + v["message"] if status == "warning" else "ok"
+    adequacy = f"; model adequacy: {v['adequacy']}" if v.get("adequacy") else ""
+    note = f" (note: {v['note']})" if v.get("note") else ""
+    return (f"verdict: {state}; {v['n_rejected_poses']} poses rejected ({v.get('n_outliers', 0)} as outliers)"
+            f"{adequacy}{note}; {v['warnings']} warnings" + (f" -- {v['message']}" if status == "failed" and
+                                                             v.get("message") else ""))
+
+
 def summary_text(report: dict) -> str:
     """One screen: the verdict first, then what was run, measured, identified and how accurate."""
     v, ident = report["verdict"], report["identification"]
-    state = "ok" if v["ok"] else ("NOT FINITE" if not v.get("finite", True) else "NOT CONVERGED")
-    adequacy = f"; model adequacy: {v['adequacy']}" if v.get("adequacy") else ""
-    lines = [f"verdict: {state}; {v['n_rejected_poses']} poses rejected ({v.get('n_outliers', 0)} as outliers)"
-             f"{adequacy}; {v['warnings']} warnings" + (f" -- {v['message']}" if not v["ok"] and v.get("message") else ""),
-             _what(report)]
+    lines = [verdict_line(v), _what(report)]
     m = report.get("measurements")
     if m:
         lines.append(f"measurement: {m['n_valid']} of {m['n_poses']} poses valid, {m['n_rejected']} rejected")
@@ -242,7 +278,7 @@ def write_report(out_dir, report: dict, setup=None, result=None, problem=None, e
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     files = {"report": "report.json"}
-    if setup is not None and report["verdict"]["ok"]:  # never a calibrated model from a failed fit
+    if setup is not None and report["verdict"].get("usable", report["verdict"]["ok"]):  # never from a failed fit
         files["model"] = "calibrated_model.yaml"
         write_calibrated_model(out / files["model"], setup, result.identified, result.std, result.free)
         files.update(setup.export_model_files(out, result.identified))

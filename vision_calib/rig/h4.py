@@ -25,6 +25,11 @@ from .base import Evaluation, Setup
 AXIS_LEVEL = 1e-3
 #: a tilt is identified when the IGM problem's predicted std of it is below this fraction of the axis std
 TILT_FREE_RATIO = 1.0
+#: the rotation axis is "not fixed" (tilts not applied) when the axis fit's residuals fail the chi-square test
+#: against the measurements' rotation covariance (level AXIS_LEVEL) AND their variance exceeds the predicted by
+#: this factor (residual std twice the predicted, as steps.UNEXPLAINED_CHI2_DOF): image rotations carry a
+#: systematic part (detector bias) the covariances only partly model
+AXIS_MAX_VARIANCE_RATIO = 4.0
 
 
 def _tilts_to_free(setup, robot, meas, axis_std, axis_shown) -> tuple[list[bool], np.ndarray, list[float]]:
@@ -35,17 +40,19 @@ def _tilts_to_free(setup, robot, meas, axis_std, axis_shown) -> tuple[list[bool]
     A pair is freed when the identifiability analysis keeps both (identify.analyze), the IGM determines them
     better than the rotation axis (std below TILT_FREE_RATIO x ``axis_std`` (4,) rad) and the data show a
     tilt: the axis estimate was significant (``axis_shown`` (2,) bool: camera, target) or the fit moves the
-    pair significantly (chi2, 2 dof, AXIS_LEVEL). The last test matters in image mode: the IGM std of the
+    pair significantly (chi2, 2 dof, AXIS_LEVEL), and that fit passes the model-adequacy test (else the tilts
+    would absorb the model's error: they stay at the axis value). The significance test matters in image mode: the IGM std of the
     camera tilt (~1e-4 rad, limited by the PnP depth noise) costs ~0.05 mm of validation error (0.5 mm per
     mrad on the demo scene, docs/h4_fidelity.md), more than the no-tilt case's whole error: a tilt the data
     do not show is better left at its nominal value than identified."""
     from scipy.stats import chi2 as chi2_dist
 
-    from ..identify import analyze, solve_lse
+    from ..identify import analyze, model_adequacy, solve_lse
     from ..identify.h4_problem import h4_igm_problem
 
     ps = robot.params.with_free(TILT_NAMES, True)
     std, q = np.full(4, np.inf), [0.0, 0.0]
+    adequate = True
     try:
         prob = h4_igm_problem(replace(robot, params=ps), meas.joints, meas.T_cam_target,
                               sigma_q_rad=setup.sigma_q_rad or None, pose_cov=meas.cov)
@@ -63,10 +70,22 @@ def _tilts_to_free(setup, robot, meas, axis_std, axis_shown) -> tuple[list[bool]
                 d = fit.identified[[keep.index(n) for n in nn]] - keep.nominal[[keep.index(n) for n in nn]]
                 std[2 * pair: 2 * pair + 2] = np.sqrt(np.diag(C))
                 q[pair] = float(d @ np.linalg.solve(C, d))
+        adequate = model_adequacy(fit)["verdict"] != "too large"
     except (DataError, ParameterError, np.linalg.LinAlgError):
         return [False] * 4, std, q
     sig = [qq > chi2_dist.isf(AXIS_LEVEL, 2) or shown for qq, shown in zip(q, axis_shown)]
-    return [bool(s < TILT_FREE_RATIO * a and sig[k // 2]) for k, (s, a) in enumerate(zip(std, axis_std))], std, q
+    free = [bool(s < TILT_FREE_RATIO * a and sig[k // 2]) for k, (s, a) in enumerate(zip(std, axis_std))]
+    # a model that does not explain the joints (chi-square adequacy "too large", e.g. per-chain geometry under
+    # model 12) makes the well-determined camera tilts absorb its error; the axis value does not depend on it
+    return (free if adequate else [False] * 4), std, q
+
+
+def _chi2_2(w, c) -> float:
+    """w^T c^-1 w for a 2-vector w and its covariance c (2, 2); inf when c is singular (exact data) and w != 0."""
+    try:
+        return float(w @ np.linalg.solve(c, w))
+    except np.linalg.LinAlgError:
+        return float("inf") if np.any(w != 0) else 0.0
 
 
 @dataclass(frozen=True)
@@ -195,7 +214,10 @@ class H4Setup(Setup):
         (chi2, 2 dof, AXIS_LEVEL), else 0. A tilt pair is then also identified (free) when the IGM problem
         determines it better than the axis did and moves it significantly (:func:`_tilts_to_free`): the
         camera tilts can be (lever: the camera distance); the target tilts enter the joints only at second
-        order and stay at the axis value. The info dict (report's ``prepared`` block) has both estimates."""
+        order and stay at the axis value. Nothing is applied when the rotations contradict a fixed axis
+        (``CameraAxisEstimate.consistency`` against the measured rotation covariance: p < AXIS_LEVEL and
+        chi2/dof > AXIS_MAX_VARIANCE_RATIO); the info dict (report's ``prepared`` block) has both estimates,
+        the axis test, and then a ``warning``."""
         from ..identify.camera_axis import estimate_camera_axis
         from ..kinematics.h4_variants import with_tilt_params, without_tilt_params
 
@@ -213,15 +235,18 @@ class H4Setup(Setup):
             est = estimate_camera_axis(meas.T_cam_target, R_BC0=base.R_BC0, R_ME0=base.R_ME0)
         except DataError as exc:  # e.g. all poses at one theta: the axis is not determined, keep the nominal
             return self, {"applied": False, "reason": str(exc)}
-        q = [float(w @ np.linalg.solve(c, w)) for w, c in ((est.tilt_cam_rad, est.cov_tilt_cam),
-                                                             (est.tilt_target_rad, est.cov_tilt_target))]
-        applied = max(q) > chi2.isf(AXIS_LEVEL, 2)
+        q = [_chi2_2(w, c) for w, c in ((est.tilt_cam_rad, est.cov_tilt_cam),
+                                       (est.tilt_target_rad, est.cov_tilt_target))]
+        axis_test = est.consistency(meas.cov[:, 3:, 3:])
+        fixed = not (axis_test["chi2"] is not None and axis_test["p_value"] < AXIS_LEVEL
+                     and axis_test["chi2_dof"] > AXIS_MAX_VARIANCE_RATIO)
+        applied = max(q) > chi2.isf(AXIS_LEVEL, 2) and fixed
         vals = np.concatenate([est.tilt_cam_rad, est.tilt_target_rad]) if applied else np.zeros(4)
         axis_std = np.concatenate([est.tilt_cam_std_rad, est.tilt_target_std_rad])
         robot = with_tilt_params(base, vals)
         shown = [qq > chi2.isf(AXIS_LEVEL, 2) for qq in q]
         free, igm_std, q_igm = _tilts_to_free(self, robot, meas, axis_std, shown)
-        if self.tilt_mode == "axis":
+        if self.tilt_mode == "axis" or not fixed:
             free = [False] * 4
         robot = with_tilt_params(base, vals, free)
         out = replace(self, params=robot.params, robot=robot)
@@ -232,11 +257,19 @@ class H4Setup(Setup):
                 "applied": bool(applied), "chi2_camera_target": q,
                 "identified": [n for n, f in zip(TILT_NAMES, free) if f],
                 "igm_std_deg": {n: float(np.degrees(s)) for n, s in zip(TILT_NAMES, igm_std)},
-                "chi2_igm_change_camera_target": q_igm,
+                "chi2_igm_change_camera_target": q_igm, "axis_fixed": bool(fixed), "axis_test": axis_test,
                 "method": "rotation axis of the nacelle (paper 4.1); tilts relative to the nominal, about the camera "
                           f"x/y and target x/y axes; initial values when significant (chi2, 2 dof, level {AXIS_LEVEL}); "
                           "tilts listed in 'identified' are then identified with the other parameters (see the "
-                          "parameter table), the others stay at the axis value"}
+                          "parameter table), the others stay at the axis value; none applied when the rotations "
+                          "do not share one fixed axis within the noise (axis_test: chi2 of the axis fit's residuals "
+                          f"against the rotation covariance, level {AXIS_LEVEL}, chi2/dof > {AXIS_MAX_VARIANCE_RATIO})"}
+        if not fixed:
+            info["warning"] = (
+                f"the measured rotations do not share one fixed rotation axis within the noise (axis fit chi2/dof "
+                f"{axis_test['chi2_dof']:.3g}, p {axis_test['p_value']:.2g}, rotation residual RMS "
+                f"{np.degrees(est.rms_residual_rad):.3g} deg): the camera/target tilts are not measured from it and "
+                "stay nominal (the nacelle or a mount moves with the pose: the model does not hold)")
         return out, info
 
     def truth_model(self, spec: dict, rng: np.random.Generator, where: str = "truth") -> "H4Setup":

@@ -159,7 +159,7 @@ def _run_synthetic(spec: StudySpec, scene, s: dict, seed: int) -> dict:
     ``truth_variant``, the measurements come from that variant's robot (deviations on all its free
     parameters) while the cell's model is identified (model error); parameter errors are recorded for
     the names both models share."""
-    from ..experiment.steps import STREAM_TRUTH, analyze_setup
+    from ..experiment.steps import STREAM_TRUTH, analyze_setup, shared_truth
     from ..experiment.synthetic import run_synthetic
     from ..io.report import parameters_table
     from ..rig import true_parameters
@@ -177,14 +177,13 @@ def _run_synthetic(spec: StudySpec, scene, s: dict, seed: int) -> dict:
     elif spec.truth == "per_run":
         x_true = true_parameters(scene, np.random.default_rng([seed, STREAM_TRUTH]), base)
     st, sr = _sigmas(scene, s)
+    # prepare as measured data do (H4: mount tilts of the scene's truth measured from the rotation axis; without
+    # it the kinematic parameters absorb them, z-scores ~10)
     out = run_synthetic(scene, method=s.get("method"), residual=residual, poses=poses, seed=seed, base=base,
-                        x_true=x_true, truth=truth, sigma_t_m=st, sigma_r_rad=sr)
-    res, ps = out.result, scene.setup.params
-    if truth is not None:  # true values of the names both models share (NaN elsewhere -> no error recorded)
-        tval = truth.params.values(x_true)
-        x_shared = np.array([tval.get(n, np.nan) for n in ps.names])
-    else:
-        x_shared = out.x_true
+                        x_true=x_true, truth=truth, sigma_t_m=st, sigma_r_rad=sr, prepare=True)
+    res, ps = out.result, out.setup.params
+    # true values of the names both models share (NaN elsewhere -> no error recorded)
+    x_shared = shared_truth(out.setup, out.truth or scene.setup, out.x_true)
     return {"converged": res.converged, "iterations": res.iterations, "seconds": out.seconds,
             "n_free": int(res.free.sum()), "before": out.before.to_dict(), "after": out.after.to_dict(),
             "cond": rep.condition_number, "parameters": parameters_table(ps.names, ps.nominal, x_shared, res)}
