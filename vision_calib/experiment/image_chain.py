@@ -34,6 +34,8 @@ def start_fork_server() -> None:
     import multiprocessing as mp
     from multiprocessing import forkserver
 
+    if getattr(mp.current_process(), "_inheriting", False):  # a child re-importing the main module: no server
+        return
     mp.get_context("forkserver").set_forkserver_preload(PRELOAD)
     forkserver.ensure_running()
 
