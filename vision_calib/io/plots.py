@@ -1,7 +1,8 @@
 """Report plots (matplotlib, Agg backend, PNG): residuals before/after, parameter deviations with
 error bars, per-pose validation error map.
 
-Drawn cheaply (issue 11: the three plots took ~1.9 s of CPU besides the matplotlib import, now ~0.6 s):
+Drawn cheaply (issue 11: the three plots took ~1.85 s of CPU besides the matplotlib import, now ~0.8 s; CPU
+time of the three functions on random data of the demo's sizes):
 one artist per data series (``vlines`` and step histograms instead of one bar patch per pose) and fixed
 margins instead of ``bbox_inches="tight"``, which draws every figure twice. :func:`preload` imports
 matplotlib and loads its fonts ahead of time (a background thread while the image workers run)."""

@@ -11,8 +11,8 @@ whose docstring describes the pipeline), built for one core:
 - noise: the noise-free image and the per-pixel noise std are computed once per pose; each frame is one
   ``cv2.randn`` draw scaled in place, then ``cv2.add(..., dtype=CV_8U)`` adds the mean, rounds to the
   nearest integer (ties to even, as torch.round) and saturates to [0, 255] in a single pass. The random
-  draws are the cost floor of this stage (~4 ms of the ~6 ms per 1024 x 768 frame); all other arrays are
-  computed once per pose, in place.
+  draws are the cost floor of this stage (~3.2 ms of CPU of the ~4.6 ms per 1024 x 768 frame, see
+  ``benchmarks/bench_end_to_end.py``); everything else is computed once per pose, in place.
 
 Random draws: OpenCV's RNG (multiply-with-carry; normal deviates by the ziggurat method), seeded with
 the caller's seed through ``cv2.setRNGSeed`` (a per-thread state): the same seed gives the same frames.
