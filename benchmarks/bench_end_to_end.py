@@ -99,8 +99,8 @@ def floors(n_poses: int = 6) -> dict:
     return {k: v / len(Ts) for k, v in out.items()}
 
 
-def chain_rate(workers: int) -> tuple[float, float, int]:
-    """(pool start [s], measure_poses wall [s], frames) of the default scene on a started pool."""
+def chain_rate(workers: int) -> tuple[float, float, int, float]:
+    """(pool start [s], measure_poses wall [s], frames, worker CPU [s]) of the default scene on a started pool."""
     from vision_calib.experiment.image_chain import ImagePool, _worker_pid, measure_poses
     from vision_calib.experiment.simulate import image_chain_of
     from vision_calib.experiment.synthetic import scene_truth
@@ -114,9 +114,10 @@ def chain_rate(workers: int) -> tuple[float, float, int]:
     with ImagePool(chain, workers) as pool:
         list(pool.map(_worker_pid, range(2 * pool.workers)))  # every worker started and initialised
         t1 = time.perf_counter()
-        measure_poses(chain, T, [f"{i:03d}" for i in range(len(T))], 0, scene.measurement.frames, pool=pool)
+        _, st = measure_poses(chain, T, [f"{i:03d}" for i in range(len(T))], 0, scene.measurement.frames, pool=pool)
         t2 = time.perf_counter()
-    return t1 - t0, t2 - t1, len(T) * scene.measurement.frames
+    cpu = sum(v for k, v in st.items() if k != "worker_peak_rss_mib")
+    return t1 - t0, t2 - t1, len(T) * scene.measurement.frames, cpu
 
 
 def demo_wall(plots: bool) -> float:
@@ -168,9 +169,10 @@ def main(argv=None):
           f"reference {rep['synthetic_reference']['accuracy_after']['position_rms_mm']:.3f} mm")
 
     w = args.workers or os.cpu_count() or 1
-    start, run, nf = chain_rate(w)
+    start, run, nf, cpu = chain_rate(w)
     print(f"\nimage chain, {w} workers: {nf / run:.1f} frames/s on a started pool ({run:.2f} s for {nf} frames; "
           f"target >= 150); pool start {start:.2f} s; {_load()}")
+    print(f"  worker CPU {cpu:.2f} s: {w * nf / cpu:.0f} frames/s if the {w} workers had a core each to themselves")
     if not args.no_demo:
         wp, wn = demo_wall(True), demo_wall(False)
         print(f"vision-calib demo from a clean start: {wp:.1f} s wall with plots (target < 6 s), {wn:.1f} s with "
