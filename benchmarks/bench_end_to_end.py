@@ -2,15 +2,20 @@
 
 1. the H4 default scene, 81 poses x 10 rendered frames (render, sensor effects, detection + PnP
    in worker processes, then identification and evaluation), with the per-stage split;
-2. a 100-run Monte Carlo study of synthetic identifications (H4 model 12, 71 of the 81 poses).
+2. the image chain alone: frames/s of ``measure_poses`` on a started pool (issue 11 target >= 150 on
+   2 cores), and the pool start;
+3. ``vision-calib demo`` wall time from a clean start (a new interpreter), with and without plots
+   (issue 11 target < 6 s with plots);
+4. a 100-run Monte Carlo study of synthetic identifications (H4 model 12, 71 of the 81 poses).
 
-    .venv/bin/python benchmarks/bench_end_to_end.py [--workers 2] [--runs 100]
+    .venv/bin/python benchmarks/bench_end_to_end.py [--workers 2] [--runs 100] [--no-demo]
 
-Target: the 81-pose run (810 rendered frames) in under 60 s on 2 cores. Per stage, the chain's CPU time
-per pose is printed beside a floor measured in the same run, one process, one thread (issue 11): render
-vs ``cv2.warpPerspective`` of the board texture at 2x + area average; effects (10 frames) vs
-``cv2.remap`` + ``cv2.GaussianBlur`` + 10 ``cv2.randn``; measure (per frame) vs raw ``detectBoard`` +
-``solvePnP``. Worker times run two workers on the 2 cores, so ratios > 1 partly reflect sharing.
+Per stage, the chain's CPU time (``time.process_time`` in the single-threaded workers) per pose is printed
+beside a floor measured in the same run as CPU time, one process, one thread (issue 11): render vs
+``cv2.warpPerspective`` of the board texture at 2x + area average; effects (10 frames) vs ``cv2.remap`` +
+``cv2.GaussianBlur`` + 10 ``cv2.randn`` + 10 ``cv2.add`` to uint8; measure (per frame) vs raw
+``detectBoard`` + ``solvePnP``. CPU times are robust to other load on the machine; wall times and frames/s
+are not: the load average is printed with them.
 """
 
 from __future__ import annotations
@@ -18,9 +23,13 @@ from __future__ import annotations
 import vision_calib.cli  # noqa: F401  (single-threaded BLAS, as the CLI runs)
 
 import argparse
+import os
 import resource
+import subprocess
+import sys
 import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -58,14 +67,15 @@ def floors(n_poses: int = 6) -> dict:
     A = np.array([[(x1 - x0) / Wt, 0, x0 + 0.5 * (x1 - x0) / Wt], [0, (y1 - y0) / Ht, y0 + 0.5 * (y1 - y0) / Ht], [0, 0, 1]])
     Ks = supersampled_K(K, 2)
     out = {"render": 0.0, "effects": 0.0, "measure": 0.0}
+    clock = time.process_time
     imgs = []
     for T in Ts:
-        t0 = time.perf_counter()
+        t0 = clock()
         H = Ks @ np.column_stack([T[:3, 0], T[:3, 1], T[:3, 3]]) @ A
         hi = cv2.warpPerspective(tex, H, (2 * K.width, 2 * K.height), flags=cv2.INTER_LINEAR,
                                  borderMode=cv2.BORDER_CONSTANT, borderValue=128)
         imgs.append(cv2.resize(hi, K.size, interpolation=cv2.INTER_AREA))
-        out["render"] += time.perf_counter() - t0
+        out["render"] += clock() - t0
     src = cv2.undistortPointsIter(np.stack(np.meshgrid(np.arange(K.width, dtype=float), np.arange(K.height, dtype=float)),
                                            -1).reshape(-1, 1, 2), K.K, K.dist_array, None, K.K,
                                   (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-12)).reshape(K.height, K.width, 2)
@@ -74,27 +84,65 @@ def floors(n_poses: int = 6) -> dict:
     _, P = spec.corner_points()
     z = np.empty((K.height, K.width), np.float32)
     for img in imgs:
-        t0 = time.perf_counter()
+        t0 = clock()
         x = cv2.GaussianBlur(cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE), (7, 7), 0.6)
         frames = []
         for _ in range(10):
             cv2.randn(z, 0, 2.0)
             frames.append(cv2.add(x, z, dtype=cv2.CV_8U))
-        out["effects"] += time.perf_counter() - t0
-        t0 = time.perf_counter()
+        out["effects"] += clock() - t0
+        t0 = clock()
         cc, ci, _, _ = det.detectBoard(frames[0])
         if ci is not None and len(ci) >= 4:
             cv2.solvePnP(P[ci.ravel()], cc, K.K, K.dist_array)
-        out["measure"] += time.perf_counter() - t0
+        out["measure"] += clock() - t0
     return {k: v / len(Ts) for k, v in out.items()}
+
+
+def chain_rate(workers: int) -> tuple[float, float, int, float]:
+    """(pool start [s], measure_poses wall [s], frames, worker CPU [s]) of the default scene on a started pool."""
+    from vision_calib.experiment.image_chain import ImagePool, _worker_pid, measure_poses
+    from vision_calib.experiment.simulate import image_chain_of
+    from vision_calib.experiment.synthetic import scene_truth
+
+    scene = load_scene(DEFAULT_SCENE)
+    rp, _, _ = rngs(0)
+    poses = scene_poses(scene, rp)
+    T = scene.setup.T_cam_target(poses, scene_truth(scene))
+    chain = image_chain_of(scene)
+    t0 = time.perf_counter()
+    with ImagePool(chain, workers) as pool:
+        list(pool.map(_worker_pid, range(2 * pool.workers)))  # every worker started and initialised
+        t1 = time.perf_counter()
+        _, st = measure_poses(chain, T, [f"{i:03d}" for i in range(len(T))], 0, scene.measurement.frames, pool=pool)
+        t2 = time.perf_counter()
+    cpu = sum(v for k, v in st.items() if k != "worker_peak_rss_mib")
+    return t1 - t0, t2 - t1, len(T) * scene.measurement.frames, cpu
+
+
+def demo_wall(plots: bool) -> float:
+    """Wall time [s] of ``python -m vision_calib.cli demo`` in a new interpreter (clean start)."""
+    root = Path(__file__).resolve().parents[1]
+    env = dict(os.environ, PYTHONPATH=str(root) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    with tempfile.TemporaryDirectory() as d:
+        cmd = [sys.executable, "-m", "vision_calib.cli", "demo", "--out", d] + ([] if plots else ["--no-plots"])
+        t0 = time.perf_counter()
+        subprocess.run(cmd, check=True, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        return time.perf_counter() - t0
+
+
+def _load() -> str:
+    return "load average %.1f %.1f %.1f" % os.getloadavg()
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser()
     ap.add_argument("--workers", type=int, default=None)
     ap.add_argument("--runs", type=int, default=100)
+    ap.add_argument("--no-demo", action="store_true", help="skip the two demo wall-time runs")
     args = ap.parse_args(argv)
 
+    print(f"{os.cpu_count()} CPUs; {_load()} at start")
     with tempfile.TemporaryDirectory() as d:
         t0 = time.perf_counter()
         rep = run_simulation(DEFAULT_SCENE, out_dir=d, seed=0, workers=args.workers)
@@ -111,13 +159,24 @@ def main(argv=None):
     for stage, per in (("render", 1), ("effects", 1), ("measure", rep["settings"]["frames"])):
         got = t[f"{stage}_cpu"] / n_p / per
         unit = "per pose" if per == 1 else "per frame"
-        print(f"  {stage:8s} {got * 1e3:7.1f} ms {unit}; floor {fl[stage] * 1e3:7.1f} ms; ratio {got / fl[stage]:.2f}")
+        print(f"  {stage:8s} {got * 1e3:7.1f} ms CPU {unit}; floor {fl[stage] * 1e3:7.1f} ms; "
+              f"ratio {got / fl[stage]:.2f}")
     print(f"  identify {t['identify'] * 1e3:.0f} ms, evaluate + synthetic reference {t['evaluate'] * 1e3:.0f} ms")
     print(f"  peak RSS: main process {me:.0f} MiB, largest render/measure worker {t['worker_peak_rss_mib']:.0f} MiB")
     a, b = rep["accuracy"]["after"], rep["accuracy"]["before"]
     print(f"  V2 {b['V2_rad']:.3g} -> {a['V2_rad']:.3g} rad ({100 * (1 - a['V2_rad'] / b['V2_rad']):.1f} % better); "
           f"validation position RMS {b['position_rms_mm']:.3f} -> {a['position_rms_mm']:.3f} mm; synthetic "
           f"reference {rep['synthetic_reference']['accuracy_after']['position_rms_mm']:.3f} mm")
+
+    w = args.workers or os.cpu_count() or 1
+    start, run, nf, cpu = chain_rate(w)
+    print(f"\nimage chain, {w} workers: {nf / run:.1f} frames/s on a started pool ({run:.2f} s for {nf} frames; "
+          f"target >= 150); pool start {start:.2f} s; {_load()}")
+    print(f"  worker CPU {cpu:.2f} s: {w * nf / cpu:.0f} frames/s if the {w} workers had a core each to themselves")
+    if not args.no_demo:
+        wp, wn = demo_wall(True), demo_wall(False)
+        print(f"vision-calib demo from a clean start: {wp:.1f} s wall with plots (target < 6 s), {wn:.1f} s with "
+              f"--no-plots; {_load()}")
 
     scene = load_scene(DEFAULT_SCENE)
     rp, _, rv = rngs(0)

@@ -212,6 +212,9 @@ def _dispatch(args) -> int:
         print(to_json(out) if args.json else _summary_synthetic(out))
         return _status(out["verdict"])
     if args.command in ("simulate", "demo"):
+        from .experiment.image_chain import start_fork_server
+
+        start_fork_server()  # the image workers' imports run beside ours (issue 11: demo wall time)
         from .experiment.simulate import run_simulation, DEFAULT_SCENE
 
         scene = DEFAULT_SCENE if args.command == "demo" else args.scene

@@ -25,11 +25,17 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-from scipy.stats import chi2 as chi2_dist
 
 from ..errors import ConfigError, DataError
 from .lse import pose_chi2, solve_lse
 from .problem import IdentificationProblem, IdentificationResult
+
+def _chi2():
+    """``scipy.stats.chi2``, imported on first use: scipy.stats is about half of the CLI's start-up imports."""
+    from scipy.stats import chi2
+
+    return chi2
+
 
 #: default significance level of the adequacy test and family-wise false-alarm level of the outlier test
 DEFAULT_LEVEL = 0.01
@@ -60,16 +66,16 @@ def model_adequacy(result: IdentificationResult, level: float = DEFAULT_LEVEL, n
         out["worst_poses"] = [
             {"label": str(result.labels[k]) if result.labels else f"#{int(k)}",
              "chi2": float(pc[k]) if np.isfinite(pc[k]) else None,
-             "p_value": float(chi2_dist.sf(pc[k], m)) if np.isfinite(pc[k]) else 0.0}
+             "p_value": float(_chi2().sf(pc[k], m)) if np.isfinite(pc[k]) else 0.0}
             for k in order
         ]
     if dof <= 0 or not np.isfinite(chi2):
         why = "no redundancy (dof <= 0)" if dof <= 0 else "the cost is not finite"
         out.update(verdict="not available", explanation=f"no chi-square test: {why}")
         return out
-    lo, hi = chi2_dist.ppf(level / 2, dof) / dof, chi2_dist.isf(level / 2, dof) / dof
+    lo, hi = _chi2().ppf(level / 2, dof) / dof, _chi2().isf(level / 2, dof) / dof
     out["expected_chi2_dof"] = [float(lo), float(hi)]
-    out["p_value"] = float(chi2_dist.sf(chi2, dof))
+    out["p_value"] = float(_chi2().sf(chi2, dof))
     v = chi2 / dof
     if v > hi:
         out.update(verdict="too large", explanation=(
@@ -137,7 +143,7 @@ def fit_rejecting_outliers(
             raise ConfigError(f"fit_rejecting_outliers: scale={scale!r}; expected 'auto' or a float > 0")
     n_obs, m = problem.n_obs, problem.m
     d = pose_chi2(problem, robust.residuals) / s**2
-    thr = float(chi2_dist.isf(level / n_obs, m))
+    thr = float(_chi2().isf(level / n_obs, m))
     if min_ratio > 0:  # gross errors only: also min_ratio x the median pose's residual norm
         thr = max(thr, min_ratio**2 * float(np.nanmedian(d)))
     bad = np.flatnonzero(~(d <= thr))  # NaN fails too

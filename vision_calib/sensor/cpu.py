@@ -2,14 +2,17 @@
 
 Same model, order and parameters as the torch/kornia implementation (:mod:`vision_calib.sensor.effects`,
 whose docstring describes the pipeline), built for one core:
-- distortion: exact bilinear resampling (:func:`remap_exact`) with per-camera index/weight tables
-  (:func:`maps.bilinear_tables`, border replicated) built once per camera, not per pose. Not ``cv2.remap``:
-  its 1/32 px fixed-point source positions shifted corners systematically (demo validation 3x worse);
+- distortion: exact bilinear resampling (:func:`remap_exact`): one sparse product with a per-camera
+  matrix of bilinear weights (:func:`maps.bilinear_matrix`, border replicated) built once per camera, not
+  per pose. Not ``cv2.remap``: its 1/32 px fixed-point source positions shifted corners systematically
+  (demo validation 3x worse);
 - blur: ``cv2.GaussianBlur`` with the same kernel size (``maps.gaussian_ksize``) or ``cv2.filter2D`` with
   the same disc kernel, border replicated;
 - noise: the noise-free image and the per-pixel noise std are computed once per pose; each frame is one
   ``cv2.randn`` draw scaled in place, then ``cv2.add(..., dtype=CV_8U)`` adds the mean, rounds to the
-  nearest integer (ties to even, as torch.round) and saturates to [0, 255] in a single pass.
+  nearest integer (ties to even, as torch.round) and saturates to [0, 255] in a single pass. The random
+  draws are the cost floor of this stage (~3.2 ms of CPU of the ~4.6 ms per 1024 x 768 frame, see
+  ``benchmarks/bench_end_to_end.py``); everything else is computed once per pose, in place.
 
 Random draws: OpenCV's RNG (multiply-with-carry; normal deviates by the ziggurat method), seeded with
 the caller's seed through ``cv2.setRNGSeed`` (a per-thread state): the same seed gives the same frames.
@@ -24,24 +27,16 @@ import cv2
 import numpy as np
 
 from ..camera import CameraIntrinsics
-from .maps import bilinear_tables, disc_kernel, gaussian_ksize, vignetting_gain
+from .maps import bilinear_matrix, disc_kernel, gaussian_ksize, vignetting_gain
 from .settings import SensorEffects
 
 
 def remap_exact(img: np.ndarray, intr: CameraIntrinsics) -> np.ndarray:
-    """Distorted image (H, W) float32 from the ideal one: bilinear sample of img at
+    """Distorted image (H, W) float32 from the ideal one img (H, W): bilinear sample of img at
     :func:`distortion_source_map` (float32 weights, no position rounding; matches torch grid_sample with
-    align_corners=True and border padding)."""
-    idx, wx, wy = bilinear_tables(intr)
-    w = intr.width
-    f = img.reshape(-1)
-    a = f[idx]
-    b = f[idx + 1]
-    top = a + wx * (b - a)
-    a = f[idx + w]
-    b = f[idx + w + 1]
-    bot = a + wx * (b - a)
-    return top + wy * (bot - top)
+    align_corners=True and border padding), as one sparse product (:func:`maps.bilinear_matrix`)."""
+    f = np.ascontiguousarray(img, dtype=np.float32).reshape(-1)
+    return (bilinear_matrix(intr) @ f).reshape(intr.height, intr.width)
 
 
 def deterministic_image_cv(ideal: np.ndarray, effects: SensorEffects, intr: CameraIntrinsics) -> np.ndarray:
@@ -80,17 +75,21 @@ def apply_effects_cv(ideal: np.ndarray, effects: SensorEffects, n_frames: int, s
                 grey += np.float32(effects.read_noise_grey) * rng.standard_normal(e.shape, dtype=np.float32)
             out[k] = cv2.add(grey, float(effects.black_level_grey), dtype=cv2.CV_8U)
         return out
-    mean = cv2.add(cv2.multiply(e, grey_per_e), float(effects.black_level_grey))
-    var = np.zeros_like(e)
-    if effects.full_well_e > 0:
-        var = cv2.multiply(np.maximum(e, 0.0), grey_per_e ** 2)
-    if effects.read_noise_grey > 0:
-        var = cv2.add(var, float(effects.read_noise_grey) ** 2)
-    if not (effects.full_well_e > 0 or effects.read_noise_grey > 0):
+    noisy = effects.full_well_e > 0 or effects.read_noise_grey > 0
+    mean = cv2.addWeighted(e, grey_per_e, e, 0.0, float(effects.black_level_grey))  # grey levels
+    if not noisy:
         out[:] = cv2.add(mean, 0.0, dtype=cv2.CV_8U)
         return out
-    std = cv2.sqrt(var)
-    z = np.empty_like(e)
+    std = e  # the electrons are no longer needed: std computed in place (grey levels)
+    if effects.full_well_e > 0:
+        np.maximum(std, 0.0, out=std)
+        np.multiply(std, np.float32(grey_per_e ** 2), out=std)
+    else:
+        std.fill(0.0)
+    if effects.read_noise_grey > 0:
+        np.add(std, np.float32(float(effects.read_noise_grey) ** 2), out=std)
+    np.sqrt(std, out=std)
+    z = np.empty_like(std)
     cv2.setRNGSeed(int(seed) & 0x7FFFFFFF)
     for k in range(n_frames):  # one draw per frame, scaled in place; add + round + saturate in one pass
         cv2.randn(z, 0.0, 1.0)
