@@ -44,7 +44,7 @@ def test_h4_model12_externals_19_of_20():
 def test_noise_free_recovery_of_every_identifiable_parameter(scene, method):
     sc = load_scene(scene)
     sc = replace(sc, truth=replace(sc.truth, unmodelled={}))  # the truth the model shares (the demo's has more)
-    out = run_synthetic(sc, method=method, n_poses=20, sigma_t_m=0.0, sigma_r_rad=0.0, seed=3)
+    out = run_synthetic(sc, method=method, n_poses=20, sigma_t_m=0.0, sigma_r_rad=0.0, seed=3, prepare=False)
     res, x_true = out.result, out.x_true
     free = res.free
     ps = out.scene.setup.params

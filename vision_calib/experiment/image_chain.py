@@ -105,10 +105,6 @@ def _worker_init(target_path, intrinsics, supersample, main_pid=None):
     import cv2
 
     cv2.setNumThreads(1)
-    if getattr(intrinsics, "dist", None) and any(intrinsics.dist):  # per-camera distortion matrix, built once
-        from ..sensor.maps import bilinear_matrix
-
-        bilinear_matrix(intrinsics)
     if "torch" in sys.modules:  # only if something imported it already (torch effects import it lazily)
         sys.modules["torch"].set_num_threads(1)
     from ..render import TargetRenderer
@@ -117,10 +113,10 @@ def _worker_init(target_path, intrinsics, supersample, main_pid=None):
     target = load_target(target_path)
     _W["target"] = target
     _W["intr"] = intrinsics
-    from ..sensor import ideal_render_grid
-
-    # with distortion: render on the supersampled grid, distort there, then box-average (sensor.ideal_render_grid)
-    _W["renderer"] = TargetRenderer(target, *ideal_render_grid(intrinsics, supersample))
+    # the lens distortion drawn geometrically by the polygon backend (exact pixel areas of the distorted
+    # image, as a sensor integrates it): no resampling; a pose that falls back to pyrender gets the
+    # distortion from the sensor stage (sensor.apply_effects)
+    _W["renderer"] = TargetRenderer(target, intrinsics, supersample, distort=True)
 
 
 def _worker_pose(job):
@@ -134,6 +130,10 @@ def _worker_pose(job):
     t0 = clock()
     ideal = _W["renderer"].render(T_cam_target)
     t1 = clock()
+    if _W["renderer"].last_distorted:
+        from dataclasses import replace
+
+        effects = replace(effects, apply_distortion=False)
     frames = apply_effects(ideal, effects, n_frames, seed, _W["intr"])  # OpenCV on the CPU: no torch
     t2 = clock()
     if image_dir is not None:

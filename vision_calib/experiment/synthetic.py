@@ -56,17 +56,18 @@ def identifiability_json(scene, residual=None, n_poses=None, seed=None, all_para
 
 
 def run_synthetic(scene, method=None, residual=None, n_poses=None, sigma_t_m=None, sigma_r_rad=None, seed=0,
-                  poses=None, validation=None, base=None, x_true=None, truth=None, prepare=False) -> SyntheticRun:
+                  poses=None, validation=None, base=None, x_true=None, truth=None, prepare=True) -> SyntheticRun:
     """One synthetic identification (see :class:`SyntheticRun`).
 
     poses / validation: commanded poses (default: drawn from the scene with the run seed).
     base: identifiable mask (n,) from a previous analysis (saves one SVD in Monte Carlo loops).
     truth: the setup that produces the measurements (default the scene's; another model, e.g. an H4
     model-31 robot identified as model 12, to study model error), with parameters x_true.
-    prepare: run ``Setup.prepare`` on the measurements first, as measured data do (H4: camera axis and
+    prepare (default): run ``Setup.prepare`` on the measurements first, as measured data do (H4: camera axis and
     tilt parameters; the base mask is then re-analysed when prepare frees parameters; the result then has
     the prepared setup's parameters, H4: 4 tilt parameters appended). Without it an H4 truth with mount
-    tilts ends ~10 mm off after calibration (the kinematic parameters absorb the camera tilt, README).
+    tilts ends ~10 mm off after calibration (the kinematic parameters absorb the camera tilt, README);
+    False only to study exactly that.
     """
     scene = _scene(scene)
     setup = scene.setup

@@ -183,9 +183,10 @@ class _GLScene:
 
 
 class TargetRenderer:
-    """Render a textured target plane as seen by a pinhole camera (OpenCV intrinsics, no distortion).
+    """Render a textured target plane as seen by a pinhole camera (OpenCV intrinsics; no distortion unless
+    ``distort``).
 
-    target: TargetSpec. intrinsics: CameraIntrinsics (its ``dist`` is ignored: ideal image).
+    target: TargetSpec. intrinsics: CameraIntrinsics (its ``dist`` is ignored unless ``distort``).
     supersample: s >= 1, render at s x resolution then box-average (pyrender; the warp backend uses
     max(s, 4); the polygon backend computes exact pixel areas and ignores it).
     background: grey level [0, 255] of empty pixels. occluders: optional list of
@@ -194,7 +195,10 @@ class TargetRenderer:
     texture_px_per_m: texture resolution [texels/m] (default: larger board side = 4096 texels).
     texture_lod_bias: mipmap LOD bias of the GL sampler (default -1). anisotropy: max anisotropic filtering
     (default 16; 1 = off; ignored if the driver lacks it). back_grey: grey level of the board's back face.
-    znear, zfar: clip distances [m]. backend: "auto" (default: "polygon" without occluders, else "pyrender"),
+    znear, zfar: clip distances [m]. distort: the polygon backend draws the intrinsics' lens distortion
+    geometrically (exact pixel areas of the distorted image, ``PolygonRenderer(distort=True)``), so no
+    resampling follows; :attr:`last_distorted` says whether the last image holds it (False for the other
+    backends and for a pyrender fallback: the caller applies the distortion, ``sensor.apply_effects``). backend: "auto" (default: "polygon" without occluders, else "pyrender"),
     "polygon", "warp" or "pyrender" (module docstring); the chosen one is :attr:`backend`, the one that drew
     the last image :attr:`last_backend` (a planar backend hands poses with a board corner at or behind znear
     to pyrender). An OpenGL context is held only once pyrender is used; call :meth:`close` or use ``with``.
@@ -203,7 +207,7 @@ class TargetRenderer:
     def __init__(self, target: TargetSpec, intrinsics: CameraIntrinsics, supersample: int = 2,
                  background: float = 128, occluders=None, texture_px_per_m: float | None = None,
                  back_grey: float = 200, texture_lod_bias: float = -1.0, anisotropy: float | None = None,
-                 znear: float = 0.005, zfar: float = 100.0, backend: str = "auto"):
+                 znear: float = 0.005, zfar: float = 100.0, backend: str = "auto", distort: bool = False):
         if int(supersample) != supersample or supersample < 1:
             raise ConfigError(f"TargetRenderer: supersample must be an integer >= 1, got {supersample}")
         if not (0 <= background <= 255):
@@ -237,7 +241,8 @@ class TargetRenderer:
         self.last_backend = None
         self.anisotropy = float("nan")  # GL sampler's anisotropy, once a GL context exists
         if backend == "polygon":
-            self._cpu = PolygonRenderer(target, intrinsics, self.background, back_grey)
+            self._cpu = PolygonRenderer(target, intrinsics, self.background, back_grey, distort=distort)
+        self.last_distorted = False
         if backend in ("polygon", "warp"):
             if max(self.texture_shape) > MAX_WARP_TEXTURE_PX:  # the texture of a pyrender fallback
                 raise ConfigError(
@@ -272,8 +277,10 @@ class TargetRenderer:
         if self._cpu is not None and planar_warp_ok(self.target, T_cam_target, self._znear):
             img = self._cpu.render(T_cam_target)
             self.last_backend = self.backend
+            self.last_distorted = bool(getattr(self._cpu, "distort", False))
         else:
             self.last_backend = "pyrender"
+            self.last_distorted = False
             img = self._open_gl().render(T_cam_target, occluder_poses).astype(np.float32)
             if self.supersample > 1:  # exact s x s box average for an integer factor
                 img = cv2.resize(img, self.intrinsics.size, interpolation=cv2.INTER_AREA)
