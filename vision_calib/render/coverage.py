@@ -104,13 +104,15 @@ class PolygonRenderer:
     target: TargetSpec; intrinsics: camera; background, back_grey: grey levels [0, 255] of empty pixels and
     of the board's back face; the printed face is white 255 / black 0.
     distort: False (default): pinhole projection, the intrinsics' distortion ignored (the sensor stage
-    resamples the image); True: the distortion drawn geometrically: every edge cut into ``n_sub`` chords
+    resamples the image); True: the distortion drawn geometrically: every edge cut into chords of at most
+    ``max_chord_px`` (chosen per pose and per group of equal-size shapes from the projected edge lengths)
     whose end points go through OpenCV's forward model (``CameraIntrinsics.project``), so pixel areas stay
-    exact and every board corner is a vertex (exact); the chord error is the sagitta of a distorted edge,
-    L^2 kappa / 8 < 1e-3 px for 30 mm squares at 0.4 m, f = 1100 px, k1 = -0.1, n_sub = 16."""
+    exact and every board corner is a vertex (exact). The chord error is the sagitta of a distorted edge,
+    l^2 kappa / 8 for a chord l and the curvature kappa of the distorted line: with l = 4 px and kappa <= 3e-4
+    /px (k1 = -0.1 at 500 px from the centre, f = 1000 px) below 1e-3 px."""
 
     def __init__(self, target: TargetSpec, intrinsics: CameraIntrinsics, background: float, back_grey: float,
-                 distort: bool = False, n_sub: int = 16):
+                 distort: bool = False, max_chord_px: float = 4.0):
         self.K = intrinsics
         self.background, self.back_grey = float(background), float(back_grey)
         x0, y0, x1, y1 = target.texture_extent_m()
@@ -119,10 +121,25 @@ class PolygonRenderer:
         polys = target.black_polygons()  # (M, V, 2)
         self._shapes = [g for g in (rects, polys) if len(g)]  # groups of equal vertex count
         self.distort = bool(distort and np.any(np.asarray(intrinsics.dist) != 0))
-        if self.distort:
-            self._outline = _subdivide(self._outline, n_sub)
-            self._shapes = [_subdivide(g, n_sub) for g in self._shapes]
+        self.max_chord_px = float(max_chord_px)
+        if self.distort:  # split the groups by edge length (octaves): each is cut into its own chord count
+            groups = []
+            for g in self._shapes:
+                side = np.max(np.linalg.norm(np.roll(g, -1, axis=1) - g, axis=2), axis=1)
+                octave = np.floor(np.log2(side / side.max()) + 1e-9).astype(int)
+                groups += [g[octave == o] for o in np.unique(octave)]
+            self._shapes = groups
         self._blank = np.full((intrinsics.height, intrinsics.width), self.background, np.float32)
+
+    def _shape_px(self, T: np.ndarray, g: np.ndarray) -> np.ndarray:
+        """(N, V', 2) pixel-border coordinates of the polygons g (N, V, 2) [m]; with ``distort`` each edge
+        cut into chords of at most ``max_chord_px`` (V' = n V) before projection."""
+        q = self._project(T, g)
+        if not self.distort:
+            return q
+        longest = float(np.max(np.linalg.norm(np.roll(q, -1, axis=1) - q, axis=2)))
+        n = int(min(64, max(1, math.ceil(longest / self.max_chord_px))))
+        return q if n == 1 else self._project(T, _subdivide(g, n))
 
     def _project(self, T: np.ndarray, pts: np.ndarray) -> np.ndarray:
         """(..., 2) target points [m] -> pixel-border coordinates (u + 0.5, v + 0.5)."""
@@ -139,7 +156,7 @@ class PolygonRenderer:
         T = np.asarray(T_cam_target, float)
         K, bg = self.K, self.background
         out = self._blank.copy()
-        outline = self._project(T, self._outline)
+        outline = self._shape_px(T, self._outline)
         u0 = max(0, int(math.floor(outline[..., 0].min())))
         v0 = max(0, int(math.floor(outline[..., 1].min())))
         u1 = min(K.width, int(math.ceil(outline[..., 0].max())))
@@ -154,7 +171,7 @@ class PolygonRenderer:
         if front:
             cov = accumulate_coverage(outline - shift, sign * np.array([255.0 - bg]), v1 - v0, u1 - u0)
             for g in self._shapes:
-                cov += accumulate_coverage(self._project(T, g) - shift, np.full(len(g), -255.0 * sign),
+                cov += accumulate_coverage(self._shape_px(T, g) - shift, np.full(len(g), -255.0 * sign),
                                            v1 - v0, u1 - u0)
         else:
             cov = accumulate_coverage(outline - shift, sign * np.array([self.back_grey - bg]), v1 - v0, u1 - u0)
