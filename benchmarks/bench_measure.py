@@ -15,7 +15,6 @@ All numbers are measured here from a seed; nothing is hard-coded.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import os
 import resource
 import sys

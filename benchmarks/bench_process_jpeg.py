@@ -19,7 +19,6 @@ import time
 from pathlib import Path
 
 import cv2
-import numpy as np
 
 from vision_calib.experiment.process import process_folder
 from vision_calib.experiment.simulate import run_simulation

@@ -315,7 +315,7 @@ def test_cli_study(tmp_path, capsys):
 def test_pose_selection_axis(tmp_path):
     """pose_selection: random = the default behaviour; D = one deterministic subset of the grid chosen on
     the nominal model (same poses every repetition, noise varies), better log det than the random subsets."""
-    from vision_calib.identify.pose_selection import design_criterion, select_poses
+    from vision_calib.identify.pose_selection import design_criterion
 
     spec_path = write_spec(tmp_path, repetitions=2, sweep={"n_poses": [8], "pose_selection": ["random", "d"]},
                            outputs=["parameters", "accuracy"], parameters=["h4.L"])

@@ -6,7 +6,7 @@ import pytest
 
 from vision_calib import frames
 from vision_calib.camera import CameraIntrinsics
-from vision_calib.measure import DetectConfig, MeasureConfig, detect, detect_batch, measure_images, measure_pose
+from vision_calib.measure import DetectConfig, detect, detect_batch, measure_images, measure_pose
 from vision_calib.measure.pnp import target_lookup
 from vision_calib.sensor import SensorEffects, apply_effects
 from vision_calib.targets.spec import TargetSpec

@@ -5,7 +5,6 @@ from vision_calib import frames
 from vision_calib.camera import CameraIntrinsics
 from vision_calib.measure import (Detection, MeasureConfig, crlb_pose_cov, measure_pose, project_pinhole,
                                   reprojection_jacobian, solve_pnp_planar, undistort_px)
-from vision_calib.measure.pnp import target_lookup
 
 from measure_helpers import random_pose
 

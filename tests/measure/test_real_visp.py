@@ -9,7 +9,7 @@ import pytest
 from vision_calib import frames
 from vision_calib.errors import ConfigError, DataError
 from vision_calib.io.visp import read_visp_camera_xml, read_visp_pose_yaml
-from vision_calib.measure import DetectConfig, MeasureConfig, measure_images
+from vision_calib.measure import measure_images
 from vision_calib.measure.handeye import hand_eye_consistency
 from vision_calib.targets.spec import TargetSpec
 
