@@ -50,6 +50,15 @@ class TargetKind:
             if getattr(spec, key) <= 0:
                 raise ConfigError(f"{where}: key {key!r} must be > 0 [m], got {getattr(spec, key)}")
 
+    def refuse_symmetric(self, spec, where, what: str, advice: str) -> None:
+        """ConfigError when the pattern is 180-degree symmetric (:meth:`symmetric`) and the spec does not set
+        ``allow_symmetric``; ``what``: "corner ids" / "ids", ``advice``: the layout to use instead."""
+        why = self.symmetric(spec)
+        if why and not spec.allow_symmetric:
+            raise ConfigError(f"{where}: {why}; its {what} cannot be tied to the physical board, so poses "
+                              f"cannot be measured with it. {advice}, or set 'allow_symmetric: true' to use it "
+                              "for intrinsics calibration only")
+
     def symmetric(self, spec) -> str:
         """Why the pattern looks the same after a 180-degree rotation ("" when it does not): the detected
         ids then cannot be tied to the physical board, so poses cannot be measured with it."""

@@ -32,3 +32,19 @@ def sample_mean(img: np.ndarray, uv: np.ndarray) -> float:
     m = np.asarray(uv, np.float32).reshape(-1, 1, 2)
     v = cv2.remap(img, m[..., 0], m[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
     return float(np.mean(v))
+
+
+class SquareCorners:
+    """Mixin: the inner corners of a board of rows x cols squares of side square_m (ChArUco, chessboard),
+    ids row-major from the origin: id = r (cols - 1) + c at ((c + 1) square_m, (r + 1) square_m, 0)."""
+
+    def pattern_size_m(self, spec):
+        return spec.cols * spec.square_m, spec.rows * spec.square_m
+
+    def n_corners(self, spec):
+        return (spec.rows - 1) * (spec.cols - 1)
+
+    def corner_points(self, spec):
+        r, c = np.divmod(np.arange(self.n_corners(spec)), spec.cols - 1)
+        p = np.column_stack([(c + 1) * spec.square_m, (r + 1) * spec.square_m, np.zeros(r.size)])
+        return np.arange(p.shape[0]), p

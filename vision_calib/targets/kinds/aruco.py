@@ -12,6 +12,7 @@ import numpy as np
 
 from ...errors import ConfigError
 from . import TargetKind
+from ._grid import SquareCorners
 
 _BORDER_BITS = 1  # OpenCV markers: one black border bit around the data bits
 
@@ -96,7 +97,7 @@ class _ArucoKind(TargetKind):
         return params
 
 
-class CharucoKind(_ArucoKind):
+class CharucoKind(SquareCorners, _ArucoKind):
     """ChArUco board: rows x cols squares of square_m, markers of marker_m in the white squares."""
 
     name = "charuco"
@@ -115,17 +116,6 @@ class CharucoKind(_ArucoKind):
         if spec.marker_m >= spec.square_m:
             raise ConfigError(f"{where}: key 'marker_m' ({spec.marker_m}) must be smaller than 'square_m' ({spec.square_m})")
         super().validate(spec, where)
-
-    def pattern_size_m(self, spec):
-        return spec.cols * spec.square_m, spec.rows * spec.square_m
-
-    def n_corners(self, spec):
-        return (spec.rows - 1) * (spec.cols - 1)
-
-    def corner_points(self, spec):
-        r, c = np.divmod(np.arange(self.n_corners(spec)), spec.cols - 1)
-        p = np.column_stack([(c + 1) * spec.square_m, (r + 1) * spec.square_m, np.zeros(r.size)])
-        return np.arange(p.shape[0]), p
 
     def cv_board(self, spec):
         ids = np.arange(spec.first_id, spec.first_id + self.n_markers(spec), dtype=np.int32)

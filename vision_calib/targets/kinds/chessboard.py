@@ -24,7 +24,7 @@ import numpy as np
 
 from ...errors import ConfigError
 from . import TargetKind
-from ._grid import fit_homography, front_facing, apply_h, sample_mean
+from ._grid import SquareCorners, apply_h, fit_homography, front_facing, sample_mean
 
 #: findChessboardCornersSB flags, chosen by corner error vs the projected truth on polygon-renderer images
 #: at the H4 geometry (1024 x 768, f 1013 px, 0.6-0.76 m, tilt <= 35 deg, SensorEffects() defaults,
@@ -34,7 +34,7 @@ from ._grid import fit_homography, front_facing, apply_h, sample_mean
 SB_FLAGS = cv2.CALIB_CB_ACCURACY
 
 
-class ChessboardKind(TargetKind):
+class ChessboardKind(SquareCorners, TargetKind):
     name = "chessboard"
     keys = ("square_m", "allow_symmetric")
     required = ("square_m",)
@@ -47,28 +47,13 @@ class ChessboardKind(TargetKind):
             raise ConfigError(f"{where}: chessboard keys 'rows' and 'cols' (squares) must be >= 2 with at least "
                               f"2 x 3 squares, got {spec.rows}x{spec.cols}")
         self.positive(spec, where, "square_m")
-        why = self.symmetric(spec)
-        if why and not spec.allow_symmetric:
-            raise ConfigError(f"{where}: {why}; its corner ids cannot be tied to the physical board, so poses "
-                              "cannot be measured with it. Use rows + cols odd (e.g. 8 x 11 squares), or set "
-                              "'allow_symmetric: true' to use it for intrinsics calibration only")
+        self.refuse_symmetric(spec, where, "corner ids", "Use rows + cols odd (e.g. 8 x 11 squares)")
 
     def symmetric(self, spec):
         if (spec.rows + spec.cols) % 2 == 0:
             return (f"chessboard of {spec.rows} x {spec.cols} squares looks the same after a 180-degree "
                     "rotation (rows + cols even)")
         return ""
-
-    def pattern_size_m(self, spec):
-        return spec.cols * spec.square_m, spec.rows * spec.square_m
-
-    def n_corners(self, spec):
-        return (spec.rows - 1) * (spec.cols - 1)
-
-    def corner_points(self, spec):
-        r, c = np.divmod(np.arange(self.n_corners(spec)), spec.cols - 1)
-        p = np.column_stack([(c + 1) * spec.square_m, (r + 1) * spec.square_m, np.zeros(r.size)])
-        return np.arange(p.shape[0]), p
 
     def black_rects(self, spec):
         s = spec.square_m

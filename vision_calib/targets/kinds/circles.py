@@ -55,11 +55,7 @@ class AsymmetricCirclesKind(TargetKind):
         if spec.diameter_m >= spec.spacing_m * math.sqrt(2):
             raise ConfigError(f"{where}: key 'diameter_m' ({spec.diameter_m}) must be smaller than the diagonal "
                               f"spacing spacing_m * sqrt(2) ({spec.spacing_m * math.sqrt(2):.4g}): circles would touch")
-        why = self.symmetric(spec)
-        if why and not spec.allow_symmetric:
-            raise ConfigError(f"{where}: {why}; its ids cannot be tied to the physical board, so poses cannot be "
-                              "measured with it. Use an odd number of rows, or set 'allow_symmetric: true' to "
-                              "use it for intrinsics calibration only")
+        self.refuse_symmetric(spec, where, "ids", "Use an odd number of rows")
 
     def symmetric(self, spec):
         if spec.rows % 2 == 0:
