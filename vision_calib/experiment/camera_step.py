@@ -125,13 +125,22 @@ def with_intrinsics_uncertainty(result, problem, setup, meas, dets, rec, block: 
         dr = np.asarray(p2.residual(x), float) - r0
         dx = -np.linalg.solve(N, np.einsum("kmi,kmn,kn->i", J, W, dr))
         C += np.outer(dx, dx)
+    return add_covariance(result, C, len(dirs))
+
+
+def add_covariance(result, C, n_directions: int):
+    """(result with C (n_free, n_free) added to its covariance and its std updated, {n_directions,
+    std_inflation {name: new std / old std}})."""
     from dataclasses import replace
 
+    import numpy as np
+
+    free = np.asarray(result.free, bool)
     cov = np.asarray(result.covariance, float) + C
     std = np.array(result.std, float)
     old = std[free].copy()
     std[free] = np.sqrt(np.diag(cov))
-    names = [n for n, f in zip(problem.params.names, free) if f]
-    info = {"n_directions": len(dirs), "std_inflation": {n: float(s / o) for n, s, o in zip(names, std[free], old)
-                                                        if o > 0}}
-    return replace(result, covariance=cov, std=std), info
+    names = [n for n, f in zip(result.names, free) if f]
+    return replace(result, covariance=cov, std=std), {
+        "n_directions": n_directions,
+        "std_inflation": {n: float(a / b) for n, a, b in zip(names, std[free], old) if b > 0}}

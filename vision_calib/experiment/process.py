@@ -164,10 +164,8 @@ def _handeye_intrinsics_uncertainty(result, rec, pms, ok, dets, intr, mount, cov
     """Hand-eye result with the uncertainty of intrinsics calibrated from the recording added (re-fit per
     eigen-direction of their covariance, poses re-measured from the detections; see
     ``camera_step.with_intrinsics_uncertainty``); (result, None) when the intrinsics were given."""
-    from dataclasses import replace
-
     from ..identify.handeye_problem import solve_handeye
-    from .camera_step import intrinsics_directions, remeasure
+    from .camera_step import add_covariance, intrinsics_directions, remeasure
 
     dirs = intrinsics_directions(intr, rec.camera)
     if not dirs or result.covariance is None or not dets:
@@ -181,13 +179,7 @@ def _handeye_intrinsics_uncertainty(result, rec, pms, ok, dets, intr, mount, cov
         r2 = solve_handeye(rec.poses[ok], T, mount, pose_cov=cov, labels=labels, scale_cov_by_residual=True)[0]
         dx = (np.asarray(r2.identified) - np.asarray(result.identified))[free]
         C += np.outer(dx, dx)
-    cov2 = np.asarray(result.covariance, float) + C
-    std = np.array(result.std, float)
-    old = std[free].copy()
-    std[free] = np.sqrt(np.diag(cov2))
-    names = [n for n, f in zip(result.names, free) if f]
-    return replace(result, covariance=cov2, std=std), {
-        "n_directions": len(dirs), "std_inflation": {n: float(a / b) for n, a, b in zip(names, std[free], old) if b > 0}}
+    return add_covariance(result, C, len(dirs))
 
 
 __all__ = ["process_folder", "measure_recording"]
