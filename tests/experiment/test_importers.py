@@ -17,6 +17,8 @@ from vision_calib.io.recording import read_recording
 from vision_calib.io.rosi import import_rosi
 from vision_calib.io.visp import import_visp_chessboard
 
+from flange_folder import flange_pose_folder  # noqa: E402 (tests/experiment helper)
+
 REPO = Path(__file__).resolve().parents[2]
 
 
@@ -122,21 +124,10 @@ def test_rosi_export_import_round_trip_processes_identically(tmp_path):
     """simulated recording -> flange poses (nominal forward kinematics) -> export_rosi -> import_rosi ->
     process: the identified hand-eye transforms equal those of the original folder exactly."""
     from vision_calib.experiment.simulate import run_simulation
-    from vision_calib.rig import load_scene
 
     run_simulation(REPO / "scenes" / "rx90_eye_in_hand.yaml", out_dir=tmp_path / "sim", seed=3, n_poses=8, frames=2,
                    export_recording=tmp_path / "rec", workers=1, progress=False, plots=False)
-    rec = read_recording(tmp_path / "rec")
-    setup = load_scene(rec.scene_path).setup
-    T = setup.chain.forward(rec.poses, setup.params.nominal)
-    flange = tmp_path / "flange"
-    shutil.copytree(tmp_path / "rec" / "images", flange / "images")
-    doc = yaml.safe_load((tmp_path / "rec" / "recording.yaml").read_text())
-    doc = {k: v for k, v in doc.items() if k not in ("scene", "scene_name")} | {"poses": "flange_pose"}
-    (flange / "recording.yaml").write_text(yaml.safe_dump(doc))
-    xyz, q = F.xyz_quat_from_T(T)
-    (flange / "poses.csv").write_text("pose_id,x,y,z,qx,qy,qz,qw\n" + "".join(
-        ",".join([pid] + [repr(float(v)) for v in (*a, *b)]) + "\n" for pid, a, b in zip(rec.pose_ids, xyz, q)))
+    flange, _, _ = flange_pose_folder(tmp_path / "rec", tmp_path / "flange")
 
     assert main(["export-rosi", str(flange), str(tmp_path / "rosi")]) == 0
     assert (tmp_path / "rosi" / "cal_data.yaml").is_file()
@@ -238,7 +229,6 @@ def test_visp_chessboard_round_trip_processes_like_the_direct_folder(tmp_path):
     processed: the hand-eye transforms equal those of the same data processed as our own flange-pose
     folder (to rounding of the theta-u conversion)."""
     from vision_calib.experiment.simulate import run_simulation
-    from vision_calib.rig import load_scene
 
     scene = yaml.safe_load((REPO / "scenes" / "rx90_eye_in_hand.yaml").read_text())
     scene["robot"] = str(REPO / "scenes" / "robots" / "rx90.yaml")
@@ -246,10 +236,8 @@ def test_visp_chessboard_round_trip_processes_like_the_direct_folder(tmp_path):
     scene["camera"]["dist"] = [0.0] * 5
     (tmp_path / "scene.yaml").write_text(yaml.safe_dump(scene))
     run_simulation(tmp_path / "scene.yaml", out_dir=tmp_path / "sim", seed=5, n_poses=10, frames=1,
-                         export_recording=tmp_path / "rec", workers=1, progress=False, plots=False)
-    rec = read_recording(tmp_path / "rec")
-    setup = load_scene(rec.scene_path).setup
-    T = setup.chain.forward(rec.poses, setup.params.nominal)  # flange poses as the robot controller reports them
+                   export_recording=tmp_path / "rec", workers=1, progress=False, plots=False)
+    flange, rec, T = flange_pose_folder(tmp_path / "rec", tmp_path / "flange")  # our own folder, same data
     c = rec.camera
     visp = tmp_path / "visp"
     visp.mkdir()
@@ -257,21 +245,10 @@ def test_visp_chessboard_round_trip_processes_like_the_direct_folder(tmp_path):
         f"<root><camera><name>Camera</name><image_width>{c.width}</image_width><image_height>{c.height}"
         f"</image_height><model><type>perspectiveProjWithoutDistortion</type><px>{c.fx!r}</px><py>{c.fy!r}</py>"
         f"<u0>{c.cx!r}</u0><v0>{c.cy!r}</v0></model></camera></root>")
-    flange = tmp_path / "flange"
-    (flange / "images").mkdir(parents=True)
     for i, (pid, Ti) in enumerate(zip(rec.pose_ids, T), start=1):
         v = F.xyz_rotvec_from_T(Ti)
         (visp / f"pose_fPe_{i}.yaml").write_text("rows: 6\ncols: 1\ndata:\n" + "".join(f"  - [{x!r}]\n" for x in map(float, v)))
         shutil.copy(rec.images[pid][0], visp / f"image-{i}.png")
-        (flange / "images" / str(i)).mkdir()
-        shutil.copy(rec.images[pid][0], flange / "images" / str(i) / "00.png")
-    doc = yaml.safe_load((tmp_path / "rec" / "recording.yaml").read_text())
-    doc = {k: v for k, v in doc.items() if k not in ("scene", "scene_name")} | {"poses": "flange_pose",
-                                                                                 "frames_per_pose": 1}
-    (flange / "recording.yaml").write_text(yaml.safe_dump(doc))
-    xyz, q = F.xyz_quat_from_T(T)
-    (flange / "poses.csv").write_text("pose_id,x,y,z,qx,qy,qz,qw\n" + "".join(
-        ",".join([str(i)] + [repr(float(v)) for v in (*a, *b)]) + "\n" for i, (a, b) in enumerate(zip(xyz, q), 1)))
     tgt = yaml.safe_load((REPO / "targets" / "chessboard_a4.yaml").read_text())
     assert main(["import-visp", str(visp), "--out", str(tmp_path / "back"), "--chessboard",
                  f"{tgt['cols'] - 1}x{tgt['rows'] - 1}", "--square-m", str(tgt["square_m"])]) == 0

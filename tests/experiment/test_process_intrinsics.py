@@ -111,21 +111,9 @@ def test_handeye_process_without_intrinsics_carries_their_uncertainty(recording,
     """Flange-pose folder (hand-eye path) of the same images: without intrinsics the camera is calibrated
     from them and the hand-eye transforms' std include the intrinsics' uncertainty (re-fit per eigen-
     direction): larger than with the true intrinsics, and the two results agree within the combined std."""
-    from vision_calib import frames as F
-    from vision_calib.io.recording import read_recording
-    from vision_calib.rig import load_scene
+    from flange_folder import flange_pose_folder  # tests/experiment helper
 
-    rec = read_recording(recording / "rec")
-    setup = load_scene(rec.scene_path).setup
-    T = setup.chain.forward(rec.poses, setup.params.nominal)
-    flange = tmp_path / "flange"
-    shutil.copytree(recording / "rec" / "images", flange / "images")
-    doc = yaml.safe_load((recording / "rec" / "recording.yaml").read_text())
-    doc = {k: v for k, v in doc.items() if k not in ("scene", "scene_name")} | {"poses": "flange_pose"}
-    (flange / "recording.yaml").write_text(yaml.safe_dump(doc))
-    xyz, q = F.xyz_quat_from_T(T)
-    (flange / "poses.csv").write_text("pose_id,x,y,z,qx,qy,qz,qw\n" + "".join(
-        ",".join([pid] + [repr(float(v)) for v in (*a, *b)]) + "\n" for pid, a, b in zip(rec.pose_ids, xyz, q)))
+    flange, _, _ = flange_pose_folder(recording / "rec", tmp_path / "flange")
     ref = process_folder(flange, tmp_path / "ref", plots=False)
     _edit_camera(flange, tmp_path / "nointr", width=1024)
     out = process_folder(tmp_path / "nointr", tmp_path / "out", plots=False)

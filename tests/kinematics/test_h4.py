@@ -22,6 +22,8 @@ from vision_calib.kinematics.h4 import (
 )
 from vision_calib.frames import rot_x, rot_z
 
+from kin_helpers import fd  # tests/kinematics helper
+
 SCENE = Path(__file__).resolve().parents[2] / "scenes" / "robots" / "h4.yaml"
 
 
@@ -38,16 +40,6 @@ def r31(r12):
 def perturbed(robot, rng, k=3.0):
     """Random full parameter vector: nominal + k * scale * N(0, 1) (a few mm / mrad)."""
     return robot.params.nominal + k * robot.params.scale * rng.standard_normal(len(robot.params))
-
-
-def fd(fun, x, eps=1e-6):
-    """Central finite differences of fun (x (n,) -> array) -> (..., n)."""
-    cols = []
-    for k in range(len(x)):
-        e = np.zeros(len(x))
-        e[k] = eps
-        cols.append((fun(x + e) - fun(x - e)) / (2 * eps))
-    return np.stack(cols, -1)
 
 
 # ----------------------------------------------------------------------------- workspace / loading

@@ -15,6 +15,8 @@ from vision_calib.kinematics.h4 import TILT_NAMES, load_h4_robot
 from vision_calib.kinematics.h4_variants import with_tilt_params, without_tilt_params
 from vision_calib.rig import load_scene
 
+from kin_helpers import fd  # tests/kinematics helper
+
 ROOT = Path(__file__).resolve().parents[2]
 ROBOT = ROOT / "scenes" / "robots" / "h4.yaml"
 TILTS = [0.006, -0.008, 0.005, 0.009]  # rad, ~0.3-0.5 deg
@@ -23,15 +25,6 @@ TILTS = [0.006, -0.008, 0.005, 0.009]  # rad, ~0.3-0.5 deg
 @pytest.fixture(scope="module")
 def r12():
     return load_h4_robot(ROBOT)
-
-
-def fd(fun, x, eps=1e-7):
-    cols = []
-    for k in range(len(x)):
-        e = np.zeros(len(x))
-        e[k] = eps
-        cols.append((fun(x + e) - fun(x - e)) / (2 * eps))
-    return np.stack(cols, -1)
 
 
 @pytest.mark.parametrize("model", ["12", "31"])
@@ -43,7 +36,7 @@ def test_tilt_jacobian_columns_match_finite_differences(r12, model):
     x = r.params.nominal + 2e-3 * rng.standard_normal(len(r.params))
     T = perturb_pose(r.camera_measurement(X, x), 1e-3 * rng.standard_normal((len(X), 6)))
     J = r.igm_from_camera_jacobian(T, x)
-    Jn = fd(lambda y: r.igm_from_camera(T, y), x)
+    Jn = fd(lambda y: r.igm_from_camera(T, y), x, eps=1e-7)
     np.testing.assert_allclose(J, Jn, atol=2e-7 * np.abs(Jn).max())
     tilt_cols = J[:, :, -4:]
     # the camera tilt moves the measured positions (lever ~0.65 m); the target tilt only the yaw, 2nd order
