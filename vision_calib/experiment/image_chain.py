@@ -123,18 +123,14 @@ def _worker_pose(job):
     """Render, add effects, (optionally) write PNGs, measure one pose -> (index, PoseMeasurement, timings):
     only the small measurement goes back to the main process, never the frames; timings are CPU seconds."""
     from ..measure import MeasureConfig, measure_images
-    from ..sensor import apply_effects
+    from ..sensor import apply_effects, effects_for_render
 
     i, pose_id, T_cam_target, effects, n_frames, seed, averaging, image_dir = job
     clock = time.process_time  # this single-threaded worker's CPU time: not inflated by machine load
     t0 = clock()
     ideal = _W["renderer"].render(T_cam_target)
     t1 = clock()
-    if _W["renderer"].last_distorted:
-        from dataclasses import replace
-
-        effects = replace(effects, apply_distortion=False)
-    frames = apply_effects(ideal, effects, n_frames, seed, _W["intr"])  # OpenCV on the CPU: no torch
+    frames = apply_effects(ideal, effects_for_render(_W["renderer"], effects), n_frames, seed, _W["intr"])  # OpenCV on the CPU: no torch
     t2 = clock()
     if image_dir is not None:
         import cv2

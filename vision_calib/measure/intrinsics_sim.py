@@ -51,25 +51,17 @@ def render_views(target, intr: CameraIntrinsics, T_cam_targets, seed: int, effec
                  exact_distortion: bool = True) -> list[np.ndarray]:
     """One uint8 (H, W) image per pose, noise seeded by (seed, view index). effects: ``SensorEffects()``
     defaults unless given (blur 0.6 px, photon + read noise). exact_distortion (default): the distortion
-    of ``intr`` drawn geometrically (``PolygonRenderer(distort=True)``, exact pixel areas), then blur and noise;
+    of ``intr`` drawn geometrically (``TargetRenderer(distort=True)``, exact pixel areas), then blur and noise;
     False: ideal pinhole render (CPU polygon backend) resampled by the sensor stage (bilinear, see
     README "Camera calibration" for the corner bias this adds)."""
-    from dataclasses import replace
-
     from ..render import TargetRenderer
-    from ..sensor import SensorEffects, apply_effects
+    from ..sensor import SensorEffects, apply_effects, effects_for_render
 
     effects = effects or SensorEffects()
+    r = TargetRenderer(target, intr, backend="polygon", distort=exact_distortion and effects.apply_distortion)
     images = []
-    if exact_distortion and effects.apply_distortion and any(intr.dist):
-        from ..render.coverage import PolygonRenderer
-
-        r = PolygonRenderer(target, intr, 128.0, 200.0, distort=True)
-        effects = replace(effects, apply_distortion=False)
-    else:
-        r = TargetRenderer(target, intr.without_distortion(), backend="polygon")
     for i, T in enumerate(T_cam_targets):
         ideal = r.render(T)
         s = int(np.random.default_rng([seed, 7, i]).integers(2**31 - 1))
-        images.append(apply_effects(ideal, effects, 1, s, intr)[0])
+        images.append(apply_effects(ideal, effects_for_render(r, effects), 1, s, intr)[0])
     return images

@@ -15,7 +15,7 @@ from ..errors import ConfigError, DataError
 from .maps import distortion_source_map
 from .settings import SensorEffects
 
-__all__ = ["SensorEffects", "apply_effects", "deterministic_image", "distortion_source_map", "ideal_render_grid",
+__all__ = ["SensorEffects", "apply_effects", "deterministic_image", "distortion_source_map", "effects_for_render", "ideal_render_grid",
            "supersampled_intrinsics"]
 
 
@@ -43,6 +43,17 @@ def ideal_render_grid(intr: CameraIntrinsics, supersample: int) -> tuple:
     if s > 1 and any(intr.dist):
         return supersampled_intrinsics(intr, s).without_distortion(), 1
     return intr.without_distortion(), s
+
+
+def effects_for_render(renderer, effects: SensorEffects) -> SensorEffects:
+    """``effects`` for the image the ``renderer`` (render.TargetRenderer) drew last: without the lens
+    distortion when that image already holds it (``TargetRenderer(distort=True)``, polygon backend), else
+    unchanged (the sensor stage then applies it)."""
+    if getattr(renderer, "last_distorted", False) and effects.apply_distortion:
+        from dataclasses import replace
+
+        return replace(effects, apply_distortion=False)
+    return effects
 
 
 def _coarse_ideal(ideal: np.ndarray, effects: SensorEffects, intr: CameraIntrinsics, s: int) -> np.ndarray:
