@@ -72,3 +72,38 @@ def test_remap_exact_is_bilinear_at_the_source_map():
         assert out.dtype == np.float32 and out.shape == (INTR.height, INTR.width)
         # bilinear of x*y in one cell is exact too: the cell's corner values span it
         np.testing.assert_allclose(out, f(su, sv), atol=5e-6 * np.abs(f(u, v)).max())  # 1/32 px: ~1e-4
+
+
+@pytest.mark.parametrize("photon_model", ["gaussian", "poisson"])
+def test_focused_frames_have_full_statistics_on_the_focus(photon_model):
+    """PoseFrames.focus(mask): on the mask, the same per-pixel mean and variance as full frames; elsewhere the
+    rounded noise-free mean; a full frame k equals apply_effects' frame k; frames do not depend on what else
+    draws from OpenCV's RNG in between (the measurement runs between two lazy draws)."""
+    import cv2
+
+    from vision_calib.sensor import pose_frames
+
+    intr = CameraIntrinsics(256, 64, 200.0, 200.0, 127.5, 31.5)
+    ideal = np.tile(np.linspace(10, 240, 256, dtype=np.float32), (64, 1))
+    eff = SensorEffects(apply_distortion=False, blur_sigma_px=0.0, full_well_e=5000.0, read_noise_grey=1.5,
+                        photon_model=photon_model)
+    n = 200
+    full = apply_effects(ideal, eff, n, seed=4, intrinsics=intr)
+    pf = pose_frames(ideal, eff, n, 4, intr)
+    mask = np.zeros((64, 256), bool)
+    mask[10:30, ::3] = True
+    pf.focus(mask)
+    focused = np.empty_like(full)
+    for k in range(n):
+        focused[k] = pf.frame(k)
+        cv2.randn(np.empty((5, 5), np.float32), 0.0, 1.0)  # someone else's draw in between
+    np.testing.assert_array_equal(pf.frame(3, full=True), full[3])
+    mean8 = pose_frames(ideal, SensorEffects(apply_distortion=False, blur_sigma_px=0.0, full_well_e=0.0,
+                                             read_noise_grey=0.0), 1, 0, intr).frame(0)
+    assert np.all(focused[:, ~mask] == mean8[~mask])
+    a, b = full[:, mask].astype(float), focused[:, mask].astype(float)
+    assert abs(a.mean() - b.mean()) < 0.05
+    assert b.var(axis=0).mean() == pytest.approx(a.var(axis=0).mean(), rel=0.05)
+    assert not np.array_equal(focused[0][mask], focused[1][mask])
+    pf.focus(None)
+    np.testing.assert_array_equal(pf.frame(7), full[7])

@@ -123,18 +123,22 @@ def _worker_pose(job):
     """Render, add effects, (optionally) write PNGs, measure one pose -> (index, PoseMeasurement, timings):
     only the small measurement goes back to the main process, never the frames; timings are CPU seconds."""
     from ..measure import MeasureConfig, measure_images
-    from ..sensor import apply_effects, effects_for_render
+    from ..sensor import effects_for_render, pose_frames
 
     i, pose_id, T_cam_target, effects, n_frames, seed, averaging, image_dir = job
     clock = time.process_time  # this single-threaded worker's CPU time: not inflated by machine load
     t0 = clock()
     ideal = _W["renderer"].render(T_cam_target)
     t1 = clock()
-    frames = apply_effects(ideal, effects_for_render(_W["renderer"], effects), n_frames, seed, _W["intr"])  # OpenCV on the CPU: no torch
+    # OpenCV on the CPU, no torch. Frames drawn on demand: the seeded measurement asks for noise only on the
+    # pixels it reads in the frames after the first (sensor.cpu.PoseFrames); written frames are drawn in full
+    frames = pose_frames(ideal, effects_for_render(_W["renderer"], effects), n_frames, seed, _W["intr"])
     t2 = clock()
     if image_dir is not None:
         import cv2
 
+        frames = frames.stack()
+        t2 = clock()
         d = Path(image_dir) / str(pose_id)
         d.mkdir(parents=True, exist_ok=True)
         for k, fr in enumerate(frames):
@@ -146,7 +150,9 @@ def _worker_pose(job):
     import resource
 
     rss_mib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # Linux: KiB
-    return i, pm, {"render": t1 - t0, "effects": t2 - t1, "write": t3 - t2, "measure": t4 - t3, "rss_mib": rss_mib}
+    drawn = 0.0 if image_dir is not None else frames.draw_cpu_s  # frames drawn while measuring: effects
+    return i, pm, {"render": t1 - t0, "effects": t2 - t1 + drawn, "write": t3 - t2, "measure": t4 - t3 - drawn,
+                   "rss_mib": rss_mib}
 
 
 def _worker_pid(_=None) -> int:

@@ -14,6 +14,10 @@ Validity per frame: the frame's 1/8-scale image must correlate with the seed's (
 seed; else the frame gets a full detection (diagnostics "fallback": why). A full detection replaces the
 seed while the seed has not yet been confirmed by a refined frame (so a first frame from another view
 costs one extra detection, not N).
+Frames drawn on demand (``sensor.pose_frames``, the simulated image chain): once a seed is set, the
+later frames are asked for noise only on the pixels the per-frame estimator reads (``_Refiner.read_mask``);
+the other pixels hold the noise-free mean, so the 1/8-scale view check sees a slightly cleaner image than a
+full frame (it is a gate, not an estimate); a frame that falls back to a full detection is drawn in full.
 Diagnostics per frame: "batch" ("seeded" | "full"); seeded frames add "seed_frame", "view_ncc",
 "max_shift_px" and the seed's "n_markers"/"marker_ids".
 """
@@ -28,7 +32,7 @@ import numpy as np
 
 from ..camera import CameraIntrinsics
 from .detect import DetectConfig, Detection, _detect_gray, _load_checked, _subpix, detect
-from .tag_edges import refine_quads
+from .tag_edges import read_mask, refine_quads
 
 #: downscale factor of the image used for the same-view check
 SMALL = 8
@@ -79,6 +83,20 @@ class _Refiner:
             ok &= ok_p
         return ids, q.reshape(-1, 2), np.repeat(ok, 4)
 
+    def read_mask(self, uv, shape, max_shift_px: float) -> np.ndarray:
+        """(H, W) bool: every pixel :meth:`refine` reads when started from the seed corners uv (N, 2).
+        ``cv2.cornerSubPix`` samples a (2 win + 3)^2 patch bilinearly around its current estimate, which stays
+        within ``max_shift_px`` of the seed in an accepted frame (+2 px for the iterations in between); the
+        edge fits read fixed profiles across the seed quads' sides (:func:`.tag_edges.read_mask`)."""
+        if self.mode == "tag_edges":
+            return read_mask(uv, self.cells, shape)
+        mask = np.zeros(shape, dtype=bool)
+        r = self.win + 2 + int(np.ceil(max_shift_px)) + 2
+        h, w = shape
+        for x, y in np.round(np.asarray(uv, dtype=np.float64).reshape(-1, 2)).astype(int):
+            mask[max(0, y - r):max(0, y + r + 1), max(0, x - r):max(0, x + r + 1)] = True
+        return mask
+
     def full_post(self, img, ids, uv):
         """Refinement of a fully detected frame (AprilTag grids: markers that cannot be refined are dropped)."""
         ids, uv, ok = self.refine(img, ids, uv, passes=2)
@@ -116,6 +134,7 @@ def detect_seeded(images, target, intrinsics: CameraIntrinsics | None, config: D
     ref = _Refiner(target, intrinsics, config, mode)
     full_cfg = config.seed_config()
     post = ref.full_post if mode == "tag_edges" else None
+    focus = getattr(images, "focus", None)  # frames drawn on demand (sensor.pose_frames): noise where we read
     seed, out = None, []
     for i, im in enumerate(images):
         t0 = time.perf_counter()
@@ -130,11 +149,15 @@ def detect_seeded(images, target, intrinsics: CameraIntrinsics | None, config: D
                 seed.confirmed = True
                 out.append(d)
                 continue
+            if focus is not None:  # a full detection reads the whole frame: draw all of it
+                img = images.frame(i, full=True)
         d = _detect_gray(img, size, source, target, i, full_cfg, t0, post=post, intrinsics=intrinsics)
         d.diagnostics["batch"] = "full"
         if why:
             d.diagnostics["fallback"] = why
         if d.valid and (seed is None or not seed.confirmed):
             seed = _Seed(i, _small(img), d.ids, d.uv_px, d.diagnostics)
+            if focus is not None:
+                focus(ref.read_mask(seed.uv, img.shape, config.max_shift_px))
         out.append(d)
     return out

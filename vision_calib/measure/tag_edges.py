@@ -57,8 +57,9 @@ def _distort(uv: np.ndarray, intr: CameraIntrinsics | None) -> np.ndarray:
     return intr.project(p).reshape(uv.shape)
 
 
-def _edge_points(img: np.ndarray, quads: np.ndarray, cells: int):
-    """Edge points per side: (M, 4, S, 2) px, their validity (M, 4, S) and per-side validity (M, 4) bool."""
+def _profiles(quads: np.ndarray, cells: int):
+    """Sampling geometry of the sides of (M, 4, 2) quads: profile centres base (M, 4, S, 2), sample points
+    pts (M, 4, S, P, 2), offsets along the normal offs (P,), unit normals n (M, 4, 2), half-width h [px]."""
     a = quads
     b = np.roll(quads, -1, axis=1)
     length = np.linalg.norm(b - a, axis=2)  # (M, 4)
@@ -71,6 +72,28 @@ def _edge_points(img: np.ndarray, quads: np.ndarray, cells: int):
     s = np.linspace(0.15, 0.85, n_s)
     base = a[:, :, None, :] + (s[None, None, :, None] * length[..., None, None]) * t[:, :, None, :]  # (M,4,S,2)
     pts = base[:, :, :, None, :] + offs[None, None, None, :, None] * n[:, :, None, None, :]  # (M,4,S,P,2)
+    return base, pts, offs, n, h
+
+
+def read_mask(quads: np.ndarray, cells: int, shape: tuple[int, int]) -> np.ndarray:
+    """(H, W) bool: every pixel :func:`refine_quads` (one pass) reads to refine ``quads`` (M, 4, 2)."""
+    quads = np.asarray(quads, dtype=np.float64).reshape(-1, 4, 2)
+    mask = np.zeros(shape, dtype=bool)
+    if len(quads) == 0:
+        return mask
+    pts = _profiles(quads, cells)[1]
+    h, w = shape
+    x0 = np.floor(np.clip(pts[..., 0], 0.0, w - 1.000001)).astype(np.intp).reshape(-1)
+    y0 = np.floor(np.clip(pts[..., 1], 0.0, h - 1.000001)).astype(np.intp).reshape(-1)
+    for dy in (0, 1):
+        for dx in (0, 1):
+            mask[y0 + dy, x0 + dx] = True
+    return mask
+
+
+def _edge_points(img: np.ndarray, quads: np.ndarray, cells: int):
+    """Edge points per side: (M, 4, S, 2) px, their validity (M, 4, S) and per-side validity (M, 4) bool."""
+    base, pts, offs, n, h = _profiles(quads, cells)
     prof = _bilinear(img, pts[..., 0], pts[..., 1])  # (M,4,S,P)
     # grey levels on either side, per profile (the dark or bright level may vary along a side: glare, shading)
     lo = prof[..., :N_LEVEL].mean(axis=-1)  # (M,4,S), -n side

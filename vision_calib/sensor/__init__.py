@@ -81,25 +81,43 @@ def apply_effects(ideal, effects: SensorEffects, n_frames: int, seed: int, intri
     (same statistics, different draws than the CPU path for the same seed).
     Returns (n_frames, H, W) uint8 numpy array.
     """
+    if device is None and isinstance(ideal, np.ndarray):
+        return pose_frames(ideal, effects, n_frames, seed, intrinsics).stack()
     if n_frames < 1:
         raise ConfigError(f"apply_effects: n_frames must be >= 1, got {n_frames}")
+    if isinstance(ideal, np.ndarray):
+        ideal, effects = _coarse_checked(ideal, effects, intrinsics)
+    from .effects import apply_effects_torch
+
+    return apply_effects_torch(ideal, effects, n_frames, seed, intrinsics, device)
+
+
+def pose_frames(ideal: np.ndarray, effects: SensorEffects, n_frames: int, seed: int, intrinsics: CameraIntrinsics):
+    """The frames of :func:`apply_effects` (CPU path, numpy ``ideal`` of the same shapes), drawn one at a time
+    when asked: a :class:`.cpu.PoseFrames` (sequence of (H, W) uint8 frames; ``focus(mask)`` restricts the
+    noise of later frames to the pixels a consumer reads). Same frames as apply_effects for the same seed."""
+    if n_frames < 1:
+        raise ConfigError(f"apply_effects: n_frames must be >= 1, got {n_frames}")
+    ideal, effects = _coarse_checked(ideal, effects, intrinsics)
+    from .cpu import PoseFrames
+
+    return PoseFrames(ideal, effects, int(n_frames), seed, intrinsics)
+
+
+def _coarse_checked(ideal: np.ndarray, effects: SensorEffects, intrinsics: CameraIntrinsics):
+    """(ideal (H, W), effects): a supersampled render box-averaged (distortion applied on the fine grid);
+    DataError for any other shape than (H, W) or an integer multiple of it."""
     H, W = intrinsics.height, intrinsics.width
-    if isinstance(ideal, np.ndarray) and ideal.ndim == 2 and ideal.shape != (H, W) and ideal.shape[0] % H == 0 \
+    if ideal.ndim == 2 and ideal.shape != (H, W) and ideal.shape[0] % H == 0 \
             and ideal.shape[0] // H >= 2 and ideal.shape == (ideal.shape[0] // H * H, ideal.shape[0] // H * W):
         from dataclasses import replace
 
         ideal = _coarse_ideal(ideal, effects, intrinsics, ideal.shape[0] // H)
         effects = replace(effects, apply_distortion=False)
-    if device is None and isinstance(ideal, np.ndarray):
-        if ideal.shape != (intrinsics.height, intrinsics.width):
-            raise DataError(f"apply_effects: ideal image shape {tuple(ideal.shape)} does not match the intrinsics "
-                            f"(H, W) = ({intrinsics.height}, {intrinsics.width}) or an integer multiple of it")
-        from .cpu import apply_effects_cv
-
-        return apply_effects_cv(ideal, effects, int(n_frames), seed, intrinsics)
-    from .effects import apply_effects_torch
-
-    return apply_effects_torch(ideal, effects, n_frames, seed, intrinsics, device)
+    if ideal.shape != (H, W):
+        raise DataError(f"apply_effects: ideal image shape {tuple(ideal.shape)} does not match the intrinsics "
+                        f"(H, W) = ({H}, {W}) or an integer multiple of it")
+    return ideal, effects
 
 
 def __getattr__(name):  # torch-only helpers, imported on first use

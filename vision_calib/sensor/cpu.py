@@ -14,14 +14,16 @@ whose docstring describes the pipeline), built for one core:
   draws are the cost floor of this stage (~3.2 ms of CPU of the ~4.6 ms per 1024 x 768 frame, see
   ``benchmarks/bench_end_to_end.py``); everything else is computed once per pose, in place.
 
-Random draws: OpenCV's RNG (multiply-with-carry; normal deviates by the ziggurat method), seeded with
-the caller's seed through ``cv2.setRNGSeed`` (a per-thread state): the same seed gives the same frames.
+Random draws: OpenCV's RNG (multiply-with-carry; normal deviates by the ziggurat method), seeded per frame
+from the caller's seed through ``cv2.setRNGSeed`` (a per-thread state): the same seed gives the same frames.
 They are *not* the same draws as the torch path for that seed, only the same distribution (tests compare
 noise variance against signal, blur MTF and distortion with the analytic model). ``photon_model="poisson"``
 draws from a ``numpy.random.Generator`` seeded with the same seed.
 """
 
 from __future__ import annotations
+
+import time
 
 import cv2
 import numpy as np
@@ -58,41 +60,125 @@ def deterministic_image_cv(ideal: np.ndarray, effects: SensorEffects, intr: Came
     return np.multiply(x, np.float32(effects.exposure * fw / 255.0), dtype=np.float32)
 
 
+def _frame_seed(seed: int, k: int) -> int:
+    """OpenCV RNG seed of frame k of a pose drawn with the user seed ``seed``: each frame is seeded on its
+    own, so a frame is the same whatever runs between the draws (the measurement, lazily) or in which order."""
+    return (int(seed) * 1_000_003 + 7919 * int(k) + 1) & 0x7FFFFFFF
+
+
+class PoseFrames:
+    """The ``n_frames`` independent frames of one pose, drawn one at a time when asked (iteration or
+    :meth:`frame`); the noise-free mean and the per-pixel noise std are computed once per pose.
+
+    :meth:`focus` (bool mask (H, W)) restricts the noise of the frames drawn afterwards to the masked
+    pixels; the other pixels then hold the rounded noise-free mean. A consumer that reads only masked
+    pixels sees exactly the statistics of full frames (the seeded refinement of ``measure/seeded.py``
+    names the pixels its per-frame estimator reads and asks for them: a few percent of the frame, so a
+    pose costs one full draw instead of ``n_frames``). :meth:`frame` (k, full=True) draws a full frame again
+    (a frame that falls back to a full detection). Frames drawn for writing to disk are always full.
+    Sequence of (H, W) uint8 arrays; ``len()`` is n_frames; :meth:`stack` -> (n_frames, H, W) uint8."""
+
+    def __init__(self, ideal: np.ndarray, effects: SensorEffects, n_frames: int, seed: int, intr: CameraIntrinsics):
+        e = deterministic_image_cv(ideal, effects, intr)  # electrons
+        fw = effects.full_well_e if effects.full_well_e > 0 else 255.0
+        self.n_frames, self.seed, self.effects = int(n_frames), int(seed), effects
+        self.grey_per_e = effects.gain * 255.0 / fw
+        self.shape = e.shape
+        self.draw_cpu_s = 0.0
+        self._focus = None  # flat indices of the pixels that get noise, or None: every pixel
+        self._mean8 = None
+        if effects.full_well_e > 0 and effects.photon_model == "poisson":
+            self.kind = "poisson"
+            self.lam = np.maximum(e, 0.0).astype(np.float64)
+            return
+        self.kind = "normal" if effects.full_well_e > 0 or effects.read_noise_grey > 0 else "none"
+        self.mean = cv2.addWeighted(e, self.grey_per_e, e, 0.0, float(effects.black_level_grey))  # grey levels
+        if self.kind == "none":
+            return
+        std = e  # the electrons are no longer needed: std computed in place (grey levels)
+        if effects.full_well_e > 0:
+            np.maximum(std, 0.0, out=std)
+            np.multiply(std, np.float32(self.grey_per_e ** 2), out=std)
+        else:
+            std.fill(0.0)
+        if effects.read_noise_grey > 0:
+            np.add(std, np.float32(float(effects.read_noise_grey) ** 2), out=std)
+        np.sqrt(std, out=std)
+        self.std = std
+
+    def __len__(self) -> int:
+        return self.n_frames
+
+    def __iter__(self):
+        for k in range(self.n_frames):
+            yield self.frame(k)
+
+    def focus(self, mask: np.ndarray | None) -> None:
+        """Draw the noise of later frames only on ``mask`` (H, W) bool (None: everywhere again)."""
+        if mask is None:
+            self._focus = None
+            return
+        mask = np.asarray(mask, dtype=bool)
+        if mask.shape != self.shape:
+            raise ValueError(f"PoseFrames.focus: mask shape {mask.shape} != frame shape {self.shape}")
+        self._focus = np.flatnonzero(mask)
+
+    def _mean_frame(self) -> np.ndarray:
+        if self._mean8 is None:
+            mean = self.mean if self.kind != "poisson" else np.float32(self.grey_per_e) * self.lam.astype(np.float32)
+            self._mean8 = cv2.add(mean, 0.0 if self.kind != "poisson" else float(self.effects.black_level_grey),
+                                  dtype=cv2.CV_8U)
+        return self._mean8
+
+    def frame(self, k: int, full: bool = False) -> np.ndarray:
+        """Frame k (H, W) uint8: noise everywhere when ``full`` or no focus is set, else on the focus only.
+        ``draw_cpu_s`` accumulates the CPU seconds spent drawing frames."""
+        t = time.process_time()
+        try:
+            return self._draw(int(k), full)
+        finally:
+            self.draw_cpu_s += time.process_time() - t
+
+    def _draw(self, k: int, full: bool) -> np.ndarray:
+        if not 0 <= k < self.n_frames:
+            raise IndexError(f"frame {k} of {self.n_frames}")
+        if self.kind == "none":
+            return self._mean_frame().copy()
+        idx = None if full else self._focus
+        if self.kind == "poisson":
+            rng = np.random.default_rng([self.seed, k])
+            lam = self.lam if idx is None else self.lam.reshape(-1)[idx]
+            grey = rng.poisson(lam).astype(np.float32) * np.float32(self.grey_per_e)
+            if self.effects.read_noise_grey > 0:
+                grey += np.float32(self.effects.read_noise_grey) * rng.standard_normal(grey.shape, dtype=np.float32)
+            vals = cv2.add(grey, float(self.effects.black_level_grey), dtype=cv2.CV_8U)
+        else:
+            cv2.setRNGSeed(_frame_seed(self.seed, k))
+            if idx is None:  # one draw, scaled in place; add + round + saturate in one pass
+                z = np.empty(self.shape, np.float32)
+                cv2.randn(z, 0.0, 1.0)
+                cv2.multiply(z, self.std, dst=z)
+                return cv2.add(z, self.mean, dtype=cv2.CV_8U)
+            z = np.empty((len(idx), 1), np.float32)
+            cv2.randn(z, 0.0, 1.0)
+            z *= self.std.reshape(-1)[idx, None]
+            vals = cv2.add(z, self.mean.reshape(-1)[idx, None], dtype=cv2.CV_8U)
+        if idx is None:
+            return vals.reshape(self.shape)
+        out = self._mean_frame().copy()
+        out.reshape(-1)[idx] = vals.reshape(-1)
+        return out
+
+    def stack(self) -> np.ndarray:
+        """Every frame, full: (n_frames, H, W) uint8."""
+        out = np.empty((self.n_frames,) + self.shape, np.uint8)
+        for k in range(self.n_frames):
+            out[k] = self.frame(k, full=True)
+        return out
+
+
 def apply_effects_cv(ideal: np.ndarray, effects: SensorEffects, n_frames: int, seed: int,
                      intr: CameraIntrinsics) -> np.ndarray:
     """``n_frames`` independent frames (n_frames, H, W) uint8 of one pose from its ideal render (H, W)
     [grey 0..255]; shapes are checked by the caller (:func:`vision_calib.sensor.apply_effects`)."""
-    e = deterministic_image_cv(ideal, effects, intr)  # electrons
-    fw = effects.full_well_e if effects.full_well_e > 0 else 255.0
-    grey_per_e = effects.gain * 255.0 / fw
-    out = np.empty((n_frames,) + e.shape, np.uint8)
-    if effects.full_well_e > 0 and effects.photon_model == "poisson":
-        rng = np.random.default_rng(int(seed))
-        lam = np.maximum(e, 0.0).astype(np.float64)
-        for k in range(n_frames):
-            grey = rng.poisson(lam).astype(np.float32) * np.float32(grey_per_e)
-            if effects.read_noise_grey > 0:
-                grey += np.float32(effects.read_noise_grey) * rng.standard_normal(e.shape, dtype=np.float32)
-            out[k] = cv2.add(grey, float(effects.black_level_grey), dtype=cv2.CV_8U)
-        return out
-    noisy = effects.full_well_e > 0 or effects.read_noise_grey > 0
-    mean = cv2.addWeighted(e, grey_per_e, e, 0.0, float(effects.black_level_grey))  # grey levels
-    if not noisy:
-        out[:] = cv2.add(mean, 0.0, dtype=cv2.CV_8U)
-        return out
-    std = e  # the electrons are no longer needed: std computed in place (grey levels)
-    if effects.full_well_e > 0:
-        np.maximum(std, 0.0, out=std)
-        np.multiply(std, np.float32(grey_per_e ** 2), out=std)
-    else:
-        std.fill(0.0)
-    if effects.read_noise_grey > 0:
-        np.add(std, np.float32(float(effects.read_noise_grey) ** 2), out=std)
-    np.sqrt(std, out=std)
-    z = np.empty_like(std)
-    cv2.setRNGSeed(int(seed) & 0x7FFFFFFF)
-    for k in range(n_frames):  # one draw per frame, scaled in place; add + round + saturate in one pass
-        cv2.randn(z, 0.0, 1.0)
-        cv2.multiply(z, std, dst=z)
-        cv2.add(z, mean, dst=out[k], dtype=cv2.CV_8U)
-    return out
+    return PoseFrames(ideal, effects, n_frames, seed, intr).stack()
