@@ -294,22 +294,24 @@ def write_report(out_dir, report: dict, setup=None, result=None, problem=None, e
 
 
 def _write_plots(out: Path, report: dict, setup, result, problem, evaluations) -> dict:
-    from .plots import plot_error_map, plot_parameters, plot_residuals
+    from .plots import draw_all, plot_error_map, plot_parameters, plot_residuals
 
-    files = {}
-    plot_residuals(out / "residuals.png", problem.residual(setup.params.nominal), result.residuals,
-                   problem.residual_kind)
+    jobs, files = [], {}
+    jobs.append((plot_residuals, (out / "residuals.png", problem.residual(setup.params.nominal), result.residuals,
+                                  problem.residual_kind)))
     files["residuals_plot"] = "residuals.png"
     free, ps = result.free, setup.params
     true = {p["name"]: p["true"] for p in report.get("parameters", [])}
     x_true = np.array([np.nan if true.get(n) is None else true[n] for n in ps.names])
-    plot_parameters(out / "parameters.png", [n for n, f in zip(ps.names, free) if f], ps.nominal[free],
-                    result.identified[free], result.std[free],
-                    None if not np.isfinite(x_true[free]).any() else x_true[free],
-                    [k for k, f in zip(ps.kinds, free) if f])
+    jobs.append((plot_parameters, (out / "parameters.png", [n for n, f in zip(ps.names, free) if f],
+                                   ps.nominal[free], result.identified[free], result.std[free],
+                                   None if not np.isfinite(x_true[free]).any() else x_true[free],
+                                   [k for k, f in zip(ps.kinds, free) if f])))
     files["parameters_plot"] = "parameters.png"
     if evaluations:
         b, a = evaluations["before"], evaluations["after"]
-        plot_error_map(out / "error_map.png", b.positions_m, b.position_errors_mm, a.position_errors_mm)
+        jobs.append((plot_error_map, (out / "error_map.png", b.positions_m, b.position_errors_mm,
+                                      a.position_errors_mm)))
         files["error_map_plot"] = "error_map.png"
+    draw_all(jobs)
     return files
