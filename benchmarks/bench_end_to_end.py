@@ -14,7 +14,10 @@ Per stage, the chain's CPU time (``time.process_time`` in the single-threaded wo
 beside a floor measured in the same run as CPU time, one process, one thread (issue 11): render vs
 ``cv2.warpPerspective`` of the board texture at 2x + area average; effects (10 frames) vs ``cv2.remap`` +
 ``cv2.GaussianBlur`` + 10 ``cv2.randn`` + 10 ``cv2.add`` to uint8; measure (per frame) vs raw
-``detectBoard`` + ``solvePnP``. CPU times are robust to other load on the machine; wall times and frames/s
+``detectBoard`` + ``solvePnP``. The chain's effects stage draws the first frame of a pose in full and, for the
+other frames, only the noise on the pixels the seeded corner refinement reads (``sensor.cpu.PoseFrames``;
+its draws during the measurement are counted under effects), so it can be well below that floor of 10 full
+frames; the per-frame measure time includes the pose's one full detection. CPU times are robust to other load on the machine; wall times and frames/s
 are not: the load average is printed with them.
 """
 
