@@ -195,3 +195,28 @@ def test_frames_drawn_on_demand_measure_like_full_frames(charuco):
     b0, s0 = _corner_stats(charuco, runs["full"])
     b1, s1 = _corner_stats(charuco, runs["lazy"])
     assert abs(b1 - b0) < 0.01 and abs(s1 - s0) < 0.1 * s0, (b0, b1, s0, s1)
+
+
+def test_a_frame_that_falls_back_is_drawn_in_full(charuco, monkeypatch):
+    """With frames drawn on demand, a frame whose seeded refinement is refused gets its full detection on a
+    frame drawn in full (not on the masked one), and the later frames are focused on the new seed."""
+    from vision_calib.measure import seeded
+    from vision_calib.sensor import pose_frames
+
+    T = random_pose(np.random.default_rng(13), charuco)
+    pf = pose_frames(warp_view(charuco, DIST_INTR.without_distortion(), T), SensorEffects(read_noise_grey=2.0),
+                     4, 5, DIST_INTR)
+    calls, foci = [], []
+    frame, focus = pf.frame, pf.focus
+    monkeypatch.setattr(pf, "frame", lambda k, full=False: calls.append((k, full)) or frame(k, full))
+    monkeypatch.setattr(pf, "focus", lambda mask: foci.append(mask.mean()) or focus(mask))
+    real = seeded._from_seed
+
+    def refuse_frame_2(img, size, source, i, *a):
+        return (None, "refused by the test") if i == 2 else real(img, size, source, i, *a)
+
+    monkeypatch.setattr(seeded, "_from_seed", refuse_frame_2)
+    dets = detect_batch(pf, charuco, DIST_INTR, SEEDED)
+    assert [d.diagnostics["batch"] for d in dets] == ["full", "seeded", "full", "seeded"]
+    assert (2, True) in calls and len(foci) == 1  # frame 2 redrawn in full; the confirmed seed 0 stays
+    assert all(d.valid for d in dets)
