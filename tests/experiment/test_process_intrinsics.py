@@ -60,34 +60,35 @@ def test_process_calibrates_missing_intrinsics_and_agrees_with_the_true_ones(rec
     assert "intrinsics (calibrated from the recording" in out["summary_text"]
     # robot parameters: the run with calibrated intrinsics agrees with the reference run within their std,
     # which carry the intrinsics' own uncertainty (a 0.15 % focal error alone moves the camera distance, d6
-    # here, by ~0.8 mm = 60 x its std). Independent check of that propagation (first order inside process):
-    # full re-runs with the true intrinsics moved by one std along the 3 largest eigen-directions of the
-    # reported intrinsics covariance (a lower bound of the whole propagated variance)
-    base = yaml.safe_load((recording / "rec" / "recording.yaml").read_text())["camera"]
-    theta = np.array([base["fx"], base["fy"], base["cx"], base["cy"], *base["dist"]], float)
-    lam, V = np.linalg.eigh(np.array(intr["covariance"], float))
-    sens = []
-    for j in np.argsort(lam)[::-1][:3]:
-        t = theta + np.sqrt(lam[j]) * V[:, j]
-        _edit_camera(recording / "rec", tmp_path / f"p{j}", **{**base, "fx": float(t[0]), "fy": float(t[1]), "cx": float(t[2]), "cy": float(t[3]),
-                                                               "dist": [float(v) for v in t[4:]]})
-        pj = process_folder(tmp_path / f"p{j}", tmp_path / f"po{j}", plots=False)
-        sens.append({p["name"]: p["identified"] for p in pj["parameters"]})
+    # here, by ~0.8 mm = 60 x its std): process fits it as one nuisance coefficient per eigen-direction of the
+    # intrinsics covariance (GLS with the poses' plus the intrinsics' covariance)
     r = {p["name"]: p for p in ref["parameters"]}
-    assert out["intrinsics"]["propagated"]["n_directions"] >= 4
+    prop = out["intrinsics"]["propagated"]
+    assert prop["n_directions"] >= 4 and prop["in_fit"] and "included in the fit" in out["summary_text"]
+    assert max(prop["std_inflation"].values()) > 3, prop["std_inflation"]
+    true = {p["name"]: p["true"] for p in json.loads((recording / "sim" / "report.json").read_text())["parameters"]}
+    z = []
     for p in out["parameters"]:
         if p["free"]:
             q = r[p["name"]]
-            # the reported std already carries the intrinsics' uncertainty (process propagates it)
             tol = 3 * np.sqrt(p["std"] ** 2 + q["std"] ** 2)
             assert abs(p["identified"] - q["identified"]) < tol, (p["name"], p["identified"], q["identified"], tol)
-            # ... at least as large as the independent re-runs show
-            # (0.7: first order vs re-run)
-            moved = np.sqrt(sum((d[p["name"]] - q["identified"]) ** 2 for d in sens))
-            assert p["std"] >= 0.7 * np.hypot(moved, q["std"]) - 1e-12, (p["name"], p["std"], moved, q["std"])
-    # and reproduces the measured poses as well as the reference
-    for k, v in ref["residuals"].items():
-        assert np.all(np.array(out["residuals"][k]) < 1.25 * np.array(v) + 1e-3), k
+            z.append((p["identified"] - true[p["name"]]) / p["std"])
+    # ... and with the simulation truth within their std: z-scores of the ~30 parameters (RMS over seeds 3-8:
+    # 1.03, largest |z| 2.6; without the intrinsics' uncertainty in the std, d6 alone is tens of std off).
+    # 4.5: a 30-parameter family-wise bound at ~2e-4; RMS of 30 N(0, 1): 1 +- 0.13 (correlated: wider)
+    z = np.array(z)
+    assert z.size >= 20 and np.max(np.abs(z)) < 4.5 and np.sqrt(np.mean(z**2)) < 1.8, np.round(z, 2)
+    # the intrinsics' error moves every pose in a correlated way the per-pose covariances miss: it is a term
+    # of the fit, so the chi-square adequacy is that of the poses' plus the intrinsics' covariance and stays
+    # in its band (without it chi2/dof was 2-11 on seeds 3-8: a false "model does not explain the data"),
+    # no good pose is taken for an outlier, and the std are not scaled by a variance factor on top
+    for rep in (ref, out):
+        a = rep["adequacy"]
+        assert a["verdict"] == "consistent", a
+        assert a["dof"] == ref["adequacy"]["dof"]  # the nuisance coefficients take no degree of freedom
+        assert rep["outliers"] == [] and rep["verdict"]["status"] == "ok", (rep["outliers"], rep["verdict"])
+    assert out["variance_factor"] == 1.0
 
 def test_refine_intrinsics_flag_and_wrong_image_size(recording, tmp_path, capsys):
     assert main(["process", str(recording / "rec"), "--out", str(tmp_path / "o"), "--refine-intrinsics", "--json",
@@ -109,8 +110,10 @@ def test_refine_intrinsics_flag_and_wrong_image_size(recording, tmp_path, capsys
 
 def test_handeye_process_without_intrinsics_carries_their_uncertainty(recording, tmp_path):
     """Flange-pose folder (hand-eye path) of the same images: without intrinsics the camera is calibrated
-    from them and the hand-eye transforms' std include the intrinsics' uncertainty (re-fit per eigen-
-    direction): larger than with the true intrinsics, and the two results agree within the combined std."""
+    from them and the hand-eye fit includes the intrinsics' uncertainty (nuisance coefficients, the poses'
+    covariance scaled by its estimated factor): std larger than with the true intrinsics where the intrinsics
+    matter, fitted coefficients within a few of their prior std, and the two results agree within the
+    combined std."""
     from flange_folder import flange_pose_folder  # tests/experiment helper
 
     flange, _, _ = flange_pose_folder(recording / "rec", tmp_path / "flange")
@@ -119,10 +122,15 @@ def test_handeye_process_without_intrinsics_carries_their_uncertainty(recording,
     out = process_folder(tmp_path / "nointr", tmp_path / "out", plots=False)
     assert ref["intrinsics"]["source"] == "recording.yaml" and "propagated" not in ref["intrinsics"]
     prop = out["intrinsics"]["propagated"]
-    assert prop["n_directions"] >= 4 and max(prop["std_inflation"].values()) > 1.5, prop
+    assert prop["n_directions"] >= 4 and prop["in_fit"] and max(prop["std_inflation"].values()) > 1.5, prop
+    # the coefficients' prior is N(0, 1): a misfit absorbed by them (pose covariance scale not estimated) gave 5-13
+    assert max(abs(c) for c in prop["coefficients"]) < 4, prop["coefficients"]
+    assert abs(out["identification"]["chi2_dof"] - 1) < 1e-3  # the poses' variance factor solved for
     a, b = ref["handeye"]["transforms"], out["handeye"]["transforms"]
     for k in a:
         sa, sb = np.array(a[k]["std_xyz_m"]), np.array(b[k]["std_xyz_m"])
-        assert np.all(sb >= sa * (1 - 1e-9)), (k, sa, sb)
+        # not smaller, up to the variance factors: each run estimates the poses' own (their PnP covariance misses
+        # the nominal flange poses' error), relative std of that estimate sqrt(1 / (2 dof)) ~ 6 % at 132 dof
+        assert np.all(sb >= sa * 0.95), (k, sa, sb)
         d = np.array(b[k]["matrix"])[:3, 3] - np.array(a[k]["matrix"])[:3, 3]
         assert np.all(np.abs(d) < 3 * np.hypot(sa, sb)), (k, d, sa, sb)

@@ -93,54 +93,33 @@ def remeasure(dets: dict, labels, target, camera, mode: str):
     return np.array(T)
 
 
-def with_intrinsics_uncertainty(result, problem, setup, meas, dets, rec, block: dict, residual: str):
-    """The identification ``result`` with the uncertainty of intrinsics calibrated from the same recording
-    added to its covariance and std: for each eigen-direction i of their covariance (one std, camera
-    moved by ``intrinsics_directions``) the poses are re-measured from their detections and the fit's
-    linear response dx_i = -(J^T W J)^-1 J^T W dr_i is computed at the solution (J, W: the fit's Jacobian
-    and weights, dr_i: the change of the residuals), then covariance += sum_i dx_i dx_i^T (first order;
-    the intrinsics' errors are treated as independent of the pose noise). Unchanged when the intrinsics
-    were given. Also returns {n_directions, std_inflation {name: factor}}."""
+def intrinsics_response(dets: dict, rec, block: dict, residual: str):
+    """For intrinsics calibrated from the same recording (``block``): a callable (setup, meas, problem, x) ->
+    U (n_obs, m, d), the change of every pose's residual (measured - model, SI) at x (n,) when the camera
+    moves one std along each eigen-direction of their covariance (``intrinsics_directions``; poses
+    re-measured from their detections, ``remeasure``), for ``steps.identify_measurements(nuisance=)``: their
+    error is shared by all poses, so it enters the fit as nuisance coefficients (the measurement covariance
+    becomes obs_cov + U U^T; first order, independent of the pose noise). A direction under which a pose is
+    no longer measurable is left out (None when all are). None when the intrinsics were given."""
     import numpy as np
 
     dirs = intrinsics_directions(block, rec.camera)
-    if not dirs or result.covariance is None:
-        return result, None
-    labels = list(problem.labels)
-    pos = {lab: k for k, lab in enumerate(meas.labels)}
-    sub = meas.subset([pos[lab] for lab in labels])
-    x = np.asarray(result.identified, float)
-    free = np.asarray(problem.params.free, bool)
-    J = np.asarray(problem.jacobian(x), float)[..., free]  # (k, m, nf)
-    W = np.linalg.inv(problem.obs_cov)  # (k, m, m)
-    N = np.einsum("kmi,kmn,knj->ij", J, W, J)
-    r0 = np.asarray(problem.residual(x), float)
-    C = np.zeros_like(N)
-    for cam in dirs:
-        T = remeasure(dets, labels, rec.target, cam, rec.averaging)
-        if T is None:
-            continue
-        p2 = setup.problem(type(sub)(sub.poses, sub.joints, T, sub.cov, sub.labels), residual,
-                           params=problem.params)
-        dr = np.asarray(p2.residual(x), float) - r0
-        dx = -np.linalg.solve(N, np.einsum("kmi,kmn,kn->i", J, W, dr))
-        C += np.outer(dx, dx)
-    return add_covariance(result, C, len(dirs))
+    if not dirs or not dets:
+        return None
 
+    def response(setup, meas, problem, x):
+        labels = list(problem.labels)
+        pos = {lab: k for k, lab in enumerate(meas.labels)}
+        sub = meas.subset([pos[lab] for lab in labels])
+        r0 = np.asarray(problem.residual(x), float)
+        cols = []
+        for cam in dirs:
+            T = remeasure(dets, labels, rec.target, cam, rec.averaging)
+            if T is None:
+                continue
+            p2 = setup.problem(type(sub)(sub.poses, sub.joints, T, sub.cov, sub.labels), residual,
+                               params=problem.params)
+            cols.append(np.asarray(p2.residual(x), float) - r0)
+        return np.stack(cols, axis=2) if cols else None
 
-def add_covariance(result, C, n_directions: int):
-    """(result with C (n_free, n_free) added to its covariance and its std updated, {n_directions,
-    std_inflation {name: new std / old std}})."""
-    from dataclasses import replace
-
-    import numpy as np
-
-    free = np.asarray(result.free, bool)
-    cov = np.asarray(result.covariance, float) + C
-    std = np.array(result.std, float)
-    old = std[free].copy()
-    std[free] = np.sqrt(np.diag(cov))
-    names = [n for n, f in zip(result.names, free) if f]
-    return replace(result, covariance=cov, std=std), {
-        "n_directions": n_directions,
-        "std_inflation": {n: float(a / b) for n, a, b in zip(names, std[free], old) if b > 0}}
+    return response

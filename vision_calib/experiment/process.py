@@ -24,6 +24,12 @@ from .checks import screen_measurements
 from .steps import check_method, identify_measurements, rejection_summary
 
 
+#: the report's intrinsics.propagated.how when the intrinsics' uncertainty is a term of the fit
+IN_FIT = ("included in the fit: one nuisance coefficient (prior N(0, 1)) per eigen-direction of the intrinsics "
+          "covariance, so the outlier test, the adequacy test, the variance factor and the std all use the "
+          "measurement covariance of the poses plus that of the intrinsics' shared error")
+
+
 def measure_recording(rec, progress=False, detections=None):
     """PoseMeasurement per pose id of a Recording (invalid ones carry a reason). detections: a dict to
     fill with {pose id: [Detection per frame]} (for the reprojection error of the calibrated chain)."""
@@ -71,7 +77,7 @@ def process_folder(folder, out_dir, method=None, progress=False, plots=True, fix
     refine_intrinsics: calibrate the camera from the recording's images even when recording.yaml gives
     intrinsics (always done when it gives none); camera_file: a camera.yaml (``calibrate-camera``) used
     instead of recording.yaml's intrinsics; the report's ``intrinsics`` block says which were used."""
-    from .camera_step import recording_intrinsics, with_intrinsics_uncertainty
+    from .camera_step import intrinsics_response, recording_intrinsics
 
     t0 = time.perf_counter()
     rec = read_recording(folder, allow_symlinks=allow_symlinks)
@@ -97,12 +103,13 @@ def process_folder(folder, out_dir, method=None, progress=False, plots=True, fix
     meas, inconsistent, motion = screen_measurements(
         setup, meas, where, "the recording's target.square_m (or marker/tag size), camera.fx/fy, and units.length "
         "of poses.csv")
+    # intrinsics calibrated from these images: their error is shared by all poses, it goes into the fit
     ident = identify_measurements(setup, meas, method, residual, context=rejection_summary(pms), where=where,
-                                  fix_unidentifiable=fix_unidentifiable, rejected=inconsistent)
+                                  fix_unidentifiable=fix_unidentifiable, rejected=inconsistent,
+                                  nuisance=intrinsics_response(dets, rec, intr, residual))
     result, problem, rep, setup = ident.result, ident.problem, ident.analysis, ident.setup
-    result, prop = with_intrinsics_uncertainty(result, problem, setup, meas, dets, rec, intr, residual)
-    if prop is not None:
-        intr = {**intr, "propagated": prop}
+    if ident.nuisance is not None:
+        intr = {**intr, "propagated": {**ident.nuisance, "in_fit": True, "how": IN_FIT}}
     t_id = time.perf_counter() - t1
     ps = setup.params
     report = build_report(
@@ -145,7 +152,7 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None) -> dict:
     # variance factor (whitened cost / degrees of freedom), reported as such
     result, A, B, problem = solve_handeye(rec.poses[ok], T, mount, pose_cov=cov, labels=labels,
                                           scale_cov_by_residual=True)
-    result, prop = _handeye_intrinsics_uncertainty(result, rec, pms, ok, dets, intr, mount, cov, labels)
+    result, A, B, prop = _handeye_intrinsics_uncertainty(result, problem, rec, pms, ok, dets, intr, mount)
     if prop is not None:
         intr = {**intr, "propagated": prop}
     he = handeye_report(result, A, B, problem, detections=dets, target=rec.target, intrinsics=rec.camera)
@@ -160,26 +167,46 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None) -> dict:
     return report
 
 
-def _handeye_intrinsics_uncertainty(result, rec, pms, ok, dets, intr, mount, cov, labels):
-    """Hand-eye result with the uncertainty of intrinsics calibrated from the recording added (re-fit per
-    eigen-direction of their covariance, poses re-measured from the detections; see
-    ``camera_step.with_intrinsics_uncertainty``); (result, None) when the intrinsics were given."""
-    from ..identify.handeye_problem import solve_handeye
-    from .camera_step import add_covariance, intrinsics_directions, remeasure
+def _handeye_intrinsics_uncertainty(result, problem, rec, pms, ok, dets, intr, mount):
+    """(result, A, B, propagated block or None): the hand-eye fit redone with the uncertainty of intrinsics
+    calibrated from the recording as nuisance coefficients (one per eigen-direction of their covariance; the
+    response U of every pose's residual from the poses re-measured from the detections, as in
+    ``camera_step.intrinsics_response``), so its variance factor and covariance see the poses' covariance
+    plus the intrinsics' shared error (``identify.nuisance.solve_nuisance_unknown_noise``: the poses'
+    covariance scaled by its estimated factor, the intrinsics' not); the input result when the intrinsics
+    were given."""
+    from ..identify.handeye_problem import handeye_problem, transforms_from_x
+    from ..identify.nuisance import solve_nuisance_unknown_noise, split_nuisance
+    from .camera_step import intrinsics_directions, remeasure
+    from .steps import NUISANCE_PREFIX
 
+    A, B = transforms_from_x(problem, result.identified)
     dirs = intrinsics_directions(intr, rec.camera)
     if not dirs or result.covariance is None or not dets:
-        return result, None
-    free = np.asarray(result.free, bool)
-    C = np.zeros_like(np.asarray(result.covariance, float))
+        return result, A, B, None
+    x = np.asarray(result.identified, float)
+    r0 = np.asarray(problem.residual(x), float)
+    m = problem.meta
+    cols = []
     for cam in dirs:
         T = remeasure(dets, [str(pms[i].pose_id) for i in ok], rec.target, cam, rec.averaging)
         if T is None:
             continue
-        r2 = solve_handeye(rec.poses[ok], T, mount, pose_cov=cov, labels=labels, scale_cov_by_residual=True)[0]
-        dx = (np.asarray(r2.identified) - np.asarray(result.identified))[free]
-        C += np.outer(dx, dx)
-    return add_covariance(result, C, len(dirs))
+        p2 = handeye_problem(m["T_base_flange"], T, mount, m["A0"], m["B0"], problem.obs_cov, labels=problem.labels)
+        cols.append(np.asarray(p2.residual(x), float) - r0)
+    if not cols:
+        return result, A, B, None
+    # the PnP covariances miss the robot's own pose error (flange poses from a nominal model): their scale is
+    # estimated (variance factor s2), the intrinsics' known
+    full, s2 = solve_nuisance_unknown_noise(problem, np.stack(cols, axis=2), x, NUISANCE_PREFIX)
+    res, nz = split_nuisance(full, len(problem.params))
+    free = np.asarray(res.free, bool)
+    ratio = res.std / result.std  # both as reported (each with its own variance factor)
+    prop = {"n_directions": len(cols), "coefficients": nz["values"], "coefficients_std": nz["std"],
+            "std_inflation": {n: float(v) for n, v, f in zip(res.names, ratio, free) if f and np.isfinite(v)},
+            "pose_variance_factor": float(s2), "in_fit": True, "how": IN_FIT}
+    A, B = transforms_from_x(problem, res.identified)
+    return res, A, B, prop
 
 
 __all__ = ["process_folder", "measure_recording"]

@@ -15,6 +15,7 @@ import numpy as np
 
 from ..errors import ConfigError, IdentifiabilityError
 from ..identify import analyze, solve_ekf, solve_lse
+from ..identify.nuisance import split_nuisance, with_nuisance
 from ..rig import Measurements, Scene, Setup, scene_poses, true_parameters
 
 STREAM_POSES, STREAM_NOISE, STREAM_VALIDATION, STREAM_TRUTH = 1, 2, 3, 4
@@ -139,11 +140,15 @@ class Identified:
     variance_factor: float
     setup: object = None  #: the setup identified (after ``Setup.prepare``): evaluate and export with it
     prepared: dict = None  #: what ``Setup.prepare`` determined from the data (e.g. the H4 camera axis)
+    #: shared measurement error fitted as nuisance coefficients (``identify.nuisance``): {n_directions,
+    #: coefficients (d,) and their std (posterior, in prior std units), std_inflation {name: std / std without
+    #: it}}; None without
+    nuisance: dict = None
 
 
 def identify_measurements(setup: Setup, meas: Measurements, method, residual, analysis=None, context: str = "",
                           robust: bool = True, where: str = "", fix_unidentifiable: bool = False,
-                          rejected=()) -> Identified:
+                          rejected=(), nuisance=None) -> Identified:
     """Identification of the setup's identifiable free parameters from measured data ``meas`` (``rejected``:
     [(label, reason)] of poses the caller removed before; ``analysis``: the
     IdentifiabilityReport of these poses when the caller has it; a pose set that loses parameters generic
@@ -152,7 +157,11 @@ def identify_measurements(setup: Setup, meas: Measurements, method, residual, an
     (``identify.fit_rejecting_outliers``, family-wise false-alarm level OUTLIER_LEVEL) and the fit is
     redone without them; the std are then scaled by the
     a-posteriori variance factor chi2/dof when it exceeds 1 (the residuals show errors the measurement
-    covariance misses)."""
+    covariance misses). ``nuisance``: a shared measurement error (e.g. intrinsics calibrated from the same
+    images), a callable (setup, meas, problem, x) -> U (n_obs, m, d) (or None) giving the response of every
+    pose's residual to one std along each of its d independent directions; U is evaluated once at a first
+    plain fit and the error enters every step (outlier test, fit, adequacy, variance factor, covariance) as d
+    nuisance coefficients (``identify.nuisance``: the GLS fit with C = obs_cov + U U^T)."""
     from ..identify import fit_rejecting_outliers, model_adequacy
 
     from .checks import structural_rank_check
@@ -172,18 +181,27 @@ def identify_measurements(setup: Setup, meas: Measurements, method, residual, an
     base = setup.params.mask(rep.base_parameters)
     problem, params = base_problem(setup, meas, residual, base, context)
     rejected = list(rejected)  # poses the caller already rejected (e.g. motion consistency): kept in the record
+    fitted = problem
+    U = None if nuisance is None else nuisance(setup, meas, problem, solve_lse(problem).identified)
+    if U is not None:
+        fitted = with_nuisance(problem, U, NUISANCE_PREFIX)
     # the outlier test needs redundancy: with fewer equations than twice the parameters, a bad pose is
     # absorbed by the fit (high leverage) and good poses fail the test (measured: 1-2 of 6 H4 poses)
     if robust and problem.n_obs * problem.m >= 2 * params.n_free:
-        fit, out = fit_rejecting_outliers(problem, level=OUTLIER_LEVEL, min_ratio=OUTLIER_MIN_RATIO)
+        fit, out = fit_rejecting_outliers(fitted, level=OUTLIER_LEVEL, min_ratio=OUTLIER_MIN_RATIO)
         if out:
             keep = [k for k, lab in enumerate(problem.labels) if lab not in {r[0] for r in out}]
-            problem = problem.subset(keep)
+            problem, fitted = problem.subset(keep), fitted.subset(keep)
             rejected += out
-        result = fit if method != "ekf" else solve(problem, method)
+        result = fit if method != "ekf" else solve(fitted, method)
     else:
-        result = solve(problem, method)
-    adequacy = model_adequacy(result)
+        result = solve(fitted, method)
+    adequacy = model_adequacy(result)  # of the augmented fit when there is a nuisance: the GLS chi-square
+    nz = None
+    if U is not None:
+        result, nz = split_nuisance(result, len(params))
+        nz = {"n_directions": int(U.shape[2]), "coefficients": nz["values"], "coefficients_std": nz["std"],
+              "std_inflation": _std_inflation(problem, result)}
     factor = float(result.chi2_dof) if robust and np.isfinite(result.chi2_dof) else 1.0
     if factor > 1:
         result = replace(result, std=result.std * np.sqrt(factor), covariance=result.covariance * factor)
@@ -198,7 +216,25 @@ def identify_measurements(setup: Setup, meas: Measurements, method, residual, an
         extra += (f"{len(rejected)} outlier poses rejected: " + "; ".join(f"{lab}: {why}" for lab, why in rejected[:5]),)
     if extra:
         result = replace(result, warnings=tuple(result.warnings) + extra)
-    return Identified(result, problem, params, rep, tuple(rejected), adequacy, max(factor, 1.0), setup, prepared)
+    return Identified(result, problem, params, rep, tuple(rejected), adequacy, max(factor, 1.0), setup, prepared,
+                      nz)
+
+
+#: name prefix of the nuisance coefficients of a shared measurement error (``identify_measurements(nuisance=)``)
+NUISANCE_PREFIX = "shared_error"
+
+
+def _std_inflation(problem, result) -> dict:
+    """{free name: std of ``result`` / std of the same fit without the shared error} (both before any
+    variance-factor scaling; the latter from ``problem``'s own Jacobian at the solution)."""
+    from ..identify.lse import covariance_from_jacobian
+
+    fi = np.flatnonzero(result.free)
+    J = np.asarray(problem.jacobian(result.identified), float)[:, :, fi]
+    Jw = np.einsum("kij,kjn->kin", problem.whitening(), J).reshape(-1, fi.size)
+    cov0, _ = covariance_from_jacobian(Jw, problem.params.scale[fi])
+    std0 = np.sqrt(np.diag(cov0))
+    return {result.names[i]: float(result.std[i] / s0) for i, s0 in zip(fi, std0) if s0 > 0}
 
 
 #: a large move is unexplained when the data do not determine it (|move| < MOVE_SIGMAS x its std) or the fit

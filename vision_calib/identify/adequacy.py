@@ -97,7 +97,8 @@ def _robust_scale(problem: IdentificationProblem, res: IdentificationResult) -> 
     equations and n free parameters (with 60 equations for 30 parameters, uncorrected, 4 good poses
     of 10 failed the test)."""
     rw = np.einsum("kij,kj->ki", problem.whitening(), res.residuals)
-    n_eq, n_free = rw.size, int(np.sum(res.free))
+    # a nuisance parameter with its prior row (problem.prior_rows) takes no degree of freedom from the poses
+    n_eq, n_free = rw.size, int(np.sum(res.free)) - problem.n_prior
     s = 1.4826 * float(np.median(np.abs(rw))) * np.sqrt(n_eq / max(n_eq - n_free, 1))
     if not (np.isfinite(s) and s > 0):
         raise DataError(f"robust scale of the whitened residuals is {s}: cannot test poses for outliers")

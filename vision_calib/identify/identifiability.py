@@ -185,10 +185,12 @@ def check_problem(problem: IdentificationProblem, x=None) -> tuple[np.ndarray, n
 
 
 def whitened_free_jacobian(problem: IdentificationProblem, J: np.ndarray, W: np.ndarray | None = None) -> np.ndarray:
-    """(N, n_free) whitened Jacobian of the free parameters (physical units) from J (n_obs, m, n)."""
+    """(N, n_free) whitened Jacobian of the free parameters (physical units) from J (n_obs, m, n): the
+    n_obs * m pose rows, then the problem's prior rows (``problem.prior_rows``; N = n_obs * m + n_prior)."""
     W = problem.whitening() if W is None else W
     Jf = J[:, :, problem.params.free_index]
-    return np.einsum("kij,kjn->kin", W, Jf).reshape(-1, Jf.shape[-1])
+    A = np.einsum("kij,kjn->kin", W, Jf).reshape(-1, Jf.shape[-1])
+    return np.vstack([A, problem.prior_jacobian()]) if problem.prior_rows else A
 
 
 def observability_indices(s: np.ndarray, n_poses: int) -> dict[str, float]:
@@ -252,7 +254,7 @@ def analyze(
     n = len(names)
     if n == 0:
         raise ParameterError("no free parameter to analyse (every parameter is fixed)")
-    N = problem.n_obs * problem.m
+    N = problem.n_obs * problem.m + problem.n_prior
     if N < n:
         raise IdentifiabilityError(
             f"{N} scalar equations ({problem.n_obs} poses x {problem.m} components) for {n} free parameters: "

@@ -150,10 +150,10 @@ def correlation_warnings(names, cov: np.ndarray, threshold: float = CORRELATION_
 
 
 def whitened_cost(problem: IdentificationProblem, x, W=None) -> float:
-    """0.5 * sum of squared whitened residuals at x (n,)."""
+    """0.5 * sum of squared whitened residuals at x (n,), prior rows included."""
     W = problem.whitening() if W is None else W
     rw = np.einsum("kij,kj->ki", W, problem.residual(x))
-    return 0.5 * float(np.sum(rw**2))
+    return 0.5 * float(np.sum(rw**2) + np.sum(problem.prior_residual(x) ** 2))
 
 
 def finish_result(method, original, problem, x0, x, cov, cost0, iterations, converged, warnings, t0, info, W=None,
@@ -179,8 +179,8 @@ def finish_result(method, original, problem, x0, x, cov, cost0, iterations, conv
     std[fi] = np.sqrt(np.clip(np.diag(cov), 0, None))
     with np.errstate(over="ignore", invalid="ignore"):
         chi2_k = pose_chi2(problem, r, W)
-        cost = 0.5 * float(np.sum(chi2_k))
-    dof = problem.n_obs * problem.m - fi.size
+        cost = 0.5 * float(np.sum(chi2_k) + np.sum(problem.prior_residual(x) ** 2))
+    dof = problem.n_obs * problem.m + problem.n_prior - fi.size
     noise = "given"
     if problem.meta.get("noise") == NOISE_ESTIMATED:  # relative weights only: the scale comes from the residuals
         noise = NOISE_ESTIMATED
@@ -271,7 +271,9 @@ def solve_lse(
         return x
 
     def fun(z):
-        return np.einsum("kij,kj->ki", W, problem.residual(x_of(z))).ravel()
+        x = x_of(z)
+        rw = np.einsum("kij,kj->ki", W, problem.residual(x)).ravel()
+        return np.concatenate([rw, problem.prior_residual(x)]) if problem.prior_rows else rw
 
     def jac_fn(z):
         return whitened_free_jacobian(problem, problem.jacobian(x_of(z)), W) * s[None, :]
@@ -321,7 +323,7 @@ def _lse_covariance(problem, J, W, s, cost, warnings):
     cov, full_rank = covariance_from_jacobian(Jw, s)
     if not full_rank:
         warnings.append("Jacobian at the solution is rank deficient: covariance is a pseudo-inverse")
-    dof = problem.n_obs * problem.m - s.size
+    dof = problem.n_obs * problem.m + problem.n_prior - s.size
     if cost is not None and dof > 0:
         cov = cov * (2.0 * float(cost) / dof)
     return cov, warnings

@@ -51,6 +51,10 @@ class IdentificationProblem:
     component_names: names of the m residual components, for reports.
     meta: builder-specific data; ``meta["noise"] == NOISE_ESTIMATED`` marks an obs_cov of relative weights
         (no noise given): the solvers then scale the parameter covariance by chi2/dof.
+    prior_rows: names of parameters whose prior N(nominal, prior_std^2) enters the least-squares cost as
+        one whitened row each, (nominal - x) / prior_std, while they are free (nuisance parameters,
+        :mod:`~vision_calib.identify.nuisance`): the equations count N = n_obs * m + their number, so a
+        nuisance parameter with its prior leaves the degrees of freedom unchanged. Needs ``prior_std``.
     """
 
     params: ParameterSet
@@ -62,6 +66,7 @@ class IdentificationProblem:
     prior_std: np.ndarray | None = None
     component_names: tuple[str, ...] = ()
     meta: dict = field(default_factory=dict)
+    prior_rows: tuple[str, ...] = ()
 
     @property
     def n_obs(self) -> int:
@@ -88,6 +93,36 @@ class IdentificationProblem:
 
         labels = tuple(self.labels[i] for i in idx) if self.labels else ()
         return replace(self, residual=residual, jacobian=jacobian, obs_cov=self.obs_cov[idx], labels=labels)
+
+    def _prior_index(self) -> tuple[np.ndarray, np.ndarray]:
+        """(positions in the free vector (p,), positions in the full vector (p,)) of the free prior_rows."""
+        if not self.prior_rows:
+            return np.zeros(0, int), np.zeros(0, int)
+        full = np.asarray(self.params.indices(list(self.prior_rows)), int)
+        full = np.sort(full[self.params.free[full]])
+        pos = np.searchsorted(self.params.free_index, full)
+        return pos, full
+
+    @property
+    def n_prior(self) -> int:
+        """Number of prior rows in the cost (free parameters of ``prior_rows``)."""
+        return int(self._prior_index()[0].size)
+
+    def prior_residual(self, x) -> np.ndarray:
+        """(p,) whitened prior rows (nominal - x) / prior_std of the free ``prior_rows`` at x (n,)."""
+        _, full = self._prior_index()
+        if not full.size:
+            return np.zeros(0)
+        sd = np.asarray(self.prior_std, float)[full]
+        return (self.params.nominal[full] - np.asarray(x, float)[full]) / sd
+
+    def prior_jacobian(self) -> np.ndarray:
+        """(p, n_free) d prior_residual / d x_free (-1 / prior_std on each row's own column)."""
+        pos, full = self._prior_index()
+        out = np.zeros((pos.size, self.params.n_free))
+        if pos.size:
+            out[np.arange(pos.size), pos] = -1.0 / np.asarray(self.prior_std, float)[full]
+        return out
 
     def whitening(self) -> np.ndarray:
         """(n_obs, m, m) matrices W with W @ cov @ W.T = I (inverse Cholesky factors)."""

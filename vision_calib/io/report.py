@@ -17,7 +17,8 @@ report.json, version 2 (each value once)::
     accuracy: {before: {...}, after: {...}}                      # validation poses, simulation only
     residuals: {...}                                             # RMS per component (process)
     intrinsics: {source: "recording.yaml" | "calibrated from the recording", values, std, rms_px,
-                 coverage, warnings, ...}                        # process (experiment/camera_step.py)
+                 coverage, warnings, propagated: {n_directions, in_fit, std_inflation, ...}, ...}
+                                                                 # process (experiment/camera_step.py)
     warnings: [str]
     timings_s: {...}
     files: {report, model, residuals_plot, ...}
@@ -253,9 +254,12 @@ def _intrinsics_line(block: dict) -> str:
     if s is None:
         return (f"intrinsics ({block['source']}): " + ", ".join(f"{k} {v[k]:.2f}" for k in names[:4]) + " px; dist "
                 + ", ".join(f"{v[k]:.4g}" for k in names[4:]))
+    prop = block.get("propagated") or {}
+    how = (f"; their uncertainty {'is included in the fit' if prop.get('in_fit') else 'is added to the std'} "
+           f"({prop['n_directions']} directions)") if prop else ""
     return (f"intrinsics ({block['source']}, {block['n_views_used']} views, RMS {block['rms_px']:.3f} px): "
             + ", ".join(f"{k} {v[k]:.2f} ± {s[k]:.2f}" for k in names[:4]) + " px; dist "
-            + ", ".join(f"{k} {v[k]:.4g} ± {s[k]:.2g}" for k in names[4:]))
+            + ", ".join(f"{k} {v[k]:.4g} ± {s[k]:.2g}" for k in names[4:]) + how)
 
 
 def _handeye_lines(report: dict) -> list[str]:

@@ -2,8 +2,9 @@
 
 A :class:`ParameterSet` is immutable. It holds, for every geometric parameter of a model
 (robot + camera/target mounting), its name (``"d3"``, ``"beta3"``, ``"T_flange_cam.tx"``,
-``"h4.L"``, ``"q0_2"``), its nominal value (SI: m or rad), its kind (``"length"`` or
-``"angle"``, used for scaling and unit conversion) and whether it is free (identified) or
+``"h4.L"``, ``"q0_2"``), its nominal value (SI: m or rad), its kind (``"length"``,
+``"angle"``, or ``"coefficient"``: dimensionless, e.g. the nuisance coefficients of
+:mod:`~vision_calib.identify.nuisance`; used for scaling and unit conversion) and whether it is free (identified) or
 fixed. Vectors ``x`` are always *full* (all parameters, in ``names`` order); solvers pick
 the free entries with :attr:`free_index`.
 """
@@ -18,14 +19,16 @@ import numpy as np
 from ..errors import ParameterError
 
 #: default scale (typical size of an error) per kind, used to scale Jacobian columns
-DEFAULT_SCALE = {"length": 1e-3, "angle": 1e-3}  # 1 mm, 1 mrad
+DEFAULT_SCALE = {"length": 1e-3, "angle": 1e-3, "coefficient": 1.0}  # 1 mm, 1 mrad, 1
+#: parameter kinds
+KINDS = ("length", "angle", "coefficient")
 
 
 @dataclass(frozen=True)
 class ParameterSet:
     """Named parameters of a model.
 
-    names: (n,) unique names. nominal: (n,) float64, SI units. kinds: (n,) "length"|"angle".
+    names: (n,) unique names. nominal: (n,) float64, SI units. kinds: (n,) "length"|"angle"|"coefficient".
     free: (n,) bool, True = identified. scale: (n,) typical deviation (m or rad), used as
     column scaling and as the default prior std for the EKF.
     """
@@ -50,9 +53,9 @@ class ParameterSet:
                 raise ParameterError(f"ParameterSet.{what} has shape {arr.shape}, expected ({n},)")
         if len(self.kinds) != n:
             raise ParameterError(f"ParameterSet.kinds has {len(self.kinds)} entries, expected {n}")
-        bad = [k for k in self.kinds if k not in ("length", "angle")]
+        bad = [k for k in self.kinds if k not in KINDS]
         if bad:
-            raise ParameterError(f"unknown parameter kinds {sorted(set(bad))} (expected 'length' or 'angle')")
+            raise ParameterError(f"unknown parameter kinds {sorted(set(bad))} (expected one of {', '.join(KINDS)})")
         for arr in (nominal, free, scale):
             arr.setflags(write=False)
         object.__setattr__(self, "nominal", nominal)
