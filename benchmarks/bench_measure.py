@@ -33,7 +33,7 @@ from vision_calib.camera import CameraIntrinsics  # noqa: E402
 from vision_calib.measure import DetectConfig, MeasureConfig, detect_batch, measure_pose  # noqa: E402
 from vision_calib.measure.accuracy import (accuracy_study, format_study, pose_seeds,  # noqa: E402
                                            random_view_pose)
-from vision_calib.sensor import SensorEffects, apply_effects, ideal_render_grid  # noqa: E402
+from vision_calib.sensor import SensorEffects, apply_effects, effects_for_render  # noqa: E402
 from vision_calib.targets.spec import TargetSpec  # noqa: E402
 
 INTR = CameraIntrinsics(1024, 768, 1100.0, 1100.0, 515.3, 380.7, (-0.1, 0.05, 0.0005, -0.0005, 0.0))
@@ -85,10 +85,11 @@ def run_detector_terms(n_poses, seed):
         lut = dict(zip(*[list(a) for a in target.corner_points()]))
         rng = np.random.default_rng(seed)
         coef, leak = [], []
-        with TargetRenderer(target, *ideal_render_grid(INTR, 2)) as r:
+        with TargetRenderer(target, INTR, 2, distort=True) as r:  # as the image chain renders
             for k in range(n_poses):
                 T = random_view_pose(rng, target, INTR)
-                d = detect_batch(apply_effects(r.render(T), clean, 1, 0, INTR), target, INTR, cfg)[0]
+                d = detect_batch(apply_effects(r.render(T), effects_for_render(r, clean), 1, 0, INTR), target, INTR,
+                                 cfg)[0]
                 if not d.valid:
                     continue
                 uv = INTR.project(frames.transform_points(T, np.array([lut[int(i)] for i in d.ids])))
@@ -122,8 +123,8 @@ def run_scene_z(scenes, n_poses, seeds):
         print(f"  ({res['n']} measurements, {time.perf_counter() - t0:.1f} s)")
 
 
-def _sweep_pose(ideal, target, read_noise, n_frames, seed):
-    eff = SensorEffects(read_noise_grey=read_noise)
+def _sweep_pose(ideal, target, read_noise, n_frames, seed, renderer):
+    eff = effects_for_render(renderer, SensorEffects(read_noise_grey=read_noise))
     imgs = apply_effects(ideal, eff, n_frames, seed, INTR)
     dets = detect_batch(imgs, target, INTR)
     return [measure_pose(dets, target, INTR, 0, MeasureConfig(mode=m)) for m in ("corners", "poses")]
@@ -139,13 +140,13 @@ def run_sweep(n_poses, seed):
     rng = np.random.default_rng(seed)
     Ts = [random_view_pose(rng, CHARUCO, INTR) for _ in range(n_poses)]
     seeds = pose_seeds(seed + 1, n_poses)
-    renderer = TargetRenderer(CHARUCO, *ideal_render_grid(INTR, 2))
+    renderer = TargetRenderer(CHARUCO, INTR, 2, distort=True)  # as the image chain renders
     try:
         ideals = [renderer.render(T) for T in Ts]
         clean = SensorEffects(full_well_e=0.0, read_noise_grey=0.0)
         bias = {}
         for mode in ("corners", "poses"):
-            bias[mode] = [frames.pose_error(T, measure_pose(detect_batch(apply_effects(im, clean, 1, 0, INTR), CHARUCO,
+            bias[mode] = [frames.pose_error(T, measure_pose(detect_batch(apply_effects(im, effects_for_render(renderer, clean), 1, 0, INTR), CHARUCO,
                                                                         INTR), CHARUCO, INTR, 0,
                                                            MeasureConfig(mode=mode)).T_cam_target)
                           for T, im in zip(Ts, ideals)]
@@ -157,7 +158,7 @@ def run_sweep(n_poses, seed):
                 tot, rnd = [], {"corners": [], "poses": []}
                 sig = []
                 for k, T in enumerate(Ts):
-                    ms = _sweep_pose(ideals[k], CHARUCO, rn, nf, seeds[k])
+                    ms = _sweep_pose(ideals[k], CHARUCO, rn, nf, seeds[k], renderer)
                     for mode, m in zip(("corners", "poses"), ms):
                         if m.valid:
                             e = frames.pose_error(T, m.T_cam_target)
@@ -196,7 +197,7 @@ def _worker_init(gl_threads=None):
     cv2.setNumThreads(1)
     from vision_calib.render import TargetRenderer
 
-    _W["r"] = TargetRenderer(CHARUCO, *ideal_render_grid(INTR, 2))
+    _W["r"] = TargetRenderer(CHARUCO, INTR, 2, distort=True)  # as the image chain renders
 
 
 def _chain(args):
@@ -206,7 +207,7 @@ def _chain(args):
     t0 = time.perf_counter()
     ideal = r.render(T)
     t1 = time.perf_counter()
-    imgs = apply_effects(ideal, SensorEffects(), n_frames, seed, INTR)
+    imgs = apply_effects(ideal, effects_for_render(r, SensorEffects()), n_frames, seed, INTR)
     t2 = time.perf_counter()
     dets = detect_batch(imgs, CHARUCO, INTR)
     t3 = time.perf_counter()

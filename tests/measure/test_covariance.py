@@ -122,30 +122,11 @@ def test_rendered_h4_poses_are_whitened():
     whitened by the covariance has z RMS in [0.5, 1.6] per component (24 poses: sampling std of an RMS
     ~15 %; on 100 poses x seeds it is 0.73-1.09, benchmarks/bench_measure.py) and no |z| > 4; the
     frame-scatter-only covariance gives z RMS more than twice as large on the same data (bench: 3.7-4.9)."""
-    from vision_calib.experiment.simulate import image_chain_of
-    from vision_calib.experiment.steps import scene_truth
-    from vision_calib.measure import detect_batch
-    from vision_calib.measure.accuracy import random_only_cov
-    from vision_calib.render import TargetRenderer
-    from vision_calib.rig import load_scene, scene_poses
-    from vision_calib.sensor import apply_effects, ideal_render_grid
-    from vision_calib.targets import load_target
+    from vision_calib.measure.accuracy import scene_z_study
 
-    scene = load_scene("scenes/h4_vision.yaml")
-    chain = image_chain_of(scene)
-    target, intr = load_target(chain.target_path), chain.camera
-    Ts = scene.setup.T_cam_target(scene_poses(scene, np.random.default_rng(123), 24), scene_truth(scene))
-    z_new, z_old = [], []
-    with TargetRenderer(target, *ideal_render_grid(intr, chain.supersample)) as r:
-        for k, T in enumerate(Ts):
-            ideal = r.render(T)
-            for s in (1,):
-                dets = detect_batch(apply_effects(ideal, chain.effects, 10, 100 * k + s, intr), target, intr)
-                m = measure_pose(dets, target, intr, k)
-                assert m.valid
-                e = frames.pose_error(T, m.T_cam_target)
-                z_new.append(e / m.std)
-                z_old.append(e / np.sqrt(np.diag(random_only_cov(m, dets, target, intr))))
+    res = scene_z_study("scenes/h4_vision.yaml", n_poses=24, seeds=(1,))  # rendered as the image chain does
+    assert res["n"] == 24
+    z_new, z_old = res["z_new"], res["z_old"]
     rms_new = np.sqrt((np.array(z_new) ** 2).mean(0))
     assert np.all((rms_new > 0.5) & (rms_new < 1.6)), rms_new
     assert np.abs(z_new).max() < 4

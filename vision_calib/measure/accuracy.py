@@ -109,11 +109,11 @@ def accuracy_study(target, intr: CameraIntrinsics, effects, n_poses: int = 50, n
     "random_over_bound", "bias_over_random" (6,), "z_new", "z_old" (P, 6) and their "_rms"/"_max" (6,),
     "n_valid", "errors" (P, 6), "bias" (P, 6)}}."""
     from ..render import TargetRenderer
-    from ..sensor import apply_effects, ideal_render_grid
+    from ..sensor import apply_effects, effects_for_render
 
     own = renderer is None
-    if own:
-        renderer = TargetRenderer(target, *ideal_render_grid(intr, supersample))
+    if own:  # the image chain's renderer: lens distortion drawn geometrically (experiment/image_chain.py)
+        renderer = TargetRenderer(target, intr, supersample, distort=True)
     try:
         rng = np.random.default_rng(seed)
         seeds = pose_seeds(seed, n_poses)
@@ -124,8 +124,9 @@ def accuracy_study(target, intr: CameraIntrinsics, effects, n_poses: int = 50, n
         for k in range(n_poses):
             T = random_view_pose(rng, target, intr, dist_range, tilt_deg)
             ideal = renderer.render(T)
-            dets0 = detect_batch(apply_effects(ideal, noiseless, 1, seeds[k], intr), target, intr, detect_config)
-            dets = detect_batch(apply_effects(ideal, effects, n_frames, seeds[k], intr), target, intr, detect_config)
+            eff, eff0 = effects_for_render(renderer, effects), effects_for_render(renderer, noiseless)
+            dets0 = detect_batch(apply_effects(ideal, eff0, 1, seeds[k], intr), target, intr, detect_config)
+            dets = detect_batch(apply_effects(ideal, eff, n_frames, seeds[k], intr), target, intr, detect_config)
             bound = np.diag(image_bound_pose_cov(target, intr, T, effects, n_frames, detect_config))
             for mode in modes:
                 cfg = MeasureConfig(mode=mode)
@@ -184,7 +185,7 @@ def scene_z_study(scene_path, n_poses: int = 20, seeds=(1, 2, 3, 4, 5), pose_see
     from ..experiment.steps import scene_truth
     from ..render import TargetRenderer
     from ..rig import load_scene, scene_poses
-    from ..sensor import apply_effects, ideal_render_grid
+    from ..sensor import apply_effects, effects_for_render
     from ..targets import load_target
 
     scene = load_scene(scene_path)
@@ -192,11 +193,12 @@ def scene_z_study(scene_path, n_poses: int = 20, seeds=(1, 2, 3, 4, 5), pose_see
     target, intr = load_target(chain.target_path), chain.camera
     Ts = scene.setup.T_cam_target(scene_poses(scene, np.random.default_rng(pose_seed), n_poses), scene_truth(scene))
     z_new, z_old = [], []
-    with TargetRenderer(target, *ideal_render_grid(intr, chain.supersample)) as r:
+    with TargetRenderer(target, intr, chain.supersample, distort=True) as r:  # as the image chain renders
         for k, T in enumerate(Ts):
             ideal = r.render(T)
             for s in seeds:
-                dets = detect_batch(apply_effects(ideal, chain.effects, 10, 1000 * k + s, intr), target, intr)
+                dets = detect_batch(apply_effects(ideal, effects_for_render(r, chain.effects), 10, 1000 * k + s, intr),
+                                    target, intr)
                 m = measure_pose(dets, target, intr, k, MeasureConfig(mode=chain.averaging))
                 if not m.valid:
                     continue
