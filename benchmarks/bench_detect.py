@@ -248,7 +248,7 @@ def run_new_kind(name, n_poses, n_seeds, n_frames, seed, effects):
         e = err[label] * SCALE
         sysm, rnd = np.nanmean(e, axis=1), np.nanstd(e, axis=1, ddof=1)
         cb = np.sqrt(np.mean([np.sum(c.mean(0) ** 2) / 2 for c, _ in corners[label]]))
-        sc = np.sqrt(np.mean([np.mean([x.var(0, ddof=1).mean() for x in xs if len(x) > 1]) for _, xs in corners[label]]))
+        sc = np.sqrt(np.mean([x.var(0, ddof=1).mean() for _, xs in corners[label] for x in xs if len(x) > 1]))
         print(f"    {label:17s} | {t_det[label] / n_img * 1e3:8.1f} | {cb:11.4f} {sc:8.4f} | "
               f"{np.sqrt(np.mean(sysm[:, :3] ** 2)):12.4f} {np.sqrt(np.mean(sysm[:, 3:] ** 2)):7.4f} | "
               f"{np.sqrt(np.mean(rnd[:, :3] ** 2)):8.4f} {np.sqrt(np.mean(rnd[:, 3:] ** 2)):7.4f} | "
