@@ -231,7 +231,8 @@ def run_new_kind(name, n_poses, n_seeds, n_frames, seed, effects):
                     err[label][k, s] = frames.pose_error(T, pm.T_cam_target)
                 for d in dets:
                     if d.valid:
-                        e = d.uv_px - intr.project(frames.transform_points(T, np.array([lookup[int(i)] for i in d.ids])))
+                        p = np.array([lookup[int(i)] for i in d.ids])
+                        e = d.uv_px - intr.project(frames.transform_points(T, p))
                         for i, ee in zip(d.ids, e):
                             acc[label].setdefault((s, int(i)), []).append(ee)
         for label in acc:  # bias per corner over all frames of the pose; scatter per (seed, corner) over frames
