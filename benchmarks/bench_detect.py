@@ -18,8 +18,12 @@ seeds of N frames each. Both DetectConfig.batch modes run on the same frames, in
 
 Target kinds chessboard / circles_asymmetric (targets/chessboard_a4.yaml, targets/circles_asymmetric_a4.yaml)
 run at the H4 viewing geometry (1024 x 768, f = 1013 px, no distortion, 0.6-0.76 m, tilt <= 35 deg), default
-DetectConfig, polygon renderer; every other pose is seen with the camera rolled 180 degrees. Printed: corner
-bias / scatter (as above), pose error systematic / random (as above) and the total RMS pose error.
+DetectConfig, polygon renderer; every other pose is seen with the camera rolled 180 degrees. Printed per path:
+time per frame of detect_batch, corner bias (per corner the mean error over all frames of the pose, RMS over
+corners and poses) / scatter (std over the frames of one seed, pooled), pose error systematic / random (as
+above) and the total RMS pose error, and the corner scatter the image model predicts (measure/covariance.py).
+Chessboard paths, on the same frames: "SB ACCURACY" (findChessboardCornersSB with CALIB_CB_ACCURACY on every
+frame, the detector before the saddle fit), "saddle per_frame" and "saddle seeded" (targets/kinds/chessboard.py).
 """
 
 from __future__ import annotations
@@ -139,52 +143,124 @@ def run_target(target, n_poses, n_seeds, n_frames, seed, effects):
     print(f"    max |seeded - per_frame| pose difference: {np.nanmax(d[..., :3]):.5f} mm, {np.nanmax(d[..., 3:]):.5f} deg")
 
 
+class _AccuracyChessboard:
+    """The chessboard kind as it was before the saddle fit: findChessboardCornersSB(CALIB_CB_ACCURACY) on
+    every frame (no seeded mode), same orientation logic."""
+
+    def __init__(self, kind):
+        self.kind = kind
+
+    def __getattr__(self, name):
+        return getattr(self.kind, name)
+
+    def find_corners(self, spec, det, img, config, diag, intrinsics=None):
+        nr, nc = spec.rows - 1, spec.cols - 1
+        ok, corners = cv2.findChessboardCornersSB(img, (nc, nr), flags=cv2.CALIB_CB_ACCURACY)
+        if not ok or corners is None:
+            return None, "not found"
+        G, why = self.kind.orient(spec, img, corners.reshape(nr, nc, 2).astype(np.float64))
+        return (None, why) if G is None else (np.arange(nr * nc), G.reshape(-1, 2))
+
+    def seeded_mode(self, config):
+        return None
+
+
+def _variants(target):
+    """[(label, kind implementation or None (the registered one), DetectConfig)] compared for a target."""
+    if target.kind == "chessboard":
+        old = _AccuracyChessboard(target.kind_impl)
+        return [("SB ACCURACY", old, MODES["per_frame"]), ("saddle per_frame", None, MODES["per_frame"]),
+                ("saddle seeded", None, MODES["seeded"])]
+    return [("default", None, DetectConfig())]
+
+
+def _with_kind(target, impl, fn):
+    """fn() with the target's kind implementation replaced by impl (None: as registered)."""
+    from vision_calib.targets import spec as spec_mod
+
+    if impl is None:
+        return fn()
+    reg = spec_mod._REGISTRY
+    keep = reg[target.kind]
+    reg[target.kind] = impl
+    try:
+        return fn()
+    finally:
+        reg[target.kind] = keep
+
+
 def run_new_kind(name, n_poses, n_seeds, n_frames, seed, effects):
-    """Accuracy of a chessboard / circle-grid target at the H4 geometry (module docstring)."""
+    """Accuracy and speed of a chessboard / circle-grid target at the H4 geometry (module docstring); for the
+    chessboard, the SB ACCURACY detector (the old path) beside the saddle fit, per frame and seeded, on the
+    same frames, plus the corner scatter the image model predicts (measure/covariance.py corner_info)."""
     from vision_calib.camera import CameraIntrinsics
+    from vision_calib.measure.covariance import corner_info
     from vision_calib.render import TargetRenderer
     from vision_calib.targets import load_target
 
     target = load_target(Path(__file__).resolve().parents[1] / "targets" / f"{name}_a4.yaml")
     intr = CameraIntrinsics(1024, 768, 1013.0, 1013.0, 511.5, 383.5)
     lookup = target_lookup(target)
+    ids_all, P_all = target.corner_points()
     rng = np.random.default_rng(seed)
     roll = frames.make_T(np.diag([-1.0, -1.0, 1.0]), np.zeros(3))
     Ts = [(roll if k % 2 else np.eye(4)) @ random_view_pose(rng, target, intr, dist_range=(0.6, 0.76))
           for k in range(n_poses)]
     seeds = pose_seeds(seed + 1, n_poses * n_seeds)
     r = TargetRenderer(target, intr, backend="polygon")
-    err = np.full((n_poses, n_seeds, 6), np.nan)
-    corners, t_det, n_img = [], 0.0, 0
+    variants = _variants(target)
+    err = {v[0]: np.full((n_poses, n_seeds, 6), np.nan) for v in variants}
+    corners = {v[0]: [] for v in variants}
+    t_det = {v[0]: 0.0 for v in variants}
+    pred_var, n_img = [], 0
     for k, T in enumerate(Ts):
         ideal = r.render(T)
-        acc = {}
+        acc = {v[0]: {} for v in variants}
+        F = corner_info(target, T, P_all, intr, effects)
+        pred_var.append(np.trace(np.linalg.inv(F), axis1=1, axis2=2) / 2)
         for s in range(n_seeds):
             imgs = apply_effects(ideal, effects, n_frames, seeds[k * n_seeds + s], intr)
-            t0 = time.perf_counter()
-            dets = detect_batch(imgs, target, intr)
-            t_det += time.perf_counter() - t0
             n_img += n_frames
-            pm = measure_pose(dets, target, intr, k)
-            if pm.valid:
-                err[k, s] = frames.pose_error(T, pm.T_cam_target)
-            for d in dets:
-                if d.valid:
-                    e = d.uv_px - intr.project(frames.transform_points(T, np.array([lookup[int(i)] for i in d.ids])))
-                    for i, ee in zip(d.ids, e):
-                        acc.setdefault(int(i), []).append(ee)
-        corners += [np.array(v) for v in acc.values() if len(v) > 1]
-    e = err * SCALE
-    sysm, rnd = np.nanmean(e, axis=1), np.nanstd(e, axis=1, ddof=1)
-    cb = np.sqrt(np.mean([np.sum(c.mean(0) ** 2) / 2 for c in corners]))
-    sc = np.sqrt(np.mean([c.var(0, ddof=1).mean() for c in corners]))
+            order = variants if (k + s) % 2 == 0 else variants[::-1]  # alternate who goes first
+            for label, impl, cfg in order:
+                t0 = time.perf_counter()
+                dets = _with_kind(target, impl, lambda: detect_batch(imgs, target, intr, cfg))
+                t_det[label] += time.perf_counter() - t0
+                pm = measure_pose(dets, target, intr, k)
+                if pm.valid:
+                    err[label][k, s] = frames.pose_error(T, pm.T_cam_target)
+                for d in dets:
+                    if d.valid:
+                        p = np.array([lookup[int(i)] for i in d.ids])
+                        e = d.uv_px - intr.project(frames.transform_points(T, p))
+                        for i, ee in zip(d.ids, e):
+                            acc[label].setdefault((s, int(i)), []).append(ee)
+        for label in acc:  # bias per corner over all frames of the pose; scatter per (seed, corner) over frames
+            per_id = {}
+            for (s, i), v in acc[label].items():
+                per_id.setdefault(i, []).append(np.array(v))
+            corners[label] += [(np.concatenate(v), v) for v in per_id.values()]
+    n_frames_mode = n_img // max(1, n_poses * n_seeds) * n_poses * n_seeds
     print(f"  {target.name}: {target.n_corners} points, {n_poses} poses (every other rolled 180 deg) x {n_seeds} "
-          f"seeds x {n_frames} frames, detect {t_det / n_img * 1e3:.0f} ms/frame")
-    print(f"    corner bias {cb:.4f} px, scatter {sc:.4f} px (per coordinate)")
-    print(f"    pose error systematic t {np.sqrt(np.mean(sysm[:, :3] ** 2)):.4f} mm, r {np.sqrt(np.mean(sysm[:, 3:] ** 2)):.4f} deg;"
-          f" random t {np.sqrt(np.mean(rnd[:, :3] ** 2)):.4f} mm, r {np.sqrt(np.mean(rnd[:, 3:] ** 2)):.4f} deg;"
-          f" total RMS t {np.sqrt(np.nanmean(e[..., :3] ** 2)):.4f} mm, r {np.sqrt(np.nanmean(e[..., 3:] ** 2)):.4f} deg;"
-          f" valid {int(np.isfinite(e[..., 0]).sum())}/{e.shape[0] * e.shape[1]}")
+          f"seeds x {n_frames} frames ({n_frames_mode} frames per row), read noise {effects.read_noise_grey} grey")
+    print(f"    {'path':17s} | {'ms/frame':>8} | {'corner bias':>11} {'scatter':>8} | {'systematic t':>12} {'r':>7} | "
+          f"{'random t':>8} {'r':>7} | {'total t':>7} {'r':>7} | valid  (px, mm, deg)")
+    for label, _, _ in variants:
+        e = err[label] * SCALE
+        sysm, rnd = np.nanmean(e, axis=1), np.nanstd(e, axis=1, ddof=1)
+        cb = np.sqrt(np.mean([np.sum(c.mean(0) ** 2) / 2 for c, _ in corners[label]]))
+        sc = np.sqrt(np.mean([x.var(0, ddof=1).mean() for _, xs in corners[label] for x in xs if len(x) > 1]))
+        print(f"    {label:17s} | {t_det[label] / n_img * 1e3:8.1f} | {cb:11.4f} {sc:8.4f} | "
+              f"{np.sqrt(np.mean(sysm[:, :3] ** 2)):12.4f} {np.sqrt(np.mean(sysm[:, 3:] ** 2)):7.4f} | "
+              f"{np.sqrt(np.mean(rnd[:, :3] ** 2)):8.4f} {np.sqrt(np.mean(rnd[:, 3:] ** 2)):7.4f} | "
+              f"{np.sqrt(np.nanmean(e[..., :3] ** 2)):7.4f} {np.sqrt(np.nanmean(e[..., 3:] ** 2)):7.4f} | "
+              f"{int(np.isfinite(e[..., 0]).sum())}/{e.shape[0] * e.shape[1]}")
+    print(f"    image-model corner scatter (corner_info, info_model {target.kind_impl.info_model!r}): "
+          f"{np.sqrt(np.mean(np.concatenate(pred_var))):.4f} px per coordinate")
+    if len(variants) > 1:
+        base = variants[0][0]
+        for label, _, _ in variants[1:]:
+            print(f"    {base} / {label} time per frame: {t_det[base] / t_det[label]:.1f}x")
 
 
 def main(argv=None):

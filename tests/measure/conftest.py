@@ -21,3 +21,8 @@ def aprilgrid():
 @pytest.fixture
 def intr():
     return CameraIntrinsics(1024, 768, 1100.0, 1100.0, 515.3, 380.7)
+
+
+@pytest.fixture
+def chessboard():
+    return TargetSpec(kind="chessboard", name="test_chessboard", rows=7, cols=10, square_m=0.03)

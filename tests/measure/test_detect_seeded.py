@@ -71,6 +71,18 @@ def test_charuco_seeded_equals_per_frame(charuco, read_noise):
     assert abs(b1 - b0) < 0.002 and abs(s1 - s0) < 0.05 * s0, (b0, b1, s0, s1)
 
 
+def test_chessboard_seeded_equals_per_frame(chessboard):
+    """Chessboard: the seeded frames are refined by the saddle fit the full detection ends with (same
+    windows), so corners and poses equal the per-frame path's to the fit's convergence tolerance."""
+    out = _compare(chessboard, n_poses=2, n_seeds=2, n_frames=4, read_noise=4.0)
+    d = np.abs(np.array(out["dpose"]))
+    assert d[:, :3].max() < 1e-6 and np.degrees(d[:, 3:].max()) < 1e-4, d
+    for (_, da), (_, db) in zip(out["per_frame"], out["seeded"]):
+        for a, b in zip(da, db):
+            assert np.array_equal(a.ids, b.ids)
+            assert np.abs(a.uv_px - b.uv_px).max() < 1e-3
+
+
 def test_apriltag_seeded_not_worse_than_per_frame(aprilgrid):
     """AprilTag grid: the edge-fit refinement has a smaller corner bias and no larger scatter than OpenCV's
     AprilTag refinement (per-frame path), and the pose errors vs truth are no larger."""
@@ -148,7 +160,7 @@ def test_seeded_config_validation():
     assert DetectConfig(refine="subpix").seed_config().refine == "subpix"
 
 
-@pytest.mark.parametrize("name", ["charuco", "aprilgrid"])
+@pytest.mark.parametrize("name", ["charuco", "aprilgrid", "chessboard"])
 def test_refinement_reads_only_its_read_mask(name, request):
     """The per-frame estimator started from the seed reads only the pixels of _Refiner.read_mask: the same
     frame with every other pixel set to 0 gives bit-identical corners (what lets the simulated chain draw

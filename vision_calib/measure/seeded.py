@@ -8,7 +8,10 @@ names (``TargetKind.seeded_mode``; None -> every frame gets a full detection):
   own OpenCV corners (it converges to the same point: poses equal within 1e-4 mm, measured);
 - "tag_edges" (AprilTag grid): straight-edge fits of each tag's border (:func:`.tag_edges.refine_quads`); the seed
   frame and every fully detected frame are refined the same way (twice, from OpenCV's unrefined
-  marker corners), so all frames of a pose share one estimator.
+  marker corners), so all frames of a pose share one estimator;
+- "saddle" (chessboard): the saddle-point fit of :mod:`.saddle` (:func:`.saddle.refine_saddles`, moves up to
+  ``max_shift_px``, windows from the seed corners), the estimator the chessboard kind's full detection
+  ends with (:func:`.saddle.refine_detected`), so the seed frame shares it too.
 Validity per frame: the frame's 1/8-scale image must correlate with the seed's (NCC >=
 ``min_view_ncc``), every corner must be refined and none may move more than ``max_shift_px`` from its
 seed; else the frame gets a full detection (diagnostics "fallback": why). A full detection replaces the
@@ -32,6 +35,7 @@ import numpy as np
 
 from ..camera import CameraIntrinsics
 from .detect import DetectConfig, Detection, _detect_gray, _load_checked, _subpix, detect
+from . import saddle
 from .tag_edges import read_mask, refine_quads
 
 #: downscale factor of the image used for the same-view check
@@ -69,11 +73,16 @@ class _Refiner:
         self.win = config.subpix_win
         self.intr = intrinsics
         self.cells = target.kind_impl.tag_cells(target) if mode == "tag_edges" else 0
-        self.refine = {"subpix": self._subpix, "tag_edges": self._tag_edges}[mode]
+        self.max_move = config.max_shift_px
+        self.refine = {"subpix": self._subpix, "tag_edges": self._tag_edges, "saddle": self._saddle}[mode]
 
     def _subpix(self, img, ids, uv, passes=1):
         out = _subpix(img, uv, self.win)
         return ids, out, np.all(np.isfinite(out), axis=1)
+
+    def _saddle(self, img, ids, uv, passes=1):
+        out, ok = saddle.refine_saddles(img, uv, self.max_move)
+        return ids, out, ok
 
     def _tag_edges(self, img, ids, uv, passes=1):
         q = uv.reshape(-1, 4, 2)
@@ -87,9 +96,14 @@ class _Refiner:
         """(H, W) bool: every pixel :meth:`refine` reads when started from the seed corners uv (N, 2).
         ``cv2.cornerSubPix`` samples a (2 win + 3)^2 patch bilinearly around its current estimate, which stays
         within ``max_shift_px`` of the seed in an accepted frame (+2 px for the iterations in between); the
-        edge fits read fixed profiles across the seed quads' sides (:func:`.tag_edges.read_mask`)."""
+        edge fits read fixed profiles across the seed quads' sides (:func:`.tag_edges.read_mask`); the saddle
+        fit reads discs of radius 3 sigma + max_shift_px around the seeds (:func:`.saddle.read_mask`)."""
         if self.mode == "tag_edges":
             return read_mask(uv, self.cells, shape)
+        if self.mode == "saddle":
+            if max_shift_px != self.max_move:
+                raise ValueError(f"read_mask: max_shift_px {max_shift_px} differs from the refiner's {self.max_move}")
+            return saddle.read_mask(uv, shape, self.max_move)
         mask = np.zeros(shape, dtype=bool)
         r = self.win + 2 + int(np.ceil(max_shift_px)) + 2
         h, w = shape

@@ -98,7 +98,7 @@ class TargetKind:
         raise NotImplementedError
 
     def seeded_mode(self, config) -> str | None:
-        """measure/seeded.py refinement from a seed frame: "subpix" | "tag_edges" | None (per-frame)."""
+        """measure/seeded.py refinement from a seed frame: "subpix" | "tag_edges" | "saddle" | None (per-frame)."""
         return None
 
 

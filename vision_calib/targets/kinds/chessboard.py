@@ -11,10 +11,12 @@ then the square outside corner 0 must be darker than the one outside the last co
 reversed. For rows + cols even the target is refused (ConfigError) unless ``allow_symmetric: true``; such a
 board can then only serve intrinsics calibration (measure_pose refuses it).
 
-Detection: ``cv2.findChessboardCornersSB`` on the whole board (all inner corners must be visible),
-flags :data:`SB_FLAGS` (ACCURACY: the most accurate, and the slowest). Every frame is detected in full
-(seeded batch mode included): cornerSubPix from a seed frame measured worse than the ACCURACY corners
-(0.032 vs 0.020 px RMS, see :data:`SB_FLAGS`).
+Detection: the whole board (all inner corners must be visible) is found by ``cv2.findChessboardCorners``
+(flags :data:`CLASSIC_FLAGS`, a few ms), else by ``cv2.findChessboardCornersSB`` (flags :data:`SB_FLAGS`,
+~0.1 s: it finds the far and steeply tilted boards FAST_CHECK misses); the corners are then located by
+the saddle-point fit of :mod:`vision_calib.measure.saddle` (corners it rejects are dropped). In the seeded
+batch mode (measure/seeded.py, mode "saddle") every other frame of a pose is refined by the same fit from
+the seed frame's corners. Measured figures: :data:`SB_FLAGS`.
 """
 
 from __future__ import annotations
@@ -23,15 +25,31 @@ import cv2
 import numpy as np
 
 from ...errors import ConfigError
+from ...measure.saddle import refine_detected
 from . import TargetKind
 from ._grid import SquareCorners, apply_h, fit_homography, front_facing, sample_mean
 
-#: findChessboardCornersSB flags, chosen by corner error vs the projected truth on polygon-renderer images
-#: at the H4 geometry (1024 x 768, f 1013 px, 0.6-0.76 m, tilt <= 35 deg, SensorEffects() defaults,
-#: chessboard_a4, 7 poses incl. one rolled 180 deg x 3 frames; RMS px, ms/frame on a shared 2-core machine):
-#: 0: 0.032, 380 ms; ACCURACY: 0.020, 1480 ms; EXHAUSTIVE: 0.032; NORMALIZE_IMAGE: 0.102 (worse);
-#: NORMALIZE|ACCURACY 0.095; flags 0 + cornerSubPix (win 5): 0.032, (win 3): 0.041.
-SB_FLAGS = cv2.CALIB_CB_ACCURACY
+#: Detectors, measured on polygon-renderer images at the H4 geometry (1024 x 768, f 1013 px, chessboard_a4,
+#: SensorEffects() defaults unless said, half the views rolled 180 deg; one thread on a shared 2-core machine).
+#: Found / 12 views and ms per view, classic = findChessboardCorners(CLASSIC_FLAGS), SB = ...SB(flags):
+#: 0.5-0.8 m tilt <= 35 deg, also with blur 1.5 / 2.5 / 4 px, read noise 8 / 16 / 30 grey or exposure 0.25:
+#: classic 12/12, 3-11 ms (60 ms at noise 30); SB 0: 12/12, 100-160 ms; SB ACCURACY: 12/12, ~500 ms.
+#: Tilt 60-70 deg: classic 10/12, SB 0 11/12, SB ACCURACY 11/12, classic then SB 0: 12/12 (25 ms).
+#: 1.6 m (13 px squares): classic 1/12, SB 0 and ACCURACY 12/12. Classic without FAST_CHECK finds all these
+#: but takes 2-3 s on a frame without the board (FAST_CHECK 6-300 ms, SB 0 90 ms).
+#: Corner error vs the projected truth (16 views at 0.6-0.76 m x 4 frames; RMS per coordinate, px):
+#: bias / scatter: SB ACCURACY 0.018 / 0.006 (read noise 8: 0.019 / 0.017), 490 ms;
+#: classic + saddle fit 0.006 / 0.004 (0.010 / 0.017), 4 + 12 ms; the raw corners: classic 0.069, SB 0 0.041.
+#: At 1.6 m / 2.2 m / tilt 50-65 deg / blur 2 px: ACCURACY 0.026 / 0.124 / 0.139 / 0.026, saddle fit 0.013 /
+#: 0.024 / 0.011 / 0.015 px. Whole detection (benchmarks/bench_detect.py --targets chessboard --poses 8 --seeds 2
+#: --frames 5, H4 geometry; ms/frame, corner bias / scatter px, pose systematic t mm / r deg):
+#: SB ACCURACY per frame 580 ms, 0.020 / 0.007, 0.058 / 0.009; this kind per frame 21 ms, 0.003 / 0.0045,
+#: 0.002 / 0.001; seeded 14 ms, same figures; at read noise 8: 0.020 / 0.018, 0.061 / 0.010 vs 0.006 / 0.017,
+#: 0.006 / 0.003.
+CLASSIC_FLAGS = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.CALIB_CB_FAST_CHECK
+SB_FLAGS = 0
+#: largest move of a detector corner in the saddle-point fit [px] (the raw corners are within ~0.3 px)
+MAX_MOVE_PX = 1.0
 
 
 class ChessboardKind(SquareCorners, TargetKind):
@@ -41,6 +59,7 @@ class ChessboardKind(SquareCorners, TargetKind):
     auto_extra_subpix = False
     info_model = "saddle"
     sb_flags = SB_FLAGS
+    classic_flags = CLASSIC_FLAGS
 
     def validate(self, spec, where):
         if spec.rows < 2 or spec.cols < 2 or spec.rows * spec.cols < 6:
@@ -62,14 +81,22 @@ class ChessboardKind(SquareCorners, TargetKind):
 
     def find_corners(self, spec, det, img, config, diag, intrinsics=None):
         nr, nc = spec.rows - 1, spec.cols - 1
-        ok, corners = cv2.findChessboardCornersSB(img, (nc, nr), flags=self.sb_flags)
+        ok, corners = cv2.findChessboardCorners(img, (nc, nr), flags=self.classic_flags)
+        diag["chessboard_detector"] = "classic"
+        if not ok or corners is None:
+            ok, corners = cv2.findChessboardCornersSB(img, (nc, nr), flags=self.sb_flags)
+            diag["chessboard_detector"] = "sb"
         if not ok or corners is None:
             return None, f"chessboard of {nc} x {nr} inner corners not found (the whole board must be visible)"
         G = corners.reshape(nr, nc, 2).astype(np.float64)
         G, why = self.orient(spec, img, G)
         if G is None:
             return None, why
-        return np.arange(nr * nc), G.reshape(-1, 2)
+        uv, ok = refine_detected(img, G.reshape(-1, 2), MAX_MOVE_PX)
+        diag["saddle_rejected"] = int((~ok).sum())
+        if not ok.any():
+            return None, "no chessboard corner passed the saddle-point fit (measure/saddle.py)"
+        return np.flatnonzero(ok), uv[ok]
 
     def orient(self, spec, img, G):
         """Detected corners G (nr, nc, 2) in OpenCV's order -> the order of the physical ids (module
@@ -94,4 +121,4 @@ class ChessboardKind(SquareCorners, TargetKind):
         return (G if first < last else G[::-1, ::-1]), ""
 
     def seeded_mode(self, config):
-        return None  # per-frame: cornerSubPix from a seed is less accurate than SB ACCURACY (SB_FLAGS)
+        return "saddle"
