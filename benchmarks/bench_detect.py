@@ -5,7 +5,8 @@
     .venv/bin/python benchmarks/bench_detect.py --targets chessboard,circles_asymmetric --poses 8 --seeds 2 --frames 5
 
 For each target (bench_measure's ChArUco 7 x 10 and AprilTag grid 4 x 5, 1024 x 768 with distortion,
-SensorEffects() defaults unless --read-noise): P random poses (TargetRenderer, supersample 2), S noise
+SensorEffects() defaults unless --read-noise): P random poses (TargetRenderer, supersample 2, lens
+distortion drawn geometrically as in the image chain), S noise
 seeds of N frames each. Both DetectConfig.batch modes run on the same frames, interleaved:
 - time per frame of the measure stage (detect_batch + measure_pose, one thread) beside a floor measured
   in the same loop: raw OpenCV detection (ChArUco detectBoard / AprilTag detectMarkers without
@@ -44,7 +45,7 @@ from vision_calib import frames  # noqa: E402
 from vision_calib.measure import DetectConfig, detect_batch, measure_pose  # noqa: E402
 from vision_calib.measure.accuracy import pose_seeds, random_view_pose  # noqa: E402
 from vision_calib.measure.pnp import target_lookup  # noqa: E402
-from vision_calib.sensor import SensorEffects, apply_effects  # noqa: E402
+from vision_calib.sensor import SensorEffects, apply_effects, effects_for_render  # noqa: E402
 
 MODES = {"per_frame": DetectConfig(batch="per_frame"), "seeded": DetectConfig(batch="seeded")}
 SCALE = np.array([1e3, 1e3, 1e3, *(3 * [np.degrees(1.0)])])  # -> mm, deg
@@ -90,7 +91,7 @@ def run_target(target, n_poses, n_seeds, n_frames, seed, effects):
     rng = np.random.default_rng(seed)
     Ts = [random_view_pose(rng, target, INTR) for _ in range(n_poses)]
     seeds = pose_seeds(seed + 1, n_poses * n_seeds)
-    r = TargetRenderer(target, INTR.without_distortion(), supersample=2)
+    r = TargetRenderer(target, INTR, supersample=2, distort=True)  # as the image chain renders
     t = {m: 0.0 for m in MODES}
     t_floor, n_img = 0.0, 0
     err = {m: np.full((n_poses, n_seeds, 6), np.nan) for m in MODES}
@@ -101,7 +102,7 @@ def run_target(target, n_poses, n_seeds, n_frames, seed, effects):
             ideal = r.render(T)
             per_pose = {m: {} for m in MODES}
             for s in range(n_seeds):
-                imgs = apply_effects(ideal, effects, n_frames, seeds[k * n_seeds + s], INTR)
+                imgs = apply_effects(ideal, effects_for_render(r, effects), n_frames, seeds[k * n_seeds + s], INTR)
                 order = list(MODES) if (k + s) % 2 == 0 else list(MODES)[::-1]  # alternate who goes first
                 for m in order:
                     t0 = time.perf_counter()
