@@ -231,7 +231,7 @@ def import_visp_chessboard(src, dst, inner_cols: int, inner_rows: int, square_m:
     ``-h``, the *inner* corners (OpenCV's pattern size; ViSP's default 9 x 6); the target written has
     ``rows``/``cols`` = number of squares = inner + 1. square_m: square side [m]. mount: "eye_in_hand"
     (ViSP's tutorial-hand-eye-calibration: camera on the flange, board fixed) or "fixed". The pattern
-    size is checked on the first image (cv2.findChessboardCorners); DataError names the image."""
+    size is checked on the first image (the chessboard kind's detectors); DataError names the image."""
     import cv2
 
     src, dst = Path(src), Path(dst)
@@ -248,8 +248,11 @@ def import_visp_chessboard(src, dst, inner_cols: int, inner_rows: int, square_m:
         img = cv2.imread(str(first), cv2.IMREAD_GRAYSCALE)
         if img is None:
             raise DataError(f"{first}: unreadable image")
-        found, _ = cv2.findChessboardCorners(img, (int(inner_cols), int(inner_rows)),
-                                             cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
+        from ..targets.kinds.chessboard import CLASSIC_FLAGS, SB_FLAGS  # the chessboard kind's detectors
+
+        size = (int(inner_cols), int(inner_rows))
+        found = cv2.findChessboardCorners(img, size, flags=CLASSIC_FLAGS)[0] or \
+            cv2.findChessboardCornersSB(img, size, flags=SB_FLAGS)[0]
         if not found:
             raise DataError(f"{first}: no chessboard of {inner_cols}x{inner_rows} inner corners found; check "
                             "--chessboard COLSxROWS (ViSP's -w x -h: inner corners, not squares)")
