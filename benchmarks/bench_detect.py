@@ -17,7 +17,7 @@ seeds of N frames each. Both DetectConfig.batch modes run on the same frames, in
   corners) and scatter (std over frames, pooled), px;
 - the largest |seeded - per_frame| pose difference.
 
-Target kinds chessboard / circles_asymmetric (targets/chessboard_a4.yaml, targets/circles_asymmetric_a4.yaml)
+Target kinds chessboard / circles_asymmetric / modified_circle_grid (targets/<kind>_a4.yaml)
 run at the H4 viewing geometry (1024 x 768, f = 1013 px, no distortion, 0.6-0.76 m, tilt <= 35 deg), default
 DetectConfig, polygon renderer; every other pose is seen with the camera rolled 180 degrees. Printed per path:
 time per frame of detect_batch, corner bias (per corner the mean error over all frames of the pose, RMS over
@@ -277,7 +277,7 @@ def main(argv=None):
     effects = SensorEffects() if a.read_noise is None else SensorEffects(read_noise_grey=a.read_noise)
     _FLOOR[CHARUCO.name] = cv2.aruco.CharucoDetector(CHARUCO.cv_board())
     _FLOOR[APRILGRID.name] = cv2.aruco.ArucoDetector(APRILGRID.cv_dictionary(), cv2.aruco.DetectorParameters())
-    for name in ("chessboard", "circles_asymmetric"):
+    for name in ("chessboard", "circles_asymmetric", "modified_circle_grid"):
         if name in a.targets.split(","):
             print(f"\n=== {name} at the H4 geometry, read noise {effects.read_noise_grey} grey, seed {a.seed} ===",
                   flush=True)

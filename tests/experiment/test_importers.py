@@ -79,7 +79,7 @@ def _edit_pose(src, i, **kv):
     ("quat", r"poses/2.yaml: keys qw, qx, qy, qz: quaternion norm 1.0\d+ is not 1"),
     ("size", r"images/1.png: image size 32x48 does not match the camera intrinsics 64x48"),
     ("missing", r"data\[0\]: file not found: .*images/0.png"),
-    ("circles", r"type 'ModifiedCircleGridTargetFinder' is not supported"),
+    ("aruco_grid", r"type 'ArucoGridTargetFinder' is not supported"),
     ("no-mount", r"neither 'static_camera' nor 'eye_in_hand'"),
 ])
 def test_rosi_bad_input_is_named_at_the_cli(tmp_path, capsys, case, pattern):
@@ -96,9 +96,9 @@ def test_rosi_bad_input_is_named_at_the_cli(tmp_path, capsys, case, pattern):
         (src / "images" / "0.png").unlink()
     else:
         doc = yaml.safe_load((src / "cal_data.yaml").read_text())
-        if case == "circles":
-            doc["target_finder"] = {"type": "ModifiedCircleGridTargetFinder", "rows": 10, "cols": 10,
-                                    "spacing": 0.0254, "circle_diameter": 0.015}
+        if case == "aruco_grid":
+            doc["target_finder"] = {"type": "ArucoGridTargetFinder", "rows": 5, "cols": 7,
+                                    "aruco_marker_dim": 0.025, "marker_gap": 0.005, "dictionary": 10}
         else:
             del doc["static_camera"]
         (src / "cal_data.yaml").write_text(yaml.safe_dump(doc))
@@ -261,3 +261,57 @@ def test_visp_chessboard_round_trip_processes_like_the_direct_folder(tmp_path):
     assert a.keys() == b.keys()
     for k in a:
         np.testing.assert_allclose(np.array(b[k]["matrix"]), np.array(a[k]["matrix"]), rtol=0, atol=1e-9, err_msg=k)
+
+
+def test_rosi_modified_circle_grid_mapping(tmp_path):
+    """ROS-I's test_set_10x10 target finder (its own file, the plugin type name, circle_detector_params)
+    -> a modified_circle_grid of 10 x 10 dots, spacing 25.4 mm, dot size unknown (0)."""
+    finder = {"type": "industrial_calibration::ModifiedCircleGridTargetFinderPlugin", "rows": 10, "cols": 10,
+              "spacing": 0.0254, "circle_detector_params": {"minThreshold": 20, "circleColor": 0}}
+    src = _rosi_set(tmp_path / "rosi", static_camera=False)
+    doc = yaml.safe_load((src / "cal_data.yaml").read_text())
+    del doc["target_finder"]
+    (src / "cal_data.yaml").write_text(yaml.safe_dump(doc))
+    (src / "target_finder.yaml").write_text(yaml.safe_dump(finder))
+    rec = read_recording(import_rosi(src, tmp_path / "rec"))
+    t = rec.target
+    assert (t.kind, t.rows, t.cols, t.spacing_m, t.diameter_m) == ("modified_circle_grid", 10, 10, 0.0254, 0.0)
+    assert rec.camera_mount == "eye_in_hand"
+
+
+@pytest.mark.slow
+def test_rosi_round_trip_with_a_modified_circle_grid(tmp_path):
+    """RX-90 eye-in-hand recording of the A4 modified circle grid -> flange poses -> export_rosi (diameters in the
+    extension keys) -> import_rosi -> process: the same hand-eye transforms as the original folder; without
+    the extension keys (a real ROS-I file) detection still works, the transforms move by less than 3 std."""
+    from vision_calib.experiment.simulate import run_simulation
+
+    scene = yaml.safe_load((REPO / "scenes" / "rx90_eye_in_hand.yaml").read_text())
+    scene["target"] = str(REPO / "targets" / "modified_circle_grid_a4.yaml")
+    scene["robot"] = str((REPO / "scenes" / scene["robot"]).resolve())
+    (tmp_path / "scene.yaml").write_text(yaml.safe_dump(scene, sort_keys=False))
+    run_simulation(tmp_path / "scene.yaml", out_dir=tmp_path / "sim", seed=4, n_poses=10, frames=1,
+                   export_recording=tmp_path / "rec", workers=1, progress=False, plots=False)
+    flange, _, _ = flange_pose_folder(tmp_path / "rec", tmp_path / "flange")
+    assert main(["export-rosi", str(flange), str(tmp_path / "rosi")]) == 0
+    cal = yaml.safe_load((tmp_path / "rosi" / "cal_data.yaml").read_text())
+    assert cal["target_finder"]["type"] == "ModifiedCircleGridTargetFinder"
+    bare = tmp_path / "rosi_bare"
+    shutil.copytree(tmp_path / "rosi", bare)
+    for k in ("diameter_m", "origin_diameter_m"):
+        cal["target_finder"].pop(k, None)
+    (bare / "cal_data.yaml").write_text(yaml.safe_dump(cal, sort_keys=False))
+    reports = {}
+    for name, folder in (("flange", flange), ("back", tmp_path / "rosi"), ("bare", bare)):
+        if name != "flange":
+            assert main(["import-rosi", str(folder), str(tmp_path / f"rec_{name}")]) == 0
+            folder = tmp_path / f"rec_{name}"
+        assert main(["process", str(folder), "--out", str(tmp_path / f"out_{name}"), "--json", "--no-plots"]) == 0
+        reports[name] = json.loads((tmp_path / f"out_{name}" / "report.json").read_text())["handeye"]["transforms"]
+    a, b, c = reports["flange"], reports["back"], reports["bare"]
+    for k in a:
+        assert np.array_equal(np.array(a[k]["matrix"]), np.array(b[k]["matrix"])), k
+        # the bare target's frame is offset by (D / 2, d / 2) in the target plane: compare the rotations and
+        # the camera mount (the flange side), which do not depend on it
+        rot = np.degrees(np.linalg.norm(F.pose_error(np.array(a[k]["matrix"]), np.array(c[k]["matrix"]))[3:]))
+        assert rot < 3 * np.linalg.norm(a[k]["std_rot_deg"]), (k, rot, a[k]["std_rot_deg"])

@@ -21,6 +21,7 @@ from vision_calib.targets.kinds import KINDS
 ROOT = Path(__file__).resolve().parents[2]
 CHESS = load_target(ROOT / "targets" / "chessboard_a4.yaml")
 CIRCLES = load_target(ROOT / "targets" / "circles_asymmetric_a4.yaml")
+MODCIRC = load_target(ROOT / "targets" / "modified_circle_grid_a4.yaml")
 INTR = CameraIntrinsics(1024, 768, 1013.0, 1013.0, 511.5, 383.5)  # the H4 base camera
 
 
@@ -37,8 +38,8 @@ def circles(**kw):
 
 
 def test_registry_holds_all_kinds():
-    assert {"charuco", "apriltag_grid", "chessboard", "circles_asymmetric"} <= set(KINDS)
-    for s in (CHESS, CIRCLES):
+    assert {"charuco", "apriltag_grid", "chessboard", "circles_asymmetric", "modified_circle_grid"} <= set(KINDS)
+    for s in (CHESS, CIRCLES, MODCIRC):
         assert s.kind_impl is KINDS[s.kind]
         assert target_from_dict(s.to_dict()) == s
         assert "dictionary" not in s.to_dict()
@@ -108,7 +109,8 @@ POSES = [(0.65, (0.0, 0.0, 0.1), False), (0.7, (0.5, -0.3, 0.2), False), (0.6, (
          (0.7, (0.3, 0.2, 0.1), True)]
 
 
-@pytest.mark.parametrize("target, tol_mm, tol_deg", [(CHESS, 0.6, 0.1), (CIRCLES, 0.6, 0.1)], ids=["chess", "circles"])
+@pytest.mark.parametrize("target, tol_mm, tol_deg", [(CHESS, 0.6, 0.1), (CIRCLES, 0.6, 0.1), (MODCIRC, 0.6, 0.1)],
+                         ids=["chess", "circles", "modified_circles"])
 def test_render_detect_pose(target, tol_mm, tol_deg):
     """Polygon renderer + default sensor effects -> detect -> measure_pose: ids tied to the physical board
     (also with the camera rolled 180 degrees) and pose error within tol (about 4x the RMS measured by
@@ -167,6 +169,13 @@ def test_symmetric_boards_refused_for_poses():
     (dict(kind="circles_asymmetric", rows=7, cols=4, spacing_m=0.02, diameter_m=0.01, allow_symmetric="y"),
      "allow_symmetric"),
     (dict(kind="hexagons", rows=7, cols=4), "kind"),
+    (dict(kind="modified_circle_grid", rows=5, cols=7, diameter_m=0.01), "spacing_m"),
+    (dict(kind="modified_circle_grid", rows=1, cols=7, spacing_m=0.03), "rows"),
+    (dict(kind="modified_circle_grid", rows=5, cols=7, spacing_m=0.03, diameter_m=0.012, origin_diameter_m=0.05),
+     "origin_diameter_m"),
+    (dict(kind="modified_circle_grid", rows=5, cols=7, spacing_m=0.03, diameter_m=0.012, origin_diameter_m=0.01),
+     "origin_diameter_m"),
+    (dict(kind="modified_circle_grid", rows=5, cols=7, spacing_m=0.03, diameter_m=-0.01), "diameter_m"),
 ])
 def test_bad_values_name_file_and_key(tmp_path, d, key):
     import yaml
@@ -178,7 +187,7 @@ def test_bad_values_name_file_and_key(tmp_path, d, key):
     assert str(f) in str(ei.value) and key in str(ei.value)
 
 
-@pytest.mark.parametrize("target", [CHESS, CIRCLES], ids=["chess", "circles"])
+@pytest.mark.parametrize("target", [CHESS, CIRCLES, MODCIRC], ids=["chess", "circles", "modified_circles"])
 def test_printable_export_detects_at_geometry(tmp_path, target):
     """The exported PNG, detected as an image, gives corners at corner_points() (pixel -> metres by the
     file's pHYs resolution)."""
@@ -212,3 +221,50 @@ def test_image_bound_for_new_kinds():
     Cb = image_bound_pose_cov(big, INTR, Tb, SensorEffects())
     # the rotation block does not depend on the frame origin (the translation block moves with the lever arm)
     np.testing.assert_allclose(Cb[3:, 3:] / Cs[3:, 3:], 0.5, rtol=1e-6)
+
+
+def _rolled(T, deg):
+    a = math.radians(deg)
+    Rz = np.array([[math.cos(a), -math.sin(a), 0], [math.sin(a), math.cos(a), 0], [0, 0, 1]])
+    return frames.make_T(Rz, np.zeros(3)) @ T
+
+
+def test_modified_circle_grid_ids_at_every_roll():
+    """ROS-I's square 10 x 10 grid (25.4 mm, 10 mm dots; its 4 rotations look alike but for the origin dot) and
+    the A4 5 x 7 one (found with rows and cols swapped when the camera is rolled 90 degrees): ids tied to the
+    board at 0/90/180/270 degrees of roll, corners within 0.1 px of the projected centres."""
+    square = TargetSpec(kind="modified_circle_grid", name="rosi_10x10", rows=10, cols=10, spacing_m=0.0254,
+                        diameter_m=0.01)
+    for target in (square, MODCIRC):
+        r = TargetRenderer(target, INTR, backend="polygon")
+        ids, P = target.corner_points()
+        for k, (dist, rvec, _) in enumerate(POSES[:3]):
+            for deg in (0, 90, 180, 270):
+                T = _rolled(_pose(target, dist + 0.1 * (target is square), rvec), deg)
+                img = apply_effects(r.render(T), SensorEffects(), 1, 11 * k + deg, INTR)[0]
+                d = detect(img, target, INTR)
+                assert d.valid, (target.name, deg, d.reason)
+                assert np.array_equal(d.ids, ids)
+                err = d.uv_px - INTR.project(frames.transform_points(T, P))
+                assert np.sqrt(np.mean(err ** 2)) < 0.1, (target.name, deg)
+                assert d.diagnostics["origin_dot_ratio"] > 3  # ROS-I's origin dot: 4x the area
+
+
+def test_modified_circle_grid_without_diameters_and_without_a_large_dot():
+    """A ROS-I target file gives no dot diameter: detection needs none (no ellipse-centre correction; points
+    at (c s, r s)); a board whose origin dot is barely larger than the others is refused, not misread."""
+    bare = TargetSpec(kind="modified_circle_grid", name="rosi", rows=5, cols=7, spacing_m=0.03)
+    T = _pose(MODCIRC, 0.65, (0.3, -0.2, 0.1))
+    img = apply_effects(TargetRenderer(MODCIRC, INTR, backend="polygon").render(T), SensorEffects(), 1, 3, INTR)[0]
+    d = detect(img, bare, INTR)
+    assert d.valid and d.diagnostics["ellipse_correction"] is False
+    shift = frames.make_T(t=[MODCIRC.diameter_m, MODCIRC.diameter_m / 2, 0.0])  # D / 2, d / 2: the frames' offset
+    e = frames.pose_error(T @ shift, measure_pose([d], bare, INTR).T_cam_target)
+    assert np.all(np.abs(e[:3]) < 0.6e-3) and np.all(np.abs(np.degrees(e[3:])) < 0.1), e
+    with pytest.raises(ConfigError, match="diameter_m' is needed to draw"):
+        bare.black_polygons()
+    weak = TargetSpec(kind="modified_circle_grid", name="weak", rows=5, cols=7, spacing_m=0.03, diameter_m=0.012,
+                      origin_diameter_m=0.0132)
+    img = apply_effects(TargetRenderer(weak, INTR, backend="polygon").render(T), SensorEffects(), 1, 3, INTR)[0]
+    d = detect(img, weak, INTR)
+    assert not d.valid and "origin (large) dot" in d.reason

@@ -32,12 +32,19 @@ Mapping (ROS-I -> ours):
   ``CharucoBoard::create(cols, rows, ...)``), chessboard_dim -> square_m, aruco_marker_dim -> marker_m,
   dictionary (OpenCV's enum value) -> its ``cv2.aruco`` name, ``legacy_pattern: true`` (ROS-I builds
   against OpenCV < 4.6, whose ChArUco layout is the legacy one; it matters only for an even number of
-  rows). Circle-grid / ArUco-grid targets are refused (no such target kind here).
+  rows).
+- ``ModifiedCircleGridTargetFinder``: rows, cols (dots), spacing -> ``modified_circle_grid`` spacing_m (its
+  circle_detector_params are ignored: our blob detector and origin-dot test, targets/kinds/circles.py). ROS-I
+  gives no dot diameter: detection does without, but the ellipse-centre correction is then off (the
+  extension keys ``diameter_m``/``origin_diameter_m``, written by :func:`export_rosi`, restore it). Our target
+  frame is not ROS-I's (``ModifiedCircleGridKind`` docstring: same point order, y flipped, origin shifted).
+  ArUco-grid targets are refused (no such target kind here).
 - Entries that share a pose file become the frames of one pose (pose id = the pose file's stem).
 
 Two extension keys, written by :func:`export_rosi` and ignored by ROS-I (it reads only the keys it
-knows): ``distortion: [k1, k2, p1, p2, k3]`` and ``target_finder.legacy_pattern``; a real ROS-I data
-set has neither (zero distortion, legacy layout).
+knows): ``distortion: [k1, k2, p1, p2, k3]`` and ``target_finder.legacy_pattern`` (ChArUco) or
+``target_finder.diameter_m``/``origin_diameter_m`` (circle grids); a real ROS-I data set has none of them
+(zero distortion, legacy layout, unknown dot size).
 
 Checks up front (DataError naming the file and key): a translation beyond 20 m (millimetres?), a
 quaternion whose norm is off 1 by more than 1e-3 (smaller: renormalised), an image missing or of
@@ -61,6 +68,7 @@ from .recording import FORMAT, MAX_ABS_POSITION_M, check_inside
 
 POSE_KEYS = ("x", "y", "z", "qw", "qx", "qy", "qz")
 CHARUCO_TYPES = ("CharucoGridTargetFinder", "industrial_calibration::CharucoGridTargetFinderPlugin")
+CIRCLE_TYPES = ("ModifiedCircleGridTargetFinder", "industrial_calibration::ModifiedCircleGridTargetFinderPlugin")
 QUAT_TOL = 1e-3
 
 
@@ -117,15 +125,26 @@ def _target(tf, where: str) -> dict:
     """Our target dict from a ROS-I target_finder mapping."""
     if not isinstance(tf, dict) or "type" not in tf:
         raise ConfigError(f"{where}: expected a mapping with a 'type' key")
-    if tf["type"] not in CHARUCO_TYPES:
-        raise ConfigError(f"{where}: type {tf['type']!r} is not supported (only ChArUco boards: "
-                          f"{', '.join(CHARUCO_TYPES)}); circle grids and ArUco grids have no target kind here")
+    if tf["type"] not in CHARUCO_TYPES + CIRCLE_TYPES:
+        raise ConfigError(f"{where}: type {tf['type']!r} is not supported (ChArUco boards: "
+                          f"{', '.join(CHARUCO_TYPES)}; modified circle grids: {', '.join(CIRCLE_TYPES)}); "
+                          "ArUco grids have no target kind here")
+    circles = tf["type"] in CIRCLE_TYPES
     ints = {}
     for k in ("rows", "cols"):
         v = tf.get(k)
         if isinstance(v, bool) or not isinstance(v, int):
-            raise ConfigError(f"{where}: key {k!r}: expected an integer (squares), got {v!r}")
+            raise ConfigError(f"{where}: key {k!r}: expected an integer ({'dots' if circles else 'squares'}), "
+                              f"got {v!r}")
         ints[k] = v
+    if circles:
+        try:
+            s = _num(tf, "spacing", where)
+            extra = {k: _num(tf, k, where) for k in ("diameter_m", "origin_diameter_m") if k in tf}
+        except DataError as exc:
+            raise ConfigError(str(exc)) from None
+        return {"kind": "modified_circle_grid", "name": "rosi_modified_circle_grid", "rows": ints["rows"],
+                "cols": ints["cols"], "spacing_m": s, "margin_m": s / 2, **extra}
     try:
         sq, mk = _num(tf, "chessboard_dim", where), _num(tf, "aruco_marker_dim", where)
     except DataError as exc:
@@ -254,10 +273,11 @@ def _csv_poses(path: Path) -> dict:
 
 
 def export_rosi(rec_folder, dst) -> Path:
-    """Write a recorded folder with flange poses (and a ChArUco target) as a ROS-I hand-eye data set:
+    """Write a recorded folder with flange poses (and a ChArUco or modified-circle-grid target) as a ROS-I
+    hand-eye data set:
     ``dst/cal_data.yaml``, ``dst/poses/<pose_id>.yaml``, ``dst/images/<pose_id>_<frame><ext>`` (one
-    ``data`` entry per frame, the frames of a pose sharing its pose file). Camera distortion and the
-    ChArUco layout go to the extension keys ``distortion`` and ``target_finder.legacy_pattern``."""
+    ``data`` entry per frame, the frames of a pose sharing its pose file). Camera distortion, the ChArUco
+    layout and the dot diameters go to extension keys (module docstring)."""
     import cv2
 
     from .recording import read_recording
@@ -267,9 +287,17 @@ def export_rosi(rec_folder, dst) -> Path:
         raise DataError(f"{rec.folder / 'recording.yaml'}: poses: {rec.pose_kind!r}; a ROS-I data set holds "
                         "flange poses (poses: flange_pose)")
     t = rec.target
-    if t.kind != "charuco":
+    if t.kind == "charuco":
+        finder = {"type": "CharucoGridTargetFinder", "rows": int(t.rows), "cols": int(t.cols),
+                  "chessboard_dim": float(t.square_m), "aruco_marker_dim": float(t.marker_m),
+                  "dictionary": int(getattr(cv2.aruco, t.dictionary)), "legacy_pattern": bool(t.legacy_pattern)}
+    elif t.kind == "modified_circle_grid":
+        finder = {"type": "ModifiedCircleGridTargetFinder", "rows": int(t.rows), "cols": int(t.cols),
+                  "spacing": float(t.spacing_m)}
+        finder |= {k: float(getattr(t, k)) for k in ("diameter_m", "origin_diameter_m") if getattr(t, k) > 0}
+    else:
         raise ConfigError(f"{rec.folder / 'recording.yaml'}: target.kind {t.kind!r}: ROS-I's finders here are "
-                          "ChArUco only")
+                          "ChArUco and modified circle grids only")
     dst = Path(dst)
     (dst / "poses").mkdir(parents=True, exist_ok=True)
     (dst / "images").mkdir(parents=True, exist_ok=True)
@@ -290,10 +318,7 @@ def export_rosi(rec_folder, dst) -> Path:
            "camera_mount_to_camera_guess": identity, "target_mount_to_target_guess": identity,
            "homography_threshold": 2.0, "static_camera": rec.camera_mount != "eye_in_hand",
            "eye_in_hand": rec.camera_mount == "eye_in_hand",
-           "target_finder": {"type": "CharucoGridTargetFinder", "rows": int(t.rows), "cols": int(t.cols),
-                             "chessboard_dim": float(t.square_m), "aruco_marker_dim": float(t.marker_m),
-                             "dictionary": int(getattr(cv2.aruco, t.dictionary)),
-                             "legacy_pattern": bool(t.legacy_pattern)}}
+           "target_finder": finder}
     if any(float(v) != 0.0 for v in c.dist):
         doc["distortion"] = [float(v) for v in c.dist]
     write_text_atomic(dst / "cal_data.yaml", yaml.safe_dump(doc, sort_keys=False))

@@ -43,19 +43,21 @@ from .kinds import get_kind
 KINDS = tuple(_REGISTRY)  # names of the registered kinds (the registry: targets/kinds/__init__.py)
 MAX_TARGET_M = 10.0  # a larger board is a unit mistake (mm given as m), refused on load
 _COMMON = ("kind", "name", "rows", "cols", "margin_m")
-_LENGTHS = ("square_m", "marker_m", "tag_m", "spacing_m", "diameter_m", "margin_m")
+_LENGTHS = ("square_m", "marker_m", "tag_m", "spacing_m", "diameter_m", "origin_diameter_m", "margin_m")
 
 
 @dataclass(frozen=True)
 class TargetSpec:
     """A planar calibration target. Lengths in metres. Which keys a kind uses: :mod:`.kinds`.
 
-    kind: a registered kind ("charuco" | "apriltag_grid" | "chessboard" | "circles_asymmetric").
+    kind: a registered kind ("charuco" | "apriltag_grid" | "chessboard" | "circles_asymmetric" |
+    "modified_circle_grid").
     rows, cols: squares (charuco, chessboard), tags (apriltag_grid), rows / dots per row
     (circles_asymmetric, OpenCV's patternSize = (cols, rows)). dictionary: cv2.aruco dictionary name
     ("DICT_5X5_100", "DICT_APRILTAG_36h11"; ArUco kinds). square_m, marker_m: square and marker sides.
     tag_m: apriltag side (outer edge of the black border); spacing_m: white gap between tags, or the
-    circle grid's spacing. diameter_m: dot diameter. legacy_pattern: OpenCV < 4.6 charuco layout.
+    circle grid's spacing. diameter_m: dot diameter; origin_diameter_m: the large origin dot of a
+    modified_circle_grid (0: twice diameter_m, ROS-I's generator). legacy_pattern: OpenCV < 4.6 charuco layout.
     margin_m: white margin around the pattern. first_id: id of the first marker/tag. allow_symmetric:
     accept a 180-degree-symmetric board (intrinsics calibration only; poses are refused).
     """
@@ -74,6 +76,7 @@ class TargetSpec:
     first_id: int = 0
     diameter_m: float = 0.0
     allow_symmetric: bool = False
+    origin_diameter_m: float = 0.0
 
     def __post_init__(self):
         where = f"target {self.name!r}"

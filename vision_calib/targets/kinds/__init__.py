@@ -123,9 +123,9 @@ def get_kind(name, where: str = "target") -> TargetKind:
 def _register_shipped() -> None:
     from .aruco import AprilTagGridKind, CharucoKind
     from .chessboard import ChessboardKind
-    from .circles import AsymmetricCirclesKind
+    from .circles import AsymmetricCirclesKind, ModifiedCircleGridKind
 
-    for cls in (CharucoKind, AprilTagGridKind, ChessboardKind, AsymmetricCirclesKind):
+    for cls in (CharucoKind, AprilTagGridKind, ChessboardKind, AsymmetricCirclesKind, ModifiedCircleGridKind):
         register(cls())
 
 

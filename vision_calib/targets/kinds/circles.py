@@ -77,31 +77,13 @@ class AsymmetricCirclesKind(TargetKind):
         return np.arange(p.shape[0]), p
 
     def black_polygons(self, spec):
-        """Each dot as a regular N_VERTICES-gon of the circle's area (radius scaled by
-        sqrt(2 pi / (N sin(2 pi / N)))): exact area and centroid, radial error < 2e-4 d."""
-        n = N_VERTICES
-        rho = spec.diameter_m / 2 * math.sqrt(2 * math.pi / (n * math.sin(2 * math.pi / n)))
-        a = -0.75 * math.pi + 2 * math.pi * np.arange(n) / n  # increasing angle: TL -> TR -> BR -> BL
-        ring = rho * np.column_stack([np.cos(a), np.sin(a)])
+        """Each dot as a regular N_VERTICES-gon of the circle's area (:func:`dot_ring`)."""
         _, p = self.corner_points(spec)
-        return p[:, None, :2] + ring[None]
+        return p[:, None, :2] + dot_ring(spec.diameter_m / 2)[None]
 
     # ---------------------------------------------------------------- detection
     def make_detector(self, spec, config):
         return None
-
-    def _blob_detector(self, img):
-        p = cv2.SimpleBlobDetector_Params()
-        p.minArea = 6.0
-        p.maxArea = 0.05 * img.shape[0] * img.shape[1]
-        p.minDistBetweenBlobs = 2.0
-        p.filterByCircularity = True
-        p.minCircularity = 0.5
-        p.filterByConvexity = True
-        p.minConvexity = 0.8
-        p.filterByInertia = True
-        p.minInertiaRatio = 0.05
-        return cv2.SimpleBlobDetector_create(p)
 
     def _orderings(self, spec) -> list[np.ndarray]:
         """Permutations sigma of the ids under the symmetries of the dot set (identity first)."""
@@ -122,7 +104,7 @@ class AsymmetricCirclesKind(TargetKind):
 
     def find_corners(self, spec, det, img, config, diag, intrinsics=None):
         ok, centres = cv2.findCirclesGrid(img, (spec.cols, spec.rows), flags=cv2.CALIB_CB_ASYMMETRIC_GRID,
-                                          blobDetector=self._blob_detector(img))
+                                          blobDetector=blob_detector(img))
         if not ok or centres is None:
             return None, (f"asymmetric circle grid of {spec.cols} x {spec.rows} not found "
                           "(the whole board must be visible)")
@@ -147,13 +129,38 @@ class AsymmetricCirclesKind(TargetKind):
         return np.arange(len(uv)), uv
 
 
-def ellipse_centre_offset(spec, p, uv, intrinsics, iterations: int = 2) -> np.ndarray:
+def blob_detector(img):
+    """OpenCV's blob detector for the dots of the circle-grid kinds (dark dots, 6 px .. 5 % of the image)."""
+    p = cv2.SimpleBlobDetector_Params()
+    p.minArea = 6.0
+    p.maxArea = 0.05 * img.shape[0] * img.shape[1]
+    p.minDistBetweenBlobs = 2.0
+    p.filterByCircularity = True
+    p.minCircularity = 0.5
+    p.filterByConvexity = True
+    p.minConvexity = 0.8
+    p.filterByInertia = True
+    p.minInertiaRatio = 0.05
+    return cv2.SimpleBlobDetector_create(p)
+
+
+def dot_ring(radius: float) -> np.ndarray:
+    """(N_VERTICES, 2) [m] regular polygon of a circle's area (radius scaled by sqrt(2 pi / (N sin(2 pi / N)))):
+    exact area and centroid, radial error < 2e-4 of the diameter; vertices TL -> TR -> BR -> BL."""
+    n = N_VERTICES
+    rho = radius * math.sqrt(2 * math.pi / (n * math.sin(2 * math.pi / n)))
+    a = -0.75 * math.pi + 2 * math.pi * np.arange(n) / n  # increasing angle: TL -> TR -> BR -> BL
+    return rho * np.column_stack([np.cos(a), np.sin(a)])
+
+
+def ellipse_centre_offset(spec, p, uv, intrinsics, iterations: int = 2, radii=None) -> np.ndarray:
     """(K, 2) px offset of each dot's image centre (the centre of the projected ellipse) from the projection
     of its circle's centre, at the pose PnP gives on the corrected centres (``iterations`` passes).
-    p: (K, 3) circle centres [m]; uv: (K, 2) measured ellipse centres [distorted px]. The offset is computed
-    for the pinhole image and applied unchanged to distorted pixels (distortion's local scale ~1)."""
+    p: (K, 3) circle centres [m]; uv: (K, 2) measured ellipse centres [distorted px]; radii: (K,) circle radii
+    [m] (default: spec.diameter_m / 2 for every dot). The offset is computed for the pinhole image and
+    applied unchanged to distorted pixels (distortion's local scale ~1)."""
     K, dist = intrinsics.K, np.asarray(intrinsics.dist, float)
-    r = spec.diameter_m / 2
+    radii = np.full(len(p), spec.diameter_m / 2) if radii is None else np.asarray(radii, float)
     off = np.zeros_like(uv)
     for _ in range(iterations):
         ok, rvec, tvec = cv2.solvePnP(p, (uv - off).reshape(-1, 1, 2), K, dist, flags=cv2.SOLVEPNP_ITERATIVE)
@@ -164,6 +171,7 @@ def ellipse_centre_offset(spec, p, uv, intrinsics, iterations: int = 2) -> np.nd
         Hinv = np.linalg.inv(Hn)
         new = np.empty_like(uv)
         for k, (cx, cy, _) in enumerate(p):
+            r = radii[k]
             Q = np.array([[1, 0, -cx], [0, 1, -cy], [-cx, -cy, cx * cx + cy * cy - r * r]])
             C = Hinv.T @ Q @ Hinv
             z = np.linalg.solve(C[:2, :2], -C[:2, 2])
@@ -171,3 +179,169 @@ def ellipse_centre_offset(spec, p, uv, intrinsics, iterations: int = 2) -> np.nd
             new[k] = (z - q[:2] / q[2]) * [intrinsics.fx, intrinsics.fy]
         off = new
     return off
+
+
+class ModifiedCircleGridKind(TargetKind):
+    """ROS-Industrial's modified circle grid (``modified_circle_grid``; industrial_calibration's
+    ``ModifiedCircleGridTarget``): a symmetric grid of dark dots on white, one of them -- the *origin* dot,
+    first of the last row -- larger, which ties the point order to the board.
+
+    YAML keys: rows, cols (dots), spacing_m (centre distance), diameter_m (dots; optional, 0 = unknown:
+    needed only to draw the board and for the ellipse-centre correction), origin_diameter_m (the large dot;
+    0 = twice diameter_m, as ROS-I's generator draws it).
+    Target frame (ours: x right, y down as the printed face is seen, z into the board): dot (r, c), id
+    r * cols + c, at (D/2 + c s, d/2 + r s, 0) with d, D the dot and origin-dot diameters (origin at the
+    outer top-left corner of the pattern's bounding box); the origin dot is id (rows - 1) * cols. The ids are
+    ROS-I's point order (row by row from the row opposite the origin dot); ROS-I's own frame has its origin
+    at the origin dot with y towards row 0 and z out of the board: p_rosi = (x - D/2, (rows - 1) s + d/2 - y, 0).
+
+    Detection: ``cv2.findCirclesGrid`` (symmetric grid, clustering; the board may also be found with rows and
+    cols swapped, i.e. seen turned by 90 degrees), then the orderings the dot grid allows (its symmetries,
+    front-facing only) are told apart by the origin dot: the grid corner whose dark area, relative to its two
+    grid neighbours', is largest (at least :data:`ORIGIN_RATIO` x the next corner's). Centres as for
+    circles_asymmetric (ellipse-centre correction when the diameters and intrinsics are known)."""
+
+    name = "modified_circle_grid"
+    keys = ("spacing_m", "diameter_m", "origin_diameter_m")
+    required = ("spacing_m",)
+    info_model = "circle"
+
+    def validate(self, spec, where):
+        if spec.rows < 2 or spec.cols < 2 or spec.rows * spec.cols < 6:
+            raise ConfigError(f"{where}: modified_circle_grid keys 'rows' and 'cols' (dots) must be >= 2 with at "
+                              f"least 6 dots, got {spec.rows}x{spec.cols}")
+        self.positive(spec, where, "spacing_m")
+        for key in ("diameter_m", "origin_diameter_m"):
+            if getattr(spec, key) < 0:
+                raise ConfigError(f"{where}: key {key!r} must be >= 0 [m] (0: unknown / default), "
+                                  f"got {getattr(spec, key)}")
+        d, D = self.diameters(spec)
+        if d > 0 and (D <= d or (d + D) / 2 >= spec.spacing_m):
+            raise ConfigError(f"{where}: keys 'diameter_m' ({d:.4g}) and 'origin_diameter_m' ({D:.4g}): the origin dot "
+                              f"must be larger than the others and must not touch its neighbours ((d + D) / 2 < "
+                              f"spacing_m = {spec.spacing_m:.4g})")
+
+    def diameters(self, spec) -> tuple[float, float]:
+        """(dot diameter d, origin-dot diameter D) [m]; (0, 0) when unknown."""
+        d = spec.diameter_m
+        return d, (spec.origin_diameter_m or 2 * d)
+
+    def origin_id(self, spec) -> int:
+        return (spec.rows - 1) * spec.cols
+
+    def pattern_size_m(self, spec):
+        d, D = self.diameters(spec)
+        s = spec.spacing_m
+        return (spec.cols - 1) * s + (d + D) / 2, (spec.rows - 1) * s + (d + D) / 2
+
+    def n_corners(self, spec):
+        return spec.rows * spec.cols
+
+    def corner_points(self, spec):
+        r, c = np.divmod(np.arange(self.n_corners(spec)), spec.cols)
+        d, D = self.diameters(spec)
+        s = spec.spacing_m
+        p = np.column_stack([D / 2 + c * s, d / 2 + r * s, np.zeros(r.size)])
+        return np.arange(p.shape[0]), p
+
+    def radii(self, spec) -> np.ndarray:
+        """(K,) dot radii [m] by id."""
+        d, D = self.diameters(spec)
+        out = np.full(self.n_corners(spec), d / 2)
+        out[self.origin_id(spec)] = D / 2
+        return out
+
+    def black_polygons(self, spec):
+        """Each dot as a regular N_VERTICES-gon of its circle's area (:func:`dot_ring`)."""
+        if not spec.diameter_m > 0:
+            raise ConfigError(f"target {spec.name!r}: key 'diameter_m' is needed to draw a modified_circle_grid "
+                              "(detection and pose measurement do without it)")
+        _, p = self.corner_points(spec)
+        return np.stack([p[k, :2] + dot_ring(r) for k, r in enumerate(self.radii(spec))])
+
+    def make_detector(self, spec, config):
+        return None
+
+    def _grid_orderings(self, rows: int, cols: int, grid_shape) -> list:
+        """Index arrays (rows, cols) into the detected grid (flattened, shape grid_shape) for every symmetry of
+        a rows x cols dot grid that maps the detected grid onto it."""
+        idx = np.arange(grid_shape[0] * grid_shape[1]).reshape(grid_shape)
+        cands = []
+        for g in (idx, idx.T):
+            if g.shape != (rows, cols):
+                continue
+            cands += [g, g[::-1, ::-1], g[:, ::-1], g[::-1, :]]
+        return cands
+
+    def find_corners(self, spec, det, img, config, diag, intrinsics=None):
+        rows, cols = spec.rows, spec.cols
+        blob = blob_detector(img)
+        flags = cv2.CALIB_CB_SYMMETRIC_GRID | cv2.CALIB_CB_CLUSTERING
+        ok, centres, shape = False, None, None
+        for a, b in ((cols, rows), (rows, cols)) if rows != cols else ((cols, rows),):
+            ok, centres = cv2.findCirclesGrid(img, (a, b), flags=flags, blobDetector=blob)
+            if ok and centres is not None:
+                shape = (b, a)
+                break
+        if not ok or centres is None:
+            return None, f"modified circle grid of {cols} x {rows} dots not found (the whole board must be visible)"
+        D = centres.reshape(-1, 2).astype(np.float64)
+        corners = dot_corner_ratios(img, D.reshape(*shape, 2))
+        order = sorted(corners, key=corners.get, reverse=True)
+        big, second = corners[order[0]], corners[order[1]]
+        diag["origin_dot_ratio"] = float(big)
+        if not (big >= ORIGIN_RATIO * second):
+            return None, (f"the origin (large) dot of the modified circle grid is not recognisable: dark-area ratios "
+                          f"of the grid corners to their neighbours {sorted(corners.values(), reverse=True)}")
+        _, p = self.corner_points(spec)
+        origin = self.origin_id(spec)
+        for g in self._grid_orderings(rows, cols, shape):
+            flat = g.reshape(-1)
+            if flat[origin] != order[0]:
+                continue
+            uv = D[flat]
+            H = fit_homography(p[:, :2], uv)
+            if H is None or not front_facing(H, p[:, :2].mean(axis=0)):
+                continue
+            diag["homography_rms_px"] = float(np.sqrt(np.mean(np.sum((apply_h(H, p[:, :2]) - uv) ** 2, axis=1))))
+            d, _ = self.diameters(spec)
+            diag["ellipse_correction"] = bool(d > 0 and intrinsics is not None)
+            if diag["ellipse_correction"]:
+                uv = uv - ellipse_centre_offset(spec, p, uv, intrinsics, radii=self.radii(spec))
+            return np.arange(len(uv)), uv
+        return None, "circle grid order could not be tied to the board (no front-facing ordering with the origin dot)"
+
+
+#: the origin dot's dark area relative to its grid neighbours must be at least this many times the next grid
+#: corner's (ROS-I's generator: 4x the area of the other dots)
+ORIGIN_RATIO = 1.5
+
+
+def dot_corner_ratios(img: np.ndarray, G: np.ndarray) -> dict:
+    """{flat index of a corner of the detected dot grid G (R, C, 2) px: its dark area / the mean dark area of
+    its two grid neighbours}. Dark area: pixels darker than the window's mid grey within half the distance to
+    the nearest grid neighbour."""
+    R, C = G.shape[:2]
+    out = {}
+    for r, c in ((0, 0), (0, C - 1), (R - 1, 0), (R - 1, C - 1)):
+        nb = [(r + (1 if r == 0 else -1), c), (r, c + (1 if c == 0 else -1))]
+        a0 = _dark_area(img, G[r, c], G[nb[0]], G[nb[1]])
+        a1 = [_dark_area(img, G[q], G[r, c]) for q in nb]
+        out[r * C + c] = a0 / max(np.mean(a1), 1e-9)
+    return out
+
+
+def _dark_area(img: np.ndarray, centre, *neighbours) -> float:
+    """Pixels darker than mid grey (between the window's 2nd and 98th percentiles) within half the distance
+    from ``centre`` (px) to its nearest given neighbour."""
+    rad = 0.5 * min(float(np.linalg.norm(np.asarray(q) - centre)) for q in neighbours)
+    h, w = img.shape
+    x0, x1 = max(0, int(centre[0] - rad)), min(w, int(centre[0] + rad) + 2)
+    y0, y1 = max(0, int(centre[1] - rad)), min(h, int(centre[1] + rad) + 2)
+    win = img[y0:y1, x0:x1].astype(np.float64)
+    if win.size == 0:
+        return 0.0
+    yy, xx = np.mgrid[y0:y1, x0:x1]
+    inside = (xx - centre[0]) ** 2 + (yy - centre[1]) ** 2 <= rad * rad
+    lo, hi = np.percentile(win, [2, 98])
+    return float(np.sum(inside & (win < (lo + hi) / 2)))
