@@ -279,6 +279,25 @@ def test_rosi_modified_circle_grid_mapping(tmp_path):
     assert rec.camera_mount == "eye_in_hand"
 
 
+@pytest.mark.parametrize("threshold, noise", [(2.0, 2.0 / 3), (0.5, 0.3), (None, 0.3)])
+def test_rosi_homography_threshold_sets_the_view_rule(tmp_path, threshold, noise):
+    """ROS-I's homography_threshold [px] -> corner_noise_px = threshold / 3 (the view rule then rejects a view at
+    a homography residual std of about that threshold), never below our default 0.3 px; it reaches the pose
+    measurement (Recording.measure_config)."""
+    src = _rosi_set(tmp_path / "rosi")
+    doc = yaml.safe_load((src / "cal_data.yaml").read_text())
+    doc.pop("homography_threshold")
+    if threshold is not None:
+        doc["homography_threshold"] = threshold
+    (src / "cal_data.yaml").write_text(yaml.safe_dump(doc))
+    rec = read_recording(import_rosi(src, tmp_path / "rec"))
+    assert rec.corner_noise_px == pytest.approx(noise) and rec.measure_config().corner_noise_px == rec.corner_noise_px
+    doc["homography_threshold"] = -1.0
+    (src / "cal_data.yaml").write_text(yaml.safe_dump(doc))
+    with pytest.raises(DataError, match="homography_threshold"):
+        import_rosi(src, tmp_path / "rec2")
+
+
 @pytest.mark.slow
 def test_rosi_round_trip_with_a_modified_circle_grid(tmp_path):
     """RX-90 eye-in-hand recording of the A4 modified circle grid -> flange poses -> export_rosi (diameters in the
@@ -315,3 +334,13 @@ def test_rosi_round_trip_with_a_modified_circle_grid(tmp_path):
         # the camera mount (the flange side), which do not depend on it
         rot = np.degrees(np.linalg.norm(F.pose_error(np.array(a[k]["matrix"]), np.array(c[k]["matrix"]))[3:]))
         assert rot < 3 * np.linalg.norm(a[k]["std_rot_deg"]), (k, rot, a[k]["std_rot_deg"])
+
+
+@pytest.mark.parametrize("value", [-0.1, 0.0, "x", 100.0])
+def test_recording_corner_noise_px_is_checked(tmp_path, value):
+    rec = import_rosi(_rosi_set(tmp_path / "rosi"), tmp_path / "rec")
+    doc = yaml.safe_load((rec / "recording.yaml").read_text())
+    doc["corner_noise_px"] = value
+    (rec / "recording.yaml").write_text(yaml.safe_dump(doc))
+    with pytest.raises((ConfigError, DataError), match="corner_noise_px"):
+        read_recording(rec)

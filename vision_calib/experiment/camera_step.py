@@ -77,16 +77,17 @@ def intrinsics_directions(block: dict, camera):
     return out
 
 
-def remeasure(dets: dict, labels, target, camera, mode: str):
+def remeasure(dets: dict, labels, target, camera, config):
     """(N, 4, 4) T_cam_target of the poses ``labels`` re-measured from their detections with ``camera``
-    (undistortion + PnP only; no detection); None when one of them is no longer valid."""
+    (undistortion + PnP only; no detection; config: measure.MeasureConfig, the recording's
+    ``Recording.measure_config()``); None when one of them is no longer valid."""
     import numpy as np
 
-    from ..measure import MeasureConfig, measure_pose
+    from ..measure import measure_pose
 
     T = []
     for lab in labels:
-        pm = measure_pose(dets[lab], target, camera, pose_id=lab, config=MeasureConfig(mode=mode))
+        pm = measure_pose(dets[lab], target, camera, pose_id=lab, config=config)
         if not pm.valid:
             return None
         T.append(pm.T_cam_target)
@@ -114,7 +115,7 @@ def intrinsics_response(dets: dict, rec, block: dict, residual: str):
         r0 = np.asarray(problem.residual(x), float)
         cols = []
         for cam in dirs:
-            T = remeasure(dets, labels, rec.target, cam, rec.averaging)
+            T = remeasure(dets, labels, rec.target, cam, rec.measure_config())
             if T is None:
                 continue
             p2 = setup.problem(type(sub)(sub.poses, sub.joints, T, sub.cov, sub.labels), residual,

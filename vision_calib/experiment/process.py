@@ -33,7 +33,7 @@ IN_FIT = ("included in the fit: one nuisance coefficient (prior N(0, 1)) per eig
 def measure_recording(rec, progress=False, detections=None):
     """PoseMeasurement per pose id of a Recording (invalid ones carry a reason). detections: a dict to
     fill with {pose id: [Detection per frame]} (for the reprojection error of the calibrated chain)."""
-    from ..measure import MeasureConfig, PoseMeasurement, measure_images
+    from ..measure import PoseMeasurement, measure_images
 
     out = []
     it = rec.pose_ids
@@ -48,7 +48,7 @@ def measure_recording(rec, progress=False, detections=None):
                                        np.full((6, 6), np.nan), 0, 0, float("nan")))
             continue
         pm, dets = measure_images([str(f) for f in files], rec.target, rec.camera, pose_id=pid,
-                                  config=MeasureConfig(mode=rec.averaging))
+                                  config=rec.measure_config())
         out.append(pm)
         if detections is not None:
             detections[pid] = dets
@@ -189,7 +189,7 @@ def _handeye_intrinsics_uncertainty(result, problem, rec, pms, ok, dets, intr, m
     m = problem.meta
     cols = []
     for cam in dirs:
-        T = remeasure(dets, [str(pms[i].pose_id) for i in ok], rec.target, cam, rec.averaging)
+        T = remeasure(dets, [str(pms[i].pose_id) for i in ok], rec.target, cam, rec.measure_config())
         if T is None:
             continue
         p2 = handeye_problem(m["T_base_flange"], T, mount, m["A0"], m["B0"], problem.obs_cov, labels=problem.labels)

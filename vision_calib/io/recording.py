@@ -27,6 +27,9 @@ recording.yaml::
     poses: joints | flange_pose
     frames_per_pose: 10
     averaging: corners                      # how the frames of a pose are averaged (measure.MeasureConfig.mode)
+    corner_noise_px: 0.3                    # optional: upper bound of a corner's per-coordinate noise [px]; the
+                                            # per-view rule drops corners beyond 5x it from the view's homography
+                                            # and views whose residual std exceeds 3x it (measure/view_checks.py)
 """
 
 from __future__ import annotations
@@ -71,6 +74,13 @@ class Recording:
     notes: tuple[str, ...] = ()
     image_size: tuple[int, int] | None = None
     camera_file: Path | None = None
+    corner_noise_px: float = 0.3
+
+    def measure_config(self):
+        """The pose measurement settings of this recording (measure.MeasureConfig: averaging, corner_noise_px)."""
+        from ..measure import MeasureConfig
+
+        return MeasureConfig(mode=self.averaging, corner_noise_px=self.corner_noise_px)
 
 
 def _target_dict(spec) -> dict:
@@ -120,6 +130,7 @@ _SCHEMA = {
     "camera_file": None,  # a camera.yaml (io.camera_file), instead of camera
     "camera_mount": None, "target": None,  # target_from_dict checks its keys
     "scene": None, "scene_name": None, "poses": None, "frames_per_pose": None, "averaging": None,
+    "corner_noise_px": None,
 }
 FLANGE_COLUMNS = ("x", "y", "z", "qx", "qy", "qz", "qw")
 #: |joint value| [rad or m] and |flange position| [m] beyond which a pose is refused as implausible
@@ -291,6 +302,7 @@ def read_recording(folder, allow_symlinks: bool = False) -> Recording:
     pose_kind = top.get("poses", str, "joints", choices=("joints", "flange_pose"))
     frames = top.number("frames_per_pose", int, 10, min=1)
     averaging = top.get("averaging", str, "corners", choices=("corners", "poses"))
+    corner_noise = top.number("corner_noise_px", float, 0.3, min=0.0, min_open=True, max=50.0, unit="px")
 
     cpath = folder / "poses.csv"
     if not cpath.is_file():
@@ -314,7 +326,7 @@ def read_recording(folder, allow_symlinks: bool = False) -> Recording:
         camera_file = camera_file if camera_file.is_absolute() else ypath.parent / camera_file
         camera = load_camera_for_images(camera_file, size, f"{ypath}: camera_file")
     return Recording(folder, camera, mount, target, scene_path, pose_kind, tuple(ids), poses, images, frames,
-                     tuple(extra), averaging, tuple(notes), size, camera_file)
+                     tuple(extra), averaging, tuple(notes), size, camera_file, float(corner_noise))
 
 
 def _recording_camera(d: dict, sec: Section, images: dict) -> tuple[CameraIntrinsics | None, tuple | None]:

@@ -9,7 +9,7 @@ The ROS-I layout (``examples/data/test_set_charuco`` of ros-industrial/industria
         static_camera: true            # or (newer GUI) eye_in_hand: false
         camera_mount_to_camera_guess: {x, y, z, qx, qy, qz, qw}   # ignored here
         target_mount_to_target_guess: {...}                       # ignored here
-        homography_threshold: 2.0                                 # ignored here
+        homography_threshold: 2.0                                 # -> corner_noise_px (below)
         target_finder: {type: CharucoGridTargetFinder, rows, cols, chessboard_dim, aruco_marker_dim,
                         dictionary: 10}
     poses/0.yaml                       # {x, y, z, qw, qx, qy, qz}
@@ -40,6 +40,10 @@ Mapping (ROS-I -> ours):
   frame is not ROS-I's (``ModifiedCircleGridKind`` docstring: same point order, y flipped, origin shifted).
   ArUco-grid targets are refused (no such target kind here).
 - Entries that share a pose file become the frames of one pose (pose id = the pose file's stem).
+- ``homography_threshold`` [px] (ROS-I skips a view whose homography error exceeds it) -> the recording's
+  ``corner_noise_px`` = threshold / ``view_checks.RMS_K`` (at least the default 0.3 px), so that our per-view
+  rule rejects a view at a homography residual std of about ROS-I's own threshold (the statistics differ:
+  ROS-I's mean error vs our per-coordinate residual std) instead of at our tighter default.
 
 Two extension keys, written by :func:`export_rosi` and ignored by ROS-I (it reads only the keys it
 knows): ``distortion: [k1, k2, p1, p2, k3]`` and ``target_finder.legacy_pattern`` (ChArUco) or
@@ -208,6 +212,14 @@ def import_rosi(src, dst, allow_symlinks: bool = False) -> Path:
     k = {key: _num(intr, key, where_i) for key in ("fx", "fy", "cx", "cy")}
     tf, where_t = _section(doc, "target_finder", folder, "target_finder.yaml", index)
     target = _target(tf, where_t)
+    noise = {}
+    if "homography_threshold" in doc:  # ROS-I's acceptance of a view: our view rule at the same residual
+        from ..measure.view_checks import RMS_K
+
+        thr = _num(doc, "homography_threshold", str(index))
+        if not thr > 0:
+            raise DataError(f"{index}: key 'homography_threshold': expected > 0 px, got {thr}")
+        noise = {"corner_noise_px": max(thr / RMS_K, 0.3)}
     dist = doc.get("distortion", [0.0] * 5)
     if not (isinstance(dist, list) and len(dist) == 5 and all(isinstance(v, (int, float)) for v in dist)):
         raise ConfigError(f"{index}: key 'distortion': expected [k1, k2, p1, p2, k3], got {dist!r}")
@@ -241,7 +253,7 @@ def import_rosi(src, dst, allow_symlinks: bool = False) -> Path:
     rec_doc = {"format": FORMAT, "source": f"imported from ROS-I industrial_calibration data set {index}",
                "units": {"length": "m", "angle": "rad"}, "camera": camera.to_dict(), "camera_mount": mount,
                "target": target, "poses": "flange_pose",
-               "frames_per_pose": max(len(imgs) for _, imgs in poses.values()), "averaging": "corners"}
+               "frames_per_pose": max(len(imgs) for _, imgs in poses.values()), "averaging": "corners", **noise}
     buf = io.StringIO()
     w = csv.writer(buf)
     w.writerow(["pose_id", "x", "y", "z", "qx", "qy", "qz", "qw"])
@@ -280,6 +292,7 @@ def export_rosi(rec_folder, dst) -> Path:
     layout and the dot diameters go to extension keys (module docstring)."""
     import cv2
 
+    from ..measure.view_checks import RMS_K
     from .recording import read_recording
 
     rec = read_recording(rec_folder)
@@ -316,7 +329,8 @@ def export_rosi(rec_folder, dst) -> Path:
     identity = {"x": 0.0, "y": 0.0, "z": 0.0, "qx": 0.0, "qy": 0.0, "qz": 0.0, "qw": 1.0}
     doc = {"data": data, "intrinsics": {"fx": c.fx, "fy": c.fy, "cx": c.cx, "cy": c.cy},
            "camera_mount_to_camera_guess": identity, "target_mount_to_target_guess": identity,
-           "homography_threshold": 2.0, "static_camera": rec.camera_mount != "eye_in_hand",
+           "homography_threshold": float(RMS_K * rec.corner_noise_px),
+           "static_camera": rec.camera_mount != "eye_in_hand",
            "eye_in_hand": rec.camera_mount == "eye_in_hand",
            "target_finder": finder}
     if any(float(v) != 0.0 for v in c.dist):
