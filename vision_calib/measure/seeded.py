@@ -19,8 +19,8 @@ seed while the seed has not yet been confirmed by a refined frame (so a first fr
 costs one extra detection, not N).
 Frames drawn on demand (``sensor.pose_frames``, the simulated image chain): once a seed is set, the
 later frames are asked for noise only on the pixels the per-frame estimator reads (``_Refiner.read_mask``);
-the other pixels hold the noise-free mean, so the 1/8-scale view check sees a slightly cleaner image than a
-full frame (it is a gate, not an estimate); a frame that falls back to a full detection is drawn in full.
+the other pixels hold the noise-free mean; such frames are one view by construction (``same_view``), so the
+1/8-scale view check is skipped ("view_ncc" None); a frame that falls back to a full detection is drawn in full.
 Diagnostics per frame: "batch" ("seeded" | "full"); seeded frames add "seed_frame", "view_ncc",
 "max_shift_px" and the seed's "n_markers"/"marker_ids".
 """
@@ -118,9 +118,10 @@ class _Refiner:
 
 
 def _from_seed(img, size, source, i, seed: _Seed, ref: _Refiner, config: DetectConfig, t0):
-    """A Detection refined from the seed, or (None, why the frame needs a full detection)."""
-    ncc = _ncc(_small(img), seed.small)
-    if not ncc >= config.min_view_ncc:
+    """A Detection refined from the seed, or (None, why the frame needs a full detection). A seed without its
+    small image (frames of one view by construction, ``same_view``) skips the view check."""
+    ncc = None if seed.small is None else _ncc(_small(img), seed.small)
+    if ncc is not None and not ncc >= config.min_view_ncc:
         return None, (f"view differs from seed frame {seed.frame_index} "
                       f"(1/{SMALL}-scale NCC {ncc:.3f} < {config.min_view_ncc})")
     try:
@@ -149,6 +150,7 @@ def detect_seeded(images, target, intrinsics: CameraIntrinsics | None, config: D
     full_cfg = config.seed_config()
     post = ref.full_post if mode == "tag_edges" else None
     focus = getattr(images, "focus", None)  # frames drawn on demand (sensor.pose_frames): noise where we read
+    same_view = bool(getattr(images, "same_view", False))  # ... of one simulated view: no view check needed
     seed, out = None, []
     for i, im in enumerate(images):
         t0 = time.perf_counter()
@@ -170,7 +172,7 @@ def detect_seeded(images, target, intrinsics: CameraIntrinsics | None, config: D
         if why:
             d.diagnostics["fallback"] = why
         if d.valid and (seed is None or not seed.confirmed):
-            seed = _Seed(i, _small(img), d.ids, d.uv_px, d.diagnostics)
+            seed = _Seed(i, None if same_view else _small(img), d.ids, d.uv_px, d.diagnostics)
             if focus is not None:
                 focus(ref.read_mask(seed.uv, img.shape, config.max_shift_px))
         out.append(d)

@@ -78,6 +78,9 @@ class PoseFrames:
     (a frame that falls back to a full detection). Frames drawn for writing to disk are always full.
     Sequence of (H, W) uint8 arrays; ``len()`` is n_frames; :meth:`stack` -> (n_frames, H, W) uint8."""
 
+    #: every frame shows the same view (one pose, one render): a consumer may skip view-consistency checks
+    same_view = True
+
     def __init__(self, ideal: np.ndarray, effects: SensorEffects, n_frames: int, seed: int, intr: CameraIntrinsics):
         e = deterministic_image_cv(ideal, effects, intr)  # electrons
         fw = effects.full_well_e if effects.full_well_e > 0 else 255.0
