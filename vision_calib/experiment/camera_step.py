@@ -112,15 +112,23 @@ def intrinsics_response(dets: dict, rec, block: dict, residual: str):
         labels = list(problem.labels)
         pos = {lab: k for k, lab in enumerate(meas.labels)}
         sub = meas.subset([pos[lab] for lab in labels])
-        r0 = np.asarray(problem.residual(x), float)
-        cols = []
-        for cam in dirs:
-            T = remeasure(dets, labels, rec.target, cam, rec.measure_config())
-            if T is None:
-                continue
-            p2 = setup.problem(type(sub)(sub.poses, sub.joints, T, sub.cov, sub.labels), residual,
-                               params=problem.params)
-            cols.append(np.asarray(p2.residual(x), float) - r0)
-        return np.stack(cols, axis=2) if cols else None
+        return residual_response(dirs, dets, labels, rec, x, np.asarray(problem.residual(x), float),
+                                 lambda T: setup.problem(type(sub)(sub.poses, sub.joints, T, sub.cov, sub.labels),
+                                                         residual, params=problem.params))
 
     return response
+
+
+def residual_response(dirs, dets: dict, labels, rec, x, r0, problem_for):
+    """U (n_obs, m, d): for each camera of ``dirs`` (``intrinsics_directions``) the change of the residual at x
+    (n,) from r0 (n_obs, m) when the poses ``labels`` are re-measured from their detections with that camera
+    (``remeasure``) and put into ``problem_for(T (n_obs, 4, 4))``; a direction under which a pose is no
+    longer measurable is left out; None when all are."""
+    import numpy as np
+
+    cols = []
+    for cam in dirs:
+        T = remeasure(dets, labels, rec.target, cam, rec.measure_config())
+        if T is not None:
+            cols.append(np.asarray(problem_for(T).residual(x), float) - r0)
+    return np.stack(cols, axis=2) if cols else None

@@ -177,7 +177,7 @@ def _handeye_intrinsics_uncertainty(result, problem, rec, pms, ok, dets, intr, m
     were given."""
     from ..identify.handeye_problem import handeye_problem, transforms_from_x
     from ..identify.nuisance import solve_nuisance_unknown_noise, split_nuisance
-    from .camera_step import intrinsics_directions, remeasure
+    from .camera_step import intrinsics_directions, residual_response
     from .steps import NUISANCE_PREFIX
 
     A, B = transforms_from_x(problem, result.identified)
@@ -185,24 +185,20 @@ def _handeye_intrinsics_uncertainty(result, problem, rec, pms, ok, dets, intr, m
     if not dirs or result.covariance is None or not dets:
         return result, A, B, None
     x = np.asarray(result.identified, float)
-    r0 = np.asarray(problem.residual(x), float)
     m = problem.meta
-    cols = []
-    for cam in dirs:
-        T = remeasure(dets, [str(pms[i].pose_id) for i in ok], rec.target, cam, rec.measure_config())
-        if T is None:
-            continue
-        p2 = handeye_problem(m["T_base_flange"], T, mount, m["A0"], m["B0"], problem.obs_cov, labels=problem.labels)
-        cols.append(np.asarray(p2.residual(x), float) - r0)
-    if not cols:
+    U = residual_response(dirs, dets, [str(pms[i].pose_id) for i in ok], rec, x,
+                          np.asarray(problem.residual(x), float),
+                          lambda T: handeye_problem(m["T_base_flange"], T, mount, m["A0"], m["B0"], problem.obs_cov,
+                                                    labels=problem.labels))
+    if U is None:
         return result, A, B, None
     # the PnP covariances miss the robot's own pose error (flange poses from a nominal model): their scale is
     # estimated (variance factor s2), the intrinsics' known
-    full, s2 = solve_nuisance_unknown_noise(problem, np.stack(cols, axis=2), x, NUISANCE_PREFIX)
+    full, s2 = solve_nuisance_unknown_noise(problem, U, x, NUISANCE_PREFIX)
     res, nz = split_nuisance(full, len(problem.params))
     free = np.asarray(res.free, bool)
     ratio = res.std / result.std  # both as reported (each with its own variance factor)
-    prop = {"n_directions": len(cols), "coefficients": nz["values"], "coefficients_std": nz["std"],
+    prop = {"n_directions": int(U.shape[2]), "coefficients": nz["values"], "coefficients_std": nz["std"],
             "std_inflation": {n: float(v) for n, v, f in zip(res.names, ratio, free) if f and np.isfinite(v)},
             "pose_variance_factor": float(s2), "in_fit": True, "how": IN_FIT}
     A, B = transforms_from_x(problem, res.identified)

@@ -178,10 +178,3 @@ class PoseFrames:
         for k in range(self.n_frames):
             out[k] = self.frame(k, full=True)
         return out
-
-
-def apply_effects_cv(ideal: np.ndarray, effects: SensorEffects, n_frames: int, seed: int,
-                     intr: CameraIntrinsics) -> np.ndarray:
-    """``n_frames`` independent frames (n_frames, H, W) uint8 of one pose from its ideal render (H, W)
-    [grey 0..255]; shapes are checked by the caller (:func:`vision_calib.sensor.apply_effects`)."""
-    return PoseFrames(ideal, effects, n_frames, seed, intr).stack()
