@@ -385,3 +385,21 @@ def test_mount_rotation_convention_is_right_multiplied():
     _, TR = ch.nominal_transforms(x)
     np.testing.assert_allclose(TR[:3, :3], rot_x(0.3) @ so3_exp(r), atol=1e-15)
     np.testing.assert_allclose(TR[:3, 3], [0.1, 0, 0])
+
+
+def test_robot_file_mount_as_quat(tmp_path):
+    """A robot file's mount given as xyz + quat [qx, qy, qz, qw] (scalar last) equals the same mount as rpy."""
+    from scipy.spatial.transform import Rotation
+
+    rpy = [10.0, -20.0, 90.0]
+    quat = Rotation.from_euler("xyz", rpy, degrees=True).as_quat().tolist()  # R = Rz Ry Rx, as rpy
+    p = tmp_path / "robot.yaml"
+    p.write_text(GOOD + f"mounts: {{right: {{name: T_flange_tool, xyz: [1, 2, 3], rpy: {rpy}}}}}\n")
+    a = load_serial_robot(p)
+    p.write_text(GOOD + f"mounts: {{right: {{name: T_flange_tool, xyz: [1, 2, 3], quat: {quat}}}}}\n")
+    b = load_serial_robot(p)
+    q = np.array([[0.2, -0.4]])
+    np.testing.assert_allclose(b.forward(q, b.params.nominal), a.forward(q, a.params.nominal), atol=1e-12)
+    p.write_text(GOOD + "mounts: {right: {name: T_flange_tool, quat: [0.1, 0, 0, 1]}}\n")
+    with pytest.raises(ConfigError, match=r"robot\.yaml: mounts\.right\.quat: expected a unit quaternion"):
+        load_serial_robot(p)

@@ -5,7 +5,6 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from vision_calib.errors import ConfigError
-from vision_calib.kinematics.serial import load_serial_robot
 from vision_calib.rig import SCENES_DIR, load_scene
 
 ROOT = SCENES_DIR.parent
@@ -53,24 +52,3 @@ def test_bad_quaternion_is_refused_naming_file_and_key(tmp_path, mount, needle):
     with pytest.raises(ConfigError, match=needle):
         load_scene(_scene(tmp_path, mount, f"rpy: {CAM_RPY_DEG}"))
 
-
-ROBOT = """
-name: toy
-units: {length: cm, angle: deg}
-joints:
-  - {alpha: 0, a: 0, theta: 0, d: 10}
-  - {alpha: 90, a: 5, theta: 0, d: 0}
-"""
-
-
-def test_robot_file_mount_as_quat(tmp_path):
-    p = tmp_path / "robot.yaml"
-    p.write_text(ROBOT + f"mounts: {{right: {{name: T_flange_tool, xyz: [1, 2, 3], rpy: {CAM_RPY_DEG}}}}}\n")
-    a = load_serial_robot(p)
-    p.write_text(ROBOT + f"mounts: {{right: {{name: T_flange_tool, xyz: [1, 2, 3], quat: {_quat(CAM_RPY_DEG)}}}}}\n")
-    b = load_serial_robot(p)
-    q = np.array([[0.2, -0.4]])
-    np.testing.assert_allclose(b.forward(q, b.params.nominal), a.forward(q, a.params.nominal), atol=1e-12)
-    p.write_text(ROBOT + "mounts: {right: {name: T_flange_tool, quat: [0.1, 0, 0, 1]}}\n")
-    with pytest.raises(ConfigError, match=r"robot\.yaml: mounts\.right\.quat: expected a unit quaternion"):
-        load_serial_robot(p)
