@@ -98,7 +98,7 @@ def test_verdict_states():
     assert (v["status"], v["ok"], v["usable"]) == ("warning", False, True) and "p007, p003" in v["message"]
     small = dict(large, verdict="too small", chi2_dof=0.5)
     v = verdict(_result(), adequacy=small)
-    assert v["status"] == "ok" and v["ok"] and "overestimated" in v["note"]
+    assert v["status"] == "ok" and v["ok"] and "smaller than the measurement covariance predicts" in v["note"]
     v = verdict(_result(converged=False), adequacy=large)  # a failed fit stays a failure
     assert v["status"] == "failed" and not v["usable"]
     rep = {"verdict": v, "identification": {"method": "lse", "converged": False, "iterations": 3, "cost_initial": 2.0,

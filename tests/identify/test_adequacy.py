@@ -47,6 +47,43 @@ def test_adequacy_verdicts():
         model_adequacy(solve_lse(prob), level=1.5)
 
 
+def test_p_value_is_two_sided_and_matches_the_band():
+    """p < level exactly outside the band, for chi2 on either side; a covariance trusted within a factor
+    [k_lo, k_hi] widens the band by those factors and p = 1 where some k in the range explains chi2."""
+    from scipy.stats import chi2 as c2
+
+    prob, _ = _clean(1)
+    res = solve_lse(prob)
+    dof = res.dof
+    for k_scale in ((1.0, 1.0), (0.55, 1.3)):
+        for target in np.linspace(0.3, 2.0, 35):  # rescale obs_cov so that chi2/dof takes many values
+            r = solve_lse(dataclasses.replace(prob, obs_cov=prob.obs_cov * res.chi2_dof / target))
+            a = model_adequacy(r, level=LEVEL, cov_scale=k_scale)
+            lo, hi = a["expected_chi2_dof"]
+            inside = lo <= a["chi2_dof"] <= hi
+            assert (a["verdict"] == "consistent") == inside
+            assert (a["p_value"] >= LEVEL - 1e-12) == inside, (target, a["p_value"], lo, hi)
+            assert a["verdict"] != "too large" or a["chi2_dof"] > hi
+            assert a["verdict"] != "too small" or a["chi2_dof"] < lo
+            if k_scale == (1.0, 1.0):  # the plain two-sided p-value
+                x = 2 * r.cost_final
+                assert a["p_value"] == pytest.approx(min(1.0, 2 * min(c2.sf(x, dof), c2.cdf(x, dof))), rel=1e-9)
+            assert "two-sided" in a["explanation"]
+    wide = model_adequacy(res, cov_scale=(0.55, 1.3))
+    plain = model_adequacy(res)
+    assert wide["expected_chi2_dof"][0] == pytest.approx(0.55 * plain["expected_chi2_dof"][0])
+    assert wide["expected_chi2_dof"][1] == pytest.approx(1.3 * plain["expected_chi2_dof"][1])
+    with pytest.raises(ConfigError):
+        model_adequacy(res, cov_scale=(1.3, 0.55))
+
+
+def test_too_small_note_does_not_claim_what_it_cannot_know():
+    prob, _ = _clean(2)
+    small = model_adequacy(solve_lse(dataclasses.replace(prob, obs_cov=prob.obs_cov * 10)))
+    assert small["verdict"] == "too small" and "not reduced" in small["explanation"]
+    assert "are pessimistic" not in small["explanation"]
+
+
 def test_two_swapped_poses_and_one_corrupt_pose_are_rejected_and_truth_recovered():
     prob, x_true = _clean(0)
     expected = equivalent_base_values(prob, analyze(prob), x_true)

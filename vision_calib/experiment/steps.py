@@ -196,7 +196,7 @@ def identify_measurements(setup: Setup, meas: Measurements, method, residual, an
         result = fit if method != "ekf" else solve(fitted, method)
     else:
         result = solve(fitted, method)
-    adequacy = model_adequacy(result)  # of the augmented fit when there is a nuisance: the GLS chi-square
+    adequacy = model_adequacy(result, cov_scale=meas.cov_scale)  # of the augmented fit when there is a nuisance: the GLS chi-square
     nz = None
     if U is not None:
         result, nz = split_nuisance(result, len(params))

@@ -106,8 +106,10 @@ def verdict(result, measurements: dict | None = None, identified=None, warnings=
            "n_outliers": n_out, "adequacy": adq, "message": message,
            "warnings": len(warnings) + len(result.warnings)}
     if adq == "too small":
-        out["note"] = (f"chi2/dof {adequacy['chi2_dof']:.3g} below its expected interval: the measurement noise is "
-                       "overestimated (predicted std are pessimistic)")
+        lo, hi = adequacy.get("expected_chi2_dof") or (float("nan"), float("nan"))
+        out["note"] = (f"chi2/dof {adequacy['chi2_dof']:.3g} below its expected {lo:.2f}-{hi:.2f} (two-sided p "
+                       f"{adequacy['p_value']:.2g}): the residuals are smaller than the measurement covariance "
+                       "predicts; the std are not reduced for it (they may be pessimistic)")
     return out
 
 
@@ -117,7 +119,7 @@ def misfit_message(adequacy: dict) -> str:
     lo, hi = adequacy.get("expected_chi2_dof") or (float("nan"), float("nan"))
     worst = ", ".join(str(w["label"]) for w in adequacy.get("worst_poses", [])[:5]) or "n/a"
     return (f"model does not explain the data (chi2/dof {adequacy['chi2_dof']:.3g}, expected {lo:.2f}-{hi:.2f}, "
-            f"p {adequacy['p_value']:.2g}); largest residual poses: {worst}")
+            f"two-sided p {adequacy['p_value']:.2g}); largest residual poses: {worst}")
 
 
 def build_report(kind: str, *, source: dict, settings: dict, result, measurements: dict | None = None,

@@ -30,7 +30,10 @@ class Measurements:
     poses: commanded poses (serial: q (N, n) rad; H4: X (N, 4)). joints: measured joint values
     (N, n_joints) rad. T_cam_target: (N, 4, 4) measured camera poses. cov: (N, 6, 6) covariance of
     each measured T_cam_target in the ``frames.pose_error`` convention (camera frame).
-    labels: (N,) pose ids.
+    labels: (N,) pose ids. cov_scale: [k_lo, k_hi], the range of the factor by which the true covariance
+    may differ from ``cov`` (the covariance model's own accuracy, read by the adequacy test:
+    ``identify.model_adequacy``): (1, 1) for synthetic or user-given covariances,
+    ``identify.adequacy.IMAGE_COV_SCALE`` for poses measured from images.
     """
 
     poses: np.ndarray
@@ -38,11 +41,13 @@ class Measurements:
     T_cam_target: np.ndarray
     cov: np.ndarray
     labels: tuple = ()
+    cov_scale: tuple = (1.0, 1.0)
 
     def subset(self, idx) -> "Measurements":
         idx = np.asarray(idx, dtype=int)
         labels = tuple(self.labels[i] for i in idx) if self.labels else ()
-        return Measurements(self.poses[idx], self.joints[idx], self.T_cam_target[idx], self.cov[idx], labels)
+        return Measurements(self.poses[idx], self.joints[idx], self.T_cam_target[idx], self.cov[idx], labels,
+                            self.cov_scale)
 
     @classmethod
     def from_pose_measurements(cls, poses, joints, pms) -> tuple["Measurements", list[int]]:
@@ -52,7 +57,9 @@ class Measurements:
         T = np.array([pms[i].T_cam_target for i in ok]).reshape(-1, 4, 4)
         cov = np.array([pms[i].cov for i in ok]).reshape(-1, 6, 6)
         labels = tuple(str(pms[i].pose_id) for i in ok)
-        return cls(np.asarray(poses)[ok], np.asarray(joints)[ok], T, cov, labels), ok
+        from ..identify.adequacy import IMAGE_COV_SCALE
+
+        return cls(np.asarray(poses)[ok], np.asarray(joints)[ok], T, cov, labels, IMAGE_COV_SCALE), ok
 
 
 def pose_cov_from_sigmas(n: int, sigma_t_m: float, sigma_r_rad: float) -> np.ndarray:

@@ -23,61 +23,11 @@ from .base import Evaluation, Setup
 
 #: significance level at which a measured camera/target tilt replaces the nominal one (chi-square, 2 dof)
 AXIS_LEVEL = 1e-3
-#: a tilt is identified when the IGM problem's predicted std of it is below this fraction of the axis std
-TILT_FREE_RATIO = 1.0
 #: the rotation axis is "not fixed" (tilts not applied) when the axis fit's residuals fail the chi-square test
 #: against the measurements' rotation covariance (level AXIS_LEVEL) AND their variance exceeds the predicted by
 #: this factor (residual std twice the predicted, as steps.UNEXPLAINED_CHI2_DOF): image rotations carry a
 #: systematic part (detector bias) the covariances only partly model
 AXIS_MAX_VARIANCE_RATIO = 4.0
-
-
-def _tilts_to_free(setup, robot, meas, axis_std, axis_shown) -> tuple[list[bool], np.ndarray, list[float]]:
-    """Which of the four tilt parameters to identify: (free (4,), their std (4,) rad from the IGM problem
-    with the setup's free parameters plus all four tilts (inf where not identifiable), chi2 (2,) of the
-    camera and target pairs' change from their initial value in that fit).
-
-    A pair is freed when the identifiability analysis keeps both (identify.analyze), the IGM determines them
-    better than the rotation axis (std below TILT_FREE_RATIO x ``axis_std`` (4,) rad) and the data show a
-    tilt: the axis estimate was significant (``axis_shown`` (2,) bool: camera, target) or the fit moves the
-    pair significantly (chi2, 2 dof, AXIS_LEVEL), and that fit passes the model-adequacy test (else the tilts
-    would absorb the model's error: they stay at the axis value). The significance test matters in image mode: the IGM std of the
-    camera tilt (~1e-4 rad, limited by the PnP depth noise) costs ~0.05 mm of validation error (0.5 mm per
-    mrad on the demo scene, docs/h4_fidelity.md), more than the no-tilt case's whole error: a tilt the data
-    do not show is better left at its nominal value than identified."""
-    from scipy.stats import chi2 as chi2_dist
-
-    from ..identify import analyze, model_adequacy, solve_lse
-    from ..identify.h4_problem import h4_igm_problem
-
-    ps = robot.params.with_free(TILT_NAMES, True)
-    std, q = np.full(4, np.inf), [0.0, 0.0]
-    adequate = True
-    try:
-        prob = h4_igm_problem(replace(robot, params=ps), meas.joints, meas.T_cam_target,
-                              sigma_q_rad=setup.sigma_q_rad or None, pose_cov=meas.cov)
-        keep = ps.only_free(analyze(prob, selection="order").base_parameters)
-        names = [keep.names[i] for i in keep.free_index]
-        if not any(n in names for n in TILT_NAMES):
-            return [False] * 4, std, q
-        fit = solve_lse(h4_igm_problem(replace(robot, params=keep), meas.joints, meas.T_cam_target,
-                                       sigma_q_rad=setup.sigma_q_rad or None, pose_cov=meas.cov))
-        for pair in (0, 1):
-            nn = TILT_NAMES[2 * pair: 2 * pair + 2]
-            if all(n in names for n in nn):
-                k = [names.index(n) for n in nn]
-                C = fit.covariance[np.ix_(k, k)]
-                d = fit.identified[[keep.index(n) for n in nn]] - keep.nominal[[keep.index(n) for n in nn]]
-                std[2 * pair: 2 * pair + 2] = np.sqrt(np.diag(C))
-                q[pair] = float(d @ np.linalg.solve(C, d))
-        adequate = model_adequacy(fit)["verdict"] != "too large"
-    except (DataError, ParameterError, np.linalg.LinAlgError):
-        return [False] * 4, std, q
-    sig = [qq > chi2_dist.isf(AXIS_LEVEL, 2) or shown for qq, shown in zip(q, axis_shown)]
-    free = [bool(s < TILT_FREE_RATIO * a and sig[k // 2]) for k, (s, a) in enumerate(zip(std, axis_std))]
-    # a model that does not explain the joints (chi-square adequacy "too large", e.g. per-chain geometry under
-    # model 12) makes the well-determined camera tilts absorb its error; the axis value does not depend on it
-    return (free if adequate else [False] * 4), std, q
 
 
 def _chi2_2(w, c) -> float:
@@ -101,6 +51,9 @@ class H4Setup(Setup):
     #: what :meth:`prepare` does with the camera/target tilts: "identify" (measure, then identify what the IGM
     #: determines better), "axis" (measure only, paper §4.1), "off" (keep the scene's nominal tilts)
     tilt_mode: str = "identify"
+    #: (4,) rad std of the prior on the tilt parameters TILT_NAMES (their nominal = the rotation-axis estimate),
+    #: set by :meth:`prepare`; empty: no prior (tilts fixed, or identified from the joints alone)
+    tilt_prior_std_rad: tuple = ()
 
     kind: ClassVar[str] = "h4"
     residuals: ClassVar[tuple[str, ...]] = ("joint",)
@@ -133,8 +86,21 @@ class H4Setup(Setup):
 
         self.check_residual(residual)
         robot = replace(self.robot, params=params or self.params)
-        return h4_igm_problem(robot, meas.joints, meas.T_cam_target, sigma_q_rad=self.sigma_q_rad or None,
+        prob = h4_igm_problem(robot, meas.joints, meas.T_cam_target, sigma_q_rad=self.sigma_q_rad or None,
                               pose_cov=meas.cov, labels=meas.labels)
+        return self.with_tilt_prior(prob)
+
+    def with_tilt_prior(self, prob):
+        """``prob`` with the rotation-axis prior of the tilts (:meth:`prepare`) as prior rows, when set."""
+        if not self.tilt_prior_std_rad or not self.robot.tilt_params:
+            return prob
+        ps = prob.params
+        prior = 100.0 * ps.scale if prob.prior_std is None else np.array(prob.prior_std, float)
+        for n, s in zip(TILT_NAMES, self.tilt_prior_std_rad):
+            prior[ps.index(n)] = s
+        rows = tuple(prob.prior_rows) + tuple(n for n in TILT_NAMES if n not in prob.prior_rows)
+        return replace(prob, prior_std=prior, prior_rows=rows,
+                       meta=dict(prob.meta, tilt_prior={n: float(s) for n, s in zip(TILT_NAMES, self.tilt_prior_std_rad)}))
 
     def evaluate(self, x, x_true, validation, measurements=None, truth=None) -> Evaluation:
         """Nacelle pose error of the forward model (Newton on the IGM) with parameters x, from the joints
@@ -210,14 +176,18 @@ class H4Setup(Setup):
     def prepare(self, meas) -> tuple["H4Setup", dict]:
         """Camera and target tilts (paper §4.1): measured from the rotation axis of the nacelle
         (``identify.camera_axis``), then carried by the four tilt parameters TILT_NAMES
-        (``kinematics.h4_variants.with_tilt_params``) at the measured values when these are significant
-        (chi2, 2 dof, AXIS_LEVEL), else 0. A tilt pair is then also identified (free) when the IGM problem
-        determines it better than the axis did and moves it significantly (:func:`_tilts_to_free`): the
-        camera tilts can be (lever: the camera distance); the target tilts enter the joints only at second
-        order and stay at the axis value. Nothing is applied when the rotations contradict a fixed axis
-        (``CameraAxisEstimate.consistency`` against the measured rotation covariance: p < AXIS_LEVEL and
-        chi2/dof > AXIS_MAX_VARIANCE_RATIO); the info dict (report's ``prepared`` block) has both estimates,
-        the axis test, and then a ``warning``."""
+        (``kinematics.h4_variants.with_tilt_params``). With ``tilt_mode`` "identify" (default) all four are
+        identified with the other parameters, the axis estimate entering the fit as a prior N(axis value,
+        axis std^2) (one prior row each, ``IdentificationProblem.prior_rows``; the estimate's x/y
+        correlation is below 1e-3 on the demo scene, so the prior is diagonal): the IGM refines what it
+        determines (the camera tilts, through the camera distance), the target tilts (second order in the
+        joints) keep about the axis value and its std, and the std and the verdict of the fit carry the
+        axis' uncertainty. No rule decides whether to free them: the prior leaves the degrees of freedom of
+        the adequacy test unchanged. "axis": the paper's step alone (tilts fixed at the axis value: their
+        uncertainty is then NOT carried, the info says so); "off": nominal tilts kept.
+        Nothing is applied when the rotations contradict a fixed axis (``CameraAxisEstimate.consistency``
+        against the measured rotation covariance: p < AXIS_LEVEL and chi2/dof > AXIS_MAX_VARIANCE_RATIO);
+        the info dict (report's ``prepared`` block) has the estimates, the axis test, and then a ``warning``."""
         from ..identify.camera_axis import estimate_camera_axis
         from ..kinematics.h4_variants import with_tilt_params, without_tilt_params
 
@@ -229,8 +199,7 @@ class H4Setup(Setup):
             return self, {"applied": False, "reason": "tilt_mode off"}
         base = without_tilt_params(self.robot)
         # rotation noise from the residuals of the axis fit, not from the per-pose covariances: the measured
-        # rotations carry a systematic part (detector bias) that the covariances miss, and an estimate that is
-        # not significant against the real scatter would only move the model by that bias
+        # rotations carry a systematic part (detector bias) that the covariances miss
         try:
             est = estimate_camera_axis(meas.T_cam_target, R_BC0=base.R_BC0, R_ME0=base.R_ME0)
         except DataError as exc:  # e.g. all poses at one theta: the axis is not determined, keep the nominal
@@ -240,36 +209,46 @@ class H4Setup(Setup):
         axis_test = est.consistency(meas.cov[:, 3:, 3:])
         fixed = not (axis_test["chi2"] is not None and axis_test["p_value"] < AXIS_LEVEL
                      and axis_test["chi2_dof"] > AXIS_MAX_VARIANCE_RATIO)
-        applied = max(q) > chi2.isf(AXIS_LEVEL, 2) and fixed
-        vals = np.concatenate([est.tilt_cam_rad, est.tilt_target_rad]) if applied else np.zeros(4)
+        vals = np.concatenate([est.tilt_cam_rad, est.tilt_target_rad])
         axis_std = np.concatenate([est.tilt_cam_std_rad, est.tilt_target_std_rad])
-        robot = with_tilt_params(base, vals)
-        shown = [qq > chi2.isf(AXIS_LEVEL, 2) for qq in q]
-        free, igm_std, q_igm = _tilts_to_free(self, robot, meas, axis_std, shown)
-        if self.tilt_mode == "axis" or not fixed:
-            free = [False] * 4
-        robot = with_tilt_params(base, vals, free)
-        out = replace(self, params=robot.params, robot=robot)
+        usable = bool(fixed and np.all(np.isfinite(vals)) and np.all(np.isfinite(axis_std)) and np.all(axis_std > 0))
+        identify = usable and self.tilt_mode == "identify"
+        if usable:
+            robot = with_tilt_params(base, vals, [identify] * 4)
+        else:
+            robot = with_tilt_params(base, np.zeros(4))
+        out = replace(self, params=robot.params, robot=robot,
+                      tilt_prior_std_rad=tuple(float(v) for v in axis_std) if identify else ())
         sd_c, sd_t = np.sqrt(np.diag(est.cov_tilt_cam)), np.sqrt(np.diag(est.cov_tilt_target))
         info = {"camera_tilt_deg": np.degrees(est.tilt_cam_rad).tolist(), "camera_tilt_std_deg": np.degrees(sd_c).tolist(),
                 "target_tilt_deg": np.degrees(est.tilt_target_rad).tolist(),
                 "target_tilt_std_deg": np.degrees(sd_t).tolist(), "rms_residual_deg": float(np.degrees(est.rms_residual_rad)),
-                "applied": bool(applied), "chi2_camera_target": q,
-                "identified": [n for n, f in zip(TILT_NAMES, free) if f],
-                "igm_std_deg": {n: float(np.degrees(s)) for n, s in zip(TILT_NAMES, igm_std)},
-                "chi2_igm_change_camera_target": q_igm, "axis_fixed": bool(fixed), "axis_test": axis_test,
+                "applied": bool(usable), "chi2_camera_target": q,
+                "identified": list(TILT_NAMES) if identify else [],
+                "prior": ({n: {"mean_deg": float(np.degrees(v)), "std_deg": float(np.degrees(s))}
+                           for n, v, s in zip(TILT_NAMES, vals, axis_std)} if identify else None),
+                "axis_fixed": bool(fixed), "axis_test": axis_test,
                 "method": "rotation axis of the nacelle (paper 4.1); tilts relative to the nominal, about the camera "
-                          f"x/y and target x/y axes; initial values when significant (chi2, 2 dof, level {AXIS_LEVEL}); "
-                          "tilts listed in 'identified' are then identified with the other parameters (see the "
-                          "parameter table), the others stay at the axis value; none applied when the rotations "
-                          "do not share one fixed axis within the noise (axis_test: chi2 of the axis fit's residuals "
-                          f"against the rotation covariance, level {AXIS_LEVEL}, chi2/dof > {AXIS_MAX_VARIANCE_RATIO})"}
+                          "x/y and target x/y axes; "
+                          + ("the four tilts are identified with the other parameters, the axis estimate entering "
+                             "the fit as a prior (mean and std above, one prior row each): the parameter table's "
+                             "tilt std carry it" if identify else
+                             "tilts fixed at the axis value (tilt_mode 'axis', the paper's step): their std is not "
+                             "carried into the other parameters' std")
+                          + "; none applied when the rotations do not share one fixed axis within the noise (axis_test: "
+                          f"chi2 of the axis fit's residuals against the rotation covariance, level {AXIS_LEVEL}, "
+                          f"chi2/dof > {AXIS_MAX_VARIANCE_RATIO})"}
         if not fixed:
             info["warning"] = (
                 f"the measured rotations do not share one fixed rotation axis within the noise (axis fit chi2/dof "
                 f"{axis_test['chi2_dof']:.3g}, p {axis_test['p_value']:.2g}, rotation residual RMS "
                 f"{np.degrees(est.rms_residual_rad):.3g} deg): the camera/target tilts are not measured from it and "
                 "stay nominal (the nacelle or a mount moves with the pose: the model does not hold)")
+        elif not usable:
+            info["warning"] = "the rotation axis estimate is not finite: the camera/target tilts stay nominal"
+        elif self.tilt_mode == "axis":
+            info["note"] = ("tilt_mode 'axis': camera/target tilts fixed at the rotation-axis estimate (std "
+                            f"{', '.join(f'{np.degrees(s):.3g}' for s in axis_std)} deg), not carried into the std")
         return out, info
 
     def truth_model(self, spec: dict, rng: np.random.Generator, where: str = "truth") -> "H4Setup":
