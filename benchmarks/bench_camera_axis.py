@@ -45,12 +45,16 @@ def _dense_reference():
 
 
 def measured_poses(robot, n, seed=0):
-    """n noisy measured T_cam_target (n, 4, 4) of a truth with tilted camera and target mounts."""
-    rng = np.random.default_rng(seed)
+    """n noisy measured T_cam_target (n, 4, 4) of a truth with tilted camera and target mounts, drawn in
+    blocks of 1000 poses (one seeded stream per block): the first m poses are the same for any n >= m."""
     truth = replace(robot, R_BC0=robot.R_BC0 @ so3_exp(np.deg2rad(TILT_CAM_DEG + [0.0])),
                     R_ME0=so3_exp(np.deg2rad([0.18, 0.24, 0.0])) @ robot.R_ME0)
-    T = truth.camera_measurement(random_workspace_poses(n, rng))
-    return perturb_pose(T, np.concatenate([rng.normal(0, SIG_T, (n, 3)), rng.normal(0, SIG_R, (n, 3))], 1))
+    out = []
+    for i in range(0, n, 1000):
+        m, rng = min(1000, n - i), np.random.default_rng([seed, i])
+        T = truth.camera_measurement(random_workspace_poses(m, rng))
+        out.append(perturb_pose(T, np.concatenate([rng.normal(0, SIG_T, (m, 3)), rng.normal(0, SIG_R, (m, 3))], 1)))
+    return np.concatenate(out)
 
 
 def timed(fn, repeats):
