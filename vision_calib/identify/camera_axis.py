@@ -12,7 +12,9 @@ measures the camera axis this way and identifies only the yaw B_T_C.theta.
 
 Estimator: maximum likelihood (Gauss-Newton) on all N measured rotations at once, model
 R_CM,k = A Rz(phi_k) B with A = R_BC^T, B = R_ME^T; unknowns: the 2 tilt angles of c, the 2 of
-n and the N nacelle angles phi_k (their common offset and the yaws of A and B are gauge).
+n and the N nacelle angles phi_k (their common offset and the yaws of A and B are gauge). Each phi_k
+only enters its own pose's 3 residuals: it is eliminated in closed form (Schur complement), so each
+Gauss-Newton step solves a 4-unknown problem and costs O(N) time and memory.
 Measurement noise: R_meas = exp([delta]) R_CM, delta ~ N(0, Sigma_r) in the camera frame
 (the :func:`vision_calib.frames.perturb_pose` convention). Starting point: the eigenvector of
 least eigenvalue of sum_k (Q_k - I)^T (Q_k - I), Q_k the relative rotations to a reference pose.
@@ -179,41 +181,59 @@ def estimate_camera_axis(T_cam_target, rot_cov=None, R_BC0=None, R_ME0=None, min
     W = np.eye(3)[None].repeat(N, 0) if rot_cov is None else np.linalg.cholesky(np.linalg.inv(rot_cov))
     W = np.swapaxes(W, -1, -2)  # W^T W = Sigma^-1
     for _ in range(max_iter):
-        Jw, rw, r, Uc, Un = _system(R, A, B, phi, W)
-        step = -np.linalg.lstsq(Jw, rw, rcond=None)[0]
-        A = so3_exp(Uc @ step[0:2]) @ A
-        B = B @ so3_exp(Un @ step[2:4])
-        phi = phi + step[4:]
-        if np.abs(step).max() < 1e-13:
+        Gp, Prw, Gw, hw, rw, r, Uc, Un = _system(R, A, B, phi, W)
+        dx = -np.linalg.lstsq(Gp.reshape(3 * N, 4), Prw.ravel(), rcond=None)[0]
+        dphi = _back_substitute(Gw, hw, rw, dx)
+        A = so3_exp(Uc @ dx[0:2]) @ A
+        B = B @ so3_exp(Un @ dx[2:4])
+        phi = phi + dphi
+        if max(np.abs(dx).max(), np.abs(dphi).max()) < 1e-13:
             break
-    Jw, rw, r, Uc, Un = _system(R, A, B, phi, W)
+    Gp, Prw, Gw, hw, rw, r, Uc, Un = _system(R, A, B, phi, W)
     estimated = rot_cov is None
     dof = 3 * N - (4 + N - 1)
     s2 = 1.0
     if estimated:
         if dof <= 0:
             raise DataError("estimating the rotation noise from the residuals needs at least 3 poses")
-        s2 = float(rw @ rw) / dof
-    # the common offset of phi is not a gauge here (A and B yaws are excluded from the basis), so J is full rank
-    C = np.linalg.inv(Jw.T @ Jw) * s2
+        s2 = float(np.sum(rw * rw)) / dof
+    # the common offset of phi is not a gauge here (A and B yaws are excluded from the basis), so J is full
+    # rank; the marginal covariance of the 4 shared unknowns is the inverse of the Schur complement Gp^T Gp
+    C = np.linalg.inv(np.einsum("kij,kil->jl", Gp, Gp)) * s2
     return replace(_finish(A, B, phi, Uc, Un, C, R_BC0, R_ME0, np.sqrt(s2) if estimated else float("nan"),
                            estimated, float(np.sqrt(np.mean(np.sum(r * r, 1))))), residuals_rad=r)
 
 
 def _system(R, A, B, phi, W):
-    """Whitened Jacobian (3N, 4 + N) and residual (3N,) of the rotation model at (A, B, phi);
-    also the raw residuals (N, 3) and the tangent bases of the two axes."""
-    N = len(R)
+    """Whitened Gauss-Newton system of the rotation model at (A, B, phi), by pose (O(N) time and memory).
+
+    The full Jacobian (3N, 4 + N) has, for pose k, the block Gw_k (3, 4) on the 4 shared unknowns (the 2
+    tilts of the camera axis, the 2 of the target axis) and the column hw_k (3,) on its own phi_k only.
+    Eliminating phi_k (Schur complement) projects pose k's rows on the orthogonal complement of hw_k:
+    P_k = I - hw_k hw_k^T / |hw_k|^2, Gp_k = P_k Gw_k, Prw_k = P_k rw_k; the reduced least-squares problem
+    min |Gp dx + Prw| (3N rows, 4 unknowns) gives the same dx as the full one, and Gp^T Gp is the Schur
+    complement (the inverse of the marginal covariance of the 4 shared unknowns).
+    Returns Gp (N, 3, 4), Prw (N, 3), Gw (N, 3, 4), hw (N, 3), rw (N, 3) (whitened residuals),
+    r (N, 3) (raw residuals delta_k, camera frame, rad) and the tangent bases Uc, Un (3, 2) of the axes.
+    """
     Rm = A @ _rz(phi) @ B
     r = _rotvec(R @ np.swapaxes(Rm, -1, -2))  # (N, 3): delta at the solution
     Uc, Un = _tangent_basis(A @ EZ), _tangent_basis(B.T @ EZ)
-    J = np.zeros((N, 3, 4 + N))
-    J[:, :, 0:2] = -Uc  # A <- exp([Uc a]) A
-    J[:, :, 2:4] = -Rm @ Un  # B <- B exp([Un b])
-    J[np.arange(N), :, 4 + np.arange(N)] = -(A @ EZ)  # Rz(phi_k + dphi)
-    Jw = np.einsum("kij,kjn->kin", W, J).reshape(3 * N, -1)
-    rw = np.einsum("kij,kj->ki", W, r).ravel()
-    return Jw, rw, r, Uc, Un
+    G = np.empty((len(R), 3, 4))
+    G[:, :, 0:2] = -Uc  # A <- exp([Uc a]) A
+    G[:, :, 2:4] = -Rm @ Un  # B <- B exp([Un b])
+    Gw = W @ G
+    hw = -W @ (A @ EZ)  # Rz(phi_k + dphi)
+    rw = np.einsum("kij,kj->ki", W, r)
+    u = hw / np.linalg.norm(hw, axis=1, keepdims=True)
+    Gp = Gw - u[:, :, None] * np.einsum("ki,kij->kj", u, Gw)[:, None, :]
+    Prw = rw - u * np.einsum("ki,ki->k", u, rw)[:, None]
+    return Gp, Prw, Gw, hw, rw, r, Uc, Un
+
+
+def _back_substitute(Gw, hw, rw, dx) -> np.ndarray:
+    """Per-pose phi steps (N,) for the shared step dx (4,): argmin_dphi_k |Gw_k dx + hw_k dphi_k + rw_k|."""
+    return -np.einsum("ki,ki->k", hw, Gw @ dx + rw) / np.einsum("ki,ki->k", hw, hw)
 
 
 def _rz(phi):
