@@ -3,7 +3,10 @@ identifiability -> identify -> evaluate -> report (``vision-calib simulate`` / `
 
 Rendering and measurement run in worker processes (:mod:`.image_chain`); everything else in the
 calling process. Per-pose seeds derive from the run seed, so the same seed gives the same report
-whatever the number of workers.
+whatever the number of workers. Kinds whose criteria need validation measurements (H4 V1/V2:
+``Setup.measured_criteria``) get them from the validation poses rendered and measured the same way (own
+noise stream), while the identification runs. The report's ``synthetic_reference`` is the same
+identification with synthetic pose measurements drawn from each measured pose's covariance (like for like).
 """
 
 from __future__ import annotations
@@ -191,7 +194,8 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
                    fix_unidentifiable=False) -> dict:
     """The whole simulated experiment; writes ``out_dir/report.json`` (+ plots, calibrated model)
     when out_dir is given and returns the report dict (with ``summary_text``). pool: an image worker
-    pool to reuse (``image_chain``), else one is started for this run."""
+    pool to reuse (``image_chain``), else one is started for this run (and shared by the identification and
+    validation poses)."""
     t_start = time.perf_counter()
     if pool is None:
         start_fork_server()  # its imports overlap with the preparation below (no-op if started already)
@@ -256,6 +260,8 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
     meas_acc = _measurement_accuracy(T_true[ok], meas)
     # before: the nominal model; after: the identified one (with what prepare() determined); truth: tsetup.
     # V1/V2 (H4) from the image-measured validation poses, never used in the identification
+    if val_meas is not None and not len(val_idx):  # no validation pose measurable: criteria left out, not NaN
+        val_meas = None
     evals = {"before": scene.setup.evaluate(scene.setup.params.nominal, x_true, validation, val_meas, truth=tsetup),
              "after": setup.evaluate(result.identified, x_true, validation, val_meas, truth=tsetup)}
     # reference: the same experiment with synthetic pose measurements drawn from the measured covariances
@@ -267,15 +273,15 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
     ps = setup.params
     mblock["accuracy_vs_truth"] = meas_acc
     extra = {"synthetic_reference": ref}
-    if val_meas is not None:
+    if val_pms is not None:
         vb = measurements_block(val_pms)
         extra["validation_measurements"] = {
             "source": "images: the validation poses rendered and measured through the identification poses' image "
                       f"chain (own noise stream [seed, {STREAM_VALIDATION_IMAGES}, i]); never used in the "
                       "identification",
-            "criteria": list(setup.measured_criteria), "labels": list(val_meas.labels),
+            "criteria": list(setup.measured_criteria), "labels": [pm.pose_id for pm in val_pms if pm.valid],
             "n_poses": vb["n_poses"], "n_valid": vb["n_valid"], "rejected": vb["rejected"],
-            "accuracy_vs_truth": _measurement_accuracy(T_val[val_idx], val_meas)}
+            "accuracy_vs_truth": None if val_meas is None else _measurement_accuracy(T_val[val_idx], val_meas)}
     report = build_report(
         "simulation", seed=seed,
         source={"scene": {"name": scene.name, "path": str(scene.path), "robot_kind": setup.kind}},
