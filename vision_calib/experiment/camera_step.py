@@ -94,14 +94,37 @@ def remeasure(dets: dict, labels, target, camera, config):
     return np.array(T)
 
 
-def intrinsics_response(dets: dict, rec, block: dict, residual: str):
+def fitted_camera(camera, directions, coefficients):
+    """The camera the fit ended at: ``camera`` (CameraIntrinsics calibrated from the recording, theta) moved by
+    the fitted nuisance coefficients c (d,) (prior std units) along the d directions the fit used
+    (``directions``: the cameras theta_k one std away, as :func:`residual_response` kept them). The fit reads
+    the poses measured with theta as carrying the shared error U c (residual r - U c, U_k the residual change
+    from theta to theta_k), so the poses of the identified chain are, to first order, those measured with
+    theta - sum_k c_k (theta_k - theta): the camera returned."""
+    import numpy as np
+
+    from ..camera import CameraIntrinsics
+
+    def vec(c):
+        return np.array([c.fx, c.fy, c.cx, c.cy, *c.dist], float)
+
+    c = np.asarray(coefficients, float)
+    if len(directions) != c.size:
+        raise DataError(f"fitted_camera: {c.size} coefficients for {len(directions)} directions")
+    t0 = vec(camera)
+    t = t0 - sum((ck * (vec(d) - t0) for ck, d in zip(c, directions)), np.zeros_like(t0))
+    return CameraIntrinsics(camera.width, camera.height, *t[:4], tuple(float(v) for v in t[4:]))
+
+
+def intrinsics_response(dets: dict, rec, block: dict, residual: str, used: list | None = None):
     """For intrinsics calibrated from the same recording (``block``): a callable (setup, meas, problem, x) ->
     U (n_obs, m, d), the change of every pose's residual (measured - model, SI) at x (n,) when the camera
     moves one std along each eigen-direction of their covariance (``intrinsics_directions``; poses
     re-measured from their detections, ``remeasure``), for ``steps.identify_measurements(nuisance=)``: their
     error is shared by all poses, so it enters the fit as nuisance coefficients (the measurement covariance
     becomes obs_cov + U U^T; first order, independent of the pose noise). A direction under which a pose is
-    no longer measurable is left out (None when all are). None when the intrinsics were given."""
+    no longer measurable is left out (None when all are). None when the intrinsics were given. used: a list
+    that each call refills with the directions (cameras) of U's columns (for :func:`fitted_camera`)."""
     import numpy as np
 
     dirs = intrinsics_directions(block, rec.camera)
@@ -114,21 +137,25 @@ def intrinsics_response(dets: dict, rec, block: dict, residual: str):
         sub = meas.subset([pos[lab] for lab in labels])
         return residual_response(dirs, dets, labels, rec, x, np.asarray(problem.residual(x), float),
                                  lambda T: setup.problem(type(sub)(sub.poses, sub.joints, T, sub.cov, sub.labels),
-                                                         residual, params=problem.params))
+                                                         residual, params=problem.params), used)
 
     return response
 
 
-def residual_response(dirs, dets: dict, labels, rec, x, r0, problem_for):
+def residual_response(dirs, dets: dict, labels, rec, x, r0, problem_for, used: list | None = None):
     """U (n_obs, m, d): for each camera of ``dirs`` (``intrinsics_directions``) the change of the residual at x
     (n,) from r0 (n_obs, m) when the poses ``labels`` are re-measured from their detections with that camera
     (``remeasure``) and put into ``problem_for(T (n_obs, 4, 4))``; a direction under which a pose is no
-    longer measurable is left out; None when all are."""
+    longer measurable is left out; None when all are. used: a list refilled with the cameras of U's columns."""
     import numpy as np
 
     cols = []
+    if used is not None:
+        used.clear()
     for cam in dirs:
         T = remeasure(dets, labels, rec.target, cam, rec.measure_config())
         if T is not None:
             cols.append(np.asarray(problem_for(T).residual(x), float) - r0)
+            if used is not None:
+                used.append(cam)
     return np.stack(cols, axis=2) if cols else None

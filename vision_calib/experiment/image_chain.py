@@ -196,18 +196,26 @@ class ImagePool:
         self.close()
 
 
+#: random stream of the image noise of identification poses: pose i of run seed s draws from
+#: ``default_rng([s, STREAM_IMAGES, i])`` (experiment.steps numbers the other streams 1-4)
+STREAM_IMAGES = 5
+
+
 def measure_poses(chain: ImageChain, T_cam_targets, labels, seed: int, frames: int, workers: int | None = None,
-                  image_dir=None, progress: bool = False, pool: ImagePool | None = None):
+                  image_dir=None, progress: bool = False, pool: ImagePool | None = None, stream: int = STREAM_IMAGES,
+                  desc: str = "render+measure"):
     """Render + effects + measure every pose T_cam_targets (N, 4, 4) [m, OpenCV camera frame].
     pool: an open :class:`ImagePool` for this chain's camera/target/supersampling (reused, not closed);
-    default: a pool of ``workers`` processes for this call only.
+    default: a pool of ``workers`` processes for this call only. stream: pose i's frames are seeded from
+    ``default_rng([seed, stream, i])`` (another stream for another pose set of the same run, e.g. the
+    validation poses, so that their noise is independent of the identification poses'); desc: progress label.
     Returns (list of PoseMeasurement in pose order, timings {stage: total CPU seconds over the workers,
     "worker_peak_rss_mib"})."""
     from ..errors import ConfigError
 
     cam = chain.camera
     jobs = [(i, labels[i], T_cam_targets[i], chain.effects, frames,
-             int(np.random.default_rng([seed, 5, i]).integers(2**31 - 1)), chain.averaging, image_dir)
+             int(np.random.default_rng([seed, int(stream), i]).integers(2**31 - 1)), chain.averaging, image_dir)
             for i in range(len(T_cam_targets))]
     results = [None] * len(jobs)
     stage = {"render": 0.0, "effects": 0.0, "write": 0.0, "measure": 0.0}
@@ -220,7 +228,7 @@ def measure_poses(chain: ImageChain, T_cam_targets, labels, seed: int, frames: i
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=len(jobs), desc="render+measure", unit="pose", leave=False)
+        bar = tqdm(total=len(jobs), desc=desc, unit="pose", leave=False)
     try:
         for i, pm, t in pool.map(_worker_pose, jobs):
             results[i] = pm

@@ -77,7 +77,7 @@ def process_folder(folder, out_dir, method=None, progress=False, plots=True, fix
     refine_intrinsics: calibrate the camera from the recording's images even when recording.yaml gives
     intrinsics (always done when it gives none); camera_file: a camera.yaml (``calibrate-camera``) used
     instead of recording.yaml's intrinsics; the report's ``intrinsics`` block says which were used."""
-    from .camera_step import intrinsics_response, recording_intrinsics
+    from .camera_step import fitted_camera, intrinsics_response, recording_intrinsics
 
     t0 = time.perf_counter()
     rec = read_recording(folder, allow_symlinks=allow_symlinks)
@@ -104,12 +104,16 @@ def process_folder(folder, out_dir, method=None, progress=False, plots=True, fix
         setup, meas, where, "the recording's target.square_m (or marker/tag size), camera.fx/fy, and units.length "
         "of poses.csv")
     # intrinsics calibrated from these images: their error is shared by all poses, it goes into the fit
+    used = []  # the intrinsics directions of the fit's nuisance coefficients
     ident = identify_measurements(setup, meas, method, residual, context=rejection_summary(pms), where=where,
                                   fix_unidentifiable=fix_unidentifiable, rejected=inconsistent,
-                                  nuisance=intrinsics_response(dets, rec, intr, residual))
+                                  nuisance=intrinsics_response(dets, rec, intr, residual, used))
     result, problem, rep, setup = ident.result, ident.problem, ident.analysis, ident.setup
+    cam_fit = None
     if ident.nuisance is not None:
-        intr = {**intr, "propagated": {**ident.nuisance, "in_fit": True, "how": IN_FIT}}
+        cam_fit = fitted_camera(rec.camera, used, ident.nuisance["coefficients"])
+        intr = {**intr, "propagated": {**ident.nuisance, "in_fit": True, "how": IN_FIT,
+                                       "fitted_values": _camera_values(cam_fit)}}
     t_id = time.perf_counter() - t1
     ps = setup.params
     report = build_report(
@@ -121,20 +125,30 @@ def process_folder(folder, out_dir, method=None, progress=False, plots=True, fix
         parameters=parameters_table(ps.names, ps.nominal, None, result), result=result, identified=ident,
         motion=motion,
         residuals=residual_stats(result.residuals, problem.residual_kind),
-        extra={"intrinsics": intr, "reprojection": _chain_reprojection(setup, meas, problem, result, dets, rec)},
+        extra={"intrinsics": intr, "reprojection": _chain_reprojection(setup, meas, problem, result, dets, rec,
+                                                                       cam_fit)},
         timings={"measure": t_meas, "identify": t_id, "total": time.perf_counter() - t0})
     write_report(out, report, setup, result, problem, plots=plots)
     return report
 
 
-def _chain_reprojection(setup, meas, problem, result, dets, rec) -> dict:
-    """Reprojection RMS px of the identified robot chain over the poses the fit kept."""
-    from ..measure.reprojection import chain_reprojection
+def _camera_values(cam) -> dict:
+    """{fx, fy, cx, cy, k1, k2, p1, p2, k3} of a CameraIntrinsics (the intrinsics block's ``values`` layout)."""
+    from ..measure.intrinsics import PARAM_NAMES
+
+    return dict(zip(PARAM_NAMES, (float(v) for v in (cam.fx, cam.fy, cam.cx, cam.cy, *cam.dist))))
+
+
+def _chain_reprojection(setup, meas, problem, result, dets, rec, fitted=None) -> dict:
+    """Reprojection RMS px of the identified robot chain over the poses the fit kept, with the intrinsics the fit
+    used (``measure.reprojection.reprojection_with``): ``fitted`` (the calibrated ones moved by the fitted
+    nuisance coefficients) when the intrinsics' error was a term of the fit, else the recording's camera."""
+    from ..measure.reprojection import reprojection_with
 
     kept = set(problem.labels)
     idx = [k for k, lab in enumerate(meas.labels) if lab in kept]
     T = setup.predict_from_joints(meas.joints[idx], result.identified)
-    return chain_reprojection(T, dets, [meas.labels[k] for k in idx], rec.target, rec.camera)
+    return reprojection_with(T, dets, [meas.labels[k] for k in idx], rec.target, rec.camera, fitted)
 
 
 def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None) -> dict:
@@ -152,10 +166,16 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None) -> dict:
     # variance factor (whitened cost / degrees of freedom), reported as such
     result, A, B, problem = solve_handeye(rec.poses[ok], T, mount, pose_cov=cov, labels=labels,
                                           scale_cov_by_residual=True)
-    result, A, B, prop = _handeye_intrinsics_uncertainty(result, problem, rec, pms, ok, dets, intr, mount)
+    result, A, B, prop, cam_fit = _handeye_intrinsics_uncertainty(result, problem, rec, pms, ok, dets, intr, mount)
     if prop is not None:
         intr = {**intr, "propagated": prop}
-    he = handeye_report(result, A, B, problem, detections=dets, target=rec.target, intrinsics=rec.camera)
+    # reprojection with the intrinsics the fit ended at, the calibrated ones' figure beside it
+    he = handeye_report(result, A, B, problem, detections=dets, target=rec.target, intrinsics=cam_fit or rec.camera)
+    if cam_fit is not None and he["reprojection"] is not None:
+        from ..measure.reprojection import with_calibrated_figure
+
+        cal = handeye_report(result, A, B, problem, detections=dets, target=rec.target, intrinsics=rec.camera)
+        he["reprojection"] = with_calibrated_figure(he["reprojection"], cal["reprojection"])
     report = build_report(
         "process_handeye", source={"folder": str(rec.folder)},
         settings={"poses": mblock["n_poses"], "mount": mount, "camera": rec.camera.to_dict(), "method": "lse"},
@@ -168,30 +188,31 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None) -> dict:
 
 
 def _handeye_intrinsics_uncertainty(result, problem, rec, pms, ok, dets, intr, mount):
-    """(result, A, B, propagated block or None): the hand-eye fit redone with the uncertainty of intrinsics
+    """(result, A, B, propagated block or None, fitted camera or None): the hand-eye fit redone with the uncertainty of intrinsics
     calibrated from the recording as nuisance coefficients (one per eigen-direction of their covariance; the
     response U of every pose's residual from the poses re-measured from the detections, as in
     ``camera_step.intrinsics_response``), so its variance factor and covariance see the poses' covariance
     plus the intrinsics' shared error (``identify.nuisance.solve_nuisance_unknown_noise``: the poses'
     covariance scaled by its estimated factor, the intrinsics' not); the input result when the intrinsics
-    were given."""
+    were given. The fitted camera: the calibrated one moved by the fitted coefficients (``fitted_camera``)."""
     from ..identify.handeye_problem import handeye_problem, transforms_from_x
     from ..identify.nuisance import solve_nuisance_unknown_noise, split_nuisance
-    from .camera_step import intrinsics_directions, residual_response
+    from .camera_step import fitted_camera, intrinsics_directions, residual_response
     from .steps import NUISANCE_PREFIX
 
     A, B = transforms_from_x(problem, result.identified)
     dirs = intrinsics_directions(intr, rec.camera)
     if not dirs or result.covariance is None or not dets:
-        return result, A, B, None
+        return result, A, B, None, None
     x = np.asarray(result.identified, float)
     m = problem.meta
+    used = []
     U = residual_response(dirs, dets, [str(pms[i].pose_id) for i in ok], rec, x,
                           np.asarray(problem.residual(x), float),
                           lambda T: handeye_problem(m["T_base_flange"], T, mount, m["A0"], m["B0"], problem.obs_cov,
-                                                    labels=problem.labels))
+                                                    labels=problem.labels), used)
     if U is None:
-        return result, A, B, None
+        return result, A, B, None, None
     # the PnP covariances miss the robot's own pose error (flange poses from a nominal model): their scale is
     # estimated (variance factor s2), the intrinsics' known
     full, s2 = solve_nuisance_unknown_noise(problem, U, x, NUISANCE_PREFIX)
@@ -201,8 +222,10 @@ def _handeye_intrinsics_uncertainty(result, problem, rec, pms, ok, dets, intr, m
     prop = {"n_directions": int(U.shape[2]), "coefficients": nz["values"], "coefficients_std": nz["std"],
             "std_inflation": {n: float(v) for n, v, f in zip(res.names, ratio, free) if f and np.isfinite(v)},
             "pose_variance_factor": float(s2), "in_fit": True, "how": IN_FIT}
+    cam_fit = fitted_camera(rec.camera, used, nz["values"])
+    prop["fitted_values"] = _camera_values(cam_fit)
     A, B = transforms_from_x(problem, res.identified)
-    return res, A, B, prop
+    return res, A, B, prop, cam_fit
 
 
 __all__ = ["process_folder", "measure_recording"]

@@ -3,12 +3,17 @@ identifiability -> identify -> evaluate -> report (``vision-calib simulate`` / `
 
 Rendering and measurement run in worker processes (:mod:`.image_chain`); everything else in the
 calling process. Per-pose seeds derive from the run seed, so the same seed gives the same report
-whatever the number of workers.
+whatever the number of workers. Kinds whose criteria need validation measurements (H4 V1/V2:
+``Setup.measured_criteria``) get them from the validation poses rendered and measured the same way (own
+noise stream), while the identification runs. The report's ``synthetic_reference`` is the same
+identification with synthetic pose measurements drawn from each measured pose's covariance (like for like).
 """
 
 from __future__ import annotations
 
+import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 from pathlib import Path
 
@@ -19,13 +24,24 @@ from ..errors import DataError
 from ..io.atomic import write_json_atomic
 from ..io.report import REPORT_VERSION, build_report, measurements_block, parameters_table, write_report
 from ..rig import Measurements, Scene, SCENES_DIR, load_scene, scene_poses
-from .image_chain import ImageChain, measure_poses, start_fork_server
+from .image_chain import ImageChain, ImagePool, measure_poses, start_fork_server
 from .checks import screen_measurements
 from .steps import (check_method, identify_measurements, rejection_summary, rngs, run_analysis_and_truth,
                     shared_truth, unmodelled_truth)
 from .synthetic import run_synthetic
 
 DEFAULT_SCENE = SCENES_DIR / "h4_vision.yaml"
+#: random streams of a run seed beside experiment.steps' (1-4) and the identification images' (5): the
+#: validation poses' images, and the synthetic reference's noise (draw k: [seed, 7, k, 0] for the
+#: identification poses, [seed, 7, k, 1] for the validation measurements)
+STREAM_VALIDATION_IMAGES, STREAM_REFERENCE = 6, 7
+#: independent noise draws of the synthetic reference (its report gives the median and the range)
+REFERENCE_DRAWS = 5
+#: what the synthetic reference's noise is, for its report block
+REFERENCE_NOISE = ("Gaussian, drawn from each image-measured pose's own covariance (the measurement's cov, 6x6: "
+                   "translation m and rotation vector rad in the camera frame, applied as frames.perturb_pose), "
+                   "for the identification poses and the validation measurements alike; joint readings exact "
+                   "as in the image run")
 #: settings an images-mode run may override (studies): sensor effects and frames per pose
 OVERRIDES = ("noise_grey", "blur_px", "frames", "averaging")
 
@@ -56,15 +72,19 @@ def image_chain_of(scene: Scene) -> ImageChain:
 
 
 def _measurement_accuracy(T_true, meas: Measurements) -> dict:
-    """Measured poses vs ground truth (simulation only): RMS per component and predicted std."""
+    """Measured poses vs ground truth T_true (N, 4, 4) (simulation only): RMS per component, the std the
+    covariances predict, and ``normalised_error_rms`` = sqrt(mean_k e_k^T cov_k^-1 e_k / 6) (1 when each
+    pose's covariance describes its error; the synthetic reference draws its noise from these covariances)."""
     err = F.pose_error(T_true, meas.T_cam_target)
     sd = np.sqrt(np.mean(np.diagonal(meas.cov, axis1=1, axis2=2), axis=0))
+    m2 = np.einsum("ki,ki->k", err, np.linalg.solve(meas.cov, err[..., None])[..., 0]) if len(err) else np.zeros(0)
     return {
         "translation_rms_mm": [float(v) for v in np.sqrt(np.mean(err[:, :3] ** 2, axis=0)) * 1e3],
         "rotation_rms_deg": [float(v) for v in np.degrees(np.sqrt(np.mean(err[:, 3:] ** 2, axis=0)))],
         "predicted_translation_std_mm": [float(v) for v in sd[:3] * 1e3],
         "predicted_rotation_std_deg": [float(v) for v in np.degrees(sd[3:])],
-    }, err
+        "normalised_error_rms": float(np.sqrt(np.mean(m2) / 6)) if len(m2) else float("nan"),
+    }
 
 
 def _check_outputs(out_dir, export_recording) -> None:
@@ -83,14 +103,68 @@ def _render_and_measure(scene, chain, T_true, q_true, poses, seed, frames, worke
     labels = [f"{i:03d}" for i in range(len(poses))]
     image_dir = None if export_recording is None else Path(export_recording) / "images"
     pms, stage = measure_poses(chain, T_true, labels, seed, frames, workers, image_dir, progress, pool=pool)
-    timings["worker_peak_rss_mib"] = stage.pop("worker_peak_rss_mib", float("nan"))
-    timings.update({f"{k}_cpu": v for k, v in stage.items()})
+    _add_stage_timings(timings, stage)
     timings["render_measure_wall"] = time.perf_counter() - t
     if export_recording is not None:
         from ..io.recording import write_recording
 
         write_recording(export_recording, scene, poses, q_true, frames)
     return pms
+
+
+def _add_stage_timings(timings: dict, stage: dict) -> None:
+    """Add measure_poses' worker CPU seconds per stage (and the peak worker RSS) into ``timings``."""
+    rss = stage.pop("worker_peak_rss_mib", float("nan"))
+    timings["worker_peak_rss_mib"] = max(timings.get("worker_peak_rss_mib", float("-inf")), rss)
+    for k, v in stage.items():
+        timings[f"{k}_cpu"] = timings.get(f"{k}_cpu", 0.0) + v
+
+
+def validation_labels(n: int) -> list[str]:
+    """Pose ids of the n validation poses' measurements ("v000", ...; identification poses are "000", ...)."""
+    return [f"v{i:03d}" for i in range(n)]
+
+
+def _measure_validation(chain, tsetup, validation, x_true, seed, frames, pool, progress, timings):
+    """(Measurements of the validation poses measured from their own rendered images, indices of those poses
+    in ``validation`` (M,), their PoseMeasurement list): the same image chain as the identification poses,
+    noise stream STREAM_VALIDATION_IMAGES, labels :func:`validation_labels`; exact joint readings."""
+    t = time.perf_counter()
+    T = tsetup.T_cam_target(validation, x_true)
+    pms, stage = measure_poses(chain, T, validation_labels(len(validation)), seed, frames, pool=pool,
+                               progress=progress, stream=STREAM_VALIDATION_IMAGES, desc="validation poses")
+    _add_stage_timings(timings, stage)
+    meas, ok = Measurements.from_pose_measurements(validation, tsetup.joints(validation, x_true), pms)
+    timings["validation_render_measure_wall"] = time.perf_counter() - t
+    return meas, np.asarray(ok, int), pms, T
+
+
+def _reference(scene, method, residual, seed, poses, meas, validation, val_meas, val_idx, base, x_true, truth,
+               draws: int = REFERENCE_DRAWS) -> dict:
+    """The report's ``synthetic_reference``: the same identification and evaluation with synthetic pose
+    measurements whose noise is drawn from each image-measured pose's own covariance (``meas.cov``; validation
+    measurements from ``val_meas.cov``, of the validation poses ``val_idx``), ``draws`` independent draws
+    (streams [seed, STREAM_REFERENCE, k, 0 | 1]); every figure of the accuracy after calibration as the median
+    over the draws (``accuracy_after``), its [min, max] (``range``) and the draws (``per_draw``)."""
+    per = []
+    for k in range(draws):
+        ref = run_synthetic(scene, method=method, residual=residual, seed=seed, poses=poses, validation=validation,
+                            base=base, x_true=x_true, truth=truth, prepare=True, pose_cov=meas.cov,
+                            validation_cov=None if val_meas is None else val_meas.cov,
+                            validation_measured=val_idx, sigma_q_rad=0.0,
+                            noise_rngs=(np.random.default_rng([seed, STREAM_REFERENCE, k, 0]),
+                                        np.random.default_rng([seed, STREAM_REFERENCE, k, 1])))
+        per.append(ref.after.to_dict())
+    keys = [k for k in per[0] if k != "n_poses"]
+    return {"noise": REFERENCE_NOISE, "draws": draws,
+            "streams": f"numpy default_rng([seed, {STREAM_REFERENCE}, k, 0]) for the identification poses' noise, "
+                       f"[seed, {STREAM_REFERENCE}, k, 1] for the validation measurements', k = 0..{draws - 1}",
+            "n_poses": int(len(poses)), "identification_poses": list(meas.labels),
+            "validation_measured": [] if val_meas is None else list(val_meas.labels),
+            "accuracy_after": {**{k: float(np.median([p[k] for p in per])) for k in keys},
+                               "n_poses": per[0]["n_poses"]},
+            "range": {k: [float(min(p[k] for p in per)), float(max(p[k] for p in per))] for k in keys},
+            "per_draw": per}
 
 
 def _preload(plots: bool):
@@ -120,7 +194,8 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
                    fix_unidentifiable=False) -> dict:
     """The whole simulated experiment; writes ``out_dir/report.json`` (+ plots, calibrated model)
     when out_dir is given and returns the report dict (with ``summary_text``). pool: an image worker
-    pool to reuse (``image_chain``), else one is started for this run."""
+    pool to reuse (``image_chain``), else one is started for this run (and shared by the identification and
+    validation poses)."""
     t_start = time.perf_counter()
     if pool is None:
         start_fork_server()  # its imports overlap with the preparation below (no-op if started already)
@@ -149,39 +224,64 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
     q_true = tsetup.joints(poses, x_true)
     timings["setup"] = time.perf_counter() - t
     preloading = _preload(out_dir is not None and plots)
-    pms = _render_and_measure(scene, chain, T_true, q_true, poses, seed, frames, workers, export_recording, progress,
-                              pool, timings)
-    meas, ok = Measurements.from_pose_measurements(poses, q_true, pms)
-    mblock = measurements_block(pms)
-    if out_dir is not None:  # kept even if identification fails below
-        write_json_atomic(Path(out_dir) / "measurements.json",
-                          {"version": REPORT_VERSION, "scene": scene.name, "seed": seed, **mblock})
-    t = time.perf_counter()
-    meas_used, inconsistent, motion = screen_measurements(setup, meas, str(scene.path),
-                                                          f"the target's square size ({scene.target_path})")
-    ident = identify_measurements(setup, meas_used, method, residual, rep if not inconsistent else None,
-                                  context=rejection_summary(pms), where=str(scene.path),
-                                  fix_unidentifiable=fix_unidentifiable, rejected=inconsistent)
-    result, problem, setup = ident.result, ident.problem, ident.setup  # setup: after Setup.prepare (H4 camera axis)
-    timings["identify"] = time.perf_counter() - t
+    measured_validation = bool(setup.measured_criteria)  # H4: V1/V2 from image-measured validation poses
+    own = pool is None
+    if own:
+        pool = ImagePool(chain, max(1, min(workers or os.cpu_count() or 1, len(poses))))
+    background = ThreadPoolExecutor(1, thread_name_prefix="validation-images")
+    try:
+        pms = _render_and_measure(scene, chain, T_true, q_true, poses, seed, frames, workers, export_recording,
+                                  progress, pool, timings)
+        # the validation poses' images are rendered and measured by the workers while this process identifies
+        val_job = None
+        if measured_validation:
+            val_job = background.submit(_measure_validation, chain, tsetup, validation, x_true, seed, frames, pool,
+                                        False, timings)
+        meas, ok = Measurements.from_pose_measurements(poses, q_true, pms)
+        mblock = measurements_block(pms)
+        if out_dir is not None:  # kept even if identification fails below
+            write_json_atomic(Path(out_dir) / "measurements.json",
+                              {"version": REPORT_VERSION, "scene": scene.name, "seed": seed, **mblock})
+        t = time.perf_counter()
+        meas_used, inconsistent, motion = screen_measurements(setup, meas, str(scene.path),
+                                                              f"the target's square size ({scene.target_path})")
+        ident = identify_measurements(setup, meas_used, method, residual, rep if not inconsistent else None,
+                                      context=rejection_summary(pms), where=str(scene.path),
+                                      fix_unidentifiable=fix_unidentifiable, rejected=inconsistent)
+        result, problem, setup = ident.result, ident.problem, ident.setup  # setup: after Setup.prepare (H4 axis)
+        timings["identify"] = time.perf_counter() - t
+        val_meas, val_idx, val_pms, T_val = val_job.result() if val_job is not None else (None, [], None, None)
+    finally:
+        background.shutdown()  # waits for the validation images (also when the identification failed)
+        if own:
+            pool.close()
 
     t = time.perf_counter()
-    meas_acc, err = _measurement_accuracy(T_true[ok], meas)
-    st = float(np.sqrt(np.mean(err[:, :3] ** 2)))  # measured pose noise, as pose sigmas
-    sr = float(np.sqrt(np.mean(err[:, 3:] ** 2)))
-    meas_val = tsetup.synthetic_measurements(validation, x_true, rv, st, sr)
-    # before: the nominal model; after: the identified one (with what prepare() determined); truth: tsetup
-    evals = {"before": scene.setup.evaluate(scene.setup.params.nominal, x_true, validation, meas_val, truth=tsetup),
-             "after": setup.evaluate(result.identified, x_true, validation, meas_val, truth=tsetup)}
-    # reference: the same experiment with synthetic pose measurements of the same noise level
-    ref = run_synthetic(scene, method=method, residual=residual, sigma_t_m=st, sigma_r_rad=sr, seed=seed,
-                        poses=poses, validation=validation, base=setup.params.mask(rep.base_parameters),
-                        x_true=x_true, truth=truth, prepare=True)
+    meas_acc = _measurement_accuracy(T_true[ok], meas)
+    # before: the nominal model; after: the identified one (with what prepare() determined); truth: tsetup.
+    # V1/V2 (H4) from the image-measured validation poses, never used in the identification
+    if val_meas is not None and not len(val_idx):  # no validation pose measurable: criteria left out, not NaN
+        val_meas = None
+    evals = {"before": scene.setup.evaluate(scene.setup.params.nominal, x_true, validation, val_meas, truth=tsetup),
+             "after": setup.evaluate(result.identified, x_true, validation, val_meas, truth=tsetup)}
+    # reference: the same experiment with synthetic pose measurements drawn from the measured covariances
+    ref = _reference(scene, method, residual, seed, poses[ok], meas, validation, val_meas, val_idx,
+                     setup.params.mask(rep.base_parameters), x_true, truth)
     timings["evaluate"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t_start
 
     ps = setup.params
     mblock["accuracy_vs_truth"] = meas_acc
+    extra = {"synthetic_reference": ref}
+    if val_pms is not None:
+        vb = measurements_block(val_pms)
+        extra["validation_measurements"] = {
+            "source": "images: the validation poses rendered and measured through the identification poses' image "
+                      f"chain (own noise stream [seed, {STREAM_VALIDATION_IMAGES}, i]); never used in the "
+                      "identification",
+            "criteria": list(setup.measured_criteria), "labels": [pm.pose_id for pm in val_pms if pm.valid],
+            "n_poses": vb["n_poses"], "n_valid": vb["n_valid"], "rejected": vb["rejected"],
+            "accuracy_vs_truth": None if val_meas is None else _measurement_accuracy(T_val[val_idx], val_meas)}
     report = build_report(
         "simulation", seed=seed,
         source={"scene": {"name": scene.name, "path": str(scene.path), "robot_kind": setup.kind}},
@@ -190,9 +290,7 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
                   "effects": scene.effects.to_dict(), "validation_poses": int(len(validation))},
         measurements=mblock, identifiability=rep, parameters=parameters_table(
             ps.names, ps.nominal, shared_truth(setup, truth or scene.setup, x_true), result),
-        result=result, identified=ident, motion=motion, accuracy=evals, timings=timings,
-        extra={"synthetic_reference": {"sigma_mm": st * 1e3, "sigma_deg": float(np.degrees(sr)),
-                                       "accuracy_after": ref.after.to_dict()}})
+        result=result, identified=ident, motion=motion, accuracy=evals, timings=timings, extra=extra)
     if out_dir is not None:
         preloading.join()
         write_report(out_dir, report, setup, result, problem, evals, plots=plots)

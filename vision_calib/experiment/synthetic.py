@@ -56,7 +56,8 @@ def identifiability_json(scene, residual=None, n_poses=None, seed=None, all_para
 
 
 def run_synthetic(scene, method=None, residual=None, n_poses=None, sigma_t_m=None, sigma_r_rad=None, seed=0,
-                  poses=None, validation=None, base=None, x_true=None, truth=None, prepare=True) -> SyntheticRun:
+                  poses=None, validation=None, base=None, x_true=None, truth=None, prepare=True, pose_cov=None,
+                  validation_cov=None, validation_measured=None, sigma_q_rad=None, noise_rngs=None) -> SyntheticRun:
     """One synthetic identification (see :class:`SyntheticRun`).
 
     poses / validation: commanded poses (default: drawn from the scene with the run seed).
@@ -68,6 +69,13 @@ def run_synthetic(scene, method=None, residual=None, n_poses=None, sigma_t_m=Non
     the prepared setup's parameters, H4: 4 tilt parameters appended). Without it an H4 truth with mount
     tilts ends ~10 mm off after calibration (the kinematic parameters absorb the camera tilt, README);
     False only to study exactly that.
+    pose_cov: (N, 6, 6) covariance of each identification pose's noise (``frames.pose_error`` convention, e.g.
+    the covariances image measurements gave: a like-for-like reference of an image run), instead of
+    sigma_t_m / sigma_r_rad; validation_cov: the same for the validation measurements (V1/V2), of the
+    validation poses ``validation_measured`` (M,) indices (default: all; none: no validation measurements,
+    the criteria that need them are left out). sigma_q_rad: joint-reading noise
+    (default the scene's). noise_rngs: (identification noise, validation noise) generators (default the run
+    seed's streams, :func:`.steps.rngs`).
     """
     scene = _scene(scene)
     setup = scene.setup
@@ -76,6 +84,7 @@ def run_synthetic(scene, method=None, residual=None, n_poses=None, sigma_t_m=Non
     m = scene.measurement
     st = m.sigma_t_m if sigma_t_m is None else sigma_t_m
     sr = m.sigma_r_rad if sigma_r_rad is None else sigma_r_rad
+    sq = m.sigma_q_rad if sigma_q_rad is None else sigma_q_rad
     rp, rn, rv = rngs(seed)
     if poses is None:
         poses = scene_poses(scene, rp, n_poses)
@@ -90,7 +99,9 @@ def run_synthetic(scene, method=None, residual=None, n_poses=None, sigma_t_m=Non
     if x_true is None:
         x_true = scene_truth(scene)
     truth_setup = truth or setup
-    meas = truth_setup.synthetic_measurements(poses, x_true, rn, st, sr, m.sigma_q_rad)
+    if noise_rngs is not None:
+        rn, rv = noise_rngs
+    meas = truth_setup.synthetic_measurements(poses, x_true, rn, st, sr, sq, pose_cov=pose_cov)
     prepared = {}
     if prepare:
         free0 = setup.params.free_names
@@ -103,7 +114,9 @@ def run_synthetic(scene, method=None, residual=None, n_poses=None, sigma_t_m=Non
     problem, _ = base_problem(setup, meas, residual, base)
     result = solve(problem, method)
     seconds = time.perf_counter() - t0
-    meas_val = truth_setup.synthetic_measurements(validation, x_true, rv, st, sr, m.sigma_q_rad)
+    vi = np.arange(len(validation)) if validation_measured is None else np.asarray(validation_measured, int)
+    meas_val = None if vi.size == 0 else truth_setup.synthetic_measurements(
+        np.asarray(validation)[vi], x_true, rv, st, sr, sq, labels=[f"v{i:03d}" for i in vi], pose_cov=validation_cov)
     before = setup.evaluate(setup.params.nominal, x_true, validation, meas_val, truth=truth_setup)
     after = setup.evaluate(result.identified, x_true, validation, meas_val, truth=truth_setup)
     return SyntheticRun(scene, result, x_true, poses, validation, meas, problem, before, after, seconds, method,

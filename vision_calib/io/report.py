@@ -235,18 +235,35 @@ def summary_text(report: dict) -> str:
                      f"rotation RMS {b['rotation_rms_deg']:.4f} -> {a['rotation_rms_deg']:.4f} deg")
         if "V2_rad" in a:
             imp = 100 * (1 - a["V2_rad"] / b["V2_rad"]) if b["V2_rad"] > 0 else float("nan")
-            lines.append(f"H4 criteria: V1 {b['V1_rad']:.3g} -> {a['V1_rad']:.3g} rad, V2 {b['V2_rad']:.3g} -> "
+            vm = report.get("validation_measurements")
+            src = (f" (V1/V2 from {vm['n_valid']} of {vm['n_poses']} validation poses measured from images)"
+                   if vm else "")
+            lines.append(f"H4 criteria{src}: V1 {b['V1_rad']:.3g} -> {a['V1_rad']:.3g} rad, V2 {b['V2_rad']:.3g} -> "
                          f"{a['V2_rad']:.3g} rad ({imp:.1f} % better), V3 {b['V3_m'] * 1e3:.4f} -> "
                          f"{a['V3_m'] * 1e3:.4f} mm")
     if "synthetic_reference" in report:
-        r = report["synthetic_reference"]
-        lines.append(f"synthetic reference (no images, sigma {r['sigma_mm']:.3f} mm / {r['sigma_deg']:.4f} deg): "
-                     f"position RMS {r['accuracy_after']['position_rms_mm']:.3f} mm")
+        lines += _reference_lines(report)
     if "handeye" in report:
         lines += _handeye_lines(report)
     if "timings_s" in report and "total" in report["timings_s"]:
         lines.append(f"time: {report['timings_s']['total']:.1f} s")
     return "\n".join(lines)
+
+
+def _reference_lines(report: dict) -> list[str]:
+    """Summary lines of the ``synthetic_reference`` block (experiment.simulate): how it was drawn, the median
+    and range over its draws of the validation position RMS (and V2 when the kind has it)."""
+    r = report["synthetic_reference"]
+    if "sigma_mm" in r:  # version-2.0 reports before the per-pose covariance draws: one draw, pooled sigma
+        return [f"synthetic reference (no images, sigma {r['sigma_mm']:.3f} mm / {r['sigma_deg']:.4f} deg): "
+                f"position RMS {r['accuracy_after']['position_rms_mm']:.3f} mm"]
+    a, rg = r["accuracy_after"], r["range"]
+    out = (f"synthetic reference (no images; noise drawn from each measured pose's covariance, {r['draws']} draws): "
+           f"position RMS median {a['position_rms_mm']:.3f} mm (range {rg['position_rms_mm'][0]:.3f}-"
+           f"{rg['position_rms_mm'][1]:.3f})")
+    if "V2_rad" in a:
+        out += f", V2 median {a['V2_rad']:.3g} rad (range {rg['V2_rad'][0]:.3g}-{rg['V2_rad'][1]:.3g})"
+    return [out]
 
 
 def _intrinsics_line(block: dict) -> str:

@@ -48,10 +48,43 @@ def chain_reprojection(T_cam_target_model, detections_by_label: dict, labels, ta
             "n_poses": len(per_pose), "per_pose": per_pose, "worst_poses": worst}
 
 
+#: the ``intrinsics`` label of a reprojection block computed with the intrinsics the fit ended at
+FITTED = ("fitted: calibrated from the recording, moved by the fit's shared-error (nuisance) coefficients, "
+          "the intrinsics the identified chain is consistent with")
+CALIBRATED = "calibrated from the recording, before the fit (without its shared-error coefficients)"
+
+
+def with_calibrated_figure(fitted_block: dict, calibrated_block: dict) -> dict:
+    """The reprojection block of the fitted intrinsics (``FITTED``), with the overall figure of the same chain
+    through the intrinsics calibrated before the fit beside it (``with_calibrated_intrinsics``: {rms_px,
+    n_corners, intrinsics}). Both figures matter: the chain was fitted to poses consistent with the fitted
+    intrinsics, so the calibrated ones show the intrinsics' error, not the robot's."""
+    return {**fitted_block, "intrinsics": FITTED,
+            "with_calibrated_intrinsics": {"rms_px": calibrated_block.get("rms_px"),
+                                           "n_corners": calibrated_block.get("n_corners"), "intrinsics": CALIBRATED}}
+
+
+def reprojection_with(T_cam_target_model, detections_by_label: dict, labels, target, intrinsics, fitted=None) -> dict:
+    """:func:`chain_reprojection` with the intrinsics the fit used: ``fitted`` (CameraIntrinsics, when the
+    intrinsics were calibrated from the recording and their error entered the fit) with the figure of
+    ``intrinsics`` beside it (:func:`with_calibrated_figure`), else ``intrinsics``."""
+    if fitted is None:
+        return chain_reprojection(T_cam_target_model, detections_by_label, labels, target, intrinsics)
+    return with_calibrated_figure(chain_reprojection(T_cam_target_model, detections_by_label, labels, target, fitted),
+                                  chain_reprojection(T_cam_target_model, detections_by_label, labels, target,
+                                                     intrinsics, n_worst=0))
+
+
 def reprojection_line(block: dict) -> str:
-    """One summary line of a :func:`chain_reprojection` block."""
+    """One summary line of a :func:`chain_reprojection` block (both figures when it has the calibrated one)."""
     if not block or block.get("rms_px") is None:
         return "reprojection: no corner detections"
     w = ", ".join(f"{e['pose_id']} ({e['rms_px']:.2f} px)" for e in block["worst_poses"][:3])
-    return (f"reprojection: RMS {block['rms_px']:.3f} px over {block['n_corners']} corners of {block['n_poses']} "
-            f"poses; worst: {w}")
+    cal = block.get("with_calibrated_intrinsics")
+    how = ""
+    if cal is not None:
+        other = "n/a" if cal.get("rms_px") is None else f"{cal['rms_px']:.3f} px"
+        how = (f" with the intrinsics the fit ended at (calibrated + fitted shared error; {other} with the "
+               "intrinsics calibrated before the fit)")
+    return (f"reprojection: RMS {block['rms_px']:.3f} px{how} over {block['n_corners']} corners of "
+            f"{block['n_poses']} poses; worst: {w}")

@@ -69,6 +69,20 @@ def pose_cov_from_sigmas(n: int, sigma_t_m: float, sigma_r_rad: float) -> np.nda
     return np.broadcast_to(np.diag([st**2] * 3 + [sr**2] * 3), (n, 6, 6)).copy()
 
 
+def pose_noise(rng: np.random.Generator, cov) -> np.ndarray:
+    """(N, 6) pose errors d_k ~ N(0, cov[k]) for covariances cov (N, 6, 6) in the ``frames.pose_error``
+    convention (translation m, rotation vector rad, camera frame; apply with ``frames.perturb_pose``).
+    Symmetric square root by eigen-decomposition (a semi-definite covariance is fine; negative rounding
+    eigenvalues count as 0). DataError when a covariance is not finite."""
+    cov = np.asarray(cov, float)
+    if not np.all(np.isfinite(cov)):
+        bad = np.flatnonzero(~np.all(np.isfinite(cov), axis=(1, 2)))
+        raise DataError(f"pose covariance not finite for poses {bad.tolist()[:5]}: no noise can be drawn from it")
+    lam, V = np.linalg.eigh(0.5 * (cov + np.swapaxes(cov, 1, 2)))
+    z = rng.normal(size=(len(cov), 6))
+    return np.einsum("kij,kj->ki", V, np.sqrt(np.clip(lam, 0.0, None)) * z)
+
+
 #: the kind-independent fields of ``Evaluation.to_dict()`` (the rest are the kind's criteria)
 ACCURACY_FIELDS = ("position_rms_mm", "position_max_mm", "rotation_rms_deg", "rotation_max_deg", "n_poses")
 
@@ -129,6 +143,9 @@ class Setup:
     pose_grids: ClassVar[tuple[str, ...]] = ()
     #: scene ``truth`` keys describing errors the model does not share (see :meth:`truth_model`)
     truth_keys: ClassVar[tuple[str, ...]] = ()
+    #: criteria of :meth:`evaluate` computed from validation measurements (H4: V1_rad, V2_rad); none: the
+    #: pipelines need not measure the validation poses
+    measured_criteria: ClassVar[tuple[str, ...]] = ()
 
     # ------------------------------------------------------------------ to implement
     @property
@@ -235,17 +252,27 @@ class Setup:
 
     # ------------------------------------------------------------------ shared
     def synthetic_measurements(self, poses, x_true, rng, sigma_t_m=0.0, sigma_r_rad=0.0, sigma_q_rad=0.0,
-                               labels=None) -> Measurements:
-        """Noise-free T_cam_target of the true robot ⊕ Gaussian noise (camera frame, per component)."""
+                               labels=None, pose_cov=None) -> Measurements:
+        """Noise-free T_cam_target of the true robot ⊕ Gaussian noise (camera frame): independent per
+        component (sigma_t_m, sigma_r_rad), or, with ``pose_cov`` (N, 6, 6), drawn from each pose's own
+        covariance (``pose_noise``; the measurements then carry that covariance)."""
         poses = np.asarray(poses, float)
         T = self.T_cam_target(poses, x_true)
         n = len(T)
-        d = np.concatenate([rng.normal(scale=sigma_t_m, size=(n, 3)), rng.normal(scale=sigma_r_rad, size=(n, 3))], axis=1)
+        if pose_cov is None:
+            d = np.concatenate([rng.normal(scale=sigma_t_m, size=(n, 3)), rng.normal(scale=sigma_r_rad, size=(n, 3))],
+                               axis=1)
+            cov = pose_cov_from_sigmas(n, sigma_t_m, sigma_r_rad)
+        else:
+            cov = np.array(pose_cov, float)
+            if cov.shape != (n, 6, 6):
+                raise DataError(f"{self.name}: pose_cov has shape {cov.shape}, expected ({n}, 6, 6) for {n} poses")
+            d = pose_noise(rng, cov)
         q = self.joints(poses, x_true)
         if sigma_q_rad > 0:
             q = q + rng.normal(scale=sigma_q_rad, size=q.shape)
         labels = tuple(labels) if labels is not None else tuple(f"p{i:03d}" for i in range(n))
-        return Measurements(poses, q, F.perturb_pose(T, d), pose_cov_from_sigmas(n, sigma_t_m, sigma_r_rad), labels)
+        return Measurements(poses, q, F.perturb_pose(T, d), cov, labels)
 
     def visible(self, T_cam_target, target_outline_m, margin_px=10.0, max_tilt_deg=60.0) -> np.ndarray:
         """(N,) bool: the whole target outline (K, 3) [m, target frame] projects inside the image

@@ -62,6 +62,7 @@ class H4Setup(Setup):
     pose_grids: ClassVar[tuple[str, ...]] = ("grid81",)
     scene_keys: ClassVar[tuple[str, ...]] = ("model", "variant")
     truth_keys: ClassVar[tuple[str, ...]] = ("model", "tilt_deg")
+    measured_criteria: ClassVar[tuple[str, ...]] = ("V1_rad", "V2_rad")
 
     @property
     def n_joints(self) -> int:
