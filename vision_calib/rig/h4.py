@@ -23,6 +23,8 @@ from .base import Evaluation, Setup
 
 #: significance level at which a measured camera/target tilt replaces the nominal one (chi-square, 2 dof)
 AXIS_LEVEL = 1e-3
+#: an axis estimate whose std is below this [rad] is exact (noise-free rotations): the tilts are fixed at it
+EXACT_AXIS_STD_RAD = 1e-9
 #: the rotation axis is "not fixed" (tilts not applied) when the axis fit's residuals fail the chi-square test
 #: against the measurements' rotation covariance (level AXIS_LEVEL) AND their variance exceeds the predicted by
 #: this factor (residual std twice the predicted, as steps.UNEXPLAINED_CHI2_DOF): image rotations carry a
@@ -212,8 +214,10 @@ class H4Setup(Setup):
                      and axis_test["chi2_dof"] > AXIS_MAX_VARIANCE_RATIO)
         vals = np.concatenate([est.tilt_cam_rad, est.tilt_target_rad])
         axis_std = np.concatenate([est.tilt_cam_std_rad, est.tilt_target_std_rad])
-        usable = bool(fixed and np.all(np.isfinite(vals)) and np.all(np.isfinite(axis_std)) and np.all(axis_std > 0))
-        identify = usable and self.tilt_mode == "identify"
+        usable = bool(fixed and np.all(np.isfinite(vals)) and np.all(np.isfinite(axis_std)))
+        # exact rotations (noise-free synthetic data) give an exact axis: fixed at it, with its zero std
+        exact = bool(usable and np.max(axis_std) < EXACT_AXIS_STD_RAD)
+        identify = usable and self.tilt_mode == "identify" and not exact
         if usable:
             robot = with_tilt_params(base, vals, [identify] * 4)
         else:
