@@ -3,26 +3,69 @@
 import shutil
 from pathlib import Path
 
+import numpy as np
 import yaml
 
 from vision_calib import frames as F
+from vision_calib.experiment.steps import scene_truth
 from vision_calib.io.recording import read_recording
 from vision_calib.rig import load_scene
 
 
-def flange_pose_folder(rec_dir, dst):
-    """Copy the recording ``rec_dir`` (joints) to ``dst`` with flange poses instead of joints: T_base_flange
-    from the scene's nominal forward kinematics (what a robot controller reports), same images, camera and
-    target, no scene. Returns (dst Path, the source Recording, T_base_flange (N, 4, 4))."""
+def flange_pose_folder(rec_dir, dst, robot_std_mm: float = 0.0, robot_std_deg: float = 0.0, seed: int = 0,
+                       declare_std: bool = False):
+    """Copy the recording ``rec_dir`` (joints, simulated) to ``dst`` with flange poses instead of joints: the TRUE
+    T_base_flange of each pose (``chain.flange(q, x_true)``, the arm alone, the truth the images were rendered
+    with), perturbed by a robot pose error of std robot_std_mm per translation axis and robot_std_deg per
+    rotation axis (``frames.perturb_pose``, seeded), same images, camera and target, no scene. declare_std:
+    write those std as recording.yaml ``robot_pose_std`` (else absent: estimated by ``process``).
+    Returns (dst Path, the source Recording, T_base_flange written (N, 4, 4))."""
     rec_dir, dst = Path(rec_dir), Path(dst)
     rec = read_recording(rec_dir)
-    setup = load_scene(rec.scene_path).setup
-    T = setup.chain.forward(rec.poses, setup.params.nominal)
+    scene = load_scene(rec.scene_path)
+    T = scene.setup.chain.flange(rec.poses, scene_truth(scene))
+    rng = np.random.default_rng(seed)
+    n = len(T)
+    d = np.concatenate([rng.normal(scale=robot_std_mm * 1e-3, size=(n, 3)),
+                        rng.normal(scale=np.radians(robot_std_deg), size=(n, 3))], axis=1)
+    T = F.perturb_pose(T, d)
     shutil.copytree(rec_dir / "images", dst / "images")
     doc = yaml.safe_load((rec_dir / "recording.yaml").read_text())
     doc = {k: v for k, v in doc.items() if k not in ("scene", "scene_name")} | {"poses": "flange_pose"}
+    if declare_std:
+        doc["robot_pose_std"] = {"translation_mm": float(robot_std_mm), "rotation_deg": float(robot_std_deg)}
     (dst / "recording.yaml").write_text(yaml.safe_dump(doc))
     xyz, q = F.xyz_quat_from_T(T)
     (dst / "poses.csv").write_text("pose_id,x,y,z,qx,qy,qz,qw\n" + "".join(
         ",".join([pid] + [repr(float(v)) for v in (*a, *b)]) + "\n" for pid, a, b in zip(rec.pose_ids, xyz, q)))
     return dst, rec, T
+
+
+def true_mounts(rec_dir) -> dict:
+    """{name: (4, 4)} true mounting transforms of a simulated joint recording, named as the hand-eye report's
+    ``transforms`` (eye_in_hand: T_flange_cam, T_cam_flange, T_base_target, T_target_base; fixed: T_cam_base,
+    T_base_cam, T_flange_target, T_target_flange)."""
+    rec = read_recording(rec_dir)
+    scene = load_scene(rec.scene_path)
+    chain = scene.setup.chain
+    TL, TR = chain.nominal_transforms(scene_truth(scene))
+    names = (chain.left, chain.right)
+    out = {names[0]: TL, names[1]: TR}
+    inv = {"T_target_base": "T_base_target", "T_flange_cam": "T_cam_flange", "T_cam_base": "T_base_cam",
+           "T_flange_target": "T_target_flange"}
+    out.update({inv[k]: F.inv_T(v) for k, v in list(out.items())})
+    return out
+
+
+def assert_mounts_within_std(transforms: dict, truth: dict, k: float = 4.0):
+    """Every mount of a hand-eye report's ``transforms`` within k of its reported std of the truth, per component
+    (``frames.pose_error`` convention: translation m, small rotation about the parent's axes). Returns the
+    largest |z|."""
+    zmax = 0.0
+    for name, d in transforms.items():
+        e = F.pose_error(truth[name], np.array(d["matrix"]))
+        s = np.r_[d["std_xyz_m"], np.radians(d["std_rot_deg"])]
+        z = e / s
+        assert np.all(np.abs(z) < k), (name, z, e, s)
+        zmax = max(zmax, float(np.abs(z).max()))
+    return zmax

@@ -306,3 +306,50 @@ def test_real_visp_eye_to_hand():
     bad, *_ = solve_handeye(F, T[perm], "fixed", pose_cov=cov[perm], sigma_t_m=1e-3,
                             sigma_rot_rad=np.radians(0.2))
     assert bad.cost_final > 5 * res.cost_final
+
+
+# ----------------------------------------------------------------------------- robot pose error
+@pytest.mark.parametrize("mount", ["fixed", "eye_in_hand"])
+def test_flange_error_map_matches_central_differences(mount):
+    """d r / d (flange pose error) of flange_error_map against re-built problems with perturbed flange poses, at a
+    point far from the solution (rotation residuals ~0.3 rad)."""
+    from vision_calib.identify.handeye_problem import flange_error_map
+
+    rng = np.random.default_rng(11)
+    A, B, F, M = _scene(rng, mount, N=5)
+    pb = handeye_problem(F, _noisy(rng, M, _random_cov(rng, 5)), mount, A0=A, B0=B, sigma_t_m=1e-3, sigma_rot_rad=1e-3)
+    x = pb.params.nominal + np.r_[rng.normal(scale=0.03, size=3), rng.normal(scale=0.2, size=3),
+                                  rng.normal(scale=0.03, size=3), rng.normal(scale=0.2, size=3)]
+    D = flange_error_map(pb, x)
+    h = 1e-6
+    Dn = np.zeros_like(D)
+    for i in range(6):
+        e = np.zeros(6)
+        e[i] = h
+        rp = handeye_problem(frames.perturb_pose(F, e), pb.meta["T_cam_target_meas"], mount, A0=A, B0=B).residual(x)
+        rm = handeye_problem(frames.perturb_pose(F, -e), pb.meta["T_cam_target_meas"], mount, A0=A, B0=B).residual(x)
+        Dn[:, :, i] = (rp - rm) / (2 * h)
+    np.testing.assert_allclose(D, Dn, atol=1e-8)
+
+
+def test_robot_cov_enters_the_weights_and_matches_monte_carlo():
+    """obs_cov = camera part + D robot_cov D^T; the residual scatter of the true parameters over flange pose errors
+    drawn with robot_cov matches it (eye_in_hand, lever arm of the target included)."""
+    from vision_calib.identify.handeye_problem import reweighted, robot_pose_cov
+
+    rng = np.random.default_rng(12)
+    A, B, F, M = _scene(rng, "eye_in_hand", N=4)
+    rc = robot_pose_cov(5e-4, 1e-3)
+    pb = handeye_problem(F, M, "eye_in_hand", A0=A, B0=B, sigma_t_m=1e-6, sigma_rot_rad=1e-6, robot_cov=rc)
+    np.testing.assert_allclose(pb.meta["camera_cov"], np.broadcast_to(np.eye(6) * 1e-12, (4, 6, 6)))
+    x = pb.params.nominal
+    R = []
+    for _ in range(3000):  # reported flange = true flange perturbed by d (the model sees the reported one)
+        d = rng.normal(size=(4, 6)) * np.r_[[5e-4] * 3, [1e-3] * 3]
+        R.append(handeye_problem(frames.perturb_pose(F, d), M, "eye_in_hand", A0=A, B0=B).residual(x))
+    R = np.array(R)
+    emp = np.einsum("ski,skj->kij", R, R) / len(R)
+    np.testing.assert_allclose(emp, pb.obs_cov, atol=0.08 * np.abs(pb.obs_cov).max())
+    assert reweighted(pb, x).obs_cov == pytest.approx(pb.obs_cov)
+    with pytest.raises(DataError, match="robot_cov"):
+        handeye_problem(F, M, "eye_in_hand", A0=A, B0=B, sigma_t_m=1e-3, sigma_rot_rad=1e-3, robot_cov=-np.eye(6))

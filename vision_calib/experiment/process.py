@@ -152,8 +152,12 @@ def _chain_reprojection(setup, meas, problem, result, dets, rec, fitted=None) ->
 
 
 def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None) -> dict:
-    """Flange poses known: identify the camera mount and the target mount only."""
-    from ..identify.handeye_problem import handeye_report, solve_handeye, stack_measurements
+    """Flange poses known: identify the camera mount and the target mount only (``handeye_step``: the robot's
+    pose error in the weights, given by recording.yaml ``robot_pose_std`` or estimated; closed-form start;
+    outlier test, adequacy test and variance factor as the robot-chain path)."""
+    from ..identify.handeye_problem import handeye_problem, handeye_report, stack_measurements
+    from .camera_step import fitted_camera, intrinsics_directions, residual_response
+    from .handeye_step import handeye_blocks, identify_handeye
 
     ok = [i for i, pm in enumerate(pms) if pm.valid]
     if len(ok) < 3:
@@ -162,13 +166,23 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None) -> dict:
     # one image with few corners per pose: each pose's sigma_px is a poor estimate, pool it over the poses
     T, cov, labels, _ = stack_measurements([pms[i] for i in ok], pool_sigma=rec.frames_per_pose == 1)
     mount = "fixed" if rec.camera_mount in ("fixed", "base") else "eye_in_hand"
-    # PnP covariances miss the robot's own pose error: scale the covariance by the a-posteriori
-    # variance factor (whitened cost / degrees of freedom), reported as such
-    result, A, B, problem = solve_handeye(rec.poses[ok], T, mount, pose_cov=cov, labels=labels,
-                                          scale_cov_by_residual=True)
-    result, A, B, prop, cam_fit = _handeye_intrinsics_uncertainty(result, problem, rec, pms, ok, dets, intr, mount)
-    if prop is not None:
-        intr = {**intr, "propagated": prop}
+    dirs = intrinsics_directions(intr, rec.camera) if dets else []
+    used = []  # the cameras of the nuisance columns (refilled by residual_response)
+
+    def nuisance(pb, x):  # intrinsics calibrated from these images: their error is shared by all poses
+        m = pb.meta
+        return residual_response(dirs, dets, [str(lab) for lab in pb.labels], rec, x, np.asarray(pb.residual(x), float),
+                                 lambda Tm: handeye_problem(m["T_base_flange"], Tm, mount, m["A0"], m["B0"], pb.obs_cov,
+                                                            labels=pb.labels), used)
+
+    ident = identify_handeye(rec.poses[ok], T, mount, cov, labels, rec.robot_pose_std,
+                             nuisance=nuisance if dirs else None, where=str(rec.folder))
+    result, A, B, problem = ident.result, ident.A, ident.B, ident.problem
+    cam_fit = None
+    if ident.nuisance is not None:
+        cam_fit = fitted_camera(rec.camera, used, ident.nuisance["coefficients"])
+        intr = {**intr, "propagated": {**ident.nuisance, "in_fit": True, "how": IN_FIT,
+                                       "fitted_values": _camera_values(cam_fit)}}
     # reprojection with the intrinsics the fit ended at, the calibrated ones' figure beside it
     he = handeye_report(result, A, B, problem, detections=dets, target=rec.target, intrinsics=cam_fit or rec.camera)
     if cam_fit is not None and he["reprojection"] is not None:
@@ -176,56 +190,16 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None) -> dict:
 
         cal = handeye_report(result, A, B, problem, detections=dets, target=rec.target, intrinsics=rec.camera)
         he["reprojection"] = with_calibrated_figure(he["reprojection"], cal["reprojection"])
+    he.update(handeye_blocks(ident))
     report = build_report(
         "process_handeye", source={"folder": str(rec.folder)},
         settings={"poses": mblock["n_poses"], "mount": mount, "camera": rec.camera.to_dict(), "method": "lse"},
-        measurements=mblock, warnings=[*rec.notes, *intr["warnings"]], result=result,
+        measurements=mblock, warnings=[*rec.notes, *intr["warnings"]], result=result, identified=ident,
         residuals=residual_stats(result.residuals, "pose"),
         extra={"handeye": he, "intrinsics": intr, "reprojection": he["reprojection"]},
         timings={"total": time.perf_counter() - t0})
     write_report(out, report, plots=plots)
     return report
-
-
-def _handeye_intrinsics_uncertainty(result, problem, rec, pms, ok, dets, intr, mount):
-    """(result, A, B, propagated block or None, fitted camera or None): the hand-eye fit redone with the uncertainty of intrinsics
-    calibrated from the recording as nuisance coefficients (one per eigen-direction of their covariance; the
-    response U of every pose's residual from the poses re-measured from the detections, as in
-    ``camera_step.intrinsics_response``), so its variance factor and covariance see the poses' covariance
-    plus the intrinsics' shared error (``identify.nuisance.solve_nuisance_unknown_noise``: the poses'
-    covariance scaled by its estimated factor, the intrinsics' not); the input result when the intrinsics
-    were given. The fitted camera: the calibrated one moved by the fitted coefficients (``fitted_camera``)."""
-    from ..identify.handeye_problem import handeye_problem, transforms_from_x
-    from ..identify.nuisance import solve_nuisance_unknown_noise, split_nuisance
-    from .camera_step import fitted_camera, intrinsics_directions, residual_response
-    from .steps import NUISANCE_PREFIX
-
-    A, B = transforms_from_x(problem, result.identified)
-    dirs = intrinsics_directions(intr, rec.camera)
-    if not dirs or result.covariance is None or not dets:
-        return result, A, B, None, None
-    x = np.asarray(result.identified, float)
-    m = problem.meta
-    used = []
-    U = residual_response(dirs, dets, [str(pms[i].pose_id) for i in ok], rec, x,
-                          np.asarray(problem.residual(x), float),
-                          lambda T: handeye_problem(m["T_base_flange"], T, mount, m["A0"], m["B0"], problem.obs_cov,
-                                                    labels=problem.labels), used)
-    if U is None:
-        return result, A, B, None, None
-    # the PnP covariances miss the robot's own pose error (flange poses from a nominal model): their scale is
-    # estimated (variance factor s2), the intrinsics' known
-    full, s2 = solve_nuisance_unknown_noise(problem, U, x, NUISANCE_PREFIX)
-    res, nz = split_nuisance(full, len(problem.params))
-    free = np.asarray(res.free, bool)
-    ratio = res.std / result.std  # both as reported (each with its own variance factor)
-    prop = {"n_directions": int(U.shape[2]), "coefficients": nz["values"], "coefficients_std": nz["std"],
-            "std_inflation": {n: float(v) for n, v, f in zip(res.names, ratio, free) if f and np.isfinite(v)},
-            "pose_variance_factor": float(s2), "in_fit": True, "how": IN_FIT}
-    cam_fit = fitted_camera(rec.camera, used, nz["values"])
-    prop["fitted_values"] = _camera_values(cam_fit)
-    A, B = transforms_from_x(problem, res.identified)
-    return res, A, B, prop, cam_fit
 
 
 __all__ = ["process_folder", "measure_recording"]

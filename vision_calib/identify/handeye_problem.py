@@ -32,10 +32,21 @@ Jacobian (analytic). With the model pose perturbed as ``perturb_pose(M, delta)``
 right Jacobian). The residual Jacobian is ``-delta`` for the translation rows and
 ``-Jr(e)^-1 delta_rot`` for the rotation rows (``e`` the rotation residual), exact at any point.
 
+Robot pose error. The flange poses are what the robot reports: the true ones are
+``perturb_pose(T_base_flange,k, d_k)`` with d_k [m, rad] (base-frame axes, about the flange origin) of
+covariance ``robot_cov`` (6, 6). It moves the model pose by ``delta = L_k d_k`` with, for ``X G Y``
+(X = A, Y = B, G = G_k) and a perturbation ``d_G`` of G, ``L = [[R_X, -R_X [R_G t_Y]x], [0, R_X]]``;
+``d_G = d`` for "fixed" and ``inverse_error_map(T_base_flange,k) d`` for "eye_in_hand"
+(:func:`flange_error_map` gives ``d r_k / d d_k``). Each pose's residual covariance is then
+``obs_cov_k = camera_cov_k + D_k robot_cov D_k^T`` (D_k = d r_k / d d_k at the current x: the weights depend
+on A and B, :func:`reweighted` recomputes them), the linearised Gauss-Helmert (errors-in-variables) model.
+
 This module imports cv2 lazily (only :func:`handeye_initial_guess` needs it).
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 
@@ -196,9 +207,18 @@ def _obs_cov(N, pose_cov, sigma_t_m, sigma_rot_rad) -> tuple[np.ndarray, dict]:
     return cov, meta
 
 
+def robot_pose_cov(sigma_t_m: float, sigma_rot_rad: float) -> np.ndarray:
+    """(6, 6) covariance [m, rad] of a flange pose error with independent std sigma_t_m per translation
+    axis and sigma_rot_rad per rotation axis (isotropic: the same in any frame)."""
+    for name, s in (("translation std", sigma_t_m), ("rotation std", sigma_rot_rad)):
+        if not (np.isfinite(s) and s >= 0):
+            raise DataError(f"robot pose error: {name} must be a finite number >= 0, got {s}")
+    return np.diag([float(sigma_t_m) ** 2] * 3 + [float(sigma_rot_rad) ** 2] * 3)
+
+
 def handeye_problem(T_base_flange, T_cam_target_meas, mount: str = "fixed", A0=None, B0=None, pose_cov=None,
                     sigma_t_m: float | None = None, sigma_rot_rad: float | None = None,
-                    labels=None) -> IdentificationProblem:
+                    labels=None, robot_cov=None) -> IdentificationProblem:
     """Hand-eye identification problem (residual_kind "pose", m = 6, 12 parameters).
 
     T_base_flange: (N, 4, 4) known flange poses in the robot base [m] (the problem builds
@@ -212,8 +232,10 @@ def handeye_problem(T_base_flange, T_cam_target_meas, mount: str = "fixed", A0=N
     pose_cov (robot repeatability, model error); with neither pose_cov nor sigmas no noise is invented:
     relative weights 1 mm : 0.1 deg and the noise scale estimated from the residuals (``meta["noise"]`` =
     "estimated from residuals, not given"; the solvers scale the covariance by chi2/dof).
-    labels: (N,) pose identifiers. ``meta`` holds mount, the A/B names, G (N, 4, 4) and the
-    nominal rotations used by :func:`transforms_from_x`.
+    labels: (N,) pose identifiers. robot_cov: (6, 6) covariance [m, rad] of the flange pose error
+    (:func:`robot_pose_cov`; module docstring), propagated into obs_cov at (A0, B0) (:func:`reweighted` at
+    another x). ``meta`` holds mount, the A/B names, G (N, 4, 4), the nominal rotations used by
+    :func:`transforms_from_x`, camera_cov (N, 6, 6) (obs_cov without the robot part) and robot_cov.
     Longer than 80 lines: input checks, initial guess, covariance and the two closures share one scope.
     """
     mount = _check_mount(mount)
@@ -233,6 +255,12 @@ def handeye_problem(T_base_flange, T_cam_target_meas, mount: str = "fixed", A0=N
     if len(labels) != N:
         raise DataError(f"{len(labels)} labels for {N} poses")
     cov, noise_meta = _obs_cov(N, pose_cov, sigma_t_m, sigma_rot_rad)
+    if robot_cov is not None:
+        robot_cov = np.asarray(robot_cov, dtype=float)
+        if robot_cov.shape != (6, 6) or not np.all(np.isfinite(robot_cov)) or np.linalg.eigvalsh(
+                0.5 * (robot_cov + robot_cov.T))[0] < 0:
+            raise DataError(f"robot_cov must be a finite positive semi-definite (6, 6) matrix, got shape "
+                            f"{robot_cov.shape}")
 
     nA, nB = MOUNT_NAMES[mount]
     na, va, ka = _mount_params(nA, A0)
@@ -274,26 +302,68 @@ def handeye_problem(T_base_flange, T_cam_target_meas, mount: str = "fixed", A0=N
         J[:, 3:, :] = -np.einsum("kij,kjl->kil", _inv_right_jacobian(e), D[:, 3:, :])
         return J
 
-    return IdentificationProblem(
+    problem = IdentificationProblem(
         params=params, residual=residual, jacobian=jacobian, obs_cov=cov, residual_kind="pose", labels=labels,
         component_names=_POSE_COMPONENTS,
         meta={"model": "handeye", "mount": mount, "A_name": nA, "B_name": nB, "G": G, "T_base_flange": F,
-              "T_cam_target_meas": M, "R_A_nominal": RA0, "R_B_nominal": RB0, "A0": A0, "B0": B0, **noise_meta},
+              "T_cam_target_meas": M, "R_A_nominal": RA0, "R_B_nominal": RB0, "A0": A0, "B0": B0,
+              "camera_cov": cov, "robot_cov": robot_cov, **noise_meta},
     )
+    return problem if robot_cov is None else reweighted(problem, params.nominal)
+
+
+def flange_error_map(problem: IdentificationProblem, x) -> np.ndarray:
+    """(N, 6, 6) d r_k / d d_k at x (12,): the residual's response to the flange pose error d_k [m, rad]
+    (``perturb_pose`` on T_base_flange,k; module docstring), for all N poses of the problem."""
+    A, B = transforms_from_x(problem, x)
+    G, F = problem.meta["G"], problem.meta["T_base_flange"]
+    RA = A[:3, :3]
+    L = np.zeros((G.shape[0], 6, 6))
+    L[:, :3, :3] = RA
+    L[:, 3:, 3:] = RA
+    L[:, :3, 3:] = -np.einsum("ij,kjl->kil", RA, frames.skew(G[:, :3, :3] @ B[:3, 3]))
+    if problem.meta["mount"] == "eye_in_hand":
+        L = L @ frames.inverse_error_map(F)
+    e = frames.pose_error(A @ G @ B, problem.meta["T_cam_target_meas"])[:, 3:]
+    D = -L
+    D[:, 3:, :] = -np.einsum("kij,kjl->kil", _inv_right_jacobian(e), L[:, 3:, :])
+    return D
+
+
+def reweighted(problem: IdentificationProblem, x, robot_cov=None) -> IdentificationProblem:
+    """The problem with obs_cov = camera_cov + D_k robot_cov D_k^T at x (12,) (:func:`flange_error_map`);
+    robot_cov (6, 6) replaces the problem's own (None: keep it; a problem without one is returned as is)."""
+    rc = problem.meta.get("robot_cov") if robot_cov is None else np.asarray(robot_cov, float)
+    if rc is None:
+        return problem
+    D = flange_error_map(problem, x)
+    cov = problem.meta["camera_cov"] + D @ rc @ np.swapaxes(D, 1, 2)
+    return dataclasses.replace(problem, obs_cov=0.5 * (cov + np.swapaxes(cov, 1, 2)),
+                               meta={**problem.meta, "robot_cov": rc})
+
+
+def x_from_transforms(problem: IdentificationProblem, A, B) -> np.ndarray:
+    """(12,) parameter vector of the transforms A, B (4, 4) (inverse of :func:`transforms_from_x`)."""
+    RA0, RB0 = problem.meta["R_A_nominal"], problem.meta["R_B_nominal"]
+    rA = frames.xyz_rotvec_from_T(frames.make_T(RA0.T @ np.asarray(A, float)[:3, :3]))[3:]
+    rB = frames.xyz_rotvec_from_T(frames.make_T(RB0.T @ np.asarray(B, float)[:3, :3]))[3:]
+    return np.r_[np.asarray(A, float)[:3, 3], rA, np.asarray(B, float)[:3, 3], rB]
 
 
 def solve_handeye(T_base_flange, T_cam_target_meas, mount: str = "fixed", pose_cov=None,
                   sigma_t_m: float | None = None, sigma_rot_rad: float | None = None, labels=None,
-                  A0=None, B0=None, **lse_kwargs):
+                  A0=None, B0=None, robot_cov=None, **lse_kwargs):
     """Closed-form start + weighted least squares. Returns (result, A (4, 4), B (4, 4), problem).
 
-    Arguments as :func:`handeye_problem`; ``lse_kwargs`` go to :func:`~vision_calib.identify.lse.solve_lse`
+    One fit with the weights at the start (A0, B0) (see :func:`vision_calib.identify.handeye_fit.fit_handeye`
+    for the weights iterated to the solution, the closed-form start chosen by cost and the robot's variance
+    estimated). Arguments as :func:`handeye_problem`; ``lse_kwargs`` go to :func:`~vision_calib.identify.lse.solve_lse`
     (e.g. ``scale_cov_by_residual=True`` when the measurement covariances are not trusted).
     """
     from .lse import solve_lse
 
     problem = handeye_problem(T_base_flange, T_cam_target_meas, mount, A0, B0, pose_cov, sigma_t_m,
-                              sigma_rot_rad, labels)
+                              sigma_rot_rad, labels, robot_cov)
     result = solve_lse(problem, **lse_kwargs)
     A, B = transforms_from_x(problem, result.identified)
     return result, A, B, problem

@@ -30,6 +30,12 @@ recording.yaml::
     corner_noise_px: 0.3                    # optional: upper bound of a corner's per-coordinate noise [px]; the
                                             # per-view rule drops corners beyond 5x it from the view's homography
                                             # and views whose residual std exceeds 3x it (measure/view_checks.py)
+    robot_pose_std: {translation_mm: 0.2, rotation_deg: 0.02}
+                                            # optional, poses: flange_pose only: std per axis of the error of the
+                                            # reported flange poses (the robot's accuracy, not its repeatability,
+                                            # when they come from its nominal model); both keys required, >= 0.
+                                            # Absent: estimated from the data (REML, identify/handeye_fit.py);
+                                            # 0, 0: the flange poses are taken as exact
 """
 
 from __future__ import annotations
@@ -75,6 +81,8 @@ class Recording:
     image_size: tuple[int, int] | None = None
     camera_file: Path | None = None
     corner_noise_px: float = 0.3
+    #: (translation m, rotation rad) std per axis of the reported flange poses' error (``robot_pose_std``), or None
+    robot_pose_std: tuple[float, float] | None = None
 
     def measure_config(self):
         """The pose measurement settings of this recording (measure.MeasureConfig: averaging, corner_noise_px)."""
@@ -130,7 +138,7 @@ _SCHEMA = {
     "camera_file": None,  # a camera.yaml (io.camera_file), instead of camera
     "camera_mount": None, "target": None,  # target_from_dict checks its keys
     "scene": None, "scene_name": None, "poses": None, "frames_per_pose": None, "averaging": None,
-    "corner_noise_px": None,
+    "corner_noise_px": None, "robot_pose_std": {"translation_mm", "rotation_deg"},
 }
 FLANGE_COLUMNS = ("x", "y", "z", "qx", "qy", "qz", "qw")
 #: |joint value| [rad or m] and |flange position| [m] beyond which a pose is refused as implausible
@@ -303,6 +311,14 @@ def read_recording(folder, allow_symlinks: bool = False) -> Recording:
     frames = top.number("frames_per_pose", int, 10, min=1)
     averaging = top.get("averaging", str, "corners", choices=("corners", "poses"))
     corner_noise = top.number("corner_noise_px", float, 0.3, min=0.0, min_open=True, max=50.0, unit="px")
+    robot_std = None
+    if "robot_pose_std" in top:
+        if pose_kind != "flange_pose":
+            raise top.error("robot_pose_std", "applies to flange-pose recordings (poses: flange_pose) only; a joint "
+                                              "recording identifies the robot's own geometry")
+        rs = top.section("robot_pose_std")
+        robot_std = (rs.number("translation_mm", float, min=0.0, max=100.0, unit="mm") * 1e-3,
+                     float(np.radians(rs.number("rotation_deg", float, min=0.0, max=10.0, unit="deg"))))
 
     cpath = folder / "poses.csv"
     if not cpath.is_file():
@@ -326,7 +342,7 @@ def read_recording(folder, allow_symlinks: bool = False) -> Recording:
         camera_file = camera_file if camera_file.is_absolute() else ypath.parent / camera_file
         camera = load_camera_for_images(camera_file, size, f"{ypath}: camera_file")
     return Recording(folder, camera, mount, target, scene_path, pose_kind, tuple(ids), poses, images, frames,
-                     tuple(extra), averaging, tuple(notes), size, camera_file, float(corner_noise))
+                     tuple(extra), averaging, tuple(notes), size, camera_file, float(corner_noise), robot_std)
 
 
 def _recording_camera(d: dict, sec: Section, images: dict) -> tuple[CameraIntrinsics | None, tuple | None]:

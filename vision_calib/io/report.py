@@ -19,6 +19,10 @@ report.json, version 2 (each value once)::
     intrinsics: {source: "recording.yaml" | "calibrated from the recording", values, std, rms_px,
                  coverage, warnings, propagated: {n_directions, in_fit, std_inflation, ...}, ...}
                                                                  # process (experiment/camera_step.py)
+    outliers: [{pose_id, reason}], adequacy: {...}, variance_factor  # measured data (process, process_handeye)
+    handeye: {transforms, residuals, reprojection, robot_pose_std: {source, translation_mm, rotation_deg, ...},
+              closed_form_comparison: {ours, start, methods: {name: {cost, cost_minus_ours, distance}}}, ...}
+                                                                 # process_handeye (experiment/handeye_step.py)
     warnings: [str]
     timings_s: {...}
     files: {report, model, residuals_plot, ...}
@@ -291,6 +295,19 @@ def _handeye_lines(report: dict) -> list[str]:
                      + ", ".join(f"{v * 1e3:.2f}" for v in t["std_xyz_m"]) + "); rpy = "
                      + ", ".join(f"{v:.2f}" for v in t["rpy_deg"]) + " deg (std "
                      + ", ".join(f"{v:.2f}" for v in t["std_rot_deg"]) + ")")
+    rob = he.get("robot_pose_std")
+    if rob:
+        est = (f" ± {rob['std_translation_mm']:.3f}" if rob.get("std_translation_mm") is not None else "",
+               f" ± {rob['std_rotation_deg']:.4f}" if rob.get("std_rotation_deg") is not None else "")
+        lines.append(f"robot pose error ({rob['source']}): {rob['translation_mm']:.3f}{est[0]} mm, "
+                     f"{rob['rotation_deg']:.4f}{est[1]} deg per axis (in the weights)")
+    cf = he.get("closed_form_comparison")
+    if cf:
+        ok = {m: v for m, v in cf["methods"].items() if "cost" in v}
+        if ok:
+            best = min(ok, key=lambda m: ok[m]["cost"])
+            lines.append(f"closed forms (OpenCV): started from {cf['start']}; cheapest {best}, cost "
+                         f"{ok[best]['cost']:.4g} vs ours {cf['ours']:.4g}")
     return lines
 
 
