@@ -84,6 +84,9 @@ class IdentifiabilityReport:
     tol: float = 0.0
     scale: np.ndarray = field(default=None, repr=False)
     column_norms: np.ndarray = field(default=None, repr=False)
+    #: free parameters with a prior row in the analysed problem (``IdentificationProblem.prior_rows``): their
+    #: identifiability comes partly from that prior (e.g. the H4 mount tilts' rotation-axis estimate)
+    prior_parameters: tuple = ()
 
     @property
     def identifiable(self) -> bool:
@@ -109,6 +112,7 @@ class IdentifiabilityReport:
             "condition_number": float(self.condition_number),
             "non_identifiable": list(self.non_identifiable),
             "base_parameters": list(self.base_parameters),
+            "prior_parameters": list(self.prior_parameters),
             "couplings": [
                 {
                     "parameter": c["parameter"],
@@ -313,6 +317,7 @@ def analyze(
         + ("; then each column divided by its norm" if normalize else "; no column normalisation")
     )
     return IdentifiabilityReport(
+        prior_parameters=tuple(n for n in names if n in problem.prior_rows),
         names=tuple(names),
         n_params=n,
         rank=rank,

@@ -219,8 +219,10 @@ def summary_text(report: dict) -> str:
     lines += [f"warning: {w}" for w in report.get("warnings", [])]
     idf = report.get("identifiability")
     if idf:
-        lines.append(f"identifiability: {idf['n_params']} parameters, rank {idf['rank']}, "
-                     f"cond {idf['condition_number']:.3g}"
+        pri = idf.get("prior_parameters") or []
+        lines.append(f"identifiability: {idf['n_params']} parameters"
+                     + (f" ({len(pri)} with a prior: {', '.join(pri)})" if pri else "")
+                     + f", rank {idf['rank']}, cond {idf['condition_number']:.3g}"
                      + (f"; not identifiable: {', '.join(idf['non_identifiable'])}" if idf["non_identifiable"] else ""))
     lines.append(f"identification ({ident['method']}): converged={ident['converged']} iterations={ident['iterations']} "
                  f"cost {ident['cost_initial']:.4g} -> {ident['cost_final']:.4g}")
