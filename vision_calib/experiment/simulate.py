@@ -115,6 +115,17 @@ def _preload(plots: bool):
     return th
 
 
+def _intrinsics_sensitivity(scene, ident, meas) -> dict:
+    """``camera_step.intrinsics_sensitivity`` of a simulated run (exact intrinsics: no warning), the poses
+    re-measured from the target's corners projected at the measured poses (``projected_remeasure``)."""
+    from ..targets import load_target
+    from .camera_step import intrinsics_sensitivity, projected_remeasure
+
+    cam = ident.setup.camera
+    again = projected_remeasure(load_target(scene.target_path), cam, dict(zip(meas.labels, meas.T_cam_target)))
+    return intrinsics_sensitivity(ident, meas, cam, again, given_std=None)
+
+
 def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, method=None, export_recording=None,
                    workers=None, progress=False, overrides=None, plots=True, pool=None,
                    fix_unidentifiable=False) -> dict:
@@ -163,6 +174,7 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
                                   context=rejection_summary(pms), where=str(scene.path),
                                   fix_unidentifiable=fix_unidentifiable, rejected=inconsistent)
     result, problem, setup = ident.result, ident.problem, ident.setup  # setup: after Setup.prepare (H4 camera axis)
+    sens = _intrinsics_sensitivity(scene, ident, meas_used)
     timings["identify"] = time.perf_counter() - t
 
     t = time.perf_counter()
@@ -192,7 +204,7 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
             ps.names, ps.nominal, shared_truth(setup, truth or scene.setup, x_true), result),
         result=result, identified=ident, motion=motion, accuracy=evals, timings=timings,
         extra={"synthetic_reference": {"sigma_mm": st * 1e3, "sigma_deg": float(np.degrees(sr)),
-                                       "accuracy_after": ref.after.to_dict()}})
+                                       "accuracy_after": ref.after.to_dict()}, "intrinsics_sensitivity": sens})
     if out_dir is not None:
         preloading.join()
         write_report(out_dir, report, setup, result, problem, evals, plots=plots)

@@ -19,11 +19,11 @@ measurements carry errors their covariance misses), or T ~ chi2(r) when obs_cov 
 
 Candidate groups (each a test), all optional:
 
-- ``joint j``: a joint error delta_j(q) = sum_h a_h sin(h q_j) + b_h cos(h q_j), h in ``harmonics``
-  (default 1, 2: eccentricity and the 2nd-order terms of gears, encoders and bearings); columns
-  ``joint_response[:, :, j] * f(q_j)``, joint_response (n_obs, m, n_joints) = d r / d(true joint error)
+- ``joint j``: a joint error delta_j(q) = c + sum_h a_h sin(h q_j) + b_h cos(h q_j), h in ``harmonics``
+  (default 1, 2: eccentricity and the 2nd-order terms of gears, encoders and bearings; c: an offset, absorbed
+  when the model has one); columns ``joint_response[:, :, j] * f(q_j)``, joint_response (n_obs, m, n_joints) = d r / d(true joint error)
   (the residual change per rad of a joint's true value moving away from the reported one). Without
-  joint_response each harmonic acts on each residual component freely (2 H m columns).
+  joint_response each term acts on each residual component freely ((2 H + 1) m columns; no amplitudes).
 - ``image position``: the target's normalised image coordinates (x/z, y/z of a target point, centred),
   acting on each residual component (2 m columns): measurement errors that depend on where the target is
   in the image (distortion, principal point).
@@ -131,12 +131,12 @@ def _group_test(Q, e, dof_res, Xw, test):
 
 
 def _harmonics(q, harmonics) -> tuple[np.ndarray, list[str]]:
-    """(n_obs, 2H) [sin(h q), cos(h q)] per order h, and their names."""
+    """(n_obs, 2H + 1) [sin(h q), cos(h q)] per order h, then the constant 1, and their names."""
     cols, names = [], []
     for h in harmonics:
         cols += [np.sin(h * q), np.cos(h * q)]
         names += [f"sin {h}q", f"cos {h}q"]
-    return np.stack(cols, axis=1), names
+    return np.stack(cols + [np.ones_like(q)], axis=1), names + ["1"]
 
 
 def _per_component(f: np.ndarray, m: int) -> np.ndarray:
@@ -162,7 +162,8 @@ def lack_of_fit(problem: IdentificationProblem, result: IdentificationResult, jo
     significant (bool), groups [{name, kind, term, dof, statistic, p_value, significant, ...}] (joint groups:
     joint (1-based), harmonics [{order, amplitude_deg, amplitude_std_deg, phase_deg, statistic,
     p_value, detectable_amplitude_deg [best, worst phase]}] from the fit of that order's sin/cos pair alone
-    (the detectable amplitude: flagged with probability DETECT_POWER by the group test), best_order; other groups: effect_rms_sigma
+    (order 0: the constant, when no parameter absorbs it; the detectable amplitude: flagged with probability
+    DETECT_POWER by the group test), best_order; other groups: effect_rms_sigma
     (RMS per pose of the fitted effect, noise std units) and coefficients (SI per unit regressor, per
     component)), overall {dof, statistic, p_value, significant}, message (empty when nothing is flagged).
     """
@@ -216,12 +217,11 @@ def lack_of_fit(problem: IdentificationProblem, result: IdentificationResult, jo
                "p_value": g["p_value"],
                "significant": bool(g["p_value"] is not None and g["p_value"] < p_thr)}
         if g["statistic"] is not None:
-            if kind == "joint":
+            if kind == "joint" and joint_response is not None:
                 lam = detectable_noncentrality(g["dof"], dof_res, p_thr, DETECT_POWER, test)
                 row.update(joint=extra["joint"], **_joint_amplitudes(Q, e, dof_res, Xw, harmonics, test, lam))
             else:
-                fit = Xw @ g["beta"]
-                row["effect_rms_sigma"] = float(np.sqrt(np.sum(fit**2) / n_obs))
+                row["effect_rms_sigma"] = float(np.sqrt(g["chi2"] / n_obs))  # the part no parameter absorbs
                 row["coefficients"] = g["beta"].reshape(-1, m).tolist()
         out["groups"].append(row)
     if len(groups) > 1:
@@ -275,6 +275,15 @@ def _joint_amplitudes(Q, e, dof_res, Xw, harmonics, test, lam_star) -> dict:
         rows.append({"order": int(h), "amplitude_deg": float(np.degrees(amp)), "amplitude_std_deg": float(np.degrees(sd)),
                      "phase_deg": float(np.degrees(np.arctan2(b, a))), "statistic": g["statistic"],
                      "p_value": g["p_value"], "detectable_amplitude_deg": mda})
+    X1 = Xw[:, 2 * len(harmonics):]  # the constant: a joint offset, unless a parameter absorbs it (then no row)
+    g = _group_test(Q, e, dof_res, X1, test)
+    if g["statistic"] is not None:
+        v = float(np.sum((X1 - Q @ (Q.T @ X1)) ** 2))
+        mda = float(np.degrees(np.sqrt(lam_star / v))) if v > 0 else None
+        rows.append({"order": 0, "amplitude_deg": float(np.degrees(abs(g["beta"][0]))),
+                     "amplitude_std_deg": float(np.degrees(np.sqrt(max(g["cov"][0, 0], 0.0)))),
+                     "phase_deg": 90.0 if g["beta"][0] >= 0 else -90.0, "statistic": g["statistic"],
+                     "p_value": g["p_value"], "detectable_amplitude_deg": [mda, mda]})
     best = min(rows, key=lambda r: r["p_value"])["order"] if rows else None
     return {"harmonics": rows, "best_order": best}
 
@@ -293,8 +302,12 @@ def lack_of_fit_message(lof: dict) -> str:
     for g in sig:
         if g["kind"] == "joint":
             h = next((r for r in g.get("harmonics", []) if r["order"] == g.get("best_order")), None)
-            what = (f"sin/cos {h['order']} {g['term']}, amplitude {h['amplitude_deg']:.2g} deg, p {g['p_value']:.2g}"
-                    if h else f"p {g['p_value']:.2g}")
+            if h and h["order"] == 0:
+                what = f"a constant {g['term']} offset, {h['amplitude_deg']:.2g} deg, p {g['p_value']:.2g}"
+            elif h:
+                what = f"sin/cos {h['order']} {g['term']}, amplitude {h['amplitude_deg']:.2g} deg, p {g['p_value']:.2g}"
+            else:
+                what = f"p {g['p_value']:.2g}"
             parts.append(f"{g['name']} ({what})")
         else:
             parts.append(f"the target's {g['name']} ({g['term']}, effect {g.get('effect_rms_sigma', float('nan')):.2g} "

@@ -230,6 +230,11 @@ def summary_text(report: dict) -> str:
     lines.append(f"identification ({ident['method']}): converged={ident['converged']} iterations={ident['iterations']} "
                  f"cost {ident['cost_initial']:.4g} -> {ident['cost_final']:.4g}")
     lines += [f"warning: {w}" for w in ident.get("warnings", [])]
+    if report.get("lack_of_fit"):
+        lines.append(lack_of_fit_line(report["lack_of_fit"]))
+    if report.get("intrinsics_sensitivity", {}).get("largest"):
+        lines.append("intrinsics sensitivity (largest shift per px, in std): " + ", ".join(
+            f"{k} -> {v['parameter']} {v['std_per_px']:+.3g}" for k, v in report["intrinsics_sensitivity"]["largest"].items()))
     if "residuals" in report:
         lines.append("residual RMS: " + "; ".join(f"{k} " + ", ".join(f"{x:.4g}" for x in vals)
                                                   for k, vals in report["residuals"].items()))
@@ -256,6 +261,28 @@ def summary_text(report: dict) -> str:
     if "timings_s" in report and "total" in report["timings_s"]:
         lines.append(f"time: {report['timings_s']['total']:.1f} s")
     return "\n".join(lines)
+
+
+def lack_of_fit_line(lof: dict) -> str:
+    """One summary line of an ``identify.lack_of_fit`` dict: what is flagged (or the smallest p-value) and the
+    joint errors (2nd harmonic, best-worst phase) the tests would detect."""
+    if lof.get("error"):
+        return f"lack of fit: {lof['error']}"
+    groups = [g for g in lof.get("groups", []) if g.get("p_value") is not None]
+    if lof.get("significant"):
+        head = f"lack of fit ({lof['test']} tests, level {lof['level']:g}): {lof['message']}"
+    elif groups:
+        g = min(groups, key=lambda g: g["p_value"])
+        head = (f"lack of fit ({lof['test']} tests, level {lof['level']:g}): no dependence on the joints or the image "
+                f"position (smallest p {g['p_value']:.2g}, {g['name']})")
+    else:
+        return "lack of fit: no test possible"
+    det = []
+    for g in groups:
+        h = next((h for h in g.get("harmonics", []) if h["order"] == 2 and None not in h["detectable_amplitude_deg"]), None)
+        if h:
+            det.append(f"{g['term']} {h['detectable_amplitude_deg'][0]:.2g}-{h['detectable_amplitude_deg'][1]:.2g}")
+    return head + (f"; detectable joint error A sin(2q + phase), deg (best-worst phase): {', '.join(det)}" if det else "")
 
 
 def _intrinsics_line(block: dict) -> str:
