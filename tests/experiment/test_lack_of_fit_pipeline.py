@@ -66,7 +66,7 @@ def test_focal_sensitivity_predicts_a_rerun(scene_file, px):
     again = projected_remeasure(load_target(scene.target_path), cam, dict(zip(meas.labels, meas.T_cam_target)))
     sens = intrinsics_sensitivity(ident, meas, cam, again, given_std=False)
     assert set(sens["std_per_px"]) == {"f", "fx", "fy", "cx", "cy"}
-    assert sens["warning"].startswith("intrinsics given without uncertainty: a 1 px focal error")
+    assert sens["warning"].startswith("intrinsics given without uncertainty: a 1 px focal error (")
     moved = identify_measurements(scene.setup, dataclasses.replace(meas, T_cam_target=again(
         shifted_camera(cam, "f", px), list(meas.labels))), "lse", scene.identification.residual)
     r1, r2 = ident.result, moved.result

@@ -188,8 +188,8 @@ def projected_remeasure(target, camera, T_cam_target: dict):
 
 
 def intrinsics_sensitivity(ident, meas, camera, remeasure_with, given_std: bool | None, px: float = 1.0) -> dict:
-    """How far 1 px of each of f (fx and fy together), fx, fy, cx, cy moves every identified parameter, in units of its reported std
-    (first order: the kept poses re-measured with the shifted camera by ``remeasure_with(camera', labels) ->
+    """How far 1 px of each of f (fx and fy together), fx, fy, cx, cy moves every identified parameter, in units
+    of its reported std (first order: the kept poses re-measured with the shifted camera by ``remeasure_with(camera', labels) ->
     T (N, 4, 4)`` or None, their residual change at the solution propagated by
     ``identify.lack_of_fit.parameter_shift``; the setup and free set of the fit stay). ident:
     ``steps.Identified``; meas: the Measurements it was fitted on (labels pick the kept poses); camera: the
@@ -237,7 +237,7 @@ def intrinsics_sensitivity(ident, meas, camera, remeasure_with, given_std: bool 
         big, nm, par = max(focal)
         if big * px > SENSITIVITY_WARN_STD:
             what = "fx and fy" if nm == "f" else nm
-            out["warning"] = (f"intrinsics given without uncertainty: a {px:g} px focal error ({what}) would move {par} "
-                              f"by {big * px:.3g} std (the fit absorbs it: the residuals cannot show it); give the "
-                              "intrinsics' std or calibrate them from the recording (process --refine-intrinsics)")
+            out["warning"] = (f"intrinsics given without uncertainty: a {px:g} px focal error ({what}) would "
+                              f"move {par} by {big * px:.3g} std, which the reported std ignore; give the intrinsics' "
+                              "std or calibrate them from the recording (process --refine-intrinsics)")
     return out

@@ -21,8 +21,8 @@ Candidate groups (each a test), all optional:
 
 - ``joint j``: a joint error delta_j(q) = c + sum_h a_h sin(h q_j) + b_h cos(h q_j), h in ``harmonics``
   (default 1, 2: eccentricity and the 2nd-order terms of gears, encoders and bearings; c: an offset, absorbed
-  when the model has one); columns ``joint_response[:, :, j] * f(q_j)``, joint_response (n_obs, m, n_joints) = d r / d(true joint error)
-  (the residual change per rad of a joint's true value moving away from the reported one). Without
+  when the model has one); columns ``joint_response[:, :, j] * f(q_j)``, joint_response (n_obs, m, n_joints)
+  = d r / d(true joint error) (the residual change per rad of a joint's true value moving away from the reported one). Without
   joint_response each term acts on each residual component freely ((2 H + 1) m columns; no amplitudes).
 - ``image position``: the target's normalised image coordinates (x/z, y/z of a target point, centred),
   acting on each residual component (2 m columns): measurement errors that depend on where the target is
@@ -189,7 +189,8 @@ def lack_of_fit(problem: IdentificationProblem, result: IdentificationResult, jo
         if joint_response is not None:
             G = np.asarray(joint_response, float)
             if G.shape != (n_obs, m, q.shape[1]):
-                raise DataError(f"lack_of_fit: joint_response of shape {G.shape}, expected ({n_obs}, {m}, {q.shape[1]})")
+                raise DataError(f"lack_of_fit: joint_response of shape {G.shape}, "
+                                f"expected ({n_obs}, {m}, {q.shape[1]})")
         for j in range(q.shape[1]):
             f, names = _harmonics(q[:, j], harmonics)
             X = G[:, :, j, None] * f[:, None, :] if joint_response is not None else _per_component(f, m)
@@ -272,7 +273,8 @@ def _joint_amplitudes(Q, e, dof_res, Xw, harmonics, test, lam_star) -> dict:
         Xp = X2 - Q @ (Q.T @ X2)
         ev = np.clip(np.linalg.eigvalsh(Xp.T @ Xp), 0.0, None)  # |projected effect|^2 per rad^2, min/max over phase
         mda = [float(np.degrees(np.sqrt(lam_star / v))) if v > 0 else None for v in (ev[1], ev[0])]
-        rows.append({"order": int(h), "amplitude_deg": float(np.degrees(amp)), "amplitude_std_deg": float(np.degrees(sd)),
+        rows.append({"order": int(h), "amplitude_deg": float(np.degrees(amp)),
+                     "amplitude_std_deg": float(np.degrees(sd)),
                      "phase_deg": float(np.degrees(np.arctan2(b, a))), "statistic": g["statistic"],
                      "p_value": g["p_value"], "detectable_amplitude_deg": mda})
     X1 = Xw[:, 2 * len(harmonics):]  # the constant: a joint offset, unless a parameter absorbs it (then no row)

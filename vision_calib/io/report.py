@@ -112,7 +112,8 @@ def verdict(result, measurements: dict | None = None, identified=None, warnings=
     message = getattr(result, "message", "") if not usable else "; ".join(why)
     out = {"ok": status == "ok", "status": status, "usable": usable, "converged": bool(result.converged),
            "finite": finite, "n_rejected_poses": (measurements or {}).get("n_rejected", 0) + n_out,
-           "n_outliers": n_out, "adequacy": adq, "lack_of_fit": None if lack_of_fit is None else lof, "message": message,
+           "n_outliers": n_out, "adequacy": adq, "lack_of_fit": None if lack_of_fit is None else lof,
+           "message": message,
            "warnings": len(warnings) + len(result.warnings)}
     if adq == "too small":
         out["note"] = (f"chi2/dof {adequacy['chi2_dof']:.3g} below its expected interval: the measurement noise is "
@@ -232,9 +233,10 @@ def summary_text(report: dict) -> str:
     lines += [f"warning: {w}" for w in ident.get("warnings", [])]
     if report.get("lack_of_fit"):
         lines.append(lack_of_fit_line(report["lack_of_fit"]))
-    if report.get("intrinsics_sensitivity", {}).get("largest"):
+    largest = (report.get("intrinsics_sensitivity") or {}).get("largest")
+    if largest:
         lines.append("intrinsics sensitivity (largest shift per px, in std): " + ", ".join(
-            f"{k} -> {v['parameter']} {v['std_per_px']:+.3g}" for k, v in report["intrinsics_sensitivity"]["largest"].items()))
+            f"{k} -> {v['parameter']} {v['std_per_px']:+.3g}" for k, v in largest.items()))
     if "residuals" in report:
         lines.append("residual RMS: " + "; ".join(f"{k} " + ", ".join(f"{x:.4g}" for x in vals)
                                                   for k, vals in report["residuals"].items()))
