@@ -1,7 +1,8 @@
 """Power and false-alarm rate of the lack-of-fit tests (identify/lack_of_fit.py, issue 16 item 5).
 
-    .venv/bin/python benchmarks/bench_lack_of_fit.py [--seeds 10] [--clean-seeds 100] [--amplitudes 0 0.005 0.01 0.02]
-                                                     [--image-seeds 0]
+    .venv/bin/python benchmarks/bench_lack_of_fit.py [--seeds 10] [--clean-seeds 100] [--amplitudes 0 0.005 ... 0.3]
+                                                     [--image-seeds 0] [--image-amplitudes 0 0.005 0.01 0.02]
+                                                     [--image-clean-seeds 0]
 
 Synthetic mode (run_synthetic, the scene's pose noise): the RX-90 (scenes/rx90_eye_in_hand.yaml) with an
 error the model lacks, A sin(2 q2 + phi) [deg] added to the TRUE joint 2 that moves the robot (the
@@ -207,7 +208,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--clean-seeds", type=int, default=100)
-    ap.add_argument("--amplitudes", type=float, nargs="+", default=[0.0, 0.005, 0.01, 0.02])
+    ap.add_argument("--amplitudes", type=float, nargs="+", default=[0.0, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.3])
     ap.add_argument("--image-seeds", type=int, default=0)
     ap.add_argument("--image-amplitudes", type=float, nargs="+", default=[0.0, 0.005, 0.01, 0.02])
     ap.add_argument("--image-clean-seeds", type=int, default=0, help="image-mode runs of the three scenes as shipped")

@@ -52,8 +52,10 @@ DEFAULT_HARMONICS = (1, 2)
 #: detection probability of the detectable amplitudes reported per joint harmonic
 DETECT_POWER = 0.8
 #: a projected regressor direction counts when its singular value exceeds this fraction of the columns' own
-#: (unit) norm: what the parameters absorb to within 1e-6 is not a test direction
-RANK_TOL = 1e-6
+#: (unit) norm. A direction the parameters absorb to within 1 % in amplitude keeps < 1e-4 of a regressor's energy
+#: (no power) but, normalised, magnifies second-order structure of the residuals: on clean synthetic H4 runs
+#: (model 12, 81 poses) the overall test had p < 0.05 in 35 % of 100 runs with 1e-6, 7 % with 1e-2 (KS p 0.66)
+RANK_TOL = 1e-2
 
 
 def _stats():
@@ -127,7 +129,7 @@ def _group_test(Q, e, dof_res, Xw, test):
     idx = np.flatnonzero(keep)
     beta[idx] = c / nrm[keep]
     cov[np.ix_(idx, idx)] = C / np.outer(nrm[keep], nrm[keep])
-    return {"dof": r, "statistic": stat, "p_value": p, "chi2": T, "beta": beta, "cov": cov}
+    return {"dof": r, "statistic": stat, "p_value": p, "chi2": T, "beta": beta, "cov": cov, "basis": U[:, ok]}
 
 
 def _harmonics(q, harmonics) -> tuple[np.ndarray, list[str]]:
@@ -220,7 +222,8 @@ def lack_of_fit(problem: IdentificationProblem, result: IdentificationResult, jo
         if g["statistic"] is not None:
             if kind == "joint" and joint_response is not None:
                 lam = detectable_noncentrality(g["dof"], dof_res, p_thr, DETECT_POWER, test)
-                row.update(joint=extra["joint"], **_joint_amplitudes(Q, e, dof_res, Xw, harmonics, test, lam))
+                row.update(joint=extra["joint"], **_joint_amplitudes(Q, e, dof_res, Xw, harmonics, test, lam,
+                                                                     g["basis"]))
             else:
                 row["effect_rms_sigma"] = float(np.sqrt(g["chi2"] / n_obs))  # the part no parameter absorbs
                 row["coefficients"] = g["beta"].reshape(-1, m).tolist()
@@ -254,12 +257,13 @@ def detectable_noncentrality(dof: int, dof_res: int, p_threshold: float, power: 
     return float(brentq(pw, 0.0 if pw(0.0) > 0 else 1e-12, hi, xtol=1e-6))
 
 
-def _joint_amplitudes(Q, e, dof_res, Xw, harmonics, test, lam_star) -> dict:
+def _joint_amplitudes(Q, e, dof_res, Xw, harmonics, test, lam_star, B) -> dict:
     """Per harmonic order h: the sin/cos pair fitted alone (columns 2i, 2i+1 of Xw): amplitude sqrt(a^2 + b^2)
     [deg] of delta = a sin(h q) + b cos(h q), its std (first order), phase [deg] (delta = amp sin(h q +
     phase)), statistic and p-value, and detectable_amplitude_deg [best phase, worst phase]: the amplitude
     of a joint error A sin(h q + phase) that the group's test flags with probability DETECT_POWER (noncentrality
-    ``lam_star`` = A^2 |(I - P_A) W x_phase|^2, extreme over the phase); best_order = smallest p-value."""
+    ``lam_star`` = A^2 |B^T W x_phase|^2, B (N, r) the group test's basis, extreme over the phase); best_order =
+    the order with the smallest p-value."""
     rows = []
     for i, h in enumerate(harmonics):
         X2 = Xw[:, 2 * i: 2 * i + 2]
@@ -270,8 +274,8 @@ def _joint_amplitudes(Q, e, dof_res, Xw, harmonics, test, lam_star) -> dict:
         amp = float(np.hypot(a, b))
         grad = np.array([a, b]) / amp if amp > 0 else np.zeros(2)
         sd = float(np.sqrt(max(grad @ g["cov"] @ grad, 0.0)))
-        Xp = X2 - Q @ (Q.T @ X2)
-        ev = np.clip(np.linalg.eigvalsh(Xp.T @ Xp), 0.0, None)  # |projected effect|^2 per rad^2, min/max over phase
+        M = B.T @ X2  # what the group's test sees of each column, per rad
+        ev = np.clip(np.linalg.eigvalsh(M.T @ M), 0.0, None)  # noncentrality per rad^2, min/max over the phase
         mda = [float(np.degrees(np.sqrt(lam_star / v))) if v > 0 else None for v in (ev[1], ev[0])]
         rows.append({"order": int(h), "amplitude_deg": float(np.degrees(amp)),
                      "amplitude_std_deg": float(np.degrees(sd)),
@@ -280,7 +284,7 @@ def _joint_amplitudes(Q, e, dof_res, Xw, harmonics, test, lam_star) -> dict:
     X1 = Xw[:, 2 * len(harmonics):]  # the constant: a joint offset, unless a parameter absorbs it (then no row)
     g = _group_test(Q, e, dof_res, X1, test)
     if g["statistic"] is not None:
-        v = float(np.sum((X1 - Q @ (Q.T @ X1)) ** 2))
+        v = float(np.sum((B.T @ X1) ** 2))
         mda = float(np.degrees(np.sqrt(lam_star / v))) if v > 0 else None
         rows.append({"order": 0, "amplitude_deg": float(np.degrees(abs(g["beta"][0]))),
                      "amplitude_std_deg": float(np.degrees(np.sqrt(max(g["cov"][0, 0], 0.0)))),
