@@ -80,6 +80,7 @@ def detectable(lof) -> tuple[float, float, float]:
     best, worst = next(h for h in g2["harmonics"] if h["order"] == 2)["detectable_amplitude_deg"]
     lam = detectable_noncentrality(g2["dof"], lof["dof_residual"], lof["p_threshold"])
     lam1 = detectable_noncentrality(1, lof["dof_residual"], lof["level"])
+    best, worst = (np.nan if v is None else v for v in (best, worst))  # None: the test sees nothing of that phase
     return best, worst, best * np.sqrt(lam1 / lam)
 
 
@@ -115,7 +116,7 @@ def power_table(amplitudes, seeds) -> None:
             sds.append(best["amplitude_std_deg"])
             det.append(detectable(lof))
         n = len(seeds)
-        d = np.median(np.array(det), axis=0)
+        d = np.nanmedian(np.array(det, float), axis=0)
         print(f"{a:7.3f} {flag:>4d}/{n:<3d} {j2:>4d}/{n:<3d} {big:>4d}/{n:<3d} {np.median(zs):10.2f} {np.max(zs):10.2f} "
               f"{np.median(amps):15.4f} {np.median(sds):9.4f} {np.median(ps):9.2g}  {d[0]:.4f}/{d[1]:.4f}, {d[2]:.4f}")
 
@@ -178,7 +179,7 @@ def image_runs(amplitudes, seeds) -> None:
             ps.append(g2["p_value"])
             det.append(detectable(lof))
         n = len(seeds)
-        d = np.median(np.array(det), axis=0)
+        d = np.nanmedian(np.array(det, float), axis=0)
         print(f"{a:7.3f} {flag:>4d}/{n:<3d} {j2:>4d}/{n:<3d} {ok:>6d}/{n:<3d} {big:>4d}/{n:<3d} {np.median(zs):10.2f} "
               f"{np.max(zs):10.2f} {np.median(amps):15.4f} {np.median(sds):9.4f} {np.median(ps):9.2g}  "
               f"{d[0]:.4f}/{d[1]:.4f}, {d[2]:.4f}"
@@ -213,7 +214,8 @@ def main():
     ap.add_argument("--image-amplitudes", type=float, nargs="+", default=[0.0, 0.005, 0.01, 0.02])
     ap.add_argument("--image-clean-seeds", type=int, default=0, help="image-mode runs of the three scenes as shipped")
     a = ap.parse_args()
-    power_table(a.amplitudes, list(range(a.seeds)))
+    if a.seeds:
+        power_table(a.amplitudes, list(range(a.seeds)))
     if a.clean_seeds:
         false_alarms(CLEAN, list(range(a.clean_seeds)))
     if a.image_seeds:

@@ -281,10 +281,12 @@ def lack_of_fit_line(lof: dict) -> str:
         return "lack of fit: no test possible"
     det = []
     for g in groups:
-        h = next((h for h in g.get("harmonics", []) if h["order"] == 2 and None not in h["detectable_amplitude_deg"]), None)
-        if h:
-            det.append(f"{g['term']} {h['detectable_amplitude_deg'][0]:.2g}-{h['detectable_amplitude_deg'][1]:.2g}")
-    return head + (f"; detectable joint error A sin(2q + phase), deg (best-worst phase): {', '.join(det)}" if det else "")
+        h = next((h for h in g.get("harmonics", []) if h["order"] == 2), None)
+        if h and h["detectable_amplitude_deg"][0] is not None:
+            lo, hi = h["detectable_amplitude_deg"]
+            det.append(f"{g['term']} {lo:.2g}-{'any' if hi is None else f'{hi:.2g}'}")
+    return head + (f"; detectable joint error A sin(2q + phase), deg (best-worst phase; any: a phase the parameters "
+                   f"absorb): {', '.join(det)}" if det else "")
 
 
 def _intrinsics_line(block: dict) -> str:
