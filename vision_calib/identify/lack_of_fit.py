@@ -259,7 +259,8 @@ def detectable_noncentrality(dof: int, dof_res: int, p_threshold: float, power: 
 
 def _joint_amplitudes(Q, e, dof_res, Xw, harmonics, test, lam_star, B) -> dict:
     """Per harmonic order h: the sin/cos pair fitted alone (columns 2i, 2i+1 of Xw): amplitude sqrt(a^2 + b^2)
-    [deg] of delta = a sin(h q) + b cos(h q), its std (first order), phase [deg] (delta = amp sin(h q +
+    [deg] of delta = a sin(h q) + b cos(h q) (of the part the test sees: a phase component the parameters absorb
+    to within RANK_TOL counts 0), its std (first order), phase [deg] (delta = amp sin(h q +
     phase)), statistic and p-value, and detectable_amplitude_deg [best phase, worst phase]: the amplitude
     of a joint error A sin(h q + phase) that the group's test flags with probability DETECT_POWER (noncentrality
     ``lam_star`` = A^2 |B^T W x_phase|^2, B (N, r) the group test's basis, extreme over the phase); best_order =
