@@ -159,3 +159,112 @@ def residual_response(dirs, dets: dict, labels, rec, x, r0, problem_for, used: l
             if used is not None:
                 used.append(cam)
     return np.stack(cols, axis=2) if cols else None
+
+
+#: intrinsics whose 1 px change :func:`intrinsics_sensitivity` propagates ("f": fx and fy together, a focal
+#: length error; fx alone also changes the aspect ratio, which the poses' rotations show)
+SENSITIVITY_PX = ("f", "fx", "fy", "cx", "cy")
+#: intrinsics given without uncertainty are warned about when 1 px of focal length moves a parameter by more
+#: than this many of its std (the std then ignore an error the data cannot show: the parameters absorb it)
+SENSITIVITY_WARN_STD = 1.0
+
+
+def shifted_camera(camera, name: str, px: float = 1.0):
+    """``camera`` (CameraIntrinsics) with intrinsic ``name`` (fx, fy, cx or cy; "f": fx and fy) moved by ``px``
+    pixels."""
+    if name == "f":
+        return replace(camera, fx=camera.fx + px, fy=camera.fy + px)
+    return replace(camera, **{name: getattr(camera, name) + px})
+
+
+def projected_remeasure(target, camera, T_cam_target: dict):
+    """A ``remeasure_with(camera', labels) -> (N, 4, 4)`` for data without detections (simulation): the target's
+    corners projected at each measured pose {label: T_cam_target (4, 4)} with ``camera`` (distortion included),
+    then undistorted and solved by PnP with camera'; the change from the same PnP with ``camera`` is applied to
+    the measured pose (noise-free first-order response of the measurement to the intrinsics)."""
+    import cv2
+    import numpy as np
+
+    from ..frames import inv_T, rvec_tvec_from_T
+    from ..measure.pnp import solve_pnp_planar, undistort_px
+
+    _, p = target.corner_points()
+    p = np.asarray(p, float)
+
+    def pnp(uv, cam):
+        return solve_pnp_planar(p[uv[1]], undistort_px(uv[0][uv[1]], cam), cam)[0]
+
+    def project(T):
+        rvec, tvec = rvec_tvec_from_T(T)
+        uv = cv2.projectPoints(p.reshape(-1, 1, 3), rvec, tvec, camera.K, camera.dist_array)[0].reshape(-1, 2)
+        z = p @ T[:3, :3].T[:, 2] + T[2, 3]
+        ok = (z > 0) & (uv[:, 0] >= 0) & (uv[:, 1] >= 0) & (uv[:, 0] < camera.width) & (uv[:, 1] < camera.height)
+        return uv, ok
+
+    def remeasure_with(cam, labels):
+        out = []
+        for lab in labels:
+            T = np.asarray(T_cam_target[lab], float)
+            uv = project(T)
+            if uv[1].sum() < 4:
+                return None
+            out.append(pnp(uv, cam) @ inv_T(pnp(uv, camera)) @ T)
+        return np.array(out)
+
+    return remeasure_with
+
+
+def intrinsics_sensitivity(ident, meas, camera, remeasure_with, given_std: bool | None, px: float = 1.0) -> dict:
+    """How far 1 px of each of f (fx and fy together), fx, fy, cx, cy moves every identified parameter, in units
+    of its reported std (first order: the kept poses re-measured with the shifted camera by ``remeasure_with(camera', labels) ->
+    T (N, 4, 4)`` or None, their residual change at the solution propagated by
+    ``identify.lack_of_fit.parameter_shift``; the setup and free set of the fit stay). ident:
+    ``steps.Identified``; meas: the Measurements it was fitted on (labels pick the kept poses); camera: the
+    intrinsics used; given_std: whether the intrinsics carry an uncertainty (False: a warning names the largest
+    focal-length effect when it exceeds SENSITIVITY_WARN_STD std; None: exact intrinsics, a simulation).
+
+    Returns {px, std_per_px {intrinsic: {parameter: shift / std}}, shift_per_px {intrinsic: {parameter: SI
+    shift}}, largest {intrinsic: {parameter, std_per_px}}, intrinsics_std_given, warning (or None)}."""
+    import numpy as np
+
+    from ..identify.lack_of_fit import parameter_shift
+
+    problem, result, setup = ident.problem, ident.result, ident.setup
+    labels = list(problem.labels)
+    pos = {lab: k for k, lab in enumerate(meas.labels)}
+    sub = meas.subset([pos[lab] for lab in labels])
+    x = np.asarray(result.identified, float)
+    r0 = np.asarray(problem.residual(x), float)
+    names, dR = [], []
+    for nm in SENSITIVITY_PX:
+        T = remeasure_with(shifted_camera(camera, nm, px), labels)
+        if T is None:
+            continue
+        moved = type(sub)(sub.poses, sub.joints, T, sub.cov, sub.labels)
+        dR.append(np.asarray(setup.problem(moved, problem.residual_kind, params=problem.params).residual(x)) - r0)
+        names.append(nm)
+    out = {"px": float(px), "std_per_px": {}, "shift_per_px": {}, "largest": {}, "intrinsics_std_given": given_std,
+           "warning": None, "how": "first order: poses re-measured with the intrinsic moved by px, the residual change "
+                                   "propagated through the fit's whitened Jacobian (setup and free set fixed)"}
+    if not names:
+        out["warning"] = "intrinsics sensitivity not computed: no pose re-measurable with shifted intrinsics"
+        return out
+    shift = parameter_shift(problem, result, np.stack(dR, axis=2)) / px
+    free = np.flatnonzero(result.free)
+    std = np.asarray(result.std, float)
+    for j, nm in enumerate(names):
+        z = {result.names[i]: float(shift[i, j] / std[i]) for i in free if std[i] > 0}
+        out["std_per_px"][nm] = z
+        out["shift_per_px"][nm] = {result.names[i]: float(shift[i, j]) for i in free}
+        if z:
+            k = max(z, key=lambda n: abs(z[n]))
+            out["largest"][nm] = {"parameter": k, "std_per_px": z[k]}
+    focal = [(abs(v["std_per_px"]), nm, v["parameter"]) for nm, v in out["largest"].items() if nm in ("f", "fx", "fy")]
+    if focal and given_std is False:
+        big, nm, par = max(focal)
+        if big * px > SENSITIVITY_WARN_STD:
+            what = "fx and fy" if nm == "f" else nm
+            out["warning"] = (f"intrinsics given without uncertainty: a {px:g} px focal error ({what}) would "
+                              f"move {par} by {big * px:.3g} std, which the reported std ignore; give the intrinsics' "
+                              "std or calibrate them from the recording (process --refine-intrinsics)")
+    return out

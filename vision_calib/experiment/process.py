@@ -77,7 +77,7 @@ def process_folder(folder, out_dir, method=None, progress=False, plots=True, fix
     refine_intrinsics: calibrate the camera from the recording's images even when recording.yaml gives
     intrinsics (always done when it gives none); camera_file: a camera.yaml (``calibrate-camera``) used
     instead of recording.yaml's intrinsics; the report's ``intrinsics`` block says which were used."""
-    from .camera_step import fitted_camera, intrinsics_response, recording_intrinsics
+    from .camera_step import fitted_camera, intrinsics_response, intrinsics_sensitivity, recording_intrinsics, remeasure
 
     t0 = time.perf_counter()
     rec = read_recording(folder, allow_symlinks=allow_symlinks)
@@ -114,6 +114,8 @@ def process_folder(folder, out_dir, method=None, progress=False, plots=True, fix
         cam_fit = fitted_camera(rec.camera, used, ident.nuisance["coefficients"])
         intr = {**intr, "propagated": {**ident.nuisance, "in_fit": True, "how": IN_FIT,
                                        "fitted_values": _camera_values(cam_fit)}}
+    sens = intrinsics_sensitivity(ident, meas, rec.camera, lambda cam, labels: remeasure(
+        dets, labels, rec.target, cam, rec.measure_config()), given_std=intr.get("std") is not None)
     t_id = time.perf_counter() - t1
     ps = setup.params
     report = build_report(
@@ -121,12 +123,13 @@ def process_folder(folder, out_dir, method=None, progress=False, plots=True, fix
                                                                "robot_kind": setup.kind}},
         settings={"poses": len(pms), "frames": rec.frames_per_pose, "method": method, "residual": residual,
                   "camera": rec.camera.to_dict()},
-        measurements=mblock, warnings=[*rec.notes, *intr["warnings"]], identifiability=rep,
+        measurements=mblock, warnings=[*rec.notes, *intr["warnings"], *([sens["warning"]] if sens["warning"] else [])],
+        identifiability=rep,
         parameters=parameters_table(ps.names, ps.nominal, None, result), result=result, identified=ident,
         motion=motion,
         residuals=residual_stats(result.residuals, problem.residual_kind),
-        extra={"intrinsics": intr, "reprojection": _chain_reprojection(setup, meas, problem, result, dets, rec,
-                                                                       cam_fit)},
+        extra={"intrinsics": intr, "intrinsics_sensitivity": sens,
+               "reprojection": _chain_reprojection(setup, meas, problem, result, dets, rec, cam_fit)},
         timings={"measure": t_meas, "identify": t_id, "total": time.perf_counter() - t0})
     write_report(out, report, setup, result, problem, plots=plots)
     return report

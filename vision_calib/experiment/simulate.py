@@ -189,6 +189,17 @@ def _preload(plots: bool):
     return th
 
 
+def _intrinsics_sensitivity(scene, ident, meas) -> dict:
+    """``camera_step.intrinsics_sensitivity`` of a simulated run (exact intrinsics: no warning), the poses
+    re-measured from the target's corners projected at the measured poses (``projected_remeasure``)."""
+    from ..targets import load_target
+    from .camera_step import intrinsics_sensitivity, projected_remeasure
+
+    cam = ident.setup.camera
+    again = projected_remeasure(load_target(scene.target_path), cam, dict(zip(meas.labels, meas.T_cam_target)))
+    return intrinsics_sensitivity(ident, meas, cam, again, given_std=None)
+
+
 def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, method=None, export_recording=None,
                    workers=None, progress=False, overrides=None, plots=True, pool=None,
                    fix_unidentifiable=False) -> dict:
@@ -249,6 +260,7 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
                                       context=rejection_summary(pms), where=str(scene.path),
                                       fix_unidentifiable=fix_unidentifiable, rejected=inconsistent)
         result, problem, setup = ident.result, ident.problem, ident.setup  # setup: after Setup.prepare (H4 axis)
+        sens = _intrinsics_sensitivity(scene, ident, meas_used)
         timings["identify"] = time.perf_counter() - t
         val_meas, val_idx, val_pms, T_val = val_job.result() if val_job is not None else (None, [], None, None)
     finally:
@@ -272,7 +284,7 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
 
     ps = setup.params
     mblock["accuracy_vs_truth"] = meas_acc
-    extra = {"synthetic_reference": ref}
+    extra = {"synthetic_reference": ref, "intrinsics_sensitivity": sens}
     if val_pms is not None:
         vb = measurements_block(val_pms)
         extra["validation_measurements"] = {

@@ -144,6 +144,9 @@ class Identified:
     #: coefficients (d,) and their std (posterior, in prior std units), std_inflation {name: std / std without
     #: it}}; None without
     nuisance: dict = None
+    #: lack-of-fit tests of the final fit (``identify.lack_of_fit`` via :func:`lack_of_fit_of`): do the residuals
+    #: depend on a joint (harmonics) or on the target's image position / depth? None when not computed
+    lack_of_fit: dict = None
 
 
 def identify_measurements(setup: Setup, meas: Measurements, method, residual, analysis=None, context: str = "",
@@ -212,12 +215,47 @@ def identify_measurements(setup: Setup, meas: Measurements, method, residual, an
                   f"{adequacy['chi2_dof']:.3g} (expected {adequacy['expected_chi2_dof'][0]:.2g}-"
                   f"{adequacy['expected_chi2_dof'][1]:.2g}); std scaled by sqrt(chi2/dof); largest residuals at "
                   f"poses {worst}",)
+    lof = lack_of_fit_of(setup, meas, problem, result)
+    if lof.get("significant"):
+        extra += (lof["message"],)
     if rejected:
         extra += (f"{len(rejected)} outlier poses rejected: " + "; ".join(f"{lab}: {why}" for lab, why in rejected[:5]),)
     if extra:
         result = replace(result, warnings=tuple(result.warnings) + extra)
     return Identified(result, problem, params, rep, tuple(rejected), adequacy, max(factor, 1.0), setup, prepared,
-                      nz)
+                      nz, lof)
+
+
+#: step [rad] of the central difference giving each pose's residual response to a joint error
+JOINT_STEP_RAD = 1e-6
+
+
+def lack_of_fit_of(setup: Setup, meas: Measurements, problem, result, level: float | None = None) -> dict:
+    """``identify.lack_of_fit`` of ``result`` (fit of ``problem``, whose labels pick the poses of ``meas``): the
+    joint groups use the measured joints with each pose's residual response to a true joint error (central
+    difference of ``setup.problem`` in the reported joints), the image groups the target origin's normalised
+    image coordinates and depth from the measured T_cam_target. {"significant": False, "error": why} when the
+    tests cannot be computed (a diagnostic: it never stops the pipeline)."""
+    from ..errors import VisionCalibError
+    from ..identify.lack_of_fit import DEFAULT_LEVEL, lack_of_fit
+
+    try:
+        pos = {lab: k for k, lab in enumerate(meas.labels)}
+        sub = meas.subset([pos[lab] for lab in problem.labels]) if problem.labels and meas.labels else meas
+        x = np.asarray(result.identified, float)
+        q = np.asarray(sub.joints, float)
+        G = np.zeros((problem.n_obs, problem.m, q.shape[1]))
+        for j in range(q.shape[1]):
+            dq = np.zeros_like(q)
+            dq[:, j] = JOINT_STEP_RAD
+            rp, rm = (setup.problem(replace(sub, joints=q + s * dq), problem.residual_kind, params=problem.params)
+                      .residual(x) for s in (1.0, -1.0))
+            G[:, :, j] = -(rp - rm) / (2 * JOINT_STEP_RAD)  # residual = measured - model(reported joints)
+        T = np.asarray(sub.T_cam_target, float)
+        return lack_of_fit(problem, result, joints=q, joint_response=G, image_xy=T[:, :2, 3] / T[:, 2:3, 3],
+                           depth=T[:, 2, 3], level=DEFAULT_LEVEL if level is None else level)
+    except (VisionCalibError, KeyError, np.linalg.LinAlgError) as exc:
+        return {"significant": False, "error": f"lack-of-fit tests not computed: {exc}"}
 
 
 #: name prefix of the nuisance coefficients of a shared measurement error (``identify_measurements(nuisance=)``)

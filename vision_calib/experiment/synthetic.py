@@ -14,7 +14,8 @@ import numpy as np
 from ..identify import model_adequacy
 from ..io.report import misfit_message, parameters_table, verdict
 from ..rig import Evaluation, Measurements, Scene, load_scene, scene_poses
-from .steps import analyze_setup, base_problem, check_method, rngs, scene_truth, shared_truth, solve, unmodelled_truth
+from .steps import (analyze_setup, base_problem, check_method, lack_of_fit_of, rngs, scene_truth, shared_truth, solve,
+                    unmodelled_truth)
 
 
 def _scene(scene) -> Scene:
@@ -138,6 +139,9 @@ def identify_synthetic_json(scene, method=None, residual=None, n_poses=None, sig
     warnings = list(res.warnings) + ([out.prepared["warning"]] if out.prepared.get("warning") else [])
     if adequacy["verdict"] == "too large":
         warnings.append("the model does not explain the data at the measurement noise: " + misfit_message(adequacy))
+    lof = lack_of_fit_of(out.setup, out.measurements, out.problem, res)
+    if lof.get("significant"):
+        warnings.append(lof["message"])
     return {
         "scene": scene.name,
         "method": out.method,
@@ -146,7 +150,7 @@ def identify_synthetic_json(scene, method=None, residual=None, n_poses=None, sig
         "n_poses": int(len(out.poses)),
         "sigma_mm": float(st * 1e3),
         "sigma_deg": float(np.degrees(sr)),
-        "verdict": verdict(res, warnings=warnings[len(res.warnings):], adequacy=adequacy),
+        "verdict": verdict(res, warnings=warnings[len(res.warnings):], adequacy=adequacy, lack_of_fit=lof),
         "parameters": parameters_table(ps.names, ps.nominal, shared_truth(out.setup, out.truth or scene.setup,
                                                                           out.x_true), res),
         "accuracy": {"before": out.before.to_dict(), "after": out.after.to_dict()},
@@ -156,6 +160,7 @@ def identify_synthetic_json(scene, method=None, residual=None, n_poses=None, sig
         "cost_final": float(res.cost_final),
         "seconds": float(out.seconds),
         "adequacy": adequacy,
+        "lack_of_fit": lof,
         "prepared": out.prepared or None,
         "warnings": warnings,
         "correlation_warnings": list(res.correlation_warnings),

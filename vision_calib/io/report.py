@@ -5,7 +5,10 @@ report.json, version 2 (each value once)::
 
     version: "2.0"
     kind: simulation | process | process_handeye
-    verdict: {ok, status, usable, converged, adequacy, message, n_rejected_poses, warnings: n}  # read first
+    verdict: {ok, status, usable, converged, adequacy, lack_of_fit, message, n_rejected_poses, warnings: n}
+                                                                 # read first
+    lack_of_fit: identify.lack_of_fit dict                       # measured-data fits (simulate, process)
+    intrinsics_sensitivity: {...}                                # process, simulate (experiment/camera_step.py)
     source: {scene: {name, path, robot_kind}} or {folder: ...}
     seed: int                                                    # simulation only
     settings: {...}                                              # poses, frames, method, residual, camera, ...
@@ -88,26 +91,33 @@ def result_is_finite(result) -> bool:
                 and np.isfinite(result.cost_final))
 
 
-def verdict(result, measurements: dict | None = None, identified=None, warnings=(), adequacy: dict | None = None) -> dict:
+def verdict(result, measurements: dict | None = None, identified=None, warnings=(), adequacy: dict | None = None,
+            lack_of_fit: dict | None = None) -> dict:
     """What to read first. status: "failed" (not converged or not finite: no calibrated model is written),
     "warning" (the chi-square model-adequacy test says the model does not explain the data: chi2/dof above
     its expected interval; the calibrated model is written, but it may be worse than the nominal one), else
     "ok"; ok = (status == "ok"); usable = converged with finite values (a calibrated model is written). Also
     the poses rejected (measurement + outliers), the adequacy verdict, a note ("too small": the noise is
     overestimated, not a failure) and the warning count. adequacy: ``identify.model_adequacy`` dict
-    (default: ``identified.adequacy``)."""
+    (default: ``identified.adequacy``). lack_of_fit: ``identify.lack_of_fit`` dict (default:
+    ``identified.lack_of_fit``): a significant term (the residuals depend on a joint or on the image position)
+    also makes the status "warning", its message naming the term."""
     finite = result_is_finite(result)
     n_out = len(identified.rejected) if identified is not None else 0
     if adequacy is None and identified is not None:
         adequacy = identified.adequacy
+    if lack_of_fit is None and identified is not None:
+        lack_of_fit = getattr(identified, "lack_of_fit", None)
     usable = bool(result.converged and finite)
     adq = (adequacy or {}).get("verdict")
-    status = "failed" if not usable else ("warning" if adq == "too large" else "ok")
-    message = getattr(result, "message", "") if not usable else (misfit_message(adequacy) if status == "warning"
-                                                                 else "")
+    lof = bool((lack_of_fit or {}).get("significant"))
+    status = "failed" if not usable else ("warning" if adq == "too large" or lof else "ok")
+    why = ([misfit_message(adequacy)] if adq == "too large" else []) + ([lack_of_fit["message"]] if lof else [])
+    message = getattr(result, "message", "") if not usable else "; ".join(why)
     out = {"ok": status == "ok", "status": status, "usable": usable, "converged": bool(result.converged),
            "finite": finite, "n_rejected_poses": (measurements or {}).get("n_rejected", 0) + n_out,
-           "n_outliers": n_out, "adequacy": adq, "message": message,
+           "n_outliers": n_out, "adequacy": adq, "lack_of_fit": None if lack_of_fit is None else lof,
+           "message": message,
            "warnings": len(warnings) + len(result.warnings)}
     if adq == "too small":
         lo, hi = adequacy.get("expected_chi2_dof") or (float("nan"), float("nan"))
@@ -155,6 +165,8 @@ def build_report(kind: str, *, source: dict, settings: dict, result, measurement
         report["outliers"] = [{"pose_id": lab, "reason": why} for lab, why in identified.rejected]
         report["adequacy"] = identified.adequacy
         report["variance_factor"] = identified.variance_factor
+        if getattr(identified, "lack_of_fit", None) is not None:
+            report["lack_of_fit"] = identified.lack_of_fit
         if identified.prepared:
             report["prepared"] = identified.prepared
     if motion:
@@ -227,6 +239,12 @@ def summary_text(report: dict) -> str:
     lines.append(f"identification ({ident['method']}): converged={ident['converged']} iterations={ident['iterations']} "
                  f"cost {ident['cost_initial']:.4g} -> {ident['cost_final']:.4g}")
     lines += [f"warning: {w}" for w in ident.get("warnings", [])]
+    if report.get("lack_of_fit"):
+        lines.append(lack_of_fit_line(report["lack_of_fit"]))
+    largest = (report.get("intrinsics_sensitivity") or {}).get("largest")
+    if largest:
+        lines.append("intrinsics sensitivity (largest shift per px, in std): " + ", ".join(
+            f"{k} -> {v['parameter']} {v['std_per_px']:+.3g}" for k, v in largest.items()))
     if "residuals" in report:
         lines.append("residual RMS: " + "; ".join(f"{k} " + ", ".join(f"{x:.4g}" for x in vals)
                                                   for k, vals in report["residuals"].items()))
@@ -270,6 +288,30 @@ def _reference_lines(report: dict) -> list[str]:
     if "V2_rad" in a:
         out += f", V2 median {a['V2_rad']:.3g} rad (range {rg['V2_rad'][0]:.3g}-{rg['V2_rad'][1]:.3g})"
     return [out]
+
+
+def lack_of_fit_line(lof: dict) -> str:
+    """One summary line of an ``identify.lack_of_fit`` dict: what is flagged (or the smallest p-value) and the
+    joint errors (2nd harmonic, best-worst phase) the tests would detect."""
+    if lof.get("error"):
+        return f"lack of fit: {lof['error']}"
+    groups = [g for g in lof.get("groups", []) if g.get("p_value") is not None]
+    if lof.get("significant"):
+        head = f"lack of fit ({lof['test']} tests, level {lof['level']:g}): {lof['message']}"
+    elif groups:
+        g = min(groups, key=lambda g: g["p_value"])
+        head = (f"lack of fit ({lof['test']} tests, level {lof['level']:g}): no dependence on the joints or the image "
+                f"position (smallest p {g['p_value']:.2g}, {g['name']})")
+    else:
+        return "lack of fit: no test possible"
+    det = []
+    for g in groups:
+        h = next((h for h in g.get("harmonics", []) if h["order"] == 2), None)
+        if h and h["detectable_amplitude_deg"][0] is not None:
+            lo, hi = h["detectable_amplitude_deg"]
+            det.append(f"{g['term']} {lo:.2g}-{'any' if hi is None else f'{hi:.2g}'}")
+    return head + (f"; detectable joint error A sin(2q + phase), deg (best-worst phase; any: a phase the parameters "
+                   f"absorb): {', '.join(det)}" if det else "")
 
 
 def _intrinsics_line(block: dict) -> str:
