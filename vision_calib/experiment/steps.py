@@ -269,13 +269,15 @@ def method_check(setup: Setup, meas: Measurements, method: str, problem, result,
     return {"methods": [method, other], "residual_kinds": [r_a, r_b], "n_poses": int(problem.n_obs),
             "parameters": [{"name": n, "difference": v, "std": s, "z": z}
                            for n, v, s, z in zip(d["names"], d["difference"], d["std"], d["z"])],
-            **{k: d[k] for k in ("max_abs_z", "worst", "chi2", "dof", "p_value", "level", "verdict")},
+            **{k: d[k] for k in ("max_abs_z", "worst", "chi2", "dof", "untested", "p_value", "level", "verdict")},
             "other": {"converged": bool(fit_b.converged), "chi2_dof": float(fit_b.chi2_dof),
                       "iterations": int(fit_b.iterations)},
             "shared_error": bool(both), "noise_scale": float(noise_scale), "seconds": time.perf_counter() - t0,
             "how": "difference of the two estimates; its covariance from the two linearised estimators applied to "
                    "the same measurement errors (A_a B_a - A_b B_b) cov(e) (.)^T, not std_a^2 + std_b^2, cov(e) "
-                   "scaled by noise_scale (the variance factor of the reported std); chi-square on its rank"}
+                   "scaled by noise_scale (the variance factor of the reported std); chi-square on the directions "
+                   "where the difference's variance is at least identify.method_check.MIN_RELATIVE_VARIANCE of the "
+                   "estimate's (dof; 'untested': the others, where second-order effects dominate)"}
 
 
 #: name prefix of the nuisance coefficients of a shared measurement error (``identify_measurements(nuisance=)``)

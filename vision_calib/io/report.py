@@ -260,8 +260,9 @@ def method_check_line(check: dict) -> str:
     a, b = check["methods"]
     verdict = "agree" if check["verdict"] == "agree" else "DISAGREE"
     return (f"method check ({a} vs {b} on the same {check['n_poses']} poses): {verdict} at level {check['level']:g}: "
-            f"chi2 {check['chi2']:.3g} on {check['dof']} dof (p {check['p_value']:.2g}), max |z| "
-            f"{check['max_abs_z']:.2f} ({check['worst']})")
+            f"chi2 {check['chi2']:.3g} on {check['dof']} dof (p {check['p_value']:.2g}"
+            + (f"; {check['untested']} directions where they differ by < 3 % of a std untested" if check.get("untested")
+               else "") + f"), max |z| {check['max_abs_z']:.2f} ({check['worst']})")
 
 
 def _intrinsics_line(block: dict) -> str:
