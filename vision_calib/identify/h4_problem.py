@@ -84,33 +84,6 @@ def h4_noise_response(robot: H4Robot, q_meas, T_cam_target_meas, x, residual_kin
     return np.concatenate([np.broadcast_to(np.eye(6), (len(T), 6, 6)), -JX @ dXdq], axis=2)
 
 
-def _raw_residual(robot: H4Robot, q, T, x, residual_kind: str) -> np.ndarray:
-    """(N, m) residual of ``residual_kind`` at x for measurements q (N, 4), T (N, 4, 4) (no checks)."""
-    if residual_kind == "joint":
-        return q - robot.igm_from_camera(T, x)
-    return pose_error(robot.camera_measurement(_forward_pose(robot, q, T, x), x), T)
-
-
-def h4_residual_bias(robot: H4Robot, q_meas, T_cam_target_meas, x, residual_kind: str, cov_e) -> np.ndarray:
-    """(N, m) second-order mean of the residual at x, 1/2 tr(d2 r/de2 cov_e[k]) per pose: the errors-in-variables
-    bias of a residual non-linear in the measurement (the IGM of a noisy pose: ~2 % of the std of h4.h on the
-    81-pose grid at 0.2 mm; invisible in an estimate, not in the difference of two estimates). Central
-    differences of one std along the eigen-directions of cov_e (N, 10, 10) ([delta (6), dq (4)]): 2 x 10
-    residual evaluations (directions without noise skipped)."""
-    q, T = np.asarray(q_meas, float), np.asarray(T_cam_target_meas, float)
-    lam, V = np.linalg.eigh(np.asarray(cov_e, float))
-    r0 = _raw_residual(robot, q, T, x, residual_kind)
-    out = np.zeros_like(r0)
-    for j in range(lam.shape[1]):
-        v = V[:, :, j] * np.sqrt(np.clip(lam[:, j], 0.0, None))[:, None]  # (N, 10): one std along direction j
-        if not np.any(v):
-            continue
-        rp = _raw_residual(robot, q + v[:, 6:], perturb_pose(T, v[:, :6]), x, residual_kind)
-        rm = _raw_residual(robot, q - v[:, 6:], perturb_pose(T, -v[:, :6]), x, residual_kind)
-        out += 0.5 * (rp + rm - 2.0 * r0)
-    return out
-
-
 def _inputs(q_meas, T_cam_target_meas, pose_cov):
     """Checked (q (N, 4), T (N, 4, 4), pose_cov (N, 6, 6) or None)."""
     q_meas = _check("q_meas", q_meas, (4,))
