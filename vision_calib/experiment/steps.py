@@ -239,8 +239,9 @@ def method_check(setup: Setup, meas: Measurements, method: str, problem, result,
     (``identify.method_check.method_difference``: the difference's covariance from the two linearised
     estimators on the same measurement errors, not std_a^2 + std_b^2; the measurement errors' covariance
     times ``noise_scale``, the variance factor that scales the reported std). JSON-ready dict: methods,
-    residual kinds, n_poses, per-parameter difference (``method`` - other, SI) / std / z, chi2, dof, p_value,
-    verdict, the other fit's convergence and chi2/dof, seconds."""
+    residual kinds, n_poses, per-parameter difference (``method`` - other, SI) / std / z / naive_std
+    (sqrt(std_a^2 + std_b^2), for comparison only), chi2, dof, p_value, verdict, the other fit's convergence and
+    chi2/dof, seconds."""
     import time
 
     from ..identify.method_check import method_difference
@@ -266,9 +267,11 @@ def method_check(setup: Setup, meas: Measurements, method: str, problem, result,
     both = U is not None and U_b is not None  # the shared error in both fits, else in neither
     d = method_difference(problem, result.identified, B_a, prob_b, fit_b.identified, B_b, cov_e * noise_scale,
                           U if both else None, U_b if both else None)
+    fi = params.free_index
+    naive = np.sqrt(noise_scale) * np.hypot(result.std[fi], fit_b.std[fi])  # what std_a^2 + std_b^2 would say
     return {"methods": [method, other], "residual_kinds": [r_a, r_b], "n_poses": int(problem.n_obs),
-            "parameters": [{"name": n, "difference": v, "std": s, "z": z}
-                           for n, v, s, z in zip(d["names"], d["difference"], d["std"], d["z"])],
+            "parameters": [{"name": n, "difference": v, "std": s, "z": z, "naive_std": float(nv)}
+                           for n, v, s, z, nv in zip(d["names"], d["difference"], d["std"], d["z"], naive)],
             **{k: d[k] for k in ("max_abs_z", "worst", "chi2", "dof", "untested", "p_value", "level", "verdict")},
             "other": {"converged": bool(fit_b.converged), "chi2_dof": float(fit_b.chi2_dof),
                       "iterations": int(fit_b.iterations)},
