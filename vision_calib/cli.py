@@ -122,6 +122,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="out/demo", help="output folder (default out/demo)")
     p.add_argument("--seed", type=_seed, default=None)
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    p.add_argument("--method", choices=["igm", "lse", "ekf"], default=None,
+                   help="H4 identification: igm (joint residuals, default), lse (pose residuals), ekf")
     p.add_argument("--json", action="store_true")
 
     p = sub.add_parser("process", help="measure -> identify -> report on a recorded image folder")

@@ -1,4 +1,5 @@
-"""H4 IGM identification problem: residual/Jacobian consistency, noise model, recovery of truth."""
+"""H4 identification problems (IGM joint residuals, forward-model pose residuals): residual/Jacobian
+consistency, noise model, identifiability, recovery of truth."""
 
 from pathlib import Path
 
@@ -7,8 +8,12 @@ import pytest
 from scipy.optimize import least_squares
 
 from vision_calib.errors import DataError, UnreachablePoseError
-from vision_calib.identify.h4_problem import h4_igm_problem, synthetic_h4_measurements
+from vision_calib.frames import pose_error
+from vision_calib.identify import analyze, solve_lse
+from vision_calib.identify.h4_problem import h4_igm_problem, h4_pose_problem, synthetic_h4_measurements
+from vision_calib.identify.problem import NOISE_ESTIMATED
 from vision_calib.kinematics.h4 import load_h4_robot, random_workspace_poses
+from vision_calib.kinematics.h4_variants import with_tilt_params
 
 SCENE = Path(__file__).resolve().parents[2] / "scenes" / "robots" / "h4.yaml"
 
@@ -150,3 +155,112 @@ def test_bad_input(r12):
     Tfar[3, 2, 3] += 1.0  # target 1 m farther from the camera: nacelle far below reach
     with pytest.raises(UnreachablePoseError, match="pose 3"):
         h4_igm_problem(r12, q, Tfar)
+
+
+# ----------------------------------------------------------------------------- pose-residual problem (lse)
+def _fd(prob, x, idx, h=1e-6):
+    J = np.zeros(prob.jacobian(x, idx=idx).shape)
+    for k in range(len(x)):
+        e = np.zeros(len(x))
+        e[k] = h
+        J[..., k] = (prob.residual(x + e, idx) - prob.residual(x - e, idx)) / (2 * h)
+    return J
+
+
+@pytest.mark.parametrize("kind", ["12", "12+tilts", "31"])
+def test_pose_problem_residual_and_jacobian(r12, kind):
+    """Pose residual = 0 at the truth; analytic Jacobian (implicit FGM + camera-measurement Jacobian) equals
+    central finite differences over every parameter, geometric, external and tilt, away from the truth."""
+    robot = {"12": r12, "12+tilts": with_tilt_params(r12, [0.01, -0.02, 0.015, 0.005], [True] * 4),
+             "31": r12.variant("H")}[kind]
+    rng = np.random.default_rng(5)
+    x_true = truth(robot, rng)
+    X = random_workspace_poses(12, rng)
+    q, T = synthetic_h4_measurements(robot, X, x_true, rng)
+    prob = h4_pose_problem(robot, q, T, sigma_q_rad=1e-4, pose_cov=np.diag([1e-8] * 3 + [1e-7] * 3))
+    assert prob.residual_kind == "pose" and prob.m == 6 and prob.n_obs == 12
+    np.testing.assert_allclose(prob.residual(x_true), 0.0, atol=1e-11)
+    x = robot.params.nominal
+    J, Jfd = prob.jacobian(x, idx=[0, 5, 9]), _fd(prob, x, [0, 5, 9])
+    assert np.abs(prob.residual(x)).max() > 1e-4  # far from the truth: the rotation residual's Jr^-1 matters
+    np.testing.assert_allclose(J, Jfd, atol=1e-7 * np.abs(J).max())
+
+
+def test_camera_measurement_jacobian_matches_finite_differences(r12):
+    robot = with_tilt_params(r12, [0.01, -0.02, 0.015, 0.005])
+    rng = np.random.default_rng(6)
+    x = truth(robot, rng) + 0.01 * rng.standard_normal(len(robot.params)) * robot.params.scale
+    X = random_workspace_poses(6, rng)
+    JX, Jx = robot.camera_measurement_jacobian(X, x)
+    T0 = robot.camera_measurement(X, x)
+    h = 1e-6
+    for k in range(4):
+        dX = np.zeros(4)
+        dX[k] = h
+        fd = (pose_error(T0, robot.camera_measurement(X + dX, x)) - pose_error(T0, robot.camera_measurement(X - dX, x)))
+        np.testing.assert_allclose(JX[..., k], fd / (2 * h), atol=1e-8)
+    for k in range(len(x)):
+        e = np.zeros(len(x))
+        e[k] = h
+        fd = (pose_error(T0, robot.camera_measurement(X, x + e)) - pose_error(T0, robot.camera_measurement(X, x - e)))
+        np.testing.assert_allclose(Jx[..., k], fd / (2 * h), atol=1e-8, err_msg=robot.names[k])
+
+
+@pytest.mark.parametrize("tilts", [False, True])
+def test_pose_and_igm_problems_identify_the_same_base_set(r12, tilts):
+    """Model 12 (variant D): 19 identifiable parameters with either residual, also with (fixed) mount tilts."""
+    robot = with_tilt_params(r12, [0.01, -0.02, 0.015, 0.005]) if tilts else r12
+    rng = np.random.default_rng(7)
+    q, T = synthetic_h4_measurements(robot, robot.pose_grid(), robot.params.nominal, rng)
+    S = np.diag([1e-8] * 3 + [1e-7] * 3)
+    a_igm = analyze(h4_igm_problem(robot, q, T, pose_cov=S), selection="order")
+    a_pose = analyze(h4_pose_problem(robot, q, T, pose_cov=S), selection="order")
+    assert a_igm.rank == a_pose.rank == 19
+    assert a_igm.base_parameters == a_pose.base_parameters
+
+
+def test_pose_problem_obs_cov_matches_monte_carlo_residuals(r12):
+    """obs_cov = Sigma_pose + sigma_q^2 (d delta/dq)(d delta/dq)^T predicts the residuals' covariance at the truth."""
+    rng = np.random.default_rng(8)
+    X = np.repeat(r12.pose_grid()[[0, 80]], 4000, axis=0)
+    sq, st, sr = 2e-4, 2e-4, np.deg2rad(0.03)
+    q, T = synthetic_h4_measurements(r12, X, r12.params.nominal, rng, sq, st, sr)
+    prob = h4_pose_problem(r12, q, T, sigma_q_rad=sq, pose_cov=np.diag([st**2] * 3 + [sr**2] * 3))
+    r = prob.residual(r12.params.nominal)
+    for sl in (slice(0, 4000), slice(4000, 8000)):
+        emp, pred = np.cov(r[sl].T), prob.obs_cov[sl].mean(axis=0)
+        d = np.sqrt(np.diag(pred))
+        np.testing.assert_allclose(np.diag(emp) / np.diag(pred), 1.0, atol=0.1)
+        np.testing.assert_allclose(emp / np.outer(d, d), pred / np.outer(d, d), atol=0.08)
+    # the joint noise through the FGM is not negligible against the pose noise here (+30 % variance)
+    assert np.diag(prob.obs_cov[0])[:3].max() > 1.2 * st**2
+
+
+@pytest.mark.parametrize("kind", ["joint", "pose"])
+def test_both_methods_recover_the_truth_within_their_std(r12, kind):
+    """Noisy synthetic data, 81 poses, 12 draws: each estimate's error against the truth, in units of its
+    predicted std, is standard normal (mean of z^2 ~ 1 over 12 x 19 values)."""
+    build = h4_igm_problem if kind == "joint" else h4_pose_problem
+    rng = np.random.default_rng(9)
+    x_true = truth(r12, rng)
+    sq, st, sr = 1e-4, 2e-4, np.deg2rad(0.03)
+    S = np.diag([st**2] * 3 + [sr**2] * 3)
+    z = []
+    for _ in range(12):
+        q, T = synthetic_h4_measurements(r12, r12.pose_grid(), x_true, rng, sq, st, sr)
+        res = solve_lse(build(r12, q, T, sigma_q_rad=sq, pose_cov=S))
+        assert res.converged and res.residual_kind == kind
+        z.append((res.identified - x_true)[res.free] / res.std[res.free])
+    z = np.array(z)
+    print(f"\n{kind}: mean z^2 {np.mean(z**2):.2f}, max |z| {np.abs(z).max():.2f}")
+    assert 0.75 < np.mean(z**2) < 1.3  # 228 values: std of the mean of z^2 ~ 0.09
+    assert np.abs(z).max() < 4.5
+
+
+def test_pose_problem_bad_input(r12):
+    rng = np.random.default_rng(10)
+    q, T = synthetic_h4_measurements(r12, random_workspace_poses(5, rng), r12.params.nominal, rng)
+    with pytest.raises(DataError, match="pose residual needs pose_cov"):
+        h4_pose_problem(r12, q, T, sigma_q_rad=1e-4)  # an exact camera: two rotation components without noise
+    prob = h4_pose_problem(r12, q, T)  # no noise given: relative weights, the scale from the residuals
+    assert prob.meta.get("noise") == NOISE_ESTIMATED

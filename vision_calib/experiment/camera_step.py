@@ -116,9 +116,10 @@ def fitted_camera(camera, directions, coefficients):
     return CameraIntrinsics(camera.width, camera.height, *t[:4], tuple(float(v) for v in t[4:]))
 
 
-def intrinsics_response(dets: dict, rec, block: dict, residual: str, used: list | None = None):
+def intrinsics_response(dets: dict, rec, block: dict, used: list | None = None):
     """For intrinsics calibrated from the same recording (``block``): a callable (setup, meas, problem, x) ->
-    U (n_obs, m, d), the change of every pose's residual (measured - model, SI) at x (n,) when the camera
+    U (n_obs, m, d), the change of every pose's residual (measured - model, SI; the residual kind of the
+    problem given) at x (n,) when the camera
     moves one std along each eigen-direction of their covariance (``intrinsics_directions``; poses
     re-measured from their detections, ``remeasure``), for ``steps.identify_measurements(nuisance=)``: their
     error is shared by all poses, so it enters the fit as nuisance coefficients (the measurement covariance
@@ -137,7 +138,7 @@ def intrinsics_response(dets: dict, rec, block: dict, residual: str, used: list 
         sub = meas.subset([pos[lab] for lab in labels])
         return residual_response(dirs, dets, labels, rec, x, np.asarray(problem.residual(x), float),
                                  lambda T: setup.problem(type(sub)(sub.poses, sub.joints, T, sub.cov, sub.labels),
-                                                         residual, params=problem.params), used)
+                                                         problem.residual_kind, params=problem.params), used)
 
     return response
 

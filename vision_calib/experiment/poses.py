@@ -50,7 +50,7 @@ def kfold_validation(setup, meas, method: str, residual: str, analysis, folds: i
     for k, test in enumerate(parts):
         train = np.sort(np.concatenate([p for j, p in enumerate(parts) if j != k]))
         result = identify_measurements(setup, meas.subset(train), method, residual, analysis, robust=False,
-                                       context=f"k-fold validation, fold {k + 1} of {folds}").result
+                                       context=f"k-fold validation, fold {k + 1} of {folds}", cross_check=False).result
         held = setup.problem(meas.subset(test), residual, params=params)
         rb, ra = held.residual(params.nominal), held.residual(result.identified)
         rb_all.append(rb)
@@ -90,19 +90,20 @@ def process_poses(path, out_dir, method=None, folds=None, plots=True, fix_uniden
     folds = int(folds or mp.folds)
     if not 2 <= folds <= len(mp.ids):
         raise ConfigError(f"{mp.path}: folds: {folds} folds need 2 <= folds <= {len(mp.ids)} (the number of poses)")
-    ident = identify_measurements(setup, meas, method, mp.residual, where=str(mp.path),
+    residual = setup.residual_for(method, mp.residual)
+    ident = identify_measurements(setup, meas, method, residual, where=str(mp.path),
                                   fix_unidentifiable=fix_unidentifiable)
     result, problem, rep, setup = ident.result, ident.problem, ident.analysis, ident.setup
     t_id = time.perf_counter() - t0
     kept = [k for k, lab in enumerate(meas.labels) if lab not in {r[0] for r in ident.rejected}]
-    kf = kfold_validation(setup, meas.subset(kept), method, mp.residual, rep, folds, mp.seed)
+    kf = kfold_validation(setup, meas.subset(kept), method, residual, rep, folds, mp.seed)
     ps = setup.params
     n = len(mp.ids)
     report = build_report(
         "process_poses",
         source={"file": str(mp.path), "csv": str(mp.csv_path),
                 "scene": {"name": scene.name, "path": str(scene.path), "robot_kind": setup.kind}},
-        settings={"poses": n, "frames": None, "method": method, "residual": mp.residual, "measured": mp.measured,
+        settings={"poses": n, "frames": None, "method": method, "residual": residual, "measured": mp.measured,
                   "residual_of": chain_direction(setup), "units": mp.units, "noise": mp.sigma_source,
                   "folds": folds, "fold_seed": mp.seed},
         measurements={"n_poses": n, "n_valid": n, "n_rejected": 0, "rejected": [], "measured": mp.measured,

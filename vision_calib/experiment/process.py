@@ -94,7 +94,7 @@ def process_folder(folder, out_dir, method=None, progress=False, plots=True, fix
         return _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets)
 
     meas, ok = Measurements.from_pose_measurements(rec.poses, rec.poses, pms)
-    residual = scene.identification.residual
+    residual = setup.residual_for(method, scene.identification.residual)
     if len(ok) < 2:
         raise IdentifiabilityError(f"{rec.folder}: only {len(ok)} usable poses of {len(pms)} "
                                    f"({rejection_summary(pms)}); identification needs more")
@@ -107,7 +107,7 @@ def process_folder(folder, out_dir, method=None, progress=False, plots=True, fix
     used = []  # the intrinsics directions of the fit's nuisance coefficients
     ident = identify_measurements(setup, meas, method, residual, context=rejection_summary(pms), where=where,
                                   fix_unidentifiable=fix_unidentifiable, rejected=inconsistent,
-                                  nuisance=intrinsics_response(dets, rec, intr, residual, used))
+                                  nuisance=intrinsics_response(dets, rec, intr, used=used))
     result, problem, rep, setup = ident.result, ident.problem, ident.analysis, ident.setup
     cam_fit = None
     if ident.nuisance is not None:

@@ -219,7 +219,7 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
     seed = 0 if seed is None else int(seed)
     frames = frames or scene.measurement.frames
     method = check_method(setup, method or scene.identification.method, "method")
-    residual = scene.identification.residual
+    residual = setup.residual_for(method, scene.identification.residual)
     timings = {}
     rp, _, rv = rngs(seed)
 

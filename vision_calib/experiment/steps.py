@@ -16,6 +16,7 @@ import numpy as np
 from ..errors import ConfigError, IdentifiabilityError
 from ..identify import analyze, solve_ekf, solve_lse
 from ..identify.nuisance import split_nuisance, with_nuisance
+from ..io.report import method_check_line
 from ..rig import Measurements, Scene, Setup, scene_poses, true_parameters
 
 STREAM_POSES, STREAM_NOISE, STREAM_VALIDATION, STREAM_TRUTH = 1, 2, 3, 4
@@ -108,12 +109,13 @@ def base_problem(setup: Setup, meas: Measurements, residual: str, base, context:
     return problem, params
 
 
-def solve(problem, method: str, fix_unidentifiable: bool = True):
-    """One identification method on a problem ("lse" and "igm" = least squares on the problem's
-    residuals, "ekf" = extended Kalman filter, passes until converged)."""
+def solve(problem, method: str, fix_unidentifiable: bool = True, x0=None):
+    """One identification method on a problem ("ekf" = extended Kalman filter, passes until converged; any
+    other = least squares on the problem's residuals: which residual a method means is
+    ``Setup.residual_for``); the result carries the method's name."""
     if method == "ekf":
-        return solve_ekf(problem, fix_unidentifiable=fix_unidentifiable)
-    return solve_lse(problem, fix_unidentifiable=fix_unidentifiable)
+        return solve_ekf(problem, x0=x0, fix_unidentifiable=fix_unidentifiable)
+    return replace(solve_lse(problem, x0=x0, fix_unidentifiable=fix_unidentifiable), method=method)
 
 
 def check_method(setup: Setup, method: str, where: str) -> str:
@@ -147,11 +149,13 @@ class Identified:
     #: lack-of-fit tests of the final fit (``identify.lack_of_fit`` via :func:`lack_of_fit_of`): do the residuals
     #: depend on a joint (harmonics) or on the target's image position / depth? None when not computed
     lack_of_fit: dict = None
+    #: the setup's other method on the same kept poses and base set, compared (:func:`method_check`); None without
+    method_check: dict = None
 
 
 def identify_measurements(setup: Setup, meas: Measurements, method, residual, analysis=None, context: str = "",
                           robust: bool = True, where: str = "", fix_unidentifiable: bool = False,
-                          rejected=(), nuisance=None) -> Identified:
+                          rejected=(), nuisance=None, cross_check: bool = True) -> Identified:
     """Identification of the setup's identifiable free parameters from measured data ``meas`` (``rejected``:
     [(label, reason)] of poses the caller removed before; ``analysis``: the
     IdentifiabilityReport of these poses when the caller has it; a pose set that loses parameters generic
@@ -164,7 +168,8 @@ def identify_measurements(setup: Setup, meas: Measurements, method, residual, an
     images), a callable (setup, meas, problem, x) -> U (n_obs, m, d) (or None) giving the response of every
     pose's residual to one std along each of its d independent directions; U is evaluated once at a first
     plain fit and the error enters every step (outlier test, fit, adequacy, variance factor, covariance) as d
-    nuisance coefficients (``identify.nuisance``: the GLS fit with C = obs_cov + U U^T)."""
+    nuisance coefficients (``identify.nuisance``: the GLS fit with C = obs_cov + U U^T). With ``cross_check``
+    and a method the setup's ``cross_methods`` pairs with another, that one runs too (:func:`method_check`)."""
     from ..identify import fit_rejecting_outliers, model_adequacy
 
     from .checks import structural_rank_check
@@ -195,8 +200,9 @@ def identify_measurements(setup: Setup, meas: Measurements, method, residual, an
         if out:
             keep = [k for k, lab in enumerate(problem.labels) if lab not in {r[0] for r in out}]
             problem, fitted = problem.subset(keep), fitted.subset(keep)
+            U = None if U is None else U[keep]
             rejected += out
-        result = fit if method != "ekf" else solve(fitted, method)
+        result = replace(fit, method=method) if method != "ekf" else solve(fitted, method)
     else:
         result = solve(fitted, method)
     adequacy = model_adequacy(result, cov_scale=meas.cov_scale)  # of the augmented fit when there is a nuisance: the GLS chi-square
@@ -206,6 +212,9 @@ def identify_measurements(setup: Setup, meas: Measurements, method, residual, an
         nz = {"n_directions": int(U.shape[2]), "coefficients": nz["values"], "coefficients_std": nz["std"],
               "std_inflation": _std_inflation(problem, result)}
     factor = float(result.chi2_dof) if robust and np.isfinite(result.chi2_dof) else 1.0
+    check = None
+    if cross_check and setup.cross_methods.get(method):
+        check = method_check(setup, meas, method, problem, result, U, nuisance, max(factor, 1.0))
     if factor > 1:
         result = replace(result, std=result.std * np.sqrt(factor), covariance=result.covariance * factor)
     extra = tuple(plausibility_warnings(params, result)) + ((prepared["warning"],) if prepared.get("warning") else ())
@@ -220,10 +229,12 @@ def identify_measurements(setup: Setup, meas: Measurements, method, residual, an
         extra += (lof["message"],)
     if rejected:
         extra += (f"{len(rejected)} outlier poses rejected: " + "; ".join(f"{lab}: {why}" for lab, why in rejected[:5]),)
+    if check is not None and check["verdict"] == "disagree":
+        extra += (method_check_line(check),)
     if extra:
         result = replace(result, warnings=tuple(result.warnings) + extra)
     return Identified(result, problem, params, rep, tuple(rejected), adequacy, max(factor, 1.0), setup, prepared,
-                      nz, lof)
+                      nz, lof, check)
 
 
 #: step [rad] of the central difference giving each pose's residual response to a joint error
@@ -256,6 +267,58 @@ def lack_of_fit_of(setup: Setup, meas: Measurements, problem, result, level: flo
                            depth=T[:, 2, 3], level=DEFAULT_LEVEL if level is None else level)
     except (VisionCalibError, KeyError, np.linalg.LinAlgError) as exc:
         return {"significant": False, "error": f"lack-of-fit tests not computed: {exc}"}
+
+
+def method_check(setup: Setup, meas: Measurements, method: str, problem, result, U=None, nuisance=None,
+                 noise_scale: float = 1.0) -> dict:
+    """The setup's other method (``setup.cross_methods[method]``) on the poses ``problem`` kept, with its
+    parameter set (base set, prepared setup), started from ``result``'s solution (and with the same shared
+    error, when ``nuisance`` gave U (n_obs, m, d) for ``problem``), compared with ``result``
+    (``identify.method_check.method_difference``: the difference's covariance from the two linearised
+    estimators on the same measurement errors, not std_a^2 + std_b^2; the measurement errors' covariance
+    times ``noise_scale``, the variance factor that scales the reported std). JSON-ready dict: methods,
+    residual kinds, n_poses, per-parameter difference (``method`` - other, SI) / std / z / naive_std
+    (sqrt(std_a^2 + std_b^2), for comparison only), chi2, dof, p_value, verdict, the other fit's convergence and
+    chi2/dof, seconds."""
+    import time
+
+    from ..identify.method_check import method_difference
+
+    t0 = time.perf_counter()
+    other = setup.cross_methods[method]
+    pos = {lab: k for k, lab in enumerate(meas.labels)}
+    kept = meas.subset([pos[lab] for lab in problem.labels]) if meas.labels else meas
+    params = problem.params
+    r_a, r_b = problem.residual_kind, setup.residual_for(other)
+    prob_b = setup.problem(kept, r_b, params=params)
+    fitted_b, U_b, x0 = prob_b, None, result.identified
+    if U is not None:
+        U_b = nuisance(setup, kept, prob_b, result.identified)
+        if U_b is not None:
+            fitted_b = with_nuisance(prob_b, U_b, NUISANCE_PREFIX)
+            x0 = np.concatenate([x0, np.zeros(U_b.shape[2])])
+    fit_b = solve(fitted_b, other, x0=x0)
+    if U_b is not None:
+        fit_b, _ = split_nuisance(fit_b, len(params))
+    B_a, cov_e = setup.noise_response(kept, r_a, params, result.identified)
+    B_b, _ = setup.noise_response(kept, r_b, params, fit_b.identified)
+    both = U is not None and U_b is not None  # the shared error in both fits, else in neither
+    d = method_difference(problem, result.identified, B_a, prob_b, fit_b.identified, B_b, cov_e * noise_scale,
+                          U if both else None, U_b if both else None)
+    fi = params.free_index
+    naive = np.sqrt(noise_scale) * np.hypot(result.std[fi], fit_b.std[fi])  # what std_a^2 + std_b^2 would say
+    return {"methods": [method, other], "residual_kinds": [r_a, r_b], "n_poses": int(problem.n_obs),
+            "parameters": [{"name": n, "difference": v, "std": s, "z": z, "naive_std": float(nv)}
+                           for n, v, s, z, nv in zip(d["names"], d["difference"], d["std"], d["z"], naive)],
+            **{k: d[k] for k in ("max_abs_z", "worst", "chi2", "dof", "untested", "p_value", "level", "verdict")},
+            "other": {"converged": bool(fit_b.converged), "chi2_dof": float(fit_b.chi2_dof),
+                      "iterations": int(fit_b.iterations)},
+            "shared_error": bool(both), "noise_scale": float(noise_scale), "seconds": time.perf_counter() - t0,
+            "how": "difference of the two estimates; its covariance from the two linearised estimators applied to "
+                   "the same measurement errors (A_a B_a - A_b B_b) cov(e) (.)^T, not std_a^2 + std_b^2, cov(e) "
+                   "scaled by noise_scale (the variance factor of the reported std); chi-square on the directions "
+                   "where the difference's variance is at least identify.method_check.MIN_RELATIVE_VARIANCE of the "
+                   "estimate's (dof; 'untested': the others, where second-order effects dominate)"}
 
 
 #: name prefix of the nuisance coefficients of a shared measurement error (``identify_measurements(nuisance=)``)

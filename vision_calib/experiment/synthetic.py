@@ -81,7 +81,7 @@ def run_synthetic(scene, method=None, residual=None, n_poses=None, sigma_t_m=Non
     scene = _scene(scene)
     setup = scene.setup
     method = check_method(setup, method or scene.identification.method, f"{scene.path}: method")
-    residual = setup.check_residual(residual or scene.identification.residual)
+    residual = setup.residual_for(method, residual or scene.identification.residual)
     m = scene.measurement
     st = m.sigma_t_m if sigma_t_m is None else sigma_t_m
     sr = m.sigma_r_rad if sigma_r_rad is None else sigma_r_rad

@@ -19,6 +19,8 @@ report.json, version 2 (each value once)::
                      correlation_warnings, warnings}             # no parameter values (they are above)
     accuracy: {before: {...}, after: {...}}                      # validation poses, simulation only
     residuals: {...}                                             # RMS per component (process)
+    method_check: {methods: [ran, other], verdict, chi2, dof, p_value, max_abs_z, parameters: [{name,
+                   difference, std, z}], ...}                    # H4 igm / lse: the other method, same poses
     intrinsics: {source: "recording.yaml" | "calibrated from the recording", values, std, rms_px,
                  coverage, warnings, propagated: {n_directions, in_fit, std_inflation, ...}, ...}
                                                                  # process (experiment/camera_step.py)
@@ -169,6 +171,8 @@ def build_report(kind: str, *, source: dict, settings: dict, result, measurement
             report["lack_of_fit"] = identified.lack_of_fit
         if identified.prepared:
             report["prepared"] = identified.prepared
+        if getattr(identified, "method_check", None):
+            report["method_check"] = identified.method_check
     if motion:
         report["motion_check"] = motion
     if accuracy is not None:
@@ -238,7 +242,10 @@ def summary_text(report: dict) -> str:
                      + (f"; not identifiable: {', '.join(idf['non_identifiable'])}" if idf["non_identifiable"] else ""))
     lines.append(f"identification ({ident['method']}): converged={ident['converged']} iterations={ident['iterations']} "
                  f"cost {ident['cost_initial']:.4g} -> {ident['cost_final']:.4g}")
-    lines += [f"warning: {w}" for w in ident.get("warnings", [])]
+    check = method_check_line(report["method_check"]) if "method_check" in report else None
+    lines += [f"warning: {w}" for w in ident.get("warnings", []) if w != check]  # a disagreement: once, below
+    if check:
+        lines.append(check)
     if report.get("lack_of_fit"):
         lines.append(lack_of_fit_line(report["lack_of_fit"]))
     largest = (report.get("intrinsics_sensitivity") or {}).get("largest")
@@ -312,6 +319,17 @@ def lack_of_fit_line(lof: dict) -> str:
             det.append(f"{g['term']} {lo:.2g}-{'any' if hi is None else f'{hi:.2g}'}")
     return head + (f"; detectable joint error A sin(2q + phase), deg (best-worst phase; any: a phase the parameters "
                    f"absorb): {', '.join(det)}" if det else "")
+
+
+def method_check_line(check: dict) -> str:
+    """'method check (a vs b on the same N poses): agree|DISAGREE at level L: chi2 .. on .. dof (p ..), max |z| ..'
+    of the report's ``method_check`` block (``experiment.steps.method_check``)."""
+    a, b = check["methods"]
+    verdict = "agree" if check["verdict"] == "agree" else "DISAGREE"
+    return (f"method check ({a} vs {b} on the same {check['n_poses']} poses): {verdict} at level {check['level']:g}: "
+            f"chi2 {check['chi2']:.3g} on {check['dof']} dof (p {check['p_value']:.2g}"
+            + (f"; {check['untested']} directions where they differ by < 3 % of a std untested" if check.get("untested")
+               else "") + f"), max |z| {check['max_abs_z']:.2f} ({check['worst']})")
 
 
 def _intrinsics_line(block: dict) -> str:

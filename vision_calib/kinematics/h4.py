@@ -469,6 +469,44 @@ class H4Robot:
         x = self._x(x)
         return inv_T(self.T_base_cam(x)) @ nacelle_T(X) @ inv_T(self.T_target_nacelle(x))
 
+    def camera_measurement_jacobian(self, X, x=None):
+        """Derivatives of :meth:`camera_measurement` as changes delta = [dt (m), drot (rad)] of T_cam_target in
+        the :func:`frames.perturb_pose` convention (camera frame): (d delta / dX (N, 6, 4), d delta / dx
+        (N, 6, n) at fixed X; only the external and tilt columns of the latter are non-zero)."""
+        X, x = self._check_X(X), self._x(x)
+        R_BC, t_BC, R_ME, t_ME = self._ext(x)
+        ix = {nm: i for i, nm in enumerate(self.names)}
+        N, n, ez = len(X), len(x), np.array([0.0, 0.0, 1.0])
+        R_BT = rot_z(X[:, 3]) @ R_ME.T  # T_base_target = T_base_nacelle @ inv(T_target_nacelle)
+        a = R_BT @ t_ME
+        # base-frame changes (dt_B, w_B) of T_base_target (per pose component and target-mount parameter)
+        JT = np.zeros((N, 6, 4 + n))
+        JT[:, :3, :3] = np.eye(3)
+        JT[:, :3, 3], JT[:, 3:, 3] = -np.cross(ez, a), ez
+        u = self._tilts(dict(zip(self.names, x)))[1] if self.tilt_params else np.zeros(3)
+        eta = {"M_T_E.theta": so3_exp(u) @ ez}  # target-frame rotation of T_target_nacelle per parameter
+        if self.tilt_params:
+            Ju = so3_right_jacobian(-u)
+            eta.update({"M_T_E.tilt_x": Ju[:, 0], "M_T_E.tilt_y": Ju[:, 1]})
+        for c, nm in enumerate("xyz"):
+            JT[:, :3, 4 + ix[f"M_T_E.{nm}"]] = -R_BT[:, :, c]
+        for nm, e in eta.items():
+            w = -R_BT @ e
+            JT[:, 3:, 4 + ix[nm]], JT[:, :3, 4 + ix[nm]] = w, -np.cross(w, a)
+        # T_cam_target = inv(T_base_cam) T_base_target: a change of T_base_target maps by R_BC^T; a change
+        # (dt_B, w_B) of T_base_cam gives drot = -R_BC^T w_B, dt = -R_BC^T (dt_B + w_B x (t_BT - t_BC))
+        J = np.concatenate([R_BC.T @ JT[:, :3], R_BC.T @ JT[:, 3:]], 1)
+        lever = X[:, :3] - a - t_BC
+        cam = {f"B_T_C.{c}": (np.eye(3)[k], np.zeros(3)) for k, c in enumerate("xyz")}
+        cam["B_T_C.theta"] = (np.zeros(3), ez)
+        if self.tilt_params:
+            Jw = R_BC @ so3_right_jacobian(self._tilts(dict(zip(self.names, x)))[0])
+            cam.update({"B_T_C.tilt_x": (np.zeros(3), Jw[:, 0]), "B_T_C.tilt_y": (np.zeros(3), Jw[:, 1])})
+        for nm, (dt, w) in cam.items():
+            J[:, :3, 4 + ix[nm]] = -(dt + np.cross(w, lever)) @ R_BC
+            J[:, 3:, 4 + ix[nm]] = -R_BC.T @ w
+        return J[..., :4], J[..., 4:]
+
     @staticmethod
     def _check_T(T):
         T = np.asarray(T, float)

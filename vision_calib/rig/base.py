@@ -139,6 +139,10 @@ class Setup:
     residuals: ClassVar[tuple[str, ...]] = ()
     #: identification methods; the first is the default
     methods: ClassVar[tuple[str, ...]] = ("lse", "ekf")
+    #: {method: the method that checks it}: two methods minimising different residuals of the same data
+    #: (``experiment.steps.identify_measurements`` runs both and compares them, ``identify.method_check``;
+    #: needs :meth:`noise_response`). Empty: methods of one residual, no check.
+    cross_methods: ClassVar[dict] = {}
     #: pose-set kinds of ``poses.kind`` besides ``random`` and ``configurations``
     pose_grids: ClassVar[tuple[str, ...]] = ()
     #: scene ``truth`` keys describing errors the model does not share (see :meth:`truth_model`)
@@ -294,6 +298,17 @@ class Setup:
             cosang = abs(normal @ centre) / np.linalg.norm(centre)
             ok[i] = bool(inside.all() and cosang >= np.cos(np.radians(max_tilt_deg)))
         return ok
+
+    def residual_for(self, method: str, residual: str | None = None) -> str:
+        """The residual kind ``method`` minimises (default: ``residual``, checked by :meth:`check_residual`;
+        kinds whose methods differ by their residual, e.g. H4, override it)."""
+        return self.check_residual(residual)
+
+    def noise_response(self, meas: Measurements, residual: str, params: ParameterSet, x) -> tuple:
+        """(B (N, m, K), cov_e (N, K, K)): first-order response d r / d e at parameters x (n,) of the
+        ``residual`` of :meth:`problem` (``params``) to the raw measurement errors e of each pose, and their
+        covariance; what ``identify.method_check`` needs for :attr:`cross_methods`."""
+        raise NotImplementedError(f"{self.kind} setups give no noise response")
 
     def check_residual(self, residual: str | None) -> str:
         """The residual kind to use (default: the kind's first); DataError if the kind has no such residual."""

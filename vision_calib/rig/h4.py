@@ -1,7 +1,9 @@
 """The H4 parallel robot (``kinematics.h4.H4Robot``), camera on the base, target on the nacelle.
 
 Commanded poses are nacelle poses X (N, 4) = (x, y, z [m], theta [rad]) mapped to joints by the
-TRUE inverse model. Identification uses the paper's inverse-geometric-model method (joint residuals).
+TRUE inverse model. Identification: the paper's inverse-geometric-model method (``igm``: joint residuals;
+``ekf`` on the same residuals) or least squares on the forward model's pose residuals (``lse``); igm and lse
+check each other (:attr:`H4Setup.cross_methods`, ``identify.method_check``).
 Evaluation adds the paper's criteria (§6.1): V1 mean and V2 RMS joint residual on validation
 measurements [rad], V3 straightness of reconstructed straight-line motions [m].
 
@@ -58,8 +60,12 @@ class H4Setup(Setup):
     tilt_prior_std_rad: tuple = ()
 
     kind: ClassVar[str] = "h4"
-    residuals: ClassVar[tuple[str, ...]] = ("joint",)
-    methods: ClassVar[tuple[str, ...]] = ("igm", "ekf", "lse")  # lse = igm (least squares on the IGM residuals)
+    residuals: ClassVar[tuple[str, ...]] = ("joint", "pose")
+    #: igm: least squares on the joint residuals (the paper's inverse-model method); ekf: EKF on the same
+    #: residuals; lse: least squares on the pose residuals of the forward model (identify.h4_problem)
+    methods: ClassVar[tuple[str, ...]] = ("igm", "ekf", "lse")
+    method_residuals: ClassVar[dict] = {"igm": "joint", "ekf": "joint", "lse": "pose"}
+    cross_methods: ClassVar[dict] = {"igm": "lse", "lse": "igm"}
     mounts: ClassVar[tuple[str, ...]] = ("base",)
     pose_grids: ClassVar[tuple[str, ...]] = ("grid81",)
     scene_keys: ClassVar[tuple[str, ...]] = ("model", "variant")
@@ -85,13 +91,29 @@ class H4Setup(Setup):
         return self.robot.camera_measurement(self.robot.fgm(joints, x), x)
 
     def problem(self, meas, residual=None, params=None):
-        from ..identify.h4_problem import h4_igm_problem
+        """The IGM problem (``residual`` "joint", default) or the forward-model pose problem ("pose")."""
+        from ..identify.h4_problem import h4_igm_problem, h4_pose_problem
 
-        self.check_residual(residual)
+        build = h4_pose_problem if self.check_residual(residual) == "pose" else h4_igm_problem
         robot = replace(self.robot, params=params or self.params)
-        prob = h4_igm_problem(robot, meas.joints, meas.T_cam_target, sigma_q_rad=self.sigma_q_rad or None,
-                              pose_cov=meas.cov, labels=meas.labels)
+        prob = build(robot, meas.joints, meas.T_cam_target, sigma_q_rad=self.sigma_q_rad or None,
+                     pose_cov=meas.cov, labels=meas.labels)
         return self.with_tilt_prior(prob)
+
+    def residual_for(self, method: str, residual: str | None = None) -> str:
+        """The method decides the H4 residual (:attr:`method_residuals`); the scene's ``residual`` is not used."""
+        return self.method_residuals.get(method) or self.check_residual(residual)
+
+    def noise_response(self, meas, residual, params, x) -> tuple:
+        """(B (N, m, 10), cov_e (N, 10, 10)): ``identify.h4_problem.h4_noise_response`` at x of the residual
+        kind, raw errors [measured-pose error (6), joint-reading error (4)] of covariance
+        blockdiag(meas.cov, sigma_q_rad^2 I4)."""
+        from ..identify.h4_problem import h4_noise_response, h4_raw_noise_cov
+
+        robot = replace(self.robot, params=params)
+        return (h4_noise_response(robot, meas.joints, meas.T_cam_target, x, self.check_residual(residual)),
+                h4_raw_noise_cov(meas.cov, self.sigma_q_rad))
+
 
     def with_tilt_prior(self, prob):
         """``prob`` with the rotation-axis prior of the tilts (:meth:`prepare`) as prior rows, when set."""

@@ -241,6 +241,11 @@ def load_scene(path) -> Scene:
     ident = top.section("identification", default={}).check_known(("method", "residual", "fix", "free"))
     method = ident.get("method", str, kind.methods[0], choices=kind.methods)
     residual = ident.get("residual", str, kind.residuals[0], choices=kind.residuals)
+    if setup.residual_for(method, residual) != residual:  # a kind whose methods decide the residual (H4)
+        if ident.data.get("residual") is not None:
+            raise ident.error("residual", f"method {method!r} minimises {setup.residual_for(method, residual)!r} "
+                                          f"residuals, not {residual!r} (leave residual out)")
+        residual = setup.residual_for(method, residual)
     pose_kinds = ("random", "configurations") + tuple(kind.pose_grids)
     return Scene(
         path=path, name=name, setup=setup, target_path=target_path,

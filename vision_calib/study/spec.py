@@ -216,6 +216,11 @@ def _check_cells(spec: StudySpec) -> None:
         if res is not None and res not in setup.residuals:
             raise ConfigError(f"{_axis_where(spec, 'residual')}: residual {res!r} does not apply to the "
                               f"{sc.kind} scene {base.path.name} (use {' or '.join(setup.residuals)})")
+        method = s.get("method") or sc.identification.method
+        if res is not None and method in setup.methods and setup.residual_for(method, res) != res:
+            raise ConfigError(f"{_axis_where(spec, 'residual')}: residual {res!r} does not apply to method "
+                              f"{method!r} on the {sc.kind} scene {base.path.name} (it minimises "
+                              f"{setup.residual_for(method, res)!r} residuals: leave residual out)")
         if s.get("method") is not None and s["method"] not in setup.methods:
             raise ConfigError(f"{_axis_where(spec, 'method')}: method {s['method']!r} does not apply to the "
                               f"{sc.kind} scene {base.path.name} (use {' or '.join(setup.methods)})")
@@ -223,7 +228,8 @@ def _check_cells(spec: StudySpec) -> None:
         if n is not None and base.poses.kind in setup.pose_grids and n > len(setup.pose_grid(base.poses.kind)):
             raise ConfigError(f"{_axis_where(spec, 'n_poses')}: {n} poses asked, the scene's grid has "
                               f"{len(setup.pose_grid(base.poses.kind))}")
-        m = {"joint": 4, "pose": 6, "position": 3}[res or sc.identification.residual]
+        m = {"joint": 4, "pose": 6, "position": 3}[setup.residual_for(method, res or sc.identification.residual)
+                                                   if method in setup.methods else res or sc.identification.residual]
         n_free = setup.params.n_free
         if n is not None and n * m < n_free:
             raise ConfigError(f"{_axis_where(spec, 'n_poses')}: {n} poses give {n * m} equations "
