@@ -30,8 +30,12 @@ Candidate groups (each a test), all optional:
 - ``depth``: the target's distance z / mean(z) - 1 on each component (m columns): a scale error (focal
   length, target size) the parameters do not absorb.
 
-The family: the groups plus the overall test (all columns together), each at ``level / n_tests``
-(Bonferroni): on data the model explains, the probability that anything is flagged is at most ``level``.
+The family that decides (``significant``): the named groups, each at ``level / n_groups`` (Bonferroni): on data
+the model explains, the probability that a term is flagged is at most ``level``. The overall test (all columns
+together) is reported beside them (``overall``, its p-value at the same threshold) but does not flag on its own:
+image measurements carry view-dependent detector errors (pixel-phase locking, similar views) that spread thinly
+over all columns; on clean image-mode H4 runs with a new true robot per seed it fired in 2 of 15
+(``benchmarks/bench_honest.py``) where no named term did. A model error the verdict must name is one term.
 
 :func:`parameter_shift` is the companion first-order question: how far do the parameters move when every
 residual changes by dR (e.g. the poses re-measured with other camera intrinsics)?
@@ -207,7 +211,7 @@ def lack_of_fit(problem: IdentificationProblem, result: IdentificationResult, jo
         if z.shape != (n_obs,) or not np.all(z > 0):
             raise DataError(f"lack_of_fit: depth must be (n_obs,) > 0, got shape {z.shape}")
         groups.append(("depth", "depth", "z", _per_component((z / z.mean() - 1.0)[:, None], m), {}))
-    n_tests = len(groups) + (1 if len(groups) > 1 else 0)
+    n_tests = len(groups)
     p_thr = level / max(n_tests, 1)
     out = {"test": test, "level": float(level), "n_tests": int(n_tests), "p_threshold": float(p_thr),
            "dof_residual": int(dof_res), "harmonics": [int(h) for h in harmonics], "groups": [], "overall": None}
@@ -233,7 +237,7 @@ def lack_of_fit(problem: IdentificationProblem, result: IdentificationResult, jo
         out["overall"] = {"dof": g["dof"], "statistic": g["statistic"], "p_value": g["p_value"],
                           "significant": bool(g["p_value"] is not None and g["p_value"] < p_thr)}
     sig = [g for g in out["groups"] if g["significant"]]
-    out["significant"] = bool(sig or (out["overall"] or {}).get("significant"))
+    out["significant"] = bool(sig)  # named terms only (module docstring); the overall test is information
     out["message"] = lack_of_fit_message(out) if out["significant"] else ""
     return out
 
@@ -300,11 +304,7 @@ def lack_of_fit_message(lof: dict) -> str:
     for the most significant group of a :func:`lack_of_fit` dict (or the overall test)."""
     sig = sorted((g for g in lof.get("groups", []) if g.get("significant")), key=lambda g: g["p_value"])
     if not sig:
-        ov = lof.get("overall") or {}
-        if not ov.get("significant"):
-            return ""
-        return (f"residuals depend on the joints / image position jointly (no single term; p {ov['p_value']:.2g}): "
-                "an error the model lacks")
+        return ""
     parts = []
     for g in sig:
         if g["kind"] == "joint":
