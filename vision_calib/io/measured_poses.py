@@ -225,6 +225,35 @@ def to_camera_convention(setup, measured: str, T, cov):
     return F.inv_T(T), G @ cov @ np.swapaxes(G, -1, -2)
 
 
+def misreadings(mp: MeasuredPoses) -> dict:
+    """{what: rig.Measurements} of the file's rows read as the usual mistakes would have written them: the
+    other pose direction (full poses), two position columns swapped, a scalar-first quaternion; for the
+    gross-error test (``experiment.gross``: which reading fits)."""
+    from ..rig import Measurements
+
+    setup, T, cov = mp.scene.setup, np.array(mp.T_meas, float), np.array(mp.cov, float)
+    out = {}
+
+    def add(what, measured, TT, CC):
+        T_ct, cov_ct = to_camera_convention(setup, measured, TT, CC)
+        out[what] = Measurements(mp.q, mp.q, T_ct, cov_ct, mp.ids)
+
+    if not mp.position_only:
+        other = {"T_cam_target": "T_target_cam", "T_target_cam": "T_cam_target"}[mp.measured]
+        add(f"the rows read as {other} (measured: direction reversed)", other, T, cov)
+    for a, b in ((0, 1), (0, 2), (1, 2)):
+        perm = [0, 1, 2] + list(range(3, cov.shape[-1]))
+        perm[a], perm[b] = b, a
+        TT = T.copy()
+        TT[:, [a, b], 3] = T[:, [b, a], 3]
+        add(f"columns {'xyz'[a]} and {'xyz'[b]} swapped", mp.measured, TT, cov[:, perm][:, :, perm])
+    if not mp.position_only:
+        xyz, quat = F.xyz_quat_from_T(T)  # as read: (qx, qy, qz, qw) columns; scalar-first means (w, x, y, z)
+        add("the quaternion written scalar first (qw,qx,qy,qz)", mp.measured,
+            F.T_from_xyz_quat(xyz, quat[:, [1, 2, 3, 0]]), cov)
+    return out
+
+
 def _check_plausible(csv_path, setup, measured, q, T, units: dict) -> None:
     """DataError when the measured positions are many times larger/smaller than what the nominal model
     predicts for the same joints (a length unit error, e.g. mm declared as m)."""
@@ -355,4 +384,4 @@ def write_measured_poses(yaml_path, scene_path, ids, q, T, measured: str, units=
 
 
 __all__ = ["FORMAT", "MEASURED", "MeasuredPoses", "read_measured_poses", "write_measured_poses",
-           "to_camera_convention", "chain_direction"]
+           "to_camera_convention", "chain_direction", "misreadings"]
