@@ -79,20 +79,45 @@ def check_keys(sec: "Section", tree) -> None:
             check_keys(sec.section(str(key)), sub)
 
 
-def load_yaml(path: str | os.PathLike) -> dict:
-    """Read a YAML mapping; ConfigError naming the file on a missing file or a syntax error."""
+def read_text(path: str | os.PathLike, error=ConfigError, what: str = "file") -> str:
+    """The ONE place a text file we read is decoded: UTF-8, a BOM dropped (spreadsheets write one).
+    ``error`` (ConfigError for settings files, DataError for data) naming the file on a missing or
+    unreadable file, and the line, column and byte of the first non-UTF-8 byte (issue 21: no
+    UnicodeDecodeError traceback, whichever reader)."""
     p = Path(path)
     if not p.is_file():
-        raise ConfigError(f"{p}: file not found")
+        raise error(f"{p}: {what} not found")
     try:
-        with open(p, encoding="utf-8") as fh:
-            data = yaml.safe_load(fh)
+        data = p.read_bytes()
+    except OSError as exc:
+        raise error(f"{p}: cannot read {what} ({exc.strerror})") from None
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = data[:exc.start].count(b"\n") + 1
+        col = exc.start - data.rfind(b"\n", 0, exc.start)
+        raise error(f"{p}: line {line}: not UTF-8 text (byte 0x{data[exc.start]:02x} at column {col}); "
+                    "save the file as UTF-8") from None
+
+
+def parse_yaml(path: str | os.PathLike, error=ConfigError, what: str = "file"):
+    """Any YAML value of a file (:func:`read_text`); ``error`` naming the file on a syntax error."""
+    text = read_text(path, error, what)
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise error(f"{path}: invalid YAML in {what} ({' '.join(str(exc).split())})") from None
+
+
+def load_yaml(path: str | os.PathLike) -> dict:
+    """Read a YAML mapping; ConfigError naming the file on a missing, unreadable or non-UTF-8 file or a
+    syntax error."""
+    p = Path(path)
+    text = read_text(p, ConfigError)
+    try:
+        data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
         raise ConfigError(f"{p}: invalid YAML ({' '.join(str(exc).split())})") from None
-    except UnicodeDecodeError:
-        raise ConfigError(f"{p}: not a UTF-8 text file") from None
-    except OSError as exc:
-        raise ConfigError(f"{p}: cannot read ({exc.strerror})") from None
     if not isinstance(data, dict):
         raise ConfigError(f"{p}: expected a mapping at the top level, got {type(data).__name__}")
     return data

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import csv
 import difflib
+import io
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import frames as F
-from ..config import ANGLE_UNITS, LENGTH_UNITS, Section, angle_key, length_key, load_yaml
+from ..config import ANGLE_UNITS, LENGTH_UNITS, Section, angle_key, length_key, load_yaml, read_text
 from ..errors import DataError
 
 FORMAT = "vision_calib.measured_poses/1"
@@ -124,10 +125,9 @@ def _header(csv_path: Path, header: list[str], n_joints: int, position_only: boo
 
 def _rows(csv_path: Path, n_joints: int, position_only: bool):
     """(ids, values {column: (N,) float in file units}, noise group, CSV line of each row) of the CSV."""
-    if not csv_path.is_file():
-        raise DataError(f"{csv_path}: file not found")
-    with open(csv_path, newline="", encoding="utf-8-sig") as fh:  # -sig: spreadsheets write a BOM
-        rows = [(ln, r) for ln, r in enumerate(csv.reader(fh), start=1) if r and any(c.strip() for c in r)]
+    text = read_text(csv_path, DataError)  # the one decoder: a named error on a non-UTF-8 byte, a BOM dropped
+    rows = [(ln, r) for ln, r in enumerate(csv.reader(io.StringIO(text, newline="")), start=1)
+            if r and any(c.strip() for c in r)]
     if len(rows) < 2:
         raise DataError(f"{csv_path}: no pose rows")
     header = [h.strip() for h in rows[0][1]]

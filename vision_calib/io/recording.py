@@ -160,15 +160,11 @@ def check_inside(path: Path, root: Path, allow_symlinks: bool) -> Path:
 
 
 def read_text_utf8(path: Path) -> str:
-    """A text file as str (a UTF-8 BOM is dropped); DataError naming the file and the line of a non-UTF-8 byte."""
-    data = Path(path).read_bytes()
-    try:
-        return data.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        line = data[:exc.start].count(b"\n") + 1
-        col = exc.start - data.rfind(b"\n", 0, exc.start)
-        raise DataError(f"{path}: line {line}: not UTF-8 text (byte 0x{data[exc.start]:02x} at column {col}); "
-                        "save the file as UTF-8") from None
+    """A data text file as str (``config.read_text``: a BOM dropped; DataError naming the file and the line of a
+    non-UTF-8 byte)."""
+    from ..config import read_text
+
+    return read_text(path, DataError)
 
 
 def _csv_columns(cpath: Path, header: list[str], pose_kind: str) -> tuple[int, list[int]]:

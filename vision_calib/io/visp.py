@@ -67,13 +67,10 @@ _POSE_KEYS = ("rows", "cols", "data")
 
 def read_visp_pose_yaml(path) -> np.ndarray:
     """ViSP pose YAML (rows: 6, cols: 1, data: [tx, ty, tz (m), theta-u (rad)]) -> (4, 4) transform."""
-    import yaml
+    from ..config import parse_yaml
 
     path = Path(path)
-    try:
-        d = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except (OSError, yaml.YAMLError, UnicodeDecodeError) as exc:
-        raise DataError(f"{path}: cannot read ViSP pose YAML ({' '.join(str(exc).split())})") from None
+    d = parse_yaml(path, DataError, "ViSP pose YAML")
     if not isinstance(d, dict):
         raise DataError(f"{path}: expected a mapping with rows, cols, data, got {type(d).__name__}")
     from ..config import did_you_mean
@@ -204,7 +201,9 @@ def import_visp_eye_to_hand(src, dst, tag_m: float | None = None, tag_id: int | 
     intr, poses, images = _collect(src, allow_symlinks)
     if tag_m is None:
         info = src / "apriltag-data.txt"
-        text = check_inside(info, src, allow_symlinks).read_text(errors="replace") if info.is_file() else ""
+        from ..config import read_text
+
+        text = read_text(check_inside(info, src, allow_symlinks), DataError) if info.is_file() else ""
         m = re.search(r"size:\s*([0-9.eE+-]+)\s*m", text)
         if not m:
             raise DataError(f"{src}: tag size unknown: give tag_m (no 'size: <x> m' in apriltag-data.txt); "
