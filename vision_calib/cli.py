@@ -189,6 +189,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("target", help="target YAML (see targets/)")
     p.add_argument("--out", required=True, help="PNG or PDF file")
     p.add_argument("--dpi", type=_count, default=300)
+    for p in sub.choices.values():  # the one rule for paths named in files (config.confine): the user's allowance
+        p.add_argument("--allow-path", action="append", default=[], metavar="DIR",
+                       help="let files (scene, measured-pose, recording, study, ROS-I files) name files in DIR too "
+                            "(by default only in their own folder and the shipped scenes/ and targets/)")
     return ap
 
 
@@ -350,11 +354,14 @@ def _locks(args) -> list:
 
 
 def _run_locked(args) -> int:
+    from .config import allow_paths
+
     held = []
     try:
         for lock in _locks(args):
             held.append(lock.acquire())
-        return _dispatch(args)
+        with allow_paths(args.allow_path):
+            return _dispatch(args)
     finally:
         for lock in reversed(held):
             lock.release()

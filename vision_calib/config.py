@@ -27,12 +27,18 @@ from __future__ import annotations
 
 import difflib
 import os
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import yaml
 
 from .errors import ConfigError
+
+#: the shipped data (scenes, robots, targets): a path a file names may lead there from anywhere
+SHIPPED_DIRS = tuple((Path(__file__).resolve().parents[1] / d) for d in ("scenes", "targets"))
+#: folders the user allowed explicitly (``--allow-path DIR`` of every command sets it; os.pathsep-separated)
+ALLOW_ENV = "VISION_CALIB_ALLOW_PATHS"
 
 LENGTH_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
 ANGLE_UNITS = {"rad": 1.0, "deg": 3.141592653589793 / 180.0}
@@ -77,6 +83,53 @@ def check_keys(sec: "Section", tree) -> None:
                 check_keys(Section(item, sec.file, sec._join(f"{key}[{i}]")), sub[0])
         else:
             check_keys(sec.section(str(key)), sub)
+
+
+def allowed_dirs() -> tuple[Path, ...]:
+    """The folders outside a file's own folder that the paths it names may lead into: the shipped data and the
+    folders the user allowed (:data:`ALLOW_ENV`, set by ``--allow-path``), resolved."""
+    extra = tuple(Path(p).resolve() for p in os.environ.get(ALLOW_ENV, "").split(os.pathsep) if p)
+    return tuple(d.resolve() for d in SHIPPED_DIRS) + extra
+
+
+@contextmanager
+def allow_paths(dirs):
+    """Within the block, paths named in files may also lead into ``dirs`` (the user's explicit allowance;
+    through the environment, so that worker processes started inside inherit it)."""
+    old = os.environ.get(ALLOW_ENV)
+    parts = [p for p in (old or "").split(os.pathsep) if p] + [str(Path(d).resolve()) for d in dirs or ()]
+    if parts:
+        os.environ[ALLOW_ENV] = os.pathsep.join(parts)
+    try:
+        yield
+    finally:
+        if old is None:
+            os.environ.pop(ALLOW_ENV, None)
+        else:
+            os.environ[ALLOW_ENV] = old
+
+
+def _inside(p: Path, root: Path) -> bool:
+    return p == root or root in p.parents
+
+
+def confine(path, root, where: str, error=ConfigError, allow: bool = False, hint: str = "--allow-path DIR") -> Path:
+    """The ONE rule for a path that a file names (issue 21): it must lead (symbolic links resolved) inside
+    ``root`` (the folder of the file that names it, or the recorded/imported folder), the shipped data, or a
+    folder the user allowed (:func:`allowed_dirs`); ``allow``: the caller's explicit allowance (e.g.
+    ``--allow-symlinks``). Returns ``path``; else ``error`` naming ``where`` and saying whether a symbolic
+    link or the path itself leads out (nothing outside is opened)."""
+    path = Path(path)
+    if allow:
+        return path
+    real, base = path.resolve(), Path(root).resolve()
+    if _inside(real, base) or any(_inside(real, d) for d in allowed_dirs()):
+        return path
+    lexical, lbase = Path(os.path.normpath(path.absolute())), Path(os.path.normpath(Path(root).absolute()))
+    why = (f"a symbolic link leading out of the folder {base} (to {real})" if _inside(lexical, lbase)
+           else f"{real} is outside the folder {base}")
+    raise error(f"{where}: {why}; refused: files may only name files inside their own folder or the shipped "
+                f"scenes/targets (copy the file into the folder, or allow it explicitly: {hint})")
 
 
 def read_text(path: str | os.PathLike, error=ConfigError, what: str = "file") -> str:
@@ -240,13 +293,15 @@ class Section:
         return Section(self.data[key], self.file, ".".join(k for k in (self.path, key) if k))
 
     def path_value(self, key: str, default: Any = _MISSING) -> Path | None:
-        """A file path relative to this file's folder; ConfigError if it does not exist."""
+        """A file path relative to this file's folder, inside it (or the shipped data, or a folder the user
+        allowed: :func:`confine`); ConfigError if it leads elsewhere or does not exist."""
         val = self.get(key, str, default)
         if val is None or val is default:
             return val
         p = Path(val)
         if not p.is_absolute():
             p = self.file.parent / p
+        confine(p, self.file.parent, f"{self.where(key)}: {val!r}")
         if not p.exists():
             raise self.error(key, f"file not found: {p}")
         return p
