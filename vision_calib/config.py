@@ -132,6 +132,25 @@ def confine(path, root, where: str, error=ConfigError, allow: bool = False, hint
                 f"scenes/targets (copy the file into the folder, or allow it explicitly: {hint})")
 
 
+def check_output_apart(out, inputs, flag: str = "--out") -> None:
+    """ConfigError naming both paths when the output ``out`` (a folder, or a file) is an input, lies inside an
+    input folder, or (folder inputs given as files: ``(path, "file")``) writes into the folder of an input
+    file. ``inputs``: [(path, "folder" | "file")]; the paths are resolved (symbolic links included)."""
+    o = Path(out).resolve()
+    for path, kind in inputs:
+        if path is None:
+            continue
+        i = Path(path).resolve()
+        if kind == "folder" and _inside(o, i):
+            where = "is the input folder" if o == i else "lies inside the input folder"
+            raise ConfigError(f"{flag} {out}: {where} {path}; outputs never go into an input: choose a folder "
+                              "outside it")
+        if kind == "file" and (o == i or o == i.parent):
+            where = "is the input file" if o == i else "is the folder of the input file"
+            raise ConfigError(f"{flag} {out}: {where} {path}; outputs never go into an input folder: choose "
+                              "another folder (e.g. a new subfolder)")
+
+
 def read_text(path: str | os.PathLike, error=ConfigError, what: str = "file") -> str:
     """The ONE place a text file we read is decoded: UTF-8, a BOM dropped (spreadsheets write one).
     ``error`` (ConfigError for settings files, DataError for data) naming the file on a missing or

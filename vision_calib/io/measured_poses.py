@@ -48,6 +48,9 @@ POSE_COLS = ("x", "y", "z", "qx", "qy", "qz", "qw")
 COMPONENTS = ("x", "y", "z", "rx", "ry", "rz")
 #: measured sizes this many times larger/smaller than the nominal model's: a unit error
 PLAUSIBLE_FACTOR = 5.0
+#: plausible std of a measured pose component, SI: 1 nm - 1 m, 1 nrad - 1 rad (outside: a unit or typing
+#: error; 1e-300 would underflow to a zero variance, 1e300 overflow)
+SIGMA_RANGE = {"length": (1e-9, 1.0), "angle": (1e-9, 1.0)}
 
 
 @dataclass(frozen=True)
@@ -158,10 +161,23 @@ def _rows(csv_path: Path, n_joints: int, position_only: bool):
     return ids, {c: arr[:, k] for k, c in enumerate(names)}, group, [ln for ln, _ in rows[1:]]
 
 
-def _covariances(csv_path, ids, lines, v, group, m, Lf, Af, default) -> tuple[np.ndarray, str]:
-    """(N, m, m) SI covariances of the rows from the noise columns (or the YAML default sigmas)."""
+def _sigma_range(csv_path, ids, lines, what: str, sd: np.ndarray, k_comp: int, unit_name: str, f: float) -> None:
+    """DataError naming the file, line, pose id and column of a std (N,) SI outside SIGMA_RANGE (before any
+    squaring: no overflow or underflow warning)."""
+    lo, hi = SIGMA_RANGE["length" if k_comp < 3 else "angle"]
+    bad = np.flatnonzero(~((sd >= lo) & (sd <= hi)))
+    if bad.size:
+        k = bad[0]
+        raise DataError(f"{csv_path}: line {lines[k]} (pose {ids[k]!r}): {what}: std {sd[k] / f:.4g} {unit_name} is "
+                        f"outside the plausible {lo / f:.3g}-{hi / f:.3g} {unit_name} (units in the YAML?)")
+
+
+def _covariances(csv_path, ids, lines, v, group, m, Lf, Af, default, units) -> tuple[np.ndarray, str]:
+    """(N, m, m) SI covariances of the rows from the noise columns (or the YAML default sigmas); every std
+    within SIGMA_RANGE and every covariance positive definite, else DataError naming the row."""
     n = len(ids)
     unit = np.array([Lf] * 3 + [Af] * 3)[:m]
+    uname = [units["length"]] * 3 + [units["angle"]] * 3
     comps = COMPONENTS[:m]
     if group == "none":
         s = np.array([default[0]] * 3 + [default[1]] * 3)[:m]
@@ -169,23 +185,34 @@ def _covariances(csv_path, ids, lines, v, group, m, Lf, Af, default) -> tuple[np
     if group == "cov":
         C = np.zeros((n, m, m))
         for i in range(m):
+            name = f"cov_{comps[i]}_{comps[i]}"
+            d = v[name]
+            bad = np.flatnonzero(~(d > 0))
+            if bad.size:
+                k = bad[0]
+                raise DataError(f"{csv_path}: line {lines[k]} (pose {ids[k]!r}): column {name}: a variance must be "
+                                f"> 0, got {d[k]}")
+            _sigma_range(csv_path, ids, lines, f"column {name}", np.sqrt(d) * unit[i], i, uname[i], unit[i])
+        for i in range(m):
             for j in range(i, m):
                 C[:, i, j] = C[:, j, i] = v[f"cov_{comps[i]}_{comps[j]}"] * unit[i] * unit[j]
-        ev = np.linalg.eigvalsh(C)[:, 0]
-        bad = np.flatnonzero(ev <= 0)
+        sd = np.sqrt(np.einsum("nii->ni", C))
+        ev = np.linalg.eigvalsh(C / sd[:, :, None] / sd[:, None, :])[:, 0]  # of the correlation: unit-free
+        bad = np.flatnonzero(~(ev > 1e-12))
         if bad.size:
             k = bad[0]
             raise DataError(f"{csv_path}: line {lines[k]} (pose {ids[k]!r}): cov_* columns: covariance is not "
                             "positive definite")
         return C, "csv cov_* columns"
     names = [f"sigma_{c}" for c in comps] if group == "sigma" else (["sigma_t"] * 3 + ["sigma_r"] * 3)[:m]
-    S = np.column_stack([v[c] for c in names]) * unit
-    for c in dict.fromkeys(names):
-        bad = np.flatnonzero(v[c] <= 0)
+    for i, c in enumerate(names):
+        bad = np.flatnonzero(~(v[c] > 0))
         if bad.size:
             k = bad[0]
             raise DataError(f"{csv_path}: line {lines[k]} (pose {ids[k]!r}): column {c}: sigma must be > 0, "
                             f"got {v[c][k]}")
+        _sigma_range(csv_path, ids, lines, f"column {c}", v[c] * unit[i], i, uname[i], unit[i])
+    S = np.column_stack([v[c] for c in names]) * unit
     return np.einsum("ni,ij->nij", S**2, np.eye(m)), f"csv {'sigma_*' if group == 'sigma' else 'sigma_t/sigma_r'} columns"
 
 
@@ -291,6 +318,10 @@ def _settings(top: Section):
             raise ds.error(rkeys[0], "position-only measurements (measured: p_*) have no rotation sigma")
         if t <= 0 or (r <= 0 and not measured.startswith("p_")):
             raise ds.error(None, "sigmas must be > 0")
+        for val, kind in ((t, "length"), (r, "angle")):
+            lo, hi = SIGMA_RANGE[kind]
+            if (val or lo) < lo or val > hi:
+                raise ds.error(None, f"a {kind} std of {val:.4g} (SI) is outside the plausible {lo:g}-{hi:g}")
         default = (t, r)
     folds = top.get("folds", int, 5)
     if folds < 2:
@@ -328,7 +359,7 @@ def read_measured_poses(path) -> MeasuredPoses:
     q = np.column_stack([v[f"q{j + 1}"] for j in range(setup.n_joints)]) * Af
     setup.check_joints(q, str(csv_path), ids)
     T = _poses(csv_path, ids, lines, v, pos_only, Lf)
-    cov, src = _covariances(csv_path, ids, lines, v, group, 3 if pos_only else 6, Lf, Af, default)
+    cov, src = _covariances(csv_path, ids, lines, v, group, 3 if pos_only else 6, Lf, Af, default, units)
     _check_plausible(csv_path, setup, measured, q, T, units)
     if len(ids) < folds:
         raise top.error("folds", f"{folds} folds need at least {folds} poses, {csv_path.name} has {len(ids)}")
