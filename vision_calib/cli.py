@@ -271,7 +271,11 @@ def _dispatch(args) -> int:
         if args.chessboard is not None:
             if args.square_m is None:
                 raise ConfigError("--chessboard needs --square-m (the square side in metres)")
-            path = import_visp_chessboard(args.src, args.out, *args.chessboard, args.square_m, mount=args.mount)
+            notes = []
+            path = import_visp_chessboard(args.src, args.out, *args.chessboard, args.square_m, mount=args.mount,
+                                          notes=notes)
+            for n in notes:
+                print(f"vision-calib: warning: {n}", file=sys.stderr)
         else:
             path = import_visp_eye_to_hand(args.src, args.out, tag_m=args.tag_size_m, tag_id=args.tag_id)
         print(f"wrote recorded folder {path}")

@@ -20,6 +20,7 @@ import numpy as np
 from ..errors import ConfigError
 from ..io.measured_poses import chain_direction, misreadings, read_measured_poses
 from ..io.report import build_report, parameters_table, residual_stats, write_report
+from .checks import duplicate_poses
 from .gross import gross_failure
 from .steps import check_method, identify_measurements
 
@@ -112,7 +113,7 @@ def process_poses(path, out_dir, method=None, folds=None, plots=True, fix_uniden
         measurements={"n_poses": n, "n_valid": n, "n_rejected": 0, "rejected": [], "measured": mp.measured,
                       "noise": mp.sigma_source, "pose_ids": list(mp.ids)},
         identifiability=rep, parameters=parameters_table(ps.names, ps.nominal, None, result), result=result,
-        identified=ident,
+        identified=ident, warnings=duplicate_poses(meas),
         residuals=residual_stats(result.residuals, problem.residual_kind), extra={"kfold": kf},
         timings={"identify": t_id, "total": time.perf_counter() - t0}, failure=failure)
     report["summary_text"] += "\n" + ("\n".join(kfold_lines(kf)) if kf else

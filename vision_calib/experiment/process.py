@@ -20,7 +20,7 @@ from ..io.recording import read_recording
 from ..io.report import (REPORT_VERSION, build_report, measurements_block, parameters_table, residual_stats,
                          write_report)
 from ..rig import Measurements, load_scene
-from .checks import screen_measurements
+from .checks import duplicate_poses, screen_measurements
 from .gross import gross_failure
 from .steps import check_method, identify_measurements, rejection_summary
 
@@ -125,7 +125,7 @@ def process_folder(folder, out_dir, method=None, progress=False, plots=True, fix
                                                                "robot_kind": setup.kind}},
         settings={"poses": len(pms), "frames": rec.frames_per_pose, "method": method, "residual": residual,
                   "camera": rec.camera.to_dict()},
-        measurements=mblock, warnings=[*rec.notes, *intr["warnings"]], identifiability=rep,
+        measurements=mblock, warnings=[*rec.notes, *intr["warnings"], *duplicate_poses(meas)], identifiability=rep,
         parameters=parameters_table(ps.names, ps.nominal, None, result), result=result, identified=ident,
         motion=motion,
         residuals=residual_stats(result.residuals, problem.residual_kind),
