@@ -169,13 +169,25 @@ def gross_failure(setup, meas: Measurements, ident, residual: str, where: str, a
         c, r = _refit(setup, alt, residual, params)
         if gross:
             fits = bool(np.isfinite(c) and c < GROSS_CHI2_DOF and c * FIT_GAIN < chi2)
-        else:  # a convention move at a good fit: the alternative must fit as well, without the move
-            fits = bool(r is not None and np.isfinite(c) and c <= 1.5 * chi2 + 1.0 and not convention_moves(params, r))
-        tests.append({"candidate": what, "chi2_dof": c if np.isfinite(c) else None, "fits": fits})
-    hits = [t for t in tests if t["fits"]]
+        else:  # a convention move at a good fit: the alternative must fit as well
+            fits = bool(np.isfinite(c) and c <= 1.5 * chi2 + 1.0)
+        moved = [m["text"] for m in convention_moves(params, r)] if fits else []
+        tests.append({"candidate": what, "chi2_dof": c if np.isfinite(c) else None, "fits": fits and not moved,
+                      "fits_with_moves": moved})
+    # an equivalent model reached by another reading (e.g. two parallel joints negated) fits too, but only the
+    # right reading brings the model back to the nominal one: those are the hits; the others are named after
+    hits = [t for t in tests if t["fits"]] or [t for t in tests if t["fits_with_moves"]]
     shown = hits or [t for t in tests if not t["candidate"].startswith("joint ")] or tests
-    tested = "; ".join(f"{t['candidate']}: chi2/dof {_fmt(np.nan if t['chi2_dof'] is None else t['chi2_dof'])}"
-                       + (" -- this fits" if t["fits"] else "") for t in shown)
+
+    def line(t):
+        c = _fmt(np.nan if t["chi2_dof"] is None else t["chi2_dof"])
+        if t["fits"]:
+            return f"{t['candidate']}: chi2/dof {c} -- this fits"
+        if t["fits_with_moves"]:
+            return f"{t['candidate']}: chi2/dof {c} -- fits, but moves {t['fits_with_moves'][0]}"
+        return f"{t['candidate']}: chi2/dof {c}"
+
+    tested = "; ".join(line(t) for t in shown)
     n_joint = sum(t["candidate"].startswith("joint ") for t in tests)
     if not hits and n_joint and len(shown) < len(tests):
         tested += f"; each of the {n_joint} joints' readings negated: no fit"
