@@ -84,7 +84,7 @@ def test_cli_error_names_the_other_runs_pid(tmp_path, capsys):
     try:
         child.stdout.readline()
         assert main(["target", "targets/charuco_a5.yaml", "--out", str(out / "t.png")]) == 0  # a file: own lock
-        assert main(["process", str(tmp_path), "--out", str(out)]) == 2
+        assert main(["process", str(tmp_path / "rec"), "--out", str(out)]) == 2
         assert f"in use by another vision-calib run (pid {child.pid}" in capsys.readouterr().err
     finally:
         child.kill()
