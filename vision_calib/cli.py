@@ -191,6 +191,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("target", help="target YAML (see targets/)")
     p.add_argument("--out", required=True, help="PNG or PDF file")
     p.add_argument("--dpi", type=_count, default=300)
+    for p in sub.choices.values():  # the one rule for paths named in files (config.confine): the user's allowance
+        p.add_argument("--allow-path", action="append", default=[], metavar="DIR",
+                       help="let files (scene, measured-pose, recording, study, ROS-I files) name files in DIR too "
+                            "(by default only in their own folder and the shipped scenes/ and targets/)")
     return ap
 
 
@@ -269,7 +273,11 @@ def _dispatch(args) -> int:
         if args.chessboard is not None:
             if args.square_m is None:
                 raise ConfigError("--chessboard needs --square-m (the square side in metres)")
-            path = import_visp_chessboard(args.src, args.out, *args.chessboard, args.square_m, mount=args.mount)
+            notes = []
+            path = import_visp_chessboard(args.src, args.out, *args.chessboard, args.square_m, mount=args.mount,
+                                          notes=notes)
+            for n in notes:
+                print(f"vision-calib: warning: {n}", file=sys.stderr)
         else:
             path = import_visp_eye_to_hand(args.src, args.out, tag_m=args.tag_size_m, tag_id=args.tag_id)
         print(f"wrote recorded folder {path}")
@@ -351,21 +359,66 @@ def _locks(args) -> list:
     return locks
 
 
+def _inputs(args) -> list:
+    """[(path, "folder" | "file")] the command reads, for ``config.check_output_apart``."""
+    c = args.command
+    if c in ("process", "calibrate-camera", "import-visp", "export-rosi"):
+        ins = [(getattr(args, "folder", None) or args.src, "folder")]
+        if c == "calibrate-camera":
+            ins.append((args.target, "file"))
+        if c == "process" and args.camera:
+            ins.append((args.camera, "file"))
+        return ins
+    if c == "import-rosi":
+        src = Path(args.src)
+        return [(src if src.is_dir() else src.parent, "folder")]
+    if c == "process-poses":
+        return [(args.file, "file")]
+    if c in ("simulate", "identifiability", "identify-synthetic"):
+        return [(args.scene, "file")]
+    if c == "study":
+        return [(args.spec, "file")]
+    if c == "target":
+        return [(args.target, "file")]
+    return []
+
+
+def _check_outputs(args) -> None:
+    """Outputs never inside inputs (issue 21): --out / DST / --export-recording against every input."""
+    from .config import check_output_apart
+
+    ins = _inputs(args)
+    for flag in ("out", "dst", "export_recording"):
+        out = getattr(args, flag, None)
+        if out is not None and not (args.command == "export-rosi" and flag == "out"):
+            check_output_apart(out, ins, "--" + flag.replace("_", "-") if flag != "dst" else "DST")
+
+
 def _run_locked(args) -> int:
+    from .config import allow_paths
+
+    _check_outputs(args)
     held = []
     try:
         for lock in _locks(args):
             held.append(lock.acquire())
-        return _dispatch(args)
+        with allow_paths(args.allow_path):
+            return _dispatch(args)
     finally:
         for lock in reversed(held):
             lock.release()
 
 
 def main(argv=None) -> int:
+    import warnings
+
     args = build_parser().parse_args(argv)
     try:
-        return _run_locked(args)
+        with warnings.catch_warnings():  # numpy's floating-point warnings never reach the user: every bad value
+            # they come from is refused by a named check (file, line, pose id) or ends in a named failure
+            warnings.filterwarnings("ignore", r"(overflow|invalid value|divide by zero|underflow) encountered",
+                                    RuntimeWarning)
+            return _run_locked(args)
     except VisionCalibError as exc:
         print(f"vision-calib: error: {exc}", file=sys.stderr)
         return exc.exit_code

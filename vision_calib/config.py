@@ -27,12 +27,18 @@ from __future__ import annotations
 
 import difflib
 import os
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import yaml
 
 from .errors import ConfigError
+
+#: the shipped data (scenes, robots, targets): a path a file names may lead there from anywhere
+SHIPPED_DIRS = tuple((Path(__file__).resolve().parents[1] / d) for d in ("scenes", "targets"))
+#: folders the user allowed explicitly (``--allow-path DIR`` of every command sets it; os.pathsep-separated)
+ALLOW_ENV = "VISION_CALIB_ALLOW_PATHS"
 
 LENGTH_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
 ANGLE_UNITS = {"rad": 1.0, "deg": 3.141592653589793 / 180.0}
@@ -79,20 +85,111 @@ def check_keys(sec: "Section", tree) -> None:
             check_keys(sec.section(str(key)), sub)
 
 
-def load_yaml(path: str | os.PathLike) -> dict:
-    """Read a YAML mapping; ConfigError naming the file on a missing file or a syntax error."""
+def allowed_dirs() -> tuple[Path, ...]:
+    """The folders outside a file's own folder that the paths it names may lead into: the shipped data and the
+    folders the user allowed (:data:`ALLOW_ENV`, set by ``--allow-path``), resolved."""
+    extra = tuple(Path(p).resolve() for p in os.environ.get(ALLOW_ENV, "").split(os.pathsep) if p)
+    return tuple(d.resolve() for d in SHIPPED_DIRS) + extra
+
+
+@contextmanager
+def allow_paths(dirs):
+    """Within the block, paths named in files may also lead into ``dirs`` (the user's explicit allowance;
+    through the environment, so that worker processes started inside inherit it)."""
+    old = os.environ.get(ALLOW_ENV)
+    parts = [p for p in (old or "").split(os.pathsep) if p] + [str(Path(d).resolve()) for d in dirs or ()]
+    if parts:
+        os.environ[ALLOW_ENV] = os.pathsep.join(parts)
+    try:
+        yield
+    finally:
+        if old is None:
+            os.environ.pop(ALLOW_ENV, None)
+        else:
+            os.environ[ALLOW_ENV] = old
+
+
+def _inside(p: Path, root: Path) -> bool:
+    return p == root or root in p.parents
+
+
+def confine(path, root, where: str, error=ConfigError, allow: bool = False, hint: str = "--allow-path DIR") -> Path:
+    """The ONE rule for a path that a file names (issue 21): it must lead (symbolic links resolved) inside
+    ``root`` (the folder of the file that names it, or the recorded/imported folder), the shipped data, or a
+    folder the user allowed (:func:`allowed_dirs`); ``allow``: the caller's explicit allowance (e.g.
+    ``--allow-symlinks``). Returns ``path``; else ``error`` naming ``where`` and saying whether a symbolic
+    link or the path itself leads out (nothing outside is opened)."""
+    path = Path(path)
+    if allow:
+        return path
+    real, base = path.resolve(), Path(root).resolve()
+    if _inside(real, base) or any(_inside(real, d) for d in allowed_dirs()):
+        return path
+    lexical, lbase = Path(os.path.normpath(path.absolute())), Path(os.path.normpath(Path(root).absolute()))
+    why = (f"a symbolic link leading out of the folder {base} (to {real})" if _inside(lexical, lbase)
+           else f"{real} is outside the folder {base}")
+    raise error(f"{where}: {why}; refused: files may only name files inside their own folder or the shipped "
+                f"scenes/targets (copy the file into the folder, or allow it explicitly: {hint})")
+
+
+def check_output_apart(out, inputs, flag: str = "--out") -> None:
+    """ConfigError naming both paths when the output ``out`` (a folder, or a file) is an input, lies inside an
+    input folder, or (folder inputs given as files: ``(path, "file")``) writes into the folder of an input
+    file. ``inputs``: [(path, "folder" | "file")]; the paths are resolved (symbolic links included)."""
+    o = Path(out).resolve()
+    for path, kind in inputs:
+        if path is None:
+            continue
+        i = Path(path).resolve()
+        if kind == "folder" and _inside(o, i):
+            where = "is the input folder" if o == i else "lies inside the input folder"
+            raise ConfigError(f"{flag} {out}: {where} {path}; outputs never go into an input: choose a folder "
+                              "outside it")
+        if kind == "file" and (o == i or o == i.parent):
+            where = "is the input file" if o == i else "is the folder of the input file"
+            raise ConfigError(f"{flag} {out}: {where} {path}; outputs never go into an input folder: choose "
+                              "another folder (e.g. a new subfolder)")
+
+
+def read_text(path: str | os.PathLike, error=ConfigError, what: str = "file") -> str:
+    """The ONE place a text file we read is decoded: UTF-8, a BOM dropped (spreadsheets write one).
+    ``error`` (ConfigError for settings files, DataError for data) naming the file on a missing or
+    unreadable file, and the line, column and byte of the first non-UTF-8 byte (issue 21: no
+    UnicodeDecodeError traceback, whichever reader)."""
     p = Path(path)
     if not p.is_file():
-        raise ConfigError(f"{p}: file not found")
+        raise error(f"{p}: {what} not found")
     try:
-        with open(p, encoding="utf-8") as fh:
-            data = yaml.safe_load(fh)
+        data = p.read_bytes()
+    except OSError as exc:
+        raise error(f"{p}: cannot read {what} ({exc.strerror})") from None
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = data[:exc.start].count(b"\n") + 1
+        col = exc.start - data.rfind(b"\n", 0, exc.start)
+        raise error(f"{p}: line {line}: not UTF-8 text (byte 0x{data[exc.start]:02x} at column {col}); "
+                    "save the file as UTF-8") from None
+
+
+def parse_yaml(path: str | os.PathLike, error=ConfigError, what: str = "file"):
+    """Any YAML value of a file (:func:`read_text`); ``error`` naming the file on a syntax error."""
+    text = read_text(path, error, what)
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise error(f"{path}: invalid YAML in {what} ({' '.join(str(exc).split())})") from None
+
+
+def load_yaml(path: str | os.PathLike) -> dict:
+    """Read a YAML mapping; ConfigError naming the file on a missing, unreadable or non-UTF-8 file or a
+    syntax error."""
+    p = Path(path)
+    text = read_text(p, ConfigError)
+    try:
+        data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
         raise ConfigError(f"{p}: invalid YAML ({' '.join(str(exc).split())})") from None
-    except UnicodeDecodeError:
-        raise ConfigError(f"{p}: not a UTF-8 text file") from None
-    except OSError as exc:
-        raise ConfigError(f"{p}: cannot read ({exc.strerror})") from None
     if not isinstance(data, dict):
         raise ConfigError(f"{p}: expected a mapping at the top level, got {type(data).__name__}")
     return data
@@ -215,13 +312,15 @@ class Section:
         return Section(self.data[key], self.file, ".".join(k for k in (self.path, key) if k))
 
     def path_value(self, key: str, default: Any = _MISSING) -> Path | None:
-        """A file path relative to this file's folder; ConfigError if it does not exist."""
+        """A file path relative to this file's folder, inside it (or the shipped data, or a folder the user
+        allowed: :func:`confine`); ConfigError if it leads elsewhere or does not exist."""
         val = self.get(key, str, default)
         if val is None or val is default:
             return val
         p = Path(val)
         if not p.is_absolute():
             p = self.file.parent / p
+        confine(p, self.file.parent, f"{self.where(key)}: {val!r}")
         if not p.exists():
             raise self.error(key, f"file not found: {p}")
         return p

@@ -10,6 +10,7 @@ import yaml
 
 from vision_calib.camera import CameraIntrinsics
 from vision_calib.cli import main
+from vision_calib.config import allow_paths
 from vision_calib.errors import ConfigError, DataError
 from vision_calib.experiment.process import process_folder
 from vision_calib.io.camera_file import load_camera_yaml
@@ -70,8 +71,11 @@ def test_calibrate_camera_output_used_by_process_equals_the_same_intrinsics_inli
                  "--no-plots"]) == 0
     by_flag = json.loads(capsys.readouterr().out)
     inline = process_folder(_with_camera(h4, tmp_path / "inline", cam.to_dict()), tmp_path / "o2", plots=False)
-    by_key = process_folder(_with_camera(h4, tmp_path / "keyed", None, camera_file="../cal/camera.yaml"),
-                            tmp_path / "o3", plots=False)
+    keyed = _with_camera(h4, tmp_path / "keyed", None, camera_file="../cal/camera.yaml")
+    with pytest.raises(ConfigError, match=r"camera_file: '../cal/camera.yaml': .*cal/camera.yaml is outside the folder"):
+        process_folder(keyed, tmp_path / "o3", plots=False)  # a path out of the recording: only when allowed
+    with allow_paths([tmp_path / "cal"]):
+        by_key = process_folder(keyed, tmp_path / "o3", plots=False)
     assert by_flag["intrinsics"]["source"] == f"camera file {cam_yaml}"
     assert by_key["intrinsics"]["source"] == f"camera file {tmp_path / 'keyed' / '..' / 'cal' / 'camera.yaml'}"
     assert inline["intrinsics"]["source"] == "recording.yaml"

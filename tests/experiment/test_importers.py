@@ -14,6 +14,7 @@ from vision_calib import frames as F
 from vision_calib.cli import main
 from vision_calib.errors import ConfigError, DataError
 from vision_calib.io.recording import read_recording
+from vision_calib.config import ALLOW_ENV
 from vision_calib.io.rosi import import_rosi
 from vision_calib.io.visp import import_visp_chessboard
 
@@ -224,12 +225,13 @@ def test_free_revolute_joints_in_degrees_are_refused():
 
 # ----------------------------------------------------------------------------- ViSP chessboard: end to end
 @pytest.mark.slow
-def test_visp_chessboard_round_trip_processes_like_the_direct_folder(tmp_path):
+def test_visp_chessboard_round_trip_processes_like_the_direct_folder(tmp_path, monkeypatch):
     """A simulated eye-in-hand recording of a chessboard (targets/chessboard_a4.yaml, no lens distortion:
     ViSP's kud/kdu model is refused) written as a ViSP hand-eye folder (camera.xml, image-N.png,
     pose_fPe_N.yaml flange poses as translation + theta-u), imported with ``import-visp --chessboard`` and
     processed: the hand-eye transforms equal those of the same data processed as our own flange-pose
     folder (to rounding of the theta-u conversion)."""
+    monkeypatch.setenv(ALLOW_ENV, str(tmp_path))  # the simulated recording names the scene written beside it
     from vision_calib.experiment.simulate import run_simulation
 
     scene = yaml.safe_load((REPO / "scenes" / "rx90_eye_in_hand.yaml").read_text())
@@ -303,10 +305,11 @@ def test_rosi_homography_threshold_sets_the_view_rule(tmp_path, threshold, noise
 
 
 @pytest.mark.slow
-def test_rosi_round_trip_with_a_modified_circle_grid(tmp_path):
+def test_rosi_round_trip_with_a_modified_circle_grid(tmp_path, monkeypatch):
     """RX-90 eye-in-hand recording of the A4 modified circle grid -> flange poses -> export_rosi (diameters in the
     extension keys) -> import_rosi -> process: the same hand-eye transforms as the original folder; without
     the extension keys (a real ROS-I file) detection still works, the transforms move by less than 3 std."""
+    monkeypatch.setenv(ALLOW_ENV, str(tmp_path))  # the simulated recording names the scene written beside it
     from vision_calib.experiment.simulate import run_simulation
 
     scene = yaml.safe_load((REPO / "scenes" / "rx90_eye_in_hand.yaml").read_text())

@@ -1,5 +1,6 @@
 """Fuzz suite fixtures: one small recorded folder per session, built with the CLI from a shipped
-scene, and the report of its undamaged processing (the reference of every damage case).
+scene, and the report of its undamaged processing (the reference of every damage case); the bad-input
+cases of the other commands (fuzz_inputs.py) share it.
 
 The tally of outcomes (named errors, correct results, silent wrong results that are xfail) is
 printed at the end of the run (``pytest tests/fuzz -q -rA``)."""
@@ -47,8 +48,8 @@ def pytest_terminal_summary(terminalreporter):
     for outcome in TALLY.values():
         counts[outcome] = counts.get(outcome, 0) + 1
     tr = terminalreporter
-    tr.section("fuzz tally (vision-calib process on damaged recordings)")
+    tr.section("fuzz tally (vision-calib on damaged recordings and bad inputs)")
     tr.write_line(f"cases: {len(TALLY)}; " + ", ".join(f"{k}: {v}" for k, v in sorted(counts.items())))
     for case, outcome in sorted(TALLY.items()):
-        if outcome not in ("named_error", "correct"):
+        if outcome not in ("named_error", "correct", "warned"):
             tr.write_line(f"  {outcome}: {case}")

@@ -259,7 +259,7 @@ CASES = [
     ("yaml-empty", _raw_yaml(b""), ERR, r"recording.yaml: expected a mapping"),
     ("yaml-list", _raw_yaml(b"- 1\n- 2\n"), ERR, r"recording.yaml: expected a mapping"),
     ("yaml-syntax", _raw_yaml(b"camera: {width: 1024\n"), ERR, r"recording.yaml: invalid YAML"),
-    ("yaml-latin1", _raw_yaml(b"format: vision_calib.recording/1\nnotes: caf\xe9\n"), ERR, r"recording.yaml: not a UTF-8"),
+    ("yaml-latin1", _raw_yaml(b"format: vision_calib.recording/1\nnotes: caf\xe9\n"), ERR, r"recording.yaml: line 2: not UTF-8"),
     ("yaml-removed", _remove("recording.yaml"), ERR, r"recording.yaml: file not found"),
     # --- poses.csv
     ("csv-columns-reordered", _csv_permute([0, 3, 1, 2, 6, 5, 4]), OK, None),

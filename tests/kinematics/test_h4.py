@@ -84,7 +84,7 @@ def test_load_errors(tmp_path):
     bad.write_text(text.replace("fixed: []", "fixed: [h4.nope]"))
     with pytest.raises(ConfigError, match="fixed"):
         load_h4_robot(bad)
-    with pytest.raises(ConfigError, match="cannot read"):
+    with pytest.raises(ConfigError, match="missing.yaml: H4 robot file not found"):
         load_h4_robot(tmp_path / "missing.yaml")
 
 

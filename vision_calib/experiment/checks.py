@@ -105,6 +105,22 @@ def check_motion(setup: Setup, meas: Measurements, where: str, scale_hint: str) 
     return out
 
 
+def duplicate_poses(meas: Measurements) -> list[str]:
+    """Warnings naming the poses whose joint readings and measured pose both equal another pose's (to 1e-12):
+    one measurement under several ids (a copied row or image folder), which the fit would count several times."""
+    groups: dict = {}
+    for k, lab in enumerate(meas.labels or range(len(meas.joints))):
+        key = (np.round(np.asarray(meas.joints[k], float), 12).tobytes(),
+               np.round(np.asarray(meas.T_cam_target[k], float), 12).tobytes())
+        groups.setdefault(key, []).append(str(lab))
+    dup = [g for g in groups.values() if len(g) > 1]
+    if not dup:
+        return []
+    shown = "; ".join(", ".join(g) for g in dup[:5]) + ("; ..." if len(dup) > 5 else "")
+    return [f"{sum(len(g) - 1 for g in dup)} poses repeat another's joints and measured pose exactly (the same "
+            f"measurement under another id, counted twice by the fit): {shown}"]
+
+
 def drop_degenerate(meas: Measurements) -> tuple[Measurements, list]:
     """(measurements without the poses whose covariance is not positive definite, [(label, reason)]): a
     pose whose frames are all identical (duplicated image files) has zero scatter and no noise estimate."""

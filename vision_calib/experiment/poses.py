@@ -18,8 +18,10 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ConfigError
-from ..io.measured_poses import chain_direction, read_measured_poses
+from ..io.measured_poses import chain_direction, misreadings, read_measured_poses
 from ..io.report import build_report, parameters_table, residual_stats, write_report
+from .checks import duplicate_poses
+from .gross import gross_failure
 from .steps import check_method, identify_measurements
 
 
@@ -96,7 +98,10 @@ def process_poses(path, out_dir, method=None, folds=None, plots=True, fix_uniden
     result, problem, rep, setup = ident.result, ident.problem, ident.analysis, ident.setup
     t_id = time.perf_counter() - t0
     kept = [k for k, lab in enumerate(meas.labels) if lab not in {r[0] for r in ident.rejected}]
-    kf = kfold_validation(setup, meas.subset(kept), method, residual, rep, folds, mp.seed)
+    failure = gross_failure(setup, meas, ident, mp.residual, str(mp.path), misreadings(mp),
+                            untested=f"a wrong robot file or scene mounts ({scene.path}), joint columns in another "
+                                     "order, joint or length units (checked up front only for gross factors)")
+    kf = None if failure else kfold_validation(setup, meas.subset(kept), method, mp.residual, rep, folds, mp.seed)
     ps = setup.params
     n = len(mp.ids)
     report = build_report(
@@ -109,10 +114,11 @@ def process_poses(path, out_dir, method=None, folds=None, plots=True, fix_uniden
         measurements={"n_poses": n, "n_valid": n, "n_rejected": 0, "rejected": [], "measured": mp.measured,
                       "noise": mp.sigma_source, "pose_ids": list(mp.ids)},
         identifiability=rep, parameters=parameters_table(ps.names, ps.nominal, None, result), result=result,
-        identified=ident,
+        identified=ident, warnings=duplicate_poses(meas),
         residuals=residual_stats(result.residuals, problem.residual_kind), extra={"kfold": kf},
-        timings={"identify": t_id, "total": time.perf_counter() - t0})
-    report["summary_text"] += "\n" + "\n".join(kfold_lines(kf))
+        timings={"identify": t_id, "total": time.perf_counter() - t0}, failure=failure)
+    report["summary_text"] += "\n" + ("\n".join(kfold_lines(kf)) if kf else
+                                      "held-out validation skipped: the fit failed (see the verdict)")
     write_report(Path(out_dir), report, setup, result, problem, plots=plots)
     return report
 

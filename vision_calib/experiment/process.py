@@ -20,7 +20,8 @@ from ..io.recording import read_recording
 from ..io.report import (REPORT_VERSION, build_report, measurements_block, parameters_table, residual_stats,
                          write_report)
 from ..rig import Measurements, load_scene
-from .checks import screen_measurements
+from .checks import duplicate_poses, screen_measurements
+from .gross import gross_failure
 from .steps import check_method, identify_measurements, rejection_summary
 
 
@@ -109,6 +110,9 @@ def process_folder(folder, out_dir, method=None, progress=False, plots=True, fix
                                   fix_unidentifiable=fix_unidentifiable, rejected=inconsistent,
                                   nuisance=intrinsics_response(dets, rec, intr, used=used))
     result, problem, rep, setup = ident.result, ident.problem, ident.analysis, ident.setup
+    failure = gross_failure(setup, meas, ident, residual, where,
+                            untested=f"a wrong robot file or scene mounts ({scene.path}), joint columns in another "
+                                     "order, the target's or camera's description in recording.yaml")
     cam_fit = None
     if ident.nuisance is not None:
         cam_fit = fitted_camera(rec.camera, used, ident.nuisance["coefficients"])
@@ -123,14 +127,15 @@ def process_folder(folder, out_dir, method=None, progress=False, plots=True, fix
                                                                "robot_kind": setup.kind}},
         settings={"poses": len(pms), "frames": rec.frames_per_pose, "method": method, "residual": residual,
                   "camera": rec.camera.to_dict()},
-        measurements=mblock, warnings=[*rec.notes, *intr["warnings"], *([sens["warning"]] if sens["warning"] else [])],
+        measurements=mblock, warnings=[*rec.notes, *intr["warnings"], *([sens["warning"]] if sens["warning"] else []),
+                                       *duplicate_poses(meas)],
         identifiability=rep,
         parameters=parameters_table(ps.names, ps.nominal, None, result), result=result, identified=ident,
         motion=motion,
         residuals=residual_stats(result.residuals, problem.residual_kind),
         extra={"intrinsics": intr, "intrinsics_sensitivity": sens,
                "reprojection": _chain_reprojection(setup, meas, problem, result, dets, rec, cam_fit)},
-        timings={"measure": t_meas, "identify": t_id, "total": time.perf_counter() - t0})
+        timings={"measure": t_meas, "identify": t_id, "total": time.perf_counter() - t0}, failure=failure)
     write_report(out, report, setup, result, problem, plots=plots)
     return report
 

@@ -33,7 +33,12 @@ RELATIVE_WEIGHT_T_M = 1e-3
 RELATIVE_WEIGHT_R_RAD = 1e-3
 
 
-def _check_poses(T, n, name="T_meas") -> np.ndarray:
+def _pose_name(k: int, labels) -> str:
+    """"pose 'p007'" (its id) when the caller gave labels, else "pose 7" (its index)."""
+    return f"pose {labels[k]!r}" if labels is not None and len(labels) > k else f"pose {k}"
+
+
+def _check_poses(T, n, name="T_meas", labels=None) -> np.ndarray:
     T = np.asarray(T, dtype=float)
     if T.ndim != 3 or T.shape[1:] != (4, 4):
         raise DataError(f"{name} must have shape (N, 4, 4), got {T.shape}")
@@ -41,18 +46,18 @@ def _check_poses(T, n, name="T_meas") -> np.ndarray:
         raise DataError(f"{name} has {T.shape[0]} poses but there are {n} joint sets")
     bad = ~np.all(np.isfinite(T), axis=(1, 2))
     if bad.any():
-        raise DataError(f"{name}: pose {int(np.flatnonzero(bad)[0])} contains a non-finite value (NaN or inf)")
+        raise DataError(f"{name}: {_pose_name(int(np.flatnonzero(bad)[0]), labels)} contains a non-finite value (NaN or inf)")
     R = T[:, :3, :3]
     err = np.abs(R @ np.swapaxes(R, 1, 2) - np.eye(3)).max(axis=(1, 2))
     det = np.linalg.det(R)
     bad = (err > 1e-6) | (det < 0)
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
-        raise DataError(f"{name}: pose {k} does not hold a rotation matrix (|R R^T - I| = {err[k]:.2g}, det = {det[k]:.3g})")
+        raise DataError(f"{name}: {_pose_name(k, labels)} does not hold a rotation matrix (|R R^T - I| = {err[k]:.2g}, det = {det[k]:.3g})")
     return T
 
 
-def _obs_cov(n, m, obs_cov, sigma_t_m, sigma_r_rad) -> tuple[np.ndarray, str]:
+def _obs_cov(n, m, obs_cov, sigma_t_m, sigma_r_rad, labels=None) -> tuple[np.ndarray, str]:
     if obs_cov is not None:
         if sigma_t_m is not None or sigma_r_rad is not None:
             raise ParameterError("give either obs_cov or sigma_t_m/sigma_r_rad, not both")
@@ -65,13 +70,15 @@ def _obs_cov(n, m, obs_cov, sigma_t_m, sigma_r_rad) -> tuple[np.ndarray, str]:
         C = np.array(C[:, :m, :m])
         bad = ~np.all(np.isfinite(C), axis=(1, 2))
         if bad.any():
-            raise DataError(f"obs_cov of pose {int(np.flatnonzero(bad)[0])} contains a non-finite value")
+            raise DataError(f"obs_cov of {_pose_name(int(np.flatnonzero(bad)[0]), labels)} contains a non-finite value")
         sym = np.abs(C - np.swapaxes(C, 1, 2)).max(axis=(1, 2)) <= 1e-12 * np.abs(C).max(axis=(1, 2)) + 1e-300
         if not sym.all():
-            raise DataError(f"obs_cov of pose {int(np.flatnonzero(~sym)[0])} is not symmetric")
-        ev = np.linalg.eigvalsh(C)
-        if np.any(ev[:, 0] <= 0):
-            raise DataError(f"obs_cov of pose {int(np.flatnonzero(ev[:, 0] <= 0)[0])} is not positive definite")
+            raise DataError(f"obs_cov of {_pose_name(int(np.flatnonzero(~sym)[0]), labels)} is not symmetric")
+        with np.errstate(all="ignore"):  # an overflowing covariance is named below, not warned about
+            ev = np.linalg.eigvalsh(C)
+        if np.any(~(ev[:, 0] > 0)):
+            raise DataError(f"obs_cov of {_pose_name(int(np.flatnonzero(~(ev[:, 0] > 0))[0]), labels)} is not "
+                            "positive definite")
         return C, "given"
     if (sigma_t_m is None) != (sigma_r_rad is None) and m == 6:
         raise ParameterError("give both sigma_t_m and sigma_r_rad for a pose residual (or obs_cov), or neither "
@@ -132,7 +139,8 @@ def serial_problem(
 
         check_joint_limits(q, getattr(chain, "joint_limits", None), f"{chain.name}: joint values",
                            labels if labels is not None and len(labels) == n else None)
-    T_meas = _check_poses(T_meas, n)
+    lab = labels if labels is not None and len(labels) == n else None
+    T_meas = _check_poses(T_meas, n, labels=lab)
     m = 6 if residual == "pose" else 3
     params = chain.params if free is None else chain.params.only_free(list(free))
     free_set = set(params.free_names)
@@ -147,12 +155,12 @@ def serial_problem(
         raise ParameterError(f"measured={measured!r}: the chain {chain.name!r} computes {own}; give {own!r} or "
                              f"{inverse!r} (the direction the rows of T_meas and their noise hold)")
     if measured == own:
-        cov, cov_src = _obs_cov(n, m, obs_cov, sigma_t_m, sigma_r_rad)
+        cov, cov_src = _obs_cov(n, m, obs_cov, sigma_t_m, sigma_r_rad, lab)
     else:  # rows and noise in the inverse direction: carry both into the chain's direction exactly
         if obs_cov is not None and np.shape(obs_cov)[-1] != 6:
             raise DataError(f"measured={measured!r}: mapping the noise to {own} needs the full (6, 6) pose "
                             f"covariance, got {np.shape(obs_cov)}")
-        cov6, cov_src = _obs_cov(n, 6, obs_cov, sigma_t_m, sigma_r_rad)
+        cov6, cov_src = _obs_cov(n, 6, obs_cov, sigma_t_m, sigma_r_rad, lab)
         G = inverse_error_map(T_meas)
         cov = np.ascontiguousarray((G @ cov6 @ np.swapaxes(G, -1, -2))[:, :m, :m])
         T_meas = inv_T(T_meas)

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import csv
 import difflib
+import io
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import frames as F
-from ..config import ANGLE_UNITS, LENGTH_UNITS, Section, angle_key, length_key, load_yaml
+from ..config import ANGLE_UNITS, LENGTH_UNITS, Section, angle_key, length_key, load_yaml, read_text
 from ..errors import DataError
 
 FORMAT = "vision_calib.measured_poses/1"
@@ -47,6 +48,9 @@ POSE_COLS = ("x", "y", "z", "qx", "qy", "qz", "qw")
 COMPONENTS = ("x", "y", "z", "rx", "ry", "rz")
 #: measured sizes this many times larger/smaller than the nominal model's: a unit error
 PLAUSIBLE_FACTOR = 5.0
+#: plausible std of a measured pose component, SI: 1 nm - 1 m, 1 nrad - 1 rad (outside: a unit or typing
+#: error; 1e-300 would underflow to a zero variance, 1e300 overflow)
+SIGMA_RANGE = {"length": (1e-9, 1.0), "angle": (1e-9, 1.0)}
 
 
 @dataclass(frozen=True)
@@ -124,10 +128,9 @@ def _header(csv_path: Path, header: list[str], n_joints: int, position_only: boo
 
 def _rows(csv_path: Path, n_joints: int, position_only: bool):
     """(ids, values {column: (N,) float in file units}, noise group, CSV line of each row) of the CSV."""
-    if not csv_path.is_file():
-        raise DataError(f"{csv_path}: file not found")
-    with open(csv_path, newline="", encoding="utf-8-sig") as fh:  # -sig: spreadsheets write a BOM
-        rows = [(ln, r) for ln, r in enumerate(csv.reader(fh), start=1) if r and any(c.strip() for c in r)]
+    text = read_text(csv_path, DataError)  # the one decoder: a named error on a non-UTF-8 byte, a BOM dropped
+    rows = [(ln, r) for ln, r in enumerate(csv.reader(io.StringIO(text, newline="")), start=1)
+            if r and any(c.strip() for c in r)]
     if len(rows) < 2:
         raise DataError(f"{csv_path}: no pose rows")
     header = [h.strip() for h in rows[0][1]]
@@ -158,10 +161,23 @@ def _rows(csv_path: Path, n_joints: int, position_only: bool):
     return ids, {c: arr[:, k] for k, c in enumerate(names)}, group, [ln for ln, _ in rows[1:]]
 
 
-def _covariances(csv_path, ids, lines, v, group, m, Lf, Af, default) -> tuple[np.ndarray, str]:
-    """(N, m, m) SI covariances of the rows from the noise columns (or the YAML default sigmas)."""
+def _sigma_range(csv_path, ids, lines, what: str, sd: np.ndarray, k_comp: int, unit_name: str, f: float) -> None:
+    """DataError naming the file, line, pose id and column of a std (N,) SI outside SIGMA_RANGE (before any
+    squaring: no overflow or underflow warning)."""
+    lo, hi = SIGMA_RANGE["length" if k_comp < 3 else "angle"]
+    bad = np.flatnonzero(~((sd >= lo) & (sd <= hi)))
+    if bad.size:
+        k = bad[0]
+        raise DataError(f"{csv_path}: line {lines[k]} (pose {ids[k]!r}): {what}: std {sd[k] / f:.4g} {unit_name} is "
+                        f"outside the plausible {lo / f:.3g}-{hi / f:.3g} {unit_name} (units in the YAML?)")
+
+
+def _covariances(csv_path, ids, lines, v, group, m, Lf, Af, default, units) -> tuple[np.ndarray, str]:
+    """(N, m, m) SI covariances of the rows from the noise columns (or the YAML default sigmas); every std
+    within SIGMA_RANGE and every covariance positive definite, else DataError naming the row."""
     n = len(ids)
     unit = np.array([Lf] * 3 + [Af] * 3)[:m]
+    uname = [units["length"]] * 3 + [units["angle"]] * 3
     comps = COMPONENTS[:m]
     if group == "none":
         s = np.array([default[0]] * 3 + [default[1]] * 3)[:m]
@@ -169,23 +185,34 @@ def _covariances(csv_path, ids, lines, v, group, m, Lf, Af, default) -> tuple[np
     if group == "cov":
         C = np.zeros((n, m, m))
         for i in range(m):
+            name = f"cov_{comps[i]}_{comps[i]}"
+            d = v[name]
+            bad = np.flatnonzero(~(d > 0))
+            if bad.size:
+                k = bad[0]
+                raise DataError(f"{csv_path}: line {lines[k]} (pose {ids[k]!r}): column {name}: a variance must be "
+                                f"> 0, got {d[k]}")
+            _sigma_range(csv_path, ids, lines, f"column {name}", np.sqrt(d) * unit[i], i, uname[i], unit[i])
+        for i in range(m):
             for j in range(i, m):
                 C[:, i, j] = C[:, j, i] = v[f"cov_{comps[i]}_{comps[j]}"] * unit[i] * unit[j]
-        ev = np.linalg.eigvalsh(C)[:, 0]
-        bad = np.flatnonzero(ev <= 0)
+        sd = np.sqrt(np.einsum("nii->ni", C))
+        ev = np.linalg.eigvalsh(C / sd[:, :, None] / sd[:, None, :])[:, 0]  # of the correlation: unit-free
+        bad = np.flatnonzero(~(ev > 1e-12))
         if bad.size:
             k = bad[0]
             raise DataError(f"{csv_path}: line {lines[k]} (pose {ids[k]!r}): cov_* columns: covariance is not "
                             "positive definite")
         return C, "csv cov_* columns"
     names = [f"sigma_{c}" for c in comps] if group == "sigma" else (["sigma_t"] * 3 + ["sigma_r"] * 3)[:m]
-    S = np.column_stack([v[c] for c in names]) * unit
-    for c in dict.fromkeys(names):
-        bad = np.flatnonzero(v[c] <= 0)
+    for i, c in enumerate(names):
+        bad = np.flatnonzero(~(v[c] > 0))
         if bad.size:
             k = bad[0]
             raise DataError(f"{csv_path}: line {lines[k]} (pose {ids[k]!r}): column {c}: sigma must be > 0, "
                             f"got {v[c][k]}")
+        _sigma_range(csv_path, ids, lines, f"column {c}", v[c] * unit[i], i, uname[i], unit[i])
+    S = np.column_stack([v[c] for c in names]) * unit
     return np.einsum("ni,ij->nij", S**2, np.eye(m)), f"csv {'sigma_*' if group == 'sigma' else 'sigma_t/sigma_r'} columns"
 
 
@@ -225,6 +252,35 @@ def to_camera_convention(setup, measured: str, T, cov):
     return F.inv_T(T), G @ cov @ np.swapaxes(G, -1, -2)
 
 
+def misreadings(mp: MeasuredPoses) -> dict:
+    """{what: rig.Measurements} of the file's rows read as the usual mistakes would have written them: the
+    other pose direction (full poses), two position columns swapped, a scalar-first quaternion; for the
+    gross-error test (``experiment.gross``: which reading fits)."""
+    from ..rig import Measurements
+
+    setup, T, cov = mp.scene.setup, np.array(mp.T_meas, float), np.array(mp.cov, float)
+    out = {}
+
+    def add(what, measured, TT, CC):
+        T_ct, cov_ct = to_camera_convention(setup, measured, TT, CC)
+        out[what] = Measurements(mp.q, mp.q, T_ct, cov_ct, mp.ids)
+
+    if not mp.position_only:
+        other = {"T_cam_target": "T_target_cam", "T_target_cam": "T_cam_target"}[mp.measured]
+        add(f"the rows read as {other} (measured: direction reversed)", other, T, cov)
+    for a, b in ((0, 1), (0, 2), (1, 2)):
+        perm = [0, 1, 2] + list(range(3, cov.shape[-1]))
+        perm[a], perm[b] = b, a
+        TT = T.copy()
+        TT[:, [a, b], 3] = T[:, [b, a], 3]
+        add(f"columns {'xyz'[a]} and {'xyz'[b]} swapped", mp.measured, TT, cov[:, perm][:, :, perm])
+    if not mp.position_only:
+        xyz, quat = F.xyz_quat_from_T(T)  # as read: (qx, qy, qz, qw) columns; scalar-first means (w, x, y, z)
+        add("the quaternion written scalar first (qw,qx,qy,qz)", mp.measured,
+            F.T_from_xyz_quat(xyz, quat[:, [1, 2, 3, 0]]), cov)
+    return out
+
+
 def _check_plausible(csv_path, setup, measured, q, T, units: dict) -> None:
     """DataError when the measured positions are many times larger/smaller than what the nominal model
     predicts for the same joints (a length unit error, e.g. mm declared as m)."""
@@ -262,6 +318,10 @@ def _settings(top: Section):
             raise ds.error(rkeys[0], "position-only measurements (measured: p_*) have no rotation sigma")
         if t <= 0 or (r <= 0 and not measured.startswith("p_")):
             raise ds.error(None, "sigmas must be > 0")
+        for val, kind in ((t, "length"), (r, "angle")):
+            lo, hi = SIGMA_RANGE[kind]
+            if (val or lo) < lo or val > hi:
+                raise ds.error(None, f"a {kind} std of {val:.4g} (SI) is outside the plausible {lo:g}-{hi:g}")
         default = (t, r)
     folds = top.get("folds", int, 5)
     if folds < 2:
@@ -299,7 +359,7 @@ def read_measured_poses(path) -> MeasuredPoses:
     q = np.column_stack([v[f"q{j + 1}"] for j in range(setup.n_joints)]) * Af
     setup.check_joints(q, str(csv_path), ids)
     T = _poses(csv_path, ids, lines, v, pos_only, Lf)
-    cov, src = _covariances(csv_path, ids, lines, v, group, 3 if pos_only else 6, Lf, Af, default)
+    cov, src = _covariances(csv_path, ids, lines, v, group, 3 if pos_only else 6, Lf, Af, default, units)
     _check_plausible(csv_path, setup, measured, q, T, units)
     if len(ids) < folds:
         raise top.error("folds", f"{folds} folds need at least {folds} poses, {csv_path.name} has {len(ids)}")
@@ -355,4 +415,4 @@ def write_measured_poses(yaml_path, scene_path, ids, q, T, measured: str, units=
 
 
 __all__ = ["FORMAT", "MEASURED", "MeasuredPoses", "read_measured_poses", "write_measured_poses",
-           "to_camera_convention", "chain_direction"]
+           "to_camera_convention", "chain_direction", "misreadings"]

@@ -148,27 +148,21 @@ MAX_ABS_POSITION_M = 20.0
 
 
 def check_inside(path: Path, root: Path, allow_symlinks: bool) -> Path:
-    """``path`` itself when it resolves inside ``root`` (or allow_symlinks); DataError otherwise: a
-    symlink inside a recording must not make the tools read (or copy) files from elsewhere."""
-    if allow_symlinks:
-        return path
-    real, base = Path(path).resolve(), Path(root).resolve()
-    if real != base and base not in real.parents:
-        raise DataError(f"{path}: a symbolic link leading out of the folder {root} (to {real}); refused "
-                        "(copy the file into the folder, or allow symlinks explicitly: --allow-symlinks)")
-    return path
+    """``path`` itself when it resolves inside ``root`` (or allow_symlinks): ``config.confine``, the one rule for
+    the paths a file or folder names (a symlink inside a recording must not make the tools read or copy files
+    from elsewhere); DataError otherwise."""
+    from ..config import confine
+
+    return confine(path, root, str(path), DataError, allow=allow_symlinks,
+                   hint="--allow-symlinks, or --allow-path DIR")
 
 
 def read_text_utf8(path: Path) -> str:
-    """A text file as str (a UTF-8 BOM is dropped); DataError naming the file and the line of a non-UTF-8 byte."""
-    data = Path(path).read_bytes()
-    try:
-        return data.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        line = data[:exc.start].count(b"\n") + 1
-        col = exc.start - data.rfind(b"\n", 0, exc.start)
-        raise DataError(f"{path}: line {line}: not UTF-8 text (byte 0x{data[exc.start]:02x} at column {col}); "
-                        "save the file as UTF-8") from None
+    """A data text file as str (``config.read_text``: a BOM dropped; DataError naming the file and the line of a
+    non-UTF-8 byte)."""
+    from ..config import read_text
+
+    return read_text(path, DataError)
 
 
 def _csv_columns(cpath: Path, header: list[str], pose_kind: str) -> tuple[int, list[int]]:
@@ -296,8 +290,12 @@ def read_recording(folder, allow_symlinks: bool = False) -> Recording:
     scene_path = None
     notes = []
     if "scene" in top:
+        from ..config import confine
+
         p = Path(top.get("scene", str))
         p = p if p.is_absolute() else ypath.parent / p
+        if p.exists():  # the same rule as every named path (a missing one falls back to the shipped scene_name)
+            confine(p, folder, f"{top.where('scene')}: {top.get('scene', str)!r}")
         if not p.is_file():
             from ..rig.scene import SCENES_DIR
 
@@ -338,8 +336,11 @@ def read_recording(folder, allow_symlinks: bool = False) -> Recording:
 
         if camera is not None:
             raise top.error("camera_file", "given together with camera fx/fy/cx/cy: give one of them")
+        from ..config import confine
+
         camera_file = Path(top.get("camera_file", str))
         camera_file = camera_file if camera_file.is_absolute() else ypath.parent / camera_file
+        confine(camera_file, folder, f"{top.where('camera_file')}: {top.get('camera_file', str)!r}")
         camera = load_camera_for_images(camera_file, size, f"{ypath}: camera_file")
     return Recording(folder, camera, mount, target, scene_path, pose_kind, tuple(ids), poses, images, frames,
                      tuple(extra), averaging, tuple(notes), size, camera_file, float(corner_noise), robot_std)

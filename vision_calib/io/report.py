@@ -5,8 +5,9 @@ report.json, version 2 (each value once)::
 
     version: "2.0"
     kind: simulation | process | process_handeye
-    verdict: {ok, status, usable, converged, adequacy, lack_of_fit, message, n_rejected_poses, warnings: n}
-                                                                 # read first
+    verdict: {ok, status, usable, converged, adequacy, lack_of_fit, message, n_rejected_poses, warnings: n,
+              failure: kind}                                     # read first; failure only when one was found
+    failure: {kind, chi2_dof, moves, tests: [{candidate, chi2_dof, fits}], message}  # experiment/gross.py
     lack_of_fit: identify.lack_of_fit dict                       # measured-data fits (simulate, process)
     intrinsics_sensitivity: {...}                                # process, simulate (experiment/camera_step.py)
     source: {scene: {name, path, robot_kind}} or {folder: ...}
@@ -94,7 +95,7 @@ def result_is_finite(result) -> bool:
 
 
 def verdict(result, measurements: dict | None = None, identified=None, warnings=(), adequacy: dict | None = None,
-            lack_of_fit: dict | None = None) -> dict:
+            lack_of_fit: dict | None = None, failure: dict | None = None) -> dict:
     """What to read first. status: "failed" (not converged or not finite: no calibrated model is written),
     "warning" (the chi-square model-adequacy test says the model does not explain the data: chi2/dof above
     its expected interval; the calibrated model is written, but it may be worse than the nominal one), else
@@ -103,24 +104,29 @@ def verdict(result, measurements: dict | None = None, identified=None, warnings=
     overestimated, not a failure) and the warning count. adequacy: ``identify.model_adequacy`` dict
     (default: ``identified.adequacy``). lack_of_fit: ``identify.lack_of_fit`` dict (default:
     ``identified.lack_of_fit``): a significant term (the residuals depend on a joint or on the image position)
-    also makes the status "warning", its message naming the term."""
+    also makes the status "warning", its message naming the term. failure: a gross input error found after the
+    fit (``experiment.gross.gross_failure``: {kind, message, ...}): status "failed", not usable (no model written)."""
     finite = result_is_finite(result)
     n_out = len(identified.rejected) if identified is not None else 0
     if adequacy is None and identified is not None:
         adequacy = identified.adequacy
     if lack_of_fit is None and identified is not None:
         lack_of_fit = getattr(identified, "lack_of_fit", None)
-    usable = bool(result.converged and finite)
+    usable = bool(result.converged and finite) and failure is None
     adq = (adequacy or {}).get("verdict")
     lof = bool((lack_of_fit or {}).get("significant"))
     status = "failed" if not usable else ("warning" if adq == "too large" or lof else "ok")
     why = ([misfit_message(adequacy)] if adq == "too large" else []) + ([lack_of_fit["message"]] if lof else [])
     message = getattr(result, "message", "") if not usable else "; ".join(why)
+    if failure is not None:
+        message = failure["message"]
     out = {"ok": status == "ok", "status": status, "usable": usable, "converged": bool(result.converged),
            "finite": finite, "n_rejected_poses": (measurements or {}).get("n_rejected", 0) + n_out,
            "n_outliers": n_out, "adequacy": adq, "lack_of_fit": None if lack_of_fit is None else lof,
            "message": message,
            "warnings": len(warnings) + len(result.warnings)}
+    if failure is not None:
+        out["failure"] = failure["kind"]
     if adq == "too small":
         lo, hi = adequacy.get("expected_chi2_dof") or (float("nan"), float("nan"))
         out["note"] = (f"chi2/dof {adequacy['chi2_dof']:.3g} below its expected {lo:.2f}-{hi:.2f} (two-sided p "
@@ -141,18 +147,22 @@ def misfit_message(adequacy: dict) -> str:
 def build_report(kind: str, *, source: dict, settings: dict, result, measurements: dict | None = None,
                  identifiability=None, parameters: list | None = None, accuracy: dict | None = None,
                  residuals: dict | None = None, warnings=(), extra: dict | None = None, timings: dict | None = None,
-                 seed: int | None = None, identified=None, motion: dict | None = None) -> dict:
+                 seed: int | None = None, identified=None, motion: dict | None = None,
+                 failure: dict | None = None) -> dict:
     """report.json content (see the module docstring) with its ``summary_text``. identifiability: an
     IdentifiabilityReport (or None); accuracy: {"before": Evaluation, "after": Evaluation}; identified:
     ``experiment.steps.Identified`` of a measured-data fit (outliers, adequacy, variance factor);
-    motion: the motion-consistency check (``experiment.checks``)."""
+    motion: the motion-consistency check (``experiment.checks``); failure: a gross input error
+    (``experiment.gross``), kept as ``failure`` and read by the verdict."""
     warnings = list(warnings)
     report = {
         "version": REPORT_VERSION,
         "kind": kind,
-        "verdict": verdict(result, measurements, identified, warnings),
+        "verdict": verdict(result, measurements, identified, warnings, failure=failure),
         "source": source,
     }
+    if failure is not None:
+        report["failure"] = failure
     if seed is not None:
         report["seed"] = int(seed)
     report["settings"] = settings
@@ -202,7 +212,8 @@ def verdict_line(v: dict) -> str:
     or 'verdict: NOT CONVERGED; ... -- why' (v: the report's ``verdict`` block)."""
     status = v.get("status", "ok" if v["ok"] else "failed")
     if status == "failed":
-        state = "NOT FINITE" if not v.get("finite", True) else "NOT CONVERGED"
+        state = (f"FAILED ({v['failure']})" if v.get("failure") else
+                 "NOT FINITE" if not v.get("finite", True) else "NOT CONVERGED")
     else:
         state = "WARNING: " + v["message"] if status == "warning" else "ok"
     adequacy = f"; model adequacy: {v['adequacy']}" if v.get("adequacy") else ""
@@ -384,6 +395,9 @@ def write_report(out_dir, report: dict, setup=None, result=None, problem=None, e
         files["model"] = "calibrated_model.yaml"
         write_calibrated_model(out / files["model"], setup, result.identified, result.std, result.free)
         files.update(setup.export_model_files(out, result.identified))
+    else:  # a calibrated model left by an earlier run into the same folder must not pass for this run's
+        for stale in out.glob("calibrated_model.*"):
+            stale.unlink()
     if plots and setup is not None:
         try:
             files.update(_write_plots(out, report, setup, result, problem, evaluations))

@@ -77,12 +77,9 @@ QUAT_TOL = 1e-3
 
 
 def _load(path: Path, what: str):
-    try:
-        return yaml.safe_load(path.read_text(encoding="utf-8-sig"))
-    except FileNotFoundError:
-        raise DataError(f"{path}: {what} not found") from None
-    except (OSError, yaml.YAMLError, UnicodeDecodeError) as exc:
-        raise DataError(f"{path}: cannot read {what} ({' '.join(str(exc).split())})") from None
+    from ..config import parse_yaml
+
+    return parse_yaml(path, DataError, what)
 
 
 def _num(d: dict, key: str, where: str) -> float:

@@ -67,13 +67,10 @@ _POSE_KEYS = ("rows", "cols", "data")
 
 def read_visp_pose_yaml(path) -> np.ndarray:
     """ViSP pose YAML (rows: 6, cols: 1, data: [tx, ty, tz (m), theta-u (rad)]) -> (4, 4) transform."""
-    import yaml
+    from ..config import parse_yaml
 
     path = Path(path)
-    try:
-        d = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except (OSError, yaml.YAMLError, UnicodeDecodeError) as exc:
-        raise DataError(f"{path}: cannot read ViSP pose YAML ({' '.join(str(exc).split())})") from None
+    d = parse_yaml(path, DataError, "ViSP pose YAML")
     if not isinstance(d, dict):
         raise DataError(f"{path}: expected a mapping with rows, cols, data, got {type(d).__name__}")
     from ..config import did_you_mean
@@ -153,7 +150,7 @@ def _collect(src: Path, allow_symlinks: bool):
     return intr, poses, images
 
 
-def _write_visp_recording(src, dst, intr, poses, images, mount: str, target: dict) -> Path:
+def _write_visp_recording(src, dst, intr, poses, images, mount: str, target: dict, notes=()) -> Path:
     """recording.yaml + poses.csv (flange poses) + images/<n>/00.<ext> of a ViSP folder."""
     import csv
     import io
@@ -173,6 +170,8 @@ def _write_visp_recording(src, dst, intr, poses, images, mount: str, target: dic
         "poses": "flange_pose",
         "frames_per_pose": 1,
     }
+    if notes:
+        doc["notes"] = list(notes)
     write_text_atomic(dst / "recording.yaml", yaml.safe_dump(doc, sort_keys=False))
     buf = io.StringIO()
     w = csv.writer(buf)
@@ -204,7 +203,9 @@ def import_visp_eye_to_hand(src, dst, tag_m: float | None = None, tag_id: int | 
     intr, poses, images = _collect(src, allow_symlinks)
     if tag_m is None:
         info = src / "apriltag-data.txt"
-        text = check_inside(info, src, allow_symlinks).read_text(errors="replace") if info.is_file() else ""
+        from ..config import read_text
+
+        text = read_text(check_inside(info, src, allow_symlinks), DataError) if info.is_file() else ""
         m = re.search(r"size:\s*([0-9.eE+-]+)\s*m", text)
         if not m:
             raise DataError(f"{src}: tag size unknown: give tag_m (no 'size: <x> m' in apriltag-data.txt); "
@@ -223,15 +224,29 @@ def import_visp_eye_to_hand(src, dst, tag_m: float | None = None, tag_id: int | 
     return _write_visp_recording(src, dst, intr, poses, images, "fixed", target)
 
 
+def transposed_note(first, corners, inner_cols: int, inner_rows: int) -> str:
+    """A warning when the detected rows of ``inner_cols`` corners (OpenCV order, (K, 1, 2) or (K, 2) px) run along
+    the image height: ViSP's ``-w`` counts the inner corners along the image width, so the size is likely
+    transposed (the board is found either way; only its frame's x axis differs). "" otherwise."""
+    c = np.asarray(corners, float).reshape(-1, 2)
+    row = c[inner_cols - 1] - c[0]
+    if inner_cols == inner_rows or abs(row[1]) <= abs(row[0]):
+        return ""
+    return (f"{first}: --chessboard {inner_cols}x{inner_rows}: the rows of {inner_cols} inner corners run along the image "
+            f"height; ViSP's -w x -h counts the corners along the image width first: {inner_rows}x{inner_cols}? "
+            "(the target frame's x axis follows the first number)")
+
+
 def import_visp_chessboard(src, dst, inner_cols: int, inner_rows: int, square_m: float,
-                           mount: str = "eye_in_hand", allow_symlinks: bool = False) -> Path:
+                           mount: str = "eye_in_hand", allow_symlinks: bool = False, notes: list | None = None) -> Path:
     """Convert a ViSP hand-eye folder of the chessboard tutorials (``camera.xml``, ``image-N.png``,
     ``pose_fPe_N.yaml`` / ``pose_rPe_N.yaml`` flange poses; ``tutorial-chessboard-pose -w W -h H
     --square_size S``) into a recorded folder with flange poses. inner_cols x inner_rows: ViSP's ``-w`` x
     ``-h``, the *inner* corners (OpenCV's pattern size; ViSP's default 9 x 6); the target written has
     ``rows``/``cols`` = number of squares = inner + 1. square_m: square side [m]. mount: "eye_in_hand"
     (ViSP's tutorial-hand-eye-calibration: camera on the flange, board fixed) or "fixed". The pattern
-    size is checked on the first image (the chessboard kind's detectors); DataError names the image."""
+    size is checked on the first image (the chessboard kind's detectors); DataError names the image. A size that
+    looks transposed (:func:`transposed_note`) is noted in recording.yaml ``notes`` and appended to ``notes``."""
     import cv2
 
     src, dst = Path(src), Path(dst)
@@ -251,11 +266,16 @@ def import_visp_chessboard(src, dst, inner_cols: int, inner_rows: int, square_m:
         from ..targets.kinds.chessboard import CLASSIC_FLAGS, SB_FLAGS  # the chessboard kind's detectors
 
         size = (int(inner_cols), int(inner_rows))
-        found = cv2.findChessboardCorners(img, size, flags=CLASSIC_FLAGS)[0] or \
-            cv2.findChessboardCornersSB(img, size, flags=SB_FLAGS)[0]
+        found, corners = cv2.findChessboardCorners(img, size, flags=CLASSIC_FLAGS)
+        if not found:
+            found, corners = cv2.findChessboardCornersSB(img, size, flags=SB_FLAGS)
         if not found:
             raise DataError(f"{first}: no chessboard of {inner_cols}x{inner_rows} inner corners found; check "
                             "--chessboard COLSxROWS (ViSP's -w x -h: inner corners, not squares)")
+        note = transposed_note(first, corners, int(inner_cols), int(inner_rows))
     target = {"kind": "chessboard", "rows": int(inner_rows) + 1, "cols": int(inner_cols) + 1,
               "square_m": float(square_m), "margin_m": float(square_m)}
-    return _write_visp_recording(src, dst, intr, poses, images, mount, target)
+    note = note if images else ""
+    if note and notes is not None:
+        notes.append(note)
+    return _write_visp_recording(src, dst, intr, poses, images, mount, target, [note] if note else [])

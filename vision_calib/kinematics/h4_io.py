@@ -54,17 +54,10 @@ def load_h4_robot(path, model: str | None = None) -> H4Robot:
     model: "12" or "31" (default: the file's ``model``); model 31 is built from the model-12
     nominal by :meth:`H4Robot.to_model31`. Free mask: variant D (model 12) or H (model 31),
     then the file's optional ``fixed`` list of names is applied."""
-    import yaml
+    from ..config import parse_yaml
 
     path = Path(path)
-    try:
-        doc = yaml.safe_load(path.read_text())
-    except OSError as e:
-        raise ConfigError(f"{path}: cannot read H4 robot file ({e})") from None
-    except yaml.YAMLError as e:
-        raise ConfigError(f"{path}: invalid YAML ({e})") from None
-    except UnicodeDecodeError:
-        raise ConfigError(f"{path}: not a UTF-8 text file") from None
+    doc = parse_yaml(path, ConfigError, "H4 robot file")
     if not isinstance(doc, dict) or doc.get("kind") != "h4":
         raise ConfigError(f"{path}: expected a mapping with 'kind: h4'")
     from ..config import Section, check_keys

@@ -316,7 +316,10 @@ def calibrate_intrinsics(detections, names, target, image_size=None,
                                   f"{det.image_size[1]} differs from {size[0]}x{size[1]}"))
             continue
         obj, img = _view_points(det, lookup, p3)
-        if len(obj) < config.min_corners:
+        copy = next((views[k].name for k, o, i in data if i.shape == img.shape and np.array_equal(i, img)), None)
+        if copy is not None:  # a copy of an earlier view adds no information and would shrink the std
+            views.append(ViewInfo(str(name), len(obj), reason=f"the same corners as view {copy} (a copy of that image)"))
+        elif len(obj) < config.min_corners:
             views.append(ViewInfo(str(name), len(obj), reason=f"too few corners: {len(obj)} < {config.min_corners}"))
         elif _spread(obj) < config.min_spread:
             views.append(ViewInfo(str(name), len(obj), reason="corners (nearly) collinear on the target"))

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..config import Section, load_yaml
+from ..config import Section, confine, load_yaml
 from ..errors import ConfigError
 
 RUN_FORMAT = "study-run-1"
@@ -126,6 +126,10 @@ def _scene_files(scene_path: Path) -> list[Path]:
         v = data.get(k)
         if isinstance(v, str):
             p = Path(v) if Path(v).is_absolute() else scene_path.parent / v
+            try:  # nothing outside the scene's folder (config.confine): load_scene names the key
+                confine(p, scene_path.parent, str(scene_path))
+            except ConfigError:
+                continue
             if p.is_file():
                 out.append(p)
     return out

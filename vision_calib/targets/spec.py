@@ -41,6 +41,9 @@ from .kinds import KINDS as _REGISTRY
 from .kinds import get_kind
 
 KINDS = tuple(_REGISTRY)  # names of the registered kinds (the registry: targets/kinds/__init__.py)
+#: upper bound of rows x cols (squares, tags or dots) of a board: a 50 MP image holds ~5e7 px, a feature needs
+#: ~10 x 10 px to be found; each dot of a circle grid is also a 128-vertex polygon (2 kB) when it is drawn
+MAX_FEATURES = 1_000_000
 MAX_TARGET_M = 10.0  # a larger board is a unit mistake (mm given as m), refused on load
 _COMMON = ("kind", "name", "rows", "cols", "margin_m")
 _LENGTHS = ("square_m", "marker_m", "tag_m", "spacing_m", "diameter_m", "origin_diameter_m", "margin_m")
@@ -103,6 +106,10 @@ class TargetSpec:
             raise ConfigError(f"{where}: key 'margin_m' must be >= 0 [m], got {self.margin_m}")
         if self.first_id < 0:
             raise ConfigError(f"{where}: key 'first_id' must be >= 0, got {self.first_id}")
+        if self.rows * self.cols > MAX_FEATURES:  # before any per-feature array (corner points, dot polygons)
+            raise ConfigError(f"{where}: keys 'rows' x 'cols' = {self.rows} x {self.cols} = {self.rows * self.cols:.4g} "
+                              f"features, more than {MAX_FEATURES:.0e} (no camera image resolves more on one board; "
+                              "the arrays for them would not fit in memory)")
         kind.validate(self, where)
         size = max(self.outline_m())
         if size > MAX_TARGET_M:

@@ -78,6 +78,7 @@ class AsymmetricCirclesKind(TargetKind):
 
     def black_polygons(self, spec):
         """Each dot as a regular N_VERTICES-gon of the circle's area (:func:`dot_ring`)."""
+        _check_polygon_memory(spec, self.n_corners(spec))
         _, p = self.corner_points(spec)
         return p[:, None, :2] + dot_ring(spec.diameter_m / 2)[None]
 
@@ -142,6 +143,14 @@ def blob_detector(img):
     p.filterByInertia = True
     p.minInertiaRatio = 0.05
     return cv2.SimpleBlobDetector_create(p)
+
+
+def _check_polygon_memory(spec, n_dots: int) -> None:
+    """ConfigError before drawing n_dots polygons would take more than half the available memory (the polygon
+    array, its pixel copy and the coverage pass: about 4 x n_dots x N_VERTICES x 2 float64)."""
+    from ..spec import check_memory
+
+    check_memory(4 * n_dots * N_VERTICES * 2 * 8, f"target {spec.name!r}: drawing {n_dots} dots")
 
 
 def dot_ring(radius: float) -> np.ndarray:
@@ -256,6 +265,7 @@ class ModifiedCircleGridKind(TargetKind):
         if not spec.diameter_m > 0:
             raise ConfigError(f"target {spec.name!r}: key 'diameter_m' is needed to draw a modified_circle_grid "
                               "(detection and pose measurement do without it)")
+        _check_polygon_memory(spec, self.n_corners(spec))
         _, p = self.corner_points(spec)
         return np.stack([p[k, :2] + dot_ring(r) for k, r in enumerate(self.radii(spec))])
 
