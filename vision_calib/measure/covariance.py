@@ -66,6 +66,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..camera import CameraIntrinsics
+from ..frames import transform_points
 from .pnp import project_pinhole, reprojection_jacobian
 
 
@@ -99,12 +100,34 @@ def _apriltag_terms(ids: np.ndarray, uv_px: np.ndarray, estimator: str = "edges"
 #: detector-bias columns of S (module docstring)
 DETECTOR_TERMS = {"apriltag": _apriltag_terms}
 
+#: share rho of the systematic corner variance sigma_s^2 that is locked to the pixel phase, per
+#: ``TargetKind.phase_model`` (module docstring; ``benchmarks/bench_measure.py --phase-terms``)
+PHASE_LOCKED_SHARE = {"subpix": 0.92}
 
-def _bias_model(target_kind):
+
+def phase_directions(uv_dist_px: np.ndarray, share: float) -> np.ndarray:
+    """(2K, 8) columns S0 of the pixel-phase-locked corner error per unit sigma_s (module docstring): b = sigma_s
+    (S0 xi + sqrt(1 - share) eta), xi (8,), eta (2K,) independent N(0, 1). uv_dist_px (K, 2): the corners in the
+    detector's (distorted) pixels. Columns: sqrt(share / 2) (cos 2 pi u, sin 2 pi u, cos 2 pi v, sin 2 pi v) on the
+    u rows, then the same on the v rows, so that Cov(b_u,k, b_u,l) = Cov(b_v,k, b_v,l) =
+    sigma_s^2 share (cos 2 pi du + cos 2 pi dv) / 2."""
+    ph = 2 * np.pi * np.asarray(uv_dist_px, float)
+    F = np.sqrt(share / 2) * np.column_stack([np.cos(ph[:, 0]), np.sin(ph[:, 0]), np.cos(ph[:, 1]), np.sin(ph[:, 1])])
+    S0 = np.zeros((2 * len(F), 8))
+    S0[0::2, :4] = F
+    S0[1::2, 4:] = F
+    return S0
+
+
+def _kind_attr(target_kind, attr):
     from ..targets.kinds import KINDS
 
     kind = KINDS.get(target_kind)
-    return None if kind is None else kind.bias_model
+    return None if kind is None else getattr(kind, attr, None)
+
+
+def _bias_model(target_kind):
+    return _kind_attr(target_kind, "bias_model")
 
 
 def corner_estimator(detections) -> str:
@@ -157,7 +180,7 @@ def field_directions(uv_px: np.ndarray) -> np.ndarray:
 def pose_covariance(T_cam_target: np.ndarray, p_target: np.ndarray, mean_uv_px: np.ndarray, n_obs: np.ndarray,
                     sigma_frame_px: float, intr: CameraIntrinsics,
                     field_std=None, target_kind: str | None = None, ids=None,
-                    estimator: str = "edges") -> PoseCovariance:
+                    estimator: str = "edges", phase_share: float | None = None) -> PoseCovariance:
     """Covariance of the pose measured from frame-averaged corners (see the module docstring).
 
     T_cam_target: (4, 4) the measured pose; p_target: (K, 3) m corner points; mean_uv_px: (K, 2)
@@ -166,7 +189,9 @@ def pose_covariance(T_cam_target: np.ndarray, p_target: np.ndarray, mean_uv_px: 
     systematic parts cannot be told apart and the whole residual variance is used as one sigma);
     field_std: (4,) stds of the smooth error field terms (None: :data:`LENS_FIELD_STD`); target_kind, ids
     (K,) corner ids: add the kind's detector-bias terms (:data:`DETECTOR_TERMS`) of the corner estimator
-    ("edges" | "opencv", :func:`corner_estimator`)."""
+    ("edges" | "opencv", :func:`corner_estimator`); phase_share: share of the systematic variance locked to the
+    pixel phase (:func:`phase_directions`; None: the kind's :data:`PHASE_LOCKED_SHARE`, 0 for other kinds;
+    used with >= 2 frames)."""
     p_target = np.asarray(p_target, dtype=float)
     n_obs = np.asarray(n_obs, dtype=float)
     J = reprojection_jacobian(T_cam_target, p_target, intr)
@@ -184,14 +209,24 @@ def pose_covariance(T_cam_target: np.ndarray, p_target: np.ndarray, mean_uv_px: 
         S = np.column_stack([S, DETECTOR_TERMS[model](np.asarray(ids, dtype=int), uv, estimator)])
     S_perp = S - J @ (Jp @ (J.T @ S))
     ss_field = float(np.sum(S_perp**2))  # expected share of the strain in r^T r
+    # systematic part per unit sigma_s^2: independent (nugget) + phase-locked columns S0 (module docstring)
+    if phase_share is None:
+        phase_share = PHASE_LOCKED_SHARE.get(_kind_attr(target_kind, "phase_model"), 0.0)
+    if not 0.0 <= phase_share <= 1.0:
+        raise ValueError(f"pose_covariance: phase_share must be in [0, 1], got {phase_share}")
+    nug, S0 = np.ones(J.shape[0]), np.zeros((J.shape[0], 0))
+    if phase_share > 0 and np.isfinite(sigma_frame_px):
+        S0 = phase_directions(intr.project(transform_points(T_cam_target, p_target)), phase_share)
+        nug = nug * (1.0 - phase_share)
+    unit = float(np.sum(nug * (1.0 - h)) + np.sum((S0 - J @ (Jp @ (J.T @ S0))) ** 2))  # E[r^T r] per sigma_s^2
     if np.isfinite(sigma_frame_px):
         d_rand = np.repeat(sigma_frame_px**2 / n_obs, 2)
-        sys2 = max((ss - ss_field - float(np.sum(d_rand * (1.0 - h)))) / dof, 0.0)
+        sys2 = max((ss - ss_field - float(np.sum(d_rand * (1.0 - h)))) / unit, 0.0)
     else:  # one frame: the residual carries both parts
         d_rand = np.full(J.shape[0], max(ss - ss_field, 0.0) / dof)
         sys2 = 0.0
     cov_random = _sandwich(J, d_rand)
-    cov = _sandwich(J, d_rand + sys2, S)
+    cov = _sandwich(J, d_rand + sys2 * nug, np.column_stack([S, np.sqrt(sys2) * S0]))
     return PoseCovariance(cov, cov_random, float(sigma_frame_px), float(np.sqrt(sys2)), int(dof),
                           float(np.sqrt(ss / len(r))))
 
