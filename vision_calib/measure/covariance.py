@@ -11,8 +11,9 @@ Model (per corner k, undistorted pixels, after averaging its n_k frames):
 - b_k, the *systematic* part: the error of the detector (and of the rendering/resampling for
   simulated images) on *this* view of the corner: the same in every frame of the pose, so it does
   not average out. It changes from corner to corner with the local geometry (sub-pixel phase,
-  orientation and foreshortening of the edges around the corner), so it is modelled as independent
-  between corners with one variance sigma_s^2 per pose.
+  orientation and foreshortening of the edges around the corner), so it is modelled with one variance
+  sigma_s^2 per pose, independent between corners (the share locked to the pixel phase, below, is
+  optional).
 
 Estimation of sigma_s, per pose: the PnP fit on the frame-averaged corners leaves the residual
 r = (I - H)(b + e), H = J (J^T J)^-1 J^T the hat matrix of the 6 pose parameters (J: reprojection
@@ -25,6 +26,33 @@ The part of b that a rigid pose can explain (J delta) is invisible in r; for ind
 accounted for by propagation: the pose error of the (unweighted) PnP is delta = (J^T J)^-1 J^T (b + e),
 
     Cov(delta) = (J^T J)^-1 J^T D J (J^T J)^-1      [m, rad; frames.pose_error convention].
+
+Pixel-phase-locked corner error (ChArUco corners, cv2.cornerSubPix; ``TargetKind.phase_model``). The
+systematic error of a corner is nearly a periodic function of its sub-pixel position in the detector's
+(distorted) pixels: on noise-free renders of the UR5e and RX-90 scenes (1500 poses each) the errors of two
+corners of a pose correlate +0.91 when their separation is within 0.1 px of an integer in u and v, and -0.81
+near a half-pixel one. A pose whose corners fall on similar phases (square size near a whole number of pixels
+along an axis) shares its corner error between corners, which moves the pose and never shows in r: the
+independent model made such poses optimistic (mean chi2/6 of the noise-free pose error 1.10, 99 % quantile 3.89
+over the UR5e poses; chi2_6 / 6: 1, 2.80). With the board's sub-pixel position random, first harmonics:
+
+    Cov(b_u,k, b_u,l) = Cov(b_v,k, b_v,l) = sigma_s^2 [rho (cos 2 pi du + cos 2 pi dv) / 2 + (1 - rho) [k = l]]
+
+(du, dv: the corners' separation in px), i.e. 8 random amplitudes (cos and sin of 2 pi u and of 2 pi v for
+each coordinate, :func:`phase_directions`) entering as columns sigma_s S0, and sigma_s^2 estimated with
+E[r^T r] = sum_i (sigma_f^2 / n_i)(1 - H_ii) + sigma_s^2 (||(I - H) S0||_F^2 + (1 - rho)(2K - 6)).
+rho (:data:`PHASE_LOCKED_SHARE`, ``benchmarks/bench_measure.py --phase-terms``): fitting a cos 2 pi du +
+b cos 2 pi dv to the pairs per 3-degree band of the board's edge angle to the pixel axes gives a + b = 0.88-0.98
+(3000 random views, blur 0.6 px; 0.82-0.96 at 0.3 px, 0.83-0.94 at 1.2 px). The split between the two terms
+depends on the edge angle and the blur (a = 0.97 at 0-3 deg and 0.29-0.31 at 9-21 deg with blur 0.6 px, 0.01-0.13
+at 6-15 deg with 1.2 px), hence the even split. Same poses: mean chi2/6 1.03, 99 % quantile 2.38 (UR5e), 1.00,
+2.27 (RX-90; independent: 1.03, 3.57); a split per edge angle measured at the scenes' blur does little better
+(1.00 / 0.97), one measured at another blur (1.2 px) worse (1.08 / 1.04). NOT the default (``phase_share`` 0):
+on the H4 demo's views (board exactly fronto-parallel, rolls -18 / 2 / 22 deg, squares of ~33.0 px at 0.755 m,
+so rows and columns share their phases) the model is optimistic, mean chi2/6 0.84 -> 1.78 (99 % quantile
+6.1 -> 17; 1215 poses), and a direction per pose for each harmonic (the data show rank-one terms at a signed
+angle) still gives 1.26 with the best direction: the coherent lattice also aliases what the first harmonics
+leave. Opt in with ``MeasureConfig(phase_share=None)`` (the kind's measured share).
 
 A *correlated* corner error (the same shift or scale on all corners, e.g. a depth bias) does not
 show in r: a rigid pose absorbs it. Measured against the renderer's truth (:func:`corner_error_split`,
@@ -180,7 +208,7 @@ def field_directions(uv_px: np.ndarray) -> np.ndarray:
 def pose_covariance(T_cam_target: np.ndarray, p_target: np.ndarray, mean_uv_px: np.ndarray, n_obs: np.ndarray,
                     sigma_frame_px: float, intr: CameraIntrinsics,
                     field_std=None, target_kind: str | None = None, ids=None,
-                    estimator: str = "edges", phase_share: float | None = None) -> PoseCovariance:
+                    estimator: str = "edges", phase_share: float | None = 0.0) -> PoseCovariance:
     """Covariance of the pose measured from frame-averaged corners (see the module docstring).
 
     T_cam_target: (4, 4) the measured pose; p_target: (K, 3) m corner points; mean_uv_px: (K, 2)
@@ -190,8 +218,8 @@ def pose_covariance(T_cam_target: np.ndarray, p_target: np.ndarray, mean_uv_px: 
     field_std: (4,) stds of the smooth error field terms (None: :data:`LENS_FIELD_STD`); target_kind, ids
     (K,) corner ids: add the kind's detector-bias terms (:data:`DETECTOR_TERMS`) of the corner estimator
     ("edges" | "opencv", :func:`corner_estimator`); phase_share: share of the systematic variance locked to the
-    pixel phase (:func:`phase_directions`; None: the kind's :data:`PHASE_LOCKED_SHARE`, 0 for other kinds;
-    used with >= 2 frames)."""
+    pixel phase (:func:`phase_directions`; 0: independent corners, the default; None: the kind's
+    :data:`PHASE_LOCKED_SHARE`, 0 for kinds without one; used with >= 2 frames)."""
     p_target = np.asarray(p_target, dtype=float)
     n_obs = np.asarray(n_obs, dtype=float)
     J = reprojection_jacobian(T_cam_target, p_target, intr)

@@ -36,8 +36,9 @@ class MeasureConfig:
     all frames' corners, px) exceeds it. pnp_method: "ippe" | "sqpnp". lens_field_std: (4,) stds of
     a smooth per-pose corner error field (a lens-model residual) in the covariance (None:
     ``covariance.LENS_FIELD_STD``, zeros: none measured in simulation). phase_share: share of the systematic
-    corner variance locked to the pixel phase (None: the target kind's ``covariance.PHASE_LOCKED_SHARE``, 0.92
-    for ChArUco's cornerSubPix corners, 0 for the other kinds; 0: independent corner errors).
+    corner variance locked to the pixel phase (0, the default: independent corner errors; None: the target
+    kind's ``covariance.PHASE_LOCKED_SHARE``, 0.92 for ChArUco's cornerSubPix corners; the module docstring of
+    measure/covariance.py says where it helps and where it fails).
     min_view_corners, min_area_fraction, corner_noise_px: the per-view rule of
     :mod:`vision_calib.measure.view_checks` (>= 6 corners, or all of a smaller target; corner hull >= 10 %
     of the board's; homography consistency within multiples of the corner noise)."""
@@ -47,7 +48,7 @@ class MeasureConfig:
     max_rms_px: float = 1.5
     pnp_method: str = "ippe"
     lens_field_std: tuple | None = None
-    phase_share: float | None = None
+    phase_share: float | None = 0.0
     min_view_corners: int = 6
     min_area_fraction: float = 0.1
     corner_noise_px: float = 0.3
