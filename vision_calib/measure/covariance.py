@@ -45,9 +45,10 @@ rho (:data:`PHASE_LOCKED_SHARE`, ``benchmarks/bench_measure.py --phase-terms``):
 b cos 2 pi dv to the pairs per 3-degree band of the board's edge angle to the pixel axes gives a + b = 0.88-0.97
 (3000 random views, blur 0.6 px; 0.82-0.96 at 0.3 px, 0.83-0.94 at 1.2 px, 900 views each). The split between
 the two terms depends on the edge angle and the blur (a = 0.97 at 0-3 deg and 0.29-0.31 at 9-21 deg with blur
-0.6 px, 0.01-0.13 at 6-15 deg with 1.2 px), hence the even split. Same poses: mean chi2/6 1.03, 99 % quantile 2.38 (UR5e), 1.00,
-2.27 (RX-90; independent: 1.03, 3.57); a split per edge angle measured at the scenes' blur does little better
-(1.00 / 0.97), one measured at another blur (1.2 px) worse (1.08 / 1.04). NOT the default (``phase_share`` 0):
+0.6 px, 0.01-0.13 at 6-15 deg with 1.2 px), hence the even split. Same poses: mean chi2/6 1.03, 99 % quantile
+2.38 (UR5e), 1.00, 2.27 (RX-90; independent: 1.03, 3.57); a split per edge angle measured at the scenes' blur
+does little better (1.00 / 0.97), one measured at another blur (1.2 px) worse (1.08 / 1.04). NOT the default
+(``phase_share`` 0):
 on the H4 demo's views (board exactly fronto-parallel, rolls -18 / 2 / 22 deg, squares of ~33.0 px at 0.755 m,
 so rows and columns share their phases) the model is optimistic, mean chi2/6 0.84 -> 1.78 (99 % quantile
 6.1 -> 17; 1215 poses), and a direction per pose for each harmonic (the data show rank-one terms at a signed
