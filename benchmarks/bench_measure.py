@@ -4,7 +4,7 @@
     .venv/bin/python benchmarks/bench_measure.py [--poses 50] [--sweep-poses 12] [--speed-poses 12]
                                                  [--workers 2] [--seed 0] [--skip accuracy,scenes,sweep,speed]
                                                  [--scene-poses 20] [--scene-seeds 1,2,3,4,5]
-                                                 [--detector-terms N]
+                                                 [--detector-terms N] [--phase-terms N]
 
 Default setting: 1024 x 768, fx = fy = 1100 px, mild Brown–Conrady distortion, ChArUco 7 x 10
 (30 mm squares, DICT_5X5_100) at 0.4-0.8 m, tilt up to 35 deg, SensorEffects() defaults (blur
@@ -108,6 +108,69 @@ def run_detector_terms(n_poses, seed):
         print(f"  {name:<17} mean " + " ".join(f"{v:+.4f}" for v in coef.mean(0)))
         print(f"  {'':<17} RMS  " + " ".join(f"{v:.4f}" for v in np.sqrt((coef**2).mean(0))))
         print(f"  {'':<17} leak " + " ".join(f"{v:.4f}" for v in np.sqrt(leak.mean(0))))
+
+
+def phase_split(e_px, uv_px):
+    """Least-squares (a, b) of the pixel-phase-locked corner error (measure/covariance.py) from the pairs of one or
+    more poses: e_px, uv_px lists of (K, 2) true corner errors and positions (distorted px); each pose's products
+    e_k e_l^T (k != l) over its mean square error fit uu = a c(du) + b c(dv), vv = b c(du) + a c(dv) with
+    c(x) = cos(2 pi x)."""
+    B, Y = [], []
+    for e, uv in zip(e_px, uv_px):
+        s2 = float(np.mean(e**2))
+        ph = 2 * np.pi * (uv[:, None, :] - uv[None, :, :])
+        m = ~np.eye(len(e), dtype=bool)
+        cu, cv = np.cos(ph[..., 0])[m], np.cos(ph[..., 1])[m]
+        B += [np.column_stack([cu, cv]), np.column_stack([cv, cu])]
+        Y += [(e[:, None, 0] * e[None, :, 0])[m] / s2, (e[:, None, 1] * e[None, :, 1])[m] / s2]
+    return np.linalg.lstsq(np.concatenate(B), np.concatenate(Y), rcond=None)[0]
+
+
+def run_phase_terms(n_poses, seed, step_deg=3.0, blur_px=None):
+    """Pixel-phase-locked corner error of the ChArUco corners (cv2.cornerSubPix; measure/covariance.py
+    PHASE_LOCKED_SHARE): random views with the board rolled uniformly about its normal, noise-free frames; per
+    band of the board's edge angle to the pixel axes (folded to 0-45 deg) the split (a, b) of the error's
+    covariance between corners into cos 2 pi du / cos 2 pi dv terms (:func:`phase_split`) and their sum, the
+    phase-locked share. blur_px: the sensor's Gaussian blur (None: SensorEffects' default)."""
+    from vision_calib.render import TargetRenderer
+
+    clean = SensorEffects(full_well_e=0.0, read_noise_grey=0.0)
+    if blur_px is not None:
+        clean = SensorEffects(full_well_e=0.0, read_noise_grey=0.0, blur_sigma_px=blur_px)
+    target = CHARUCO
+    lut = dict(zip(*[list(a) for a in target.corner_points()]))
+    x0, y0, x1, y1 = target.texture_extent_m()
+    c = np.array([(x0 + x1) / 2, (y0 + y1) / 2, 0.0])
+    rng = np.random.default_rng(seed)
+    bands = np.arange(0.0, 45.0 + 1e-9, step_deg)
+    E, U, TH = [], [], []
+    with TargetRenderer(target, INTR, 2, distort=True) as r:  # as the image chain renders
+        for _ in range(n_poses):
+            roll = frames.make_T(frames.T_from_xyz_rotvec(np.r_[0, 0, 0, 0, 0, rng.uniform(0, 2 * np.pi)])[:3, :3],
+                                 np.zeros(3))
+            T = random_view_pose(rng, target, INTR, dist_range=(0.6, 0.8), tilt_deg=25.0, min_visible=0.7)
+            T = T @ frames.make_T(np.eye(3), c) @ roll @ frames.make_T(np.eye(3), -c)
+            d = detect_batch(apply_effects(r.render(T), effects_for_render(r, clean), 1, 0, INTR), target, INTR)[0]
+            if not d.valid or len(d.ids) < 12:
+                continue
+            uv = INTR.project(frames.transform_points(T, np.array([lut[int(i)] for i in d.ids])))
+            E.append(d.uv_px - uv)
+            U.append(uv)
+            R = T[:3, :3]
+            TH.append(abs((np.degrees(np.arctan2(R[1, 0], R[0, 0])) + 45) % 90 - 45))
+    TH = np.array(TH)
+    section(f"phase-locked ChArUco corner error: {len(TH)} views (of {n_poses}), noise-free, blur "
+            f"{clean.blur_sigma_px} px; a, b per band of the board's edge angle (measure/covariance.py)")
+    shares = []
+    for lo, hi in zip(bands[:-1], bands[1:]):
+        k = np.flatnonzero((TH >= lo) & (TH < hi))
+        if len(k) >= 5:
+            a, b = phase_split([E[i] for i in k], [U[i] for i in k])
+            shares.append(a + b)
+            print(f"  edge angle {lo:4.1f}-{hi:4.1f} deg ({len(k):3d} views): a {a:.2f}, b {b:.2f}, "
+                  f"phase-locked share a + b {a + b:.2f}")
+    print(f"  phase-locked share over the bands: mean {np.mean(shares):.2f}, range {np.min(shares):.2f}-"
+          f"{np.max(shares):.2f} (covariance.PHASE_LOCKED_SHARE)")
 
 
 def run_scene_z(scenes, n_poses, seeds):
@@ -277,12 +340,19 @@ def main(argv=None):
     ap.add_argument("--skip", default="", help="comma-separated: accuracy,scenes,sweep,speed")
     ap.add_argument("--detector-terms", type=int, default=0, metavar="N",
                     help="only: fit the per-pose common corner error terms on N poses (measure/covariance.py)")
+    ap.add_argument("--phase-terms", type=int, default=0, metavar="N",
+                    help="only: measure the pixel-phase-locked ChArUco corner error on N views (measure/covariance.py)")
+    ap.add_argument("--blur", type=float, default=None,
+                    help="--phase-terms: sensor blur [px] (default: SensorEffects')")
     ap.add_argument("--scene-poses", type=int, default=20)
     ap.add_argument("--scene-seeds", default="1,2,3,4,5")
     a = ap.parse_args(argv)
     skip = set(filter(None, a.skip.split(",")))
     if a.detector_terms:
         run_detector_terms(a.detector_terms, a.seed)
+        return
+    if a.phase_terms:
+        run_phase_terms(a.phase_terms, a.seed, blur_px=a.blur)
         return
     if "speed" not in skip:
         run_speed(a.speed_poses, a.workers, a.seed)

@@ -158,7 +158,9 @@ def main(argv=None):
         flag = "" if 0.7 <= r <= 1.5 and m <= 4 else "   <- outside RMS 0.7-1.5 / max 4"
         print(f"  {n:<24} {r:6.2f} {m:8.2f} {mu:+7.2f}{flag}")
     Z = z_matrix(res)[1]
-    print(f"over {len(args.seeds)} seeds: z RMS {np.sqrt(np.nanmean(Z**2)):.2f}, max |z| {np.nanmax(np.abs(Z)):.2f}; "
+    zf = Z[np.isfinite(Z)]
+    print(f"over {len(args.seeds)} seeds: z RMS {np.sqrt(np.mean(zf**2)):.2f}, max |z| {np.max(np.abs(zf)):.2f}, "
+          f"|z| > 2: {np.mean(np.abs(zf) > 2):.1%} (4.6 % for N(0, 1)); "
           f"per-parameter z RMS from {rms.min():.2f} ({names[int(np.argmin(rms))]}) to {rms.max():.2f} "
           f"({names[int(np.argmax(rms))]})")
 

@@ -11,8 +11,9 @@ Model (per corner k, undistorted pixels, after averaging its n_k frames):
 - b_k, the *systematic* part: the error of the detector (and of the rendering/resampling for
   simulated images) on *this* view of the corner: the same in every frame of the pose, so it does
   not average out. It changes from corner to corner with the local geometry (sub-pixel phase,
-  orientation and foreshortening of the edges around the corner), so it is modelled as independent
-  between corners with one variance sigma_s^2 per pose.
+  orientation and foreshortening of the edges around the corner), so it is modelled with one variance
+  sigma_s^2 per pose, independent between corners (the share locked to the pixel phase, below, is
+  optional).
 
 Estimation of sigma_s, per pose: the PnP fit on the frame-averaged corners leaves the residual
 r = (I - H)(b + e), H = J (J^T J)^-1 J^T the hat matrix of the 6 pose parameters (J: reprojection
@@ -25,6 +26,34 @@ The part of b that a rigid pose can explain (J delta) is invisible in r; for ind
 accounted for by propagation: the pose error of the (unweighted) PnP is delta = (J^T J)^-1 J^T (b + e),
 
     Cov(delta) = (J^T J)^-1 J^T D J (J^T J)^-1      [m, rad; frames.pose_error convention].
+
+Pixel-phase-locked corner error (ChArUco corners, cv2.cornerSubPix; ``TargetKind.phase_model``). The
+systematic error of a corner is nearly a periodic function of its sub-pixel position in the detector's
+(distorted) pixels: on noise-free renders of the UR5e and RX-90 scenes (1500 poses each) the errors of two
+corners of a pose correlate +0.91 when their separation is within 0.1 px of an integer in u and v, and -0.81
+near a half-pixel one. A pose whose corners fall on similar phases (square size near a whole number of pixels
+along an axis) shares its corner error between corners, which moves the pose and never shows in r: the
+independent model made such poses optimistic (mean chi2/6 of the noise-free pose error 1.10, 99 % quantile 3.89
+over the UR5e poses; chi2_6 / 6: 1, 2.80). With the board's sub-pixel position random, first harmonics:
+
+    Cov(b_u,k, b_u,l) = Cov(b_v,k, b_v,l) = sigma_s^2 [rho (cos 2 pi du + cos 2 pi dv) / 2 + (1 - rho) [k = l]]
+
+(du, dv: the corners' separation in px), i.e. 8 random amplitudes (cos and sin of 2 pi u and of 2 pi v for
+each coordinate, :func:`phase_directions`) entering as columns sigma_s S0, and sigma_s^2 estimated with
+E[r^T r] = sum_i (sigma_f^2 / n_i)(1 - H_ii) + sigma_s^2 (||(I - H) S0||_F^2 + (1 - rho)(2K - 6)).
+rho (:data:`PHASE_LOCKED_SHARE`, ``benchmarks/bench_measure.py --phase-terms``): fitting a cos 2 pi du +
+b cos 2 pi dv to the pairs per 3-degree band of the board's edge angle to the pixel axes gives a + b = 0.88-0.97
+(3000 random views, blur 0.6 px; 0.82-0.96 at 0.3 px, 0.83-0.94 at 1.2 px, 900 views each). The split between
+the two terms depends on the edge angle and the blur (a = 0.97 at 0-3 deg and 0.29-0.31 at 9-21 deg with blur
+0.6 px, 0.01-0.13 at 6-15 deg with 1.2 px), hence the even split. Same poses: mean chi2/6 1.03, 99 % quantile
+2.38 (UR5e), 1.00, 2.27 (RX-90; independent: 1.03, 3.57); a split per edge angle measured at the scenes' blur
+does little better (1.00 / 0.97), one measured at another blur (1.2 px) worse (1.08 / 1.04). NOT the default
+(``phase_share`` 0):
+on the H4 demo's views (board exactly fronto-parallel, rolls -18 / 2 / 22 deg, squares of ~33.0 px at 0.755 m,
+so rows and columns share their phases) the model is optimistic, mean chi2/6 0.84 -> 1.78 (99 % quantile
+6.1 -> 17; 1215 poses), and a direction per pose for each harmonic (the data show rank-one terms at a signed
+angle) still gives 1.26 with the best direction: the coherent lattice also aliases what the first harmonics
+leave. Opt in with ``MeasureConfig(phase_share=None)`` (the kind's measured share).
 
 A *correlated* corner error (the same shift or scale on all corners, e.g. a depth bias) does not
 show in r: a rigid pose absorbs it. Measured against the renderer's truth (:func:`corner_error_split`,
@@ -66,6 +95,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..camera import CameraIntrinsics
+from ..frames import transform_points
 from .pnp import project_pinhole, reprojection_jacobian
 
 
@@ -99,12 +129,34 @@ def _apriltag_terms(ids: np.ndarray, uv_px: np.ndarray, estimator: str = "edges"
 #: detector-bias columns of S (module docstring)
 DETECTOR_TERMS = {"apriltag": _apriltag_terms}
 
+#: share rho of the systematic corner variance sigma_s^2 that is locked to the pixel phase, per
+#: ``TargetKind.phase_model`` (module docstring; ``benchmarks/bench_measure.py --phase-terms``)
+PHASE_LOCKED_SHARE = {"subpix": 0.92}
 
-def _bias_model(target_kind):
+
+def phase_directions(uv_dist_px: np.ndarray, share: float) -> np.ndarray:
+    """(2K, 8) columns S0 of the pixel-phase-locked corner error per unit sigma_s (module docstring): b = sigma_s
+    (S0 xi + sqrt(1 - share) eta), xi (8,), eta (2K,) independent N(0, 1). uv_dist_px (K, 2): the corners in the
+    detector's (distorted) pixels. Columns: sqrt(share / 2) (cos 2 pi u, sin 2 pi u, cos 2 pi v, sin 2 pi v) on the
+    u rows, then the same on the v rows, so that Cov(b_u,k, b_u,l) = Cov(b_v,k, b_v,l) =
+    sigma_s^2 share (cos 2 pi du + cos 2 pi dv) / 2."""
+    ph = 2 * np.pi * np.asarray(uv_dist_px, float)
+    F = np.sqrt(share / 2) * np.column_stack([np.cos(ph[:, 0]), np.sin(ph[:, 0]), np.cos(ph[:, 1]), np.sin(ph[:, 1])])
+    S0 = np.zeros((2 * len(F), 8))
+    S0[0::2, :4] = F
+    S0[1::2, 4:] = F
+    return S0
+
+
+def _kind_attr(target_kind, attr):
     from ..targets.kinds import KINDS
 
     kind = KINDS.get(target_kind)
-    return None if kind is None else kind.bias_model
+    return None if kind is None else getattr(kind, attr, None)
+
+
+def _bias_model(target_kind):
+    return _kind_attr(target_kind, "bias_model")
 
 
 def corner_estimator(detections) -> str:
@@ -157,7 +209,7 @@ def field_directions(uv_px: np.ndarray) -> np.ndarray:
 def pose_covariance(T_cam_target: np.ndarray, p_target: np.ndarray, mean_uv_px: np.ndarray, n_obs: np.ndarray,
                     sigma_frame_px: float, intr: CameraIntrinsics,
                     field_std=None, target_kind: str | None = None, ids=None,
-                    estimator: str = "edges") -> PoseCovariance:
+                    estimator: str = "edges", phase_share: float | None = 0.0) -> PoseCovariance:
     """Covariance of the pose measured from frame-averaged corners (see the module docstring).
 
     T_cam_target: (4, 4) the measured pose; p_target: (K, 3) m corner points; mean_uv_px: (K, 2)
@@ -166,7 +218,9 @@ def pose_covariance(T_cam_target: np.ndarray, p_target: np.ndarray, mean_uv_px: 
     systematic parts cannot be told apart and the whole residual variance is used as one sigma);
     field_std: (4,) stds of the smooth error field terms (None: :data:`LENS_FIELD_STD`); target_kind, ids
     (K,) corner ids: add the kind's detector-bias terms (:data:`DETECTOR_TERMS`) of the corner estimator
-    ("edges" | "opencv", :func:`corner_estimator`)."""
+    ("edges" | "opencv", :func:`corner_estimator`); phase_share: share of the systematic variance locked to the
+    pixel phase (:func:`phase_directions`; 0: independent corners, the default; None: the kind's
+    :data:`PHASE_LOCKED_SHARE`, 0 for kinds without one; used with >= 2 frames)."""
     p_target = np.asarray(p_target, dtype=float)
     n_obs = np.asarray(n_obs, dtype=float)
     J = reprojection_jacobian(T_cam_target, p_target, intr)
@@ -184,14 +238,24 @@ def pose_covariance(T_cam_target: np.ndarray, p_target: np.ndarray, mean_uv_px: 
         S = np.column_stack([S, DETECTOR_TERMS[model](np.asarray(ids, dtype=int), uv, estimator)])
     S_perp = S - J @ (Jp @ (J.T @ S))
     ss_field = float(np.sum(S_perp**2))  # expected share of the strain in r^T r
+    # systematic part per unit sigma_s^2: independent (nugget) + phase-locked columns S0 (module docstring)
+    if phase_share is None:
+        phase_share = PHASE_LOCKED_SHARE.get(_kind_attr(target_kind, "phase_model"), 0.0)
+    if not 0.0 <= phase_share <= 1.0:
+        raise ValueError(f"pose_covariance: phase_share must be in [0, 1], got {phase_share}")
+    nug, S0 = np.ones(J.shape[0]), np.zeros((J.shape[0], 0))
+    if phase_share > 0 and np.isfinite(sigma_frame_px):
+        S0 = phase_directions(intr.project(transform_points(T_cam_target, p_target)), phase_share)
+        nug = nug * (1.0 - phase_share)
+    unit = float(np.sum(nug * (1.0 - h)) + np.sum((S0 - J @ (Jp @ (J.T @ S0))) ** 2))  # E[r^T r] per sigma_s^2
     if np.isfinite(sigma_frame_px):
         d_rand = np.repeat(sigma_frame_px**2 / n_obs, 2)
-        sys2 = max((ss - ss_field - float(np.sum(d_rand * (1.0 - h)))) / dof, 0.0)
+        sys2 = max((ss - ss_field - float(np.sum(d_rand * (1.0 - h)))) / unit, 0.0)
     else:  # one frame: the residual carries both parts
         d_rand = np.full(J.shape[0], max(ss - ss_field, 0.0) / dof)
         sys2 = 0.0
     cov_random = _sandwich(J, d_rand)
-    cov = _sandwich(J, d_rand + sys2, S)
+    cov = _sandwich(J, d_rand + sys2 * nug, np.column_stack([S, np.sqrt(sys2) * S0]))
     return PoseCovariance(cov, cov_random, float(sigma_frame_px), float(np.sqrt(sys2)), int(dof),
                           float(np.sqrt(ss / len(r))))
 

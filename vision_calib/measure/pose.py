@@ -35,7 +35,10 @@ class MeasureConfig:
     for "poses", averaged for "corners"). max_rms_px: reject when the final reprojection RMS (over
     all frames' corners, px) exceeds it. pnp_method: "ippe" | "sqpnp". lens_field_std: (4,) stds of
     a smooth per-pose corner error field (a lens-model residual) in the covariance (None:
-    ``covariance.LENS_FIELD_STD``, zeros: none measured in simulation).
+    ``covariance.LENS_FIELD_STD``, zeros: none measured in simulation). phase_share: share of the systematic
+    corner variance locked to the pixel phase (0, the default: independent corner errors; None: the target
+    kind's ``covariance.PHASE_LOCKED_SHARE``, 0.92 for ChArUco's cornerSubPix corners; the module docstring of
+    measure/covariance.py says where it helps and where it fails).
     min_view_corners, min_area_fraction, corner_noise_px: the per-view rule of
     :mod:`vision_calib.measure.view_checks` (>= 6 corners, or all of a smaller target; corner hull >= 10 %
     of the board's; homography consistency within multiples of the corner noise)."""
@@ -45,6 +48,7 @@ class MeasureConfig:
     max_rms_px: float = 1.5
     pnp_method: str = "ippe"
     lens_field_std: tuple | None = None
+    phase_share: float | None = 0.0
     min_view_corners: int = 6
     min_area_fraction: float = 0.1
     corner_noise_px: float = 0.3
@@ -60,6 +64,8 @@ class MeasureConfig:
             raise ConfigError(f"MeasureConfig.min_area_fraction must be in [0, 1], got {self.min_area_fraction}")
         if not self.corner_noise_px > 0:
             raise ConfigError(f"MeasureConfig.corner_noise_px must be > 0, got {self.corner_noise_px}")
+        if self.phase_share is not None and not 0 <= self.phase_share <= 1:
+            raise ConfigError(f"MeasureConfig.phase_share must be in [0, 1] or None, got {self.phase_share}")
         if not self.max_rms_px > 0:
             raise ConfigError(f"MeasureConfig.max_rms_px must be > 0, got {self.max_rms_px}")
 
@@ -220,10 +226,10 @@ def measure_pose(detections: Sequence[Detection], target, intrinsics: CameraIntr
         sigma = sigma_scatter
     else:
         sigma = float(np.sqrt(np.sum(all_res**2) / max(n_res - 6, 1)))
-    used = cnt > 0  # random (frame scatter / n) + systematic per-corner + lens field: measure/covariance.py
+    used = cnt > 0  # random (frame scatter / n) + systematic per-corner (phase-locked) + lens field: covariance.py
     cov = pose_covariance(T, p_all[used], mean_uv[used], cnt[used], sigma if len(obs) >= 2 else float("nan"),
                           intrinsics, config.lens_field_std, getattr(target, "kind", None), all_ids[used],
-                          corner_estimator(detections)).cov
+                          corner_estimator(detections), config.phase_share).cov
     if not rms <= config.max_rms_px:
         return PoseMeasurement(pose_id, False, f"reprojection RMS {rms:.3f} px > {config.max_rms_px} px",
                                np.full((4, 4), np.nan), np.full((6, 6), np.nan), len(obs), len(all_ids), rms,

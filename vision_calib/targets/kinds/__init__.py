@@ -28,7 +28,8 @@ class TargetKind:
     - auto_refine: DetectConfig.refine "auto" -> this marker refinement (ArUco kinds);
     - auto_extra_subpix: whether DetectConfig.extra_subpix None (auto) runs the cornerSubPix pass;
     - info_model: image model of a corner's Fisher information in measure/covariance.py
-      ("saddle" | "tag_edge" | "circle"); bias_model: detector-bias columns there (None | "apriltag").
+      ("saddle" | "tag_edge" | "circle"); bias_model: detector-bias columns there (None | "apriltag");
+      phase_model: the pixel-phase-locked share of the systematic corner error there (None | "subpix").
     """
 
     name = ""
@@ -38,6 +39,7 @@ class TargetKind:
     auto_extra_subpix = False
     info_model = "saddle"
     bias_model = None
+    phase_model = None
 
     # ---------------------------------------------------------------- spec
     def validate(self, spec, where: str) -> None:

@@ -105,6 +105,7 @@ class CharucoKind(SquareCorners, _ArucoKind):
     required = ("dictionary", "square_m", "marker_m")
     auto_extra_subpix = True
     info_model = "saddle"
+    phase_model = "subpix"  # corners from cv2.cornerSubPix: pixel-phase-locked errors (measure/covariance.py)
 
     def n_markers(self, spec):
         return (spec.rows * spec.cols) // 2
