@@ -94,6 +94,10 @@ def result_is_finite(result) -> bool:
                 and np.isfinite(result.cost_final))
 
 
+#: more rejected poses (measurement failures, detection included, plus outliers) than this fraction: a "warning"
+MAX_REJECTED_FRACTION = 0.3
+
+
 def verdict(result, measurements: dict | None = None, identified=None, warnings=(), adequacy: dict | None = None,
             lack_of_fit: dict | None = None, failure: dict | None = None) -> dict:
     """What to read first. status: "failed" (not converged or not finite: no calibrated model is written),
@@ -115,8 +119,13 @@ def verdict(result, measurements: dict | None = None, identified=None, warnings=
     usable = bool(result.converged and finite) and failure is None
     adq = (adequacy or {}).get("verdict")
     lof = bool((lack_of_fit or {}).get("significant"))
-    status = "failed" if not usable else ("warning" if adq == "too large" or lof else "ok")
+    n_all = (measurements or {}).get("n_poses", 0)
+    n_rej = (measurements or {}).get("n_rejected", 0) + n_out
+    many = bool(n_all) and n_rej > MAX_REJECTED_FRACTION * n_all  # detection failures count as rejected views
+    status = "failed" if not usable else ("warning" if adq == "too large" or lof or many else "ok")
     why = ([misfit_message(adequacy)] if adq == "too large" else []) + ([lack_of_fit["message"]] if lof else [])
+    why += [f"{n_rej} of {n_all} poses rejected (more than {MAX_REJECTED_FRACTION:.0%}; measurement and outliers): "
+            "the result rests on the views that were easy to measure"] if many else []
     message = getattr(result, "message", "") if not usable else "; ".join(why)
     if failure is not None:
         message = failure["message"]

@@ -33,8 +33,9 @@ Mapping (ROS-I -> ours):
   dictionary (OpenCV's enum value) -> its ``cv2.aruco`` name, ``legacy_pattern: true`` (ROS-I builds
   against OpenCV < 4.6, whose ChArUco layout is the legacy one; it matters only for an even number of
   rows).
-- ``ModifiedCircleGridTargetFinder``: rows, cols (dots), spacing -> ``modified_circle_grid`` spacing_m (its
-  circle_detector_params are ignored: our blob detector and origin-dot test, targets/kinds/circles.py). ROS-I
+- ``ModifiedCircleGridTargetFinder``: rows, cols (dots), spacing -> ``modified_circle_grid`` spacing_m; its
+  ``circle_detector_params`` -> the target's ``blob_detector`` (:func:`blob_settings`), tried first on each image
+  before our own stages (targets/kinds/dot_grid.py); the origin dot is told by our dark-area test. ROS-I
   gives no dot diameter: detection does without, but the ellipse-centre correction is then off (the
   extension keys ``diameter_m``/``origin_diameter_m``, written by :func:`export_rosi`, restore it). Our target
   frame is not ROS-I's (``ModifiedCircleGridKind`` docstring: same point order, y flipped, origin shifted).
@@ -144,6 +145,8 @@ def _target(tf, where: str) -> dict:
             extra = {k: _num(tf, k, where) for k in ("diameter_m", "origin_diameter_m") if k in tf}
         except DataError as exc:
             raise ConfigError(str(exc)) from None
+        if "circle_detector_params" in tf:
+            extra["blob_detector"] = blob_settings(tf["circle_detector_params"], f"{where}: circle_detector_params")
         return {"kind": "modified_circle_grid", "name": "rosi_modified_circle_grid", "rows": ints["rows"],
                 "cols": ints["cols"], "spacing_m": s, "margin_m": s / 2, **extra}
     try:
@@ -153,6 +156,42 @@ def _target(tf, where: str) -> dict:
     return {"kind": "charuco", "name": "rosi_charuco", "rows": ints["rows"], "cols": ints["cols"],
             "dictionary": _dictionary_name(tf.get("dictionary"), where), "square_m": sq, "marker_m": mk,
             "legacy_pattern": bool(tf.get("legacy_pattern", True)), "margin_m": sq / 2}
+
+
+#: ROS-I circle_detector_params keys with an OpenCV SimpleBlobDetector_Params field of the same meaning
+ROSI_BLOB_SAME = ("minThreshold", "maxThreshold", "minRepeatability", "filterByColor", "filterByArea", "minArea",
+                  "maxArea", "filterByCircularity", "minCircularity", "maxCircularity", "filterByInertia",
+                  "minInertiaRatio", "maxInertiaRatio", "filterByConvexity", "minConvexity", "maxConvexity",
+                  "minDistBetweenBlobs")
+#: ROS-I keys of its own circle detector with no OpenCV blob-detector counterpart (ignored)
+ROSI_BLOB_OWN = ("circleInclusionRadius", "maxRadiusDiff", "maxAverageEllipseError")
+
+
+def blob_settings(params, where: str) -> dict:
+    """ROS-I ``circle_detector_params`` -> OpenCV SimpleBlobDetector parameters (the target's ``blob_detector``):
+    same-named keys copied, ``nThresholds`` -> ``thresholdStep`` = (maxThreshold - minThreshold) / nThresholds,
+    ``circleColor`` -> ``blobColor``; ROS-I's own keys (ROSI_BLOB_OWN) ignored; another key is a ConfigError."""
+    if not isinstance(params, dict):
+        raise ConfigError(f"{where}: expected a mapping of circle detector parameters, got {params!r}")
+    out = {}
+    for k, v in params.items():
+        if k in ROSI_BLOB_SAME:
+            out[k] = v
+        elif k == "circleColor":
+            out["blobColor"] = v
+        elif k not in ROSI_BLOB_OWN + ("nThresholds",):
+            raise ConfigError(f"{where}: {k}: not a ROS-I circle detector parameter (known: "
+                              f"{', '.join(ROSI_BLOB_SAME + ROSI_BLOB_OWN + ('nThresholds', 'circleColor'))})")
+    if "nThresholds" in params:
+        n = params["nThresholds"]
+        lo, hi = out.get("minThreshold", 50.0), out.get("maxThreshold", 220.0)
+        if isinstance(n, bool) or not isinstance(n, (int, float)) or not n >= 1:
+            raise ConfigError(f"{where}: nThresholds: expected a number >= 1, got {n!r}")
+        out["thresholdStep"] = max((hi - lo) / n, 1.0)
+    for k in ("minRepeatability", "blobColor"):
+        if isinstance(out.get(k), float) and out[k] == int(out[k]):
+            out[k] = int(out[k])
+    return out
 
 
 def _mount(doc: dict, where: str) -> str:
@@ -305,6 +344,15 @@ def export_rosi(rec_folder, dst) -> Path:
         finder = {"type": "ModifiedCircleGridTargetFinder", "rows": int(t.rows), "cols": int(t.cols),
                   "spacing": float(t.spacing_m)}
         finder |= {k: float(getattr(t, k)) for k in ("diameter_m", "origin_diameter_m") if getattr(t, k) > 0}
+        if t.blob_detector:  # back to ROS-I's names (blob_settings' inverse)
+            b = dict(t.blob_detector)
+            cdp = {k: v for k, v in b.items() if k in ROSI_BLOB_SAME}
+            if "blobColor" in b:
+                cdp["circleColor"] = b["blobColor"]
+            if "thresholdStep" in b:
+                cdp["nThresholds"] = max(1, round((b.get("maxThreshold", 220.0) - b.get("minThreshold", 50.0))
+                                                   / b["thresholdStep"]))
+            finder["circle_detector_params"] = cdp
     else:
         raise ConfigError(f"{rec.folder / 'recording.yaml'}: target.kind {t.kind!r}: ROS-I's finders here are "
                           "ChArUco and modified circle grids only")

@@ -62,7 +62,9 @@ class TargetSpec:
     circle grid's spacing. diameter_m: dot diameter; origin_diameter_m: the large origin dot of a
     modified_circle_grid (0: twice diameter_m, ROS-I's generator). legacy_pattern: OpenCV < 4.6 charuco layout.
     margin_m: white margin around the pattern. first_id: id of the first marker/tag. allow_symmetric:
-    accept a 180-degree-symmetric board (intrinsics calibration only; poses are refused).
+    accept a 180-degree-symmetric board (intrinsics calibration only; poses are refused). blob_detector: circle
+    grids: OpenCV SimpleBlobDetector parameters tried first on each image (a mapping in YAML; e.g. a ROS-I data
+    set's ``circle_detector_params``; :mod:`.kinds.dot_grid`).
     """
 
     kind: str
@@ -80,6 +82,7 @@ class TargetSpec:
     diameter_m: float = 0.0
     allow_symmetric: bool = False
     origin_diameter_m: float = 0.0
+    blob_detector: tuple = ()
 
     def __post_init__(self):
         where = f"target {self.name!r}"
@@ -95,6 +98,14 @@ class TargetSpec:
             if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) or not math.isfinite(v):
                 raise ConfigError(f"{where}: key {key!r} must be a finite number [m], got {v!r}")
             object.__setattr__(self, key, float(v))
+        bd = self.blob_detector  # a mapping in YAML, a sorted tuple of (name, value) pairs here (hashable)
+        if isinstance(bd, (list, tuple, dict)) and len(bd) == 0 or bd is None:
+            object.__setattr__(self, "blob_detector", ())
+        else:
+            from .kinds.dot_grid import check_blob_settings
+
+            object.__setattr__(self, "blob_detector", check_blob_settings(
+                [tuple(kv) for kv in bd] if isinstance(bd, list) else bd, where))
         for key in ("legacy_pattern", "allow_symmetric"):
             if not isinstance(getattr(self, key), (bool, np.bool_)):
                 raise ConfigError(f"{where}: key {key!r} must be true or false, got {getattr(self, key)!r}")
@@ -236,7 +247,13 @@ class TargetSpec:
     def to_dict(self) -> dict:
         """Plain dict of the kind's keys (the YAML schema of :func:`load_target`)."""
         keep = _COMMON + self.kind_impl.keys
-        return {f.name: getattr(self, f.name) for f in fields(self) if f.name in keep}
+        out = {f.name: getattr(self, f.name) for f in fields(self) if f.name in keep}
+        if "blob_detector" in out:
+            if out["blob_detector"]:
+                out["blob_detector"] = dict(out["blob_detector"])
+            else:
+                del out["blob_detector"]
+        return out
 
 
 def available_memory() -> int | None:

@@ -36,13 +36,14 @@ import numpy as np
 from ...errors import ConfigError
 from . import TargetKind
 from ._grid import apply_h, fit_homography, front_facing
+from .dot_grid import MAX_OFF_GRID, candidate_grids, grid_consistency, not_found_message
 
 N_VERTICES = 128  # polygon vertices per dot (area-preserving radius: exact area and centroid)
 
 
 class AsymmetricCirclesKind(TargetKind):
     name = "circles_asymmetric"
-    keys = ("spacing_m", "diameter_m", "allow_symmetric")
+    keys = ("spacing_m", "diameter_m", "allow_symmetric", "blob_detector")
     required = ("spacing_m", "diameter_m")
     info_model = "circle"
     correct_ellipse = True
@@ -104,45 +105,60 @@ class AsymmetricCirclesKind(TargetKind):
         return out
 
     def find_corners(self, spec, det, img, config, diag, intrinsics=None):
-        ok, centres = cv2.findCirclesGrid(img, (spec.cols, spec.rows), flags=cv2.CALIB_CB_ASYMMETRIC_GRID,
-                                          blobDetector=blob_detector(img))
-        if not ok or centres is None:
-            return None, (f"asymmetric circle grid of {spec.cols} x {spec.rows} not found "
-                          "(the whole board must be visible)")
-        D = centres.reshape(-1, 2).astype(np.float64)
         _, p = self.corner_points(spec)
-        best = None
-        for perm in self._orderings(spec):
-            uv = np.empty_like(D)
-            uv[perm] = D
-            H = fit_homography(p[:, :2], uv)
-            if H is None or not front_facing(H, p[:, :2].mean(axis=0)):
-                continue
-            res = float(np.sqrt(np.mean(np.sum((apply_h(H, p[:, :2]) - uv) ** 2, axis=1))))
-            if best is None or res < best[0]:
-                best = (res, uv, H)
-        if best is None:
-            return None, "circle grid order could not be tied to the board (no front-facing ordering)"
-        diag["homography_rms_px"] = best[0]
-        uv = best[1]
+        orderings = self._orderings(spec)
+
+        def order(D):
+            best = None
+            for perm in orderings:
+                uv = np.empty_like(D)
+                uv[perm] = D
+                H = fit_homography(p[:, :2], uv)
+                if H is None or not front_facing(H, p[:, :2].mean(axis=0)):
+                    continue
+                res = float(np.sqrt(np.mean(np.sum((apply_h(H, p[:, :2]) - uv) ** 2, axis=1))))
+                if best is None or res < best[0]:
+                    best = (res, uv)
+            if best is None:
+                return None, "circle grid order could not be tied to the board (no front-facing ordering)"
+            return best[1], best[0]
+
+        flags = cv2.CALIB_CB_ASYMMETRIC_GRID
+        found = find_ordered(spec, img, diag, intrinsics, [(spec.cols, spec.rows)], [flags, flags | cv2.CALIB_CB_CLUSTERING],
+                             order, f"asymmetric circle grid of {spec.cols} x {spec.rows} dots", big=False)
+        if found[0] is None:
+            return found
+        uv = found[1]
         if self.correct_ellipse and intrinsics is not None:
             uv = uv - ellipse_centre_offset(spec, p, uv, intrinsics)
         return np.arange(len(uv)), uv
 
 
-def blob_detector(img):
-    """OpenCV's blob detector for the dots of the circle-grid kinds (dark dots, 6 px .. 5 % of the image)."""
-    p = cv2.SimpleBlobDetector_Params()
-    p.minArea = 6.0
-    p.maxArea = 0.05 * img.shape[0] * img.shape[1]
-    p.minDistBetweenBlobs = 2.0
-    p.filterByCircularity = True
-    p.minCircularity = 0.5
-    p.filterByConvexity = True
-    p.minConvexity = 0.8
-    p.filterByInertia = True
-    p.minInertiaRatio = 0.05
-    return cv2.SimpleBlobDetector_create(p)
+def find_ordered(spec, img, diag, intrinsics, patterns, flags_list, order, what, big):
+    """The first dot grid of :func:`.dot_grid.candidate_grids` that ``order`` (centres (K, 2) px in OpenCV's grid
+    order -> (uv (K, 2) by id, homography RMS px) or (None, why)) ties to the board and whose point order is
+    consistent (:func:`.dot_grid.grid_consistency`: no dot more than MAX_OFF_GRID x the dot spacing off the
+    board's homography, on undistorted points when intrinsics are given). Returns (ids, uv) or (None, reason
+    naming what was found and why each grid was refused)."""
+    _, p = spec.corner_points()
+    dr = spec.diameter_m / spec.spacing_m if spec.diameter_m > 0 else 0.0
+    report, refused = {}, []
+    for stage, pattern, D in candidate_grids(img, len(p), patterns, flags_list, spec.blob_detector, dr, big, report):
+        uv, how = order(D)
+        if uv is None:
+            refused.append(how)
+            continue
+        q = uv if intrinsics is None else cv2.undistortPoints(
+            uv.reshape(-1, 1, 2), intrinsics.K, np.asarray(intrinsics.dist, float), P=intrinsics.K).reshape(-1, 2)
+        off_px, off = grid_consistency(p[:, :2], q, spec.spacing_m)
+        if not off <= MAX_OFF_GRID:
+            refused.append(f"point order inconsistent (a dot {off_px:.1f} px = {off:.2f} dot spacings off the board's "
+                           "homography: ids shifted by a row or column, or a stray blob in the grid)")
+            continue
+        diag.update(dot_stage=stage, homography_rms_px=float(how), max_off_grid_px=off_px, blobs=report)
+        return np.arange(len(uv)), uv
+    diag["blobs"] = report
+    return None, not_found_message(what, len(p), report, refused)
 
 
 def _check_polygon_memory(spec, n_dots: int) -> None:
@@ -211,7 +227,7 @@ class ModifiedCircleGridKind(TargetKind):
     circles_asymmetric (ellipse-centre correction when the diameters and intrinsics are known)."""
 
     name = "modified_circle_grid"
-    keys = ("spacing_m", "diameter_m", "origin_diameter_m")
+    keys = ("spacing_m", "diameter_m", "origin_diameter_m", "blob_detector")
     required = ("spacing_m",)
     info_model = "circle"
 
@@ -285,41 +301,45 @@ class ModifiedCircleGridKind(TargetKind):
 
     def find_corners(self, spec, det, img, config, diag, intrinsics=None):
         rows, cols = spec.rows, spec.cols
-        blob = blob_detector(img)
-        flags = cv2.CALIB_CB_SYMMETRIC_GRID | cv2.CALIB_CB_CLUSTERING
-        ok, centres, shape = False, None, None
-        for a, b in ((cols, rows), (rows, cols)) if rows != cols else ((cols, rows),):
-            ok, centres = cv2.findCirclesGrid(img, (a, b), flags=flags, blobDetector=blob)
-            if ok and centres is not None:
-                shape = (b, a)
-                break
-        if not ok or centres is None:
-            return None, f"modified circle grid of {cols} x {rows} dots not found (the whole board must be visible)"
-        D = centres.reshape(-1, 2).astype(np.float64)
-        corners = dot_corner_ratios(img, D.reshape(*shape, 2))
-        order = sorted(corners, key=corners.get, reverse=True)
-        big, second = corners[order[0]], corners[order[1]]
-        diag["origin_dot_ratio"] = float(big)
-        if not (big >= ORIGIN_RATIO * second):
-            return None, (f"the origin (large) dot of the modified circle grid is not recognisable: dark-area ratios "
-                          f"of the grid corners to their neighbours {sorted(corners.values(), reverse=True)}")
         _, p = self.corner_points(spec)
         origin = self.origin_id(spec)
-        for g in self._grid_orderings(rows, cols, shape):
-            flat = g.reshape(-1)
-            if flat[origin] != order[0]:
-                continue
-            uv = D[flat]
-            H = fit_homography(p[:, :2], uv)
-            if H is None or not front_facing(H, p[:, :2].mean(axis=0)):
-                continue
-            diag["homography_rms_px"] = float(np.sqrt(np.mean(np.sum((apply_h(H, p[:, :2]) - uv) ** 2, axis=1))))
-            d, _ = self.diameters(spec)
-            diag["ellipse_correction"] = bool(d > 0 and intrinsics is not None)
-            if diag["ellipse_correction"]:
-                uv = uv - ellipse_centre_offset(spec, p, uv, intrinsics, radii=self.radii(spec))
-            return np.arange(len(uv)), uv
-        return None, "circle grid order could not be tied to the board (no front-facing ordering with the origin dot)"
+        patterns = [(cols, rows), (rows, cols)] if rows != cols else [(cols, rows)]
+
+        def order(D, pattern):
+            shape = (pattern[1], pattern[0])  # OpenCV's patternSize (per row, rows) -> grid (rows, per row)
+            corners = dot_corner_ratios(img, D.reshape(*shape, 2))
+            ranked = sorted(corners, key=corners.get, reverse=True)
+            big, second = corners[ranked[0]], corners[ranked[1]]
+            diag["origin_dot_ratio"] = float(big)
+            if not (big >= ORIGIN_RATIO * second):
+                return None, (f"the origin (large) dot is not recognisable: dark-area ratios of the grid corners to "
+                              f"their neighbours {[round(v, 2) for v in sorted(corners.values(), reverse=True)]}")
+            for g in self._grid_orderings(rows, cols, shape):
+                flat = g.reshape(-1)
+                if flat[origin] != ranked[0]:
+                    continue
+                uv = D[flat]
+                H = fit_homography(p[:, :2], uv)
+                if H is None or not front_facing(H, p[:, :2].mean(axis=0)):
+                    continue
+                return uv, float(np.sqrt(np.mean(np.sum((apply_h(H, p[:, :2]) - uv) ** 2, axis=1))))
+            return None, "grid order could not be tied to the board (no front-facing ordering with the origin dot)"
+
+        flags = cv2.CALIB_CB_SYMMETRIC_GRID
+        found = None, ""
+        for pattern in patterns:  # the grid may be seen turned by 90 degrees
+            found = find_ordered(spec, img, diag, intrinsics, [pattern], [flags | cv2.CALIB_CB_CLUSTERING, flags],
+                                 lambda D, pattern=pattern: order(D, pattern), f"modified circle grid of {cols} x {rows} dots", big=True)
+            if found[0] is not None:
+                break
+        if found[0] is None:
+            return found
+        uv = found[1]
+        d, _ = self.diameters(spec)
+        diag["ellipse_correction"] = bool(d > 0 and intrinsics is not None)
+        if diag["ellipse_correction"]:
+            uv = uv - ellipse_centre_offset(spec, p, uv, intrinsics, radii=self.radii(spec))
+        return np.arange(len(uv)), uv
 
 
 #: the origin dot's dark area relative to its grid neighbours must be at least this many times the next grid

@@ -1,0 +1,78 @@
+"""Photograph-like views of a planar target for detection tests: perspective, uneven lighting, a shadow across
+part of the board, defocus, sensor noise and JPEG, on a textured background (no renderer needed: the board's
+texture warped by the homography of a pinhole camera, 3x supersampled)."""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+
+W, H, F = 800, 600, 900.0  # image size [px] and focal length [px]
+K = np.array([[F, 0, W / 2], [0, F, H / 2], [0, 0, 1.0]])
+
+
+def _rot(tilt_deg: float, roll_deg: float, tilt_axis_deg: float) -> np.ndarray:
+    """R_cam_target: roll about the optical axis, then a tilt about an in-plane axis at tilt_axis_deg."""
+    def rz(a):
+        c, s = math.cos(a), math.sin(a)
+        return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
+    a = math.radians(tilt_axis_deg)
+    u = np.array([math.cos(a), math.sin(a), 0.0])
+    R_tilt, _ = cv2.Rodrigues(u * math.radians(tilt_deg))
+    return R_tilt @ rz(math.radians(roll_deg))
+
+
+def photo_view(spec, rng, dot_px: float, tilt_deg: float = 0.0, roll_deg: float = 0.0, light: float = 0.0,
+               shadow: float = 0.0, blur_px: float = 0.0, jpeg: int = 0, noise: float = 2.0, ss: int = 3):
+    """(uint8 (H, W) image, true dot centres (K, 2) px by id, whole board inside the image) for a view where a dot
+    of diameter spec.diameter_m appears dot_px across (at the board centre, frontal). light: relative brightness
+    change across the image (linear ramp, 0..0.8); shadow: darkening of a half-plane across the board (0..0.7);
+    blur_px: Gaussian defocus sigma; jpeg: JPEG quality (0: none); noise: grey-level std."""
+    z = F * spec.diameter_m / dot_px
+    R = _rot(tilt_deg, roll_deg, rng.uniform(0, 180))
+    x0, y0, x1, y1 = spec.texture_extent_m()
+    c = np.array([(x0 + x1) / 2, (y0 + y1) / 2, 0.0])
+    t = np.array([rng.uniform(-0.1, 0.1) * W / F * z, rng.uniform(-0.1, 0.1) * H / F * z, z]) - R @ c
+    Hm = K @ np.column_stack([R[:, 0], R[:, 1], t])  # target (x, y, 1) [m] -> image px
+    # texture at ~2 texture px per image px at the nearest point
+    ppm = 2.0 * ss * F / max(z - 0.5 * max(x1 - x0, y1 - y0), 0.2 * z)
+    ppm = min(ppm, 4000.0 / max(x1 - x0, y1 - y0))
+    tex = spec.texture(ppm).astype(np.float32)
+    th, tw = tex.shape
+    A = np.array([[(x1 - x0) / tw, 0, x0 + 0.5 * (x1 - x0) / tw - 0.0], [0, (y1 - y0) / th, y0 + 0.5 * (y1 - y0) / th],
+                  [0, 0, 1.0]])  # texture px (pixel-centre convention) -> target m
+    Sss = np.array([[ss, 0, (ss - 1) / 2], [0, ss, (ss - 1) / 2], [0, 0, 1.0]])  # image px -> supersampled px
+    M = Sss @ Hm @ A
+    # background: carpet-like texture (blobs of a few px) of mid-dark grey
+    bg = rng.normal(70, 12, size=(H // 3 + 1, W // 3 + 1)).astype(np.float32)
+    bg = cv2.resize(bg, (W * ss, H * ss), interpolation=cv2.INTER_CUBIC)
+    mask = cv2.warpPerspective(np.ones_like(tex), M, (W * ss, H * ss), flags=cv2.INTER_LINEAR)
+    board = cv2.warpPerspective(tex * 0.85 + 20, M, (W * ss, H * ss), flags=cv2.INTER_LINEAR)
+    img = board * mask + bg * (1 - mask)
+    img = cv2.resize(img, (W, H), interpolation=cv2.INTER_AREA)
+    yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
+    if light > 0:  # brightness ramp across the image in a random direction
+        a = rng.uniform(0, 2 * math.pi)
+        ramp = ((xx - W / 2) * math.cos(a) + (yy - H / 2) * math.sin(a)) / (0.5 * math.hypot(W, H))
+        img = img * (1 + light * ramp) / (1 + light)
+    _, p = spec.corner_points()
+    q = np.column_stack([p[:, :2], np.ones(len(p))]) @ (Hm.T)
+    uv = q[:, :2] / q[:, 2:]
+    if shadow > 0:  # a soft-edged shadow over a half-plane through the board
+        a = rng.uniform(0, 2 * math.pi)
+        m = uv.mean(axis=0) + rng.uniform(-0.3, 0.3) * (uv.max(axis=0) - uv.min(axis=0))
+        d = (xx - m[0]) * math.cos(a) + (yy - m[1]) * math.sin(a)
+        img = img * (1 - shadow / (1 + np.exp(-d / 3.0)))
+    if blur_px > 0:
+        img = cv2.GaussianBlur(img, (0, 0), blur_px)
+    img = img + rng.normal(0, noise, img.shape)
+    img = np.clip(np.rint(img), 0, 255).astype(np.uint8)
+    if jpeg:
+        ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, int(jpeg)])
+        img = cv2.imdecode(buf, cv2.IMREAD_GRAYSCALE)
+    corners = np.array([[x0, y0, 1], [x1, y0, 1], [x1, y1, 1], [x0, y1, 1.0]]) @ Hm.T
+    cu = corners[:, :2] / corners[:, 2:]
+    whole = bool(np.all(corners[:, 2] > 0) and np.all(cu >= 1) and np.all(cu[:, 0] <= W - 2) and np.all(cu[:, 1] <= H - 2))
+    return img, uv, whole
