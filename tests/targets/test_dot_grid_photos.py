@@ -73,6 +73,7 @@ def test_real_rosi_photo_all_dots_and_origin(settings):
     assert off < MAX_OFF_GRID
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("family, kw", [
     ("lighting", dict(light=0.6)),
     ("defocus", dict(blur_px=2.0)),
@@ -97,6 +98,7 @@ def test_degraded_views_detected(family, kw):
     assert ok >= 7, f"{family}: {ok} of {n}"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("dot_px", [5.0, 8.0, 20.0, 40.0, 60.0])
 def test_dot_sizes(dot_px):
     """Dots of 5-60 px (tilt up to 30 deg, mild lighting ramp and blur): found with the right ids in 3 of 3 views."""
