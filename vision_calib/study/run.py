@@ -72,11 +72,16 @@ def _execute_local(spec, todo, workers, on_done):
                 on_done(*f.result())
         ok = True
     finally:
+        ours = set(mp.active_children()) - before
         if not ok:  # error (of a run, of on_done) or KeyboardInterrupt: stop the running runs too
-            ex.shutdown(wait=False, cancel_futures=True)
-            for p in set(mp.active_children()) - before:
+            for p in ours:
                 p.terminate()
-        ex.shutdown(wait=True)  # joins the workers (after a normal end: they exit when the queue closes)
+        ex.shutdown(wait=True, cancel_futures=True)  # after a normal end the workers exit when the queue closes
+        for p in ours:
+            p.join(10)
+            if p.is_alive():  # pragma: no cover (SIGTERM not honoured)
+                p.kill()
+                p.join()
 
 
 def _execute(spec, todo, workers, scheduler, on_done):
