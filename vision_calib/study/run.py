@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 from ..io.atomic import write_json_atomic
+from .budget import budget_table, budget_text, write_budget
 from .cells import run_cell
 from .spec import RUN_FORMAT, StudySpec, cell_key, load_study, study_cells
 from .tables import cell_summary, parameter_spread, parameter_table, summary_text, write_outputs, \
@@ -163,7 +164,10 @@ def run_study(spec, out_dir, workers: int | None = None, scheduler=None, progres
     res["parameters"] = parameter_table(spec, table)
     if res["parameters"]:
         files["parameters_csv"] = write_parameter_table(spec, res["parameters"], out)
-    res["summary_text"] = summary_text(spec, res)
+    res["budget"] = budget_table(spec, table)
+    if res["budget"]:
+        files["budget_csv"] = write_budget(spec, res["budget"], out)
+    res["summary_text"] = "\n".join([summary_text(spec, res), *budget_text(spec, res["budget"])])
     return res
 
 
