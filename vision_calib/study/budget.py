@@ -2,8 +2,8 @@
 ``frames`` and ``n_poses``), the cheapest acquisition -- fewest images = poses x frames, then fewest poses --
 whose 95th percentile of the after-calibration figure meets the target (``budget.csv``, summary lines).
 
-A run that failed counts as missing the target (its figure is +inf), so a cell meets it only if at most 5 % of its
-runs fail; with no failure the percentile is the one of ``summary.csv`` (numpy's linear interpolation)."""
+A run that failed counts as missing the target (its figure is +inf): the percentile (numpy's linear interpolation,
+as in ``summary.csv`` when no run failed) is +inf when it interpolates toward a failed run."""
 
 from __future__ import annotations
 
@@ -34,14 +34,25 @@ def _defaults(spec: StudySpec) -> dict:
             "frames": int(scene.measurement.frames)}
 
 
+def percentile_with_failures(v: np.ndarray, q: float) -> float:
+    """q-th percentile of ``v`` (numpy's default linear interpolation) where +inf stands for failed runs: +inf when
+    it interpolates toward one (the exact order statistic otherwise; numpy itself gives nan there)."""
+    v = np.sort(np.asarray(v, float))
+    if v.size == 0:
+        return math.inf
+    pos = q / 100 * (v.size - 1)
+    i = int(np.floor(pos))
+    t = pos - i
+    if t == 0 or i + 1 >= v.size:
+        return float(v[i])
+    return float(v[i] + (v[i + 1] - v[i]) * t) if np.isfinite(v[i + 1]) else math.inf
+
+
 def _percentiles(rows: list[dict], column: str) -> tuple[float, float, int]:
-    """(p50, p95, failed runs) of ``column`` over ``rows``, a failed / missing figure counted as +inf."""
+    """(p50, p95, failed runs) of ``column`` over ``rows``, a failed / missing / non-finite figure as +inf."""
     v = np.array([float(r[column]) if r.get(column) is not None and not r.get("error") else np.inf for r in rows])
     v[~np.isfinite(v)] = np.inf
-    with np.errstate(invalid="ignore"):
-        p50, p95 = np.percentile(v, [50, 95])
-    return (float(p50) if np.isfinite(p50) else math.inf), (float(p95) if np.isfinite(p95) else math.inf), \
-        int(np.sum(~np.isfinite(v)))
+    return percentile_with_failures(v, 50), percentile_with_failures(v, 95), int(np.sum(~np.isfinite(v)))
 
 
 def budget_table(spec: StudySpec, table: list[dict]) -> list[dict]:
