@@ -7,7 +7,10 @@ OpenGL platform and thread environment of a process. Workers hold one OpenGL con
 results do not depend on the worker count. Neither the main process nor the workers import torch for the
 CPU effects. :class:`ImagePool` starts the workers once (``with ImagePool(chain) as pool:
 measure_poses(chain, ..., pool=pool)`` for many runs); workers die with their parent (Linux
-``PR_SET_PDEATHSIG``), also after ``kill -9`` of the main process.
+``PR_SET_PDEATHSIG``), also after ``kill -9`` of the main process. It is what the single-run commands
+(``simulate``, ``demo``) use. :class:`InlineImagePool` runs the same chain in the calling thread, no child process:
+what a study run uses inside its study worker (whose parallelism is the study's; a daemonic Dask worker may not
+have children). Both give the same numbers.
 """
 
 from __future__ import annotations
@@ -210,16 +213,18 @@ class ImagePool:
             raise RuntimeError("ImagePool: closed")
         return self._ex.map(_worker_pose, jobs, chunksize=1)
 
-    def close(self) -> None:
+    def close(self, cancel: bool = False) -> None:
+        """Stop the workers (idempotent): after the poses already handed to them; ``cancel``: the queued ones
+        are dropped (an error or Ctrl-C in the caller)."""
         ex, self._ex = getattr(self, "_ex", None), None
         if ex is not None:
-            ex.shutdown()
+            ex.shutdown(wait=True, cancel_futures=cancel)
 
     def __enter__(self) -> "ImagePool":
         return self
 
-    def __exit__(self, *exc) -> None:
-        self.close()
+    def __exit__(self, exc_type, *exc) -> None:
+        self.close(cancel=exc_type is not None)
 
 
 class InlineImagePool:
@@ -299,6 +304,10 @@ def measure_poses(chain: ImageChain, T_cam_targets, labels, seed: int, frames: i
                 stage[k] += v
             if bar is not None:
                 bar.update(1)
+    except BaseException:
+        if own:
+            pool.close(cancel=True)
+        raise
     finally:
         if own:
             pool.close()

@@ -260,6 +260,10 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
                                                                     pool, False, timings)
         else:
             val_meas, val_idx, val_pms, T_val = None, [], None, None
+    except BaseException:  # an error or Ctrl-C: the queued poses are dropped, not measured
+        if own:
+            pool.close(cancel=True)
+        raise
     finally:
         if background is not None:
             background.shutdown()  # waits for the validation images (also when the identification failed)
