@@ -159,10 +159,10 @@ def _rss_mib() -> float:
 
 
 def _memory_worker(spec_path: str, n: int) -> list:
-    from vision_calib.experiment.image_chain import single_thread_libraries
+    from vision_calib.experiment.image_chain import study_worker_settings
     from vision_calib import study as S
 
-    single_thread_libraries()
+    study_worker_settings()  # as a study worker runs
     spec = S.load_study(spec_path)
     cells = S.study_cells(spec)
     marks = {1, 10, 50, 100, 150, n}

@@ -18,11 +18,12 @@ from .tables import cell_summary, parameter_spread, parameter_table, summary_tex
 
 def _run_task(spec, cell, rep, in_worker: bool = False):
     """One run -> (cell, rep, row). in_worker: this process is a study worker (local or Dask) whose parallelism is
-    the study's: one OpenCV/Mesa thread (``image_chain.single_thread_libraries``; idempotent)."""
+    the study's: one OpenCV/Mesa thread, image buffers from the heap (``image_chain.study_worker_settings``, also
+    undoing a Dask nanny's malloc setting that doubles an images run's CPU; idempotent)."""
     if in_worker:
-        from ..experiment.image_chain import single_thread_libraries
+        from ..experiment.image_chain import study_worker_settings
 
-        single_thread_libraries()
+        study_worker_settings()
     return cell, rep, run_cell(spec, cell, rep)
 
 
@@ -31,11 +32,11 @@ def _local_worker_init(main_pid: int) -> None:
     terminal sends SIGINT to the whole process group: the main process alone decides, and stops the workers)."""
     import signal
 
-    from ..experiment.image_chain import die_with_parent, single_thread_libraries
+    from ..experiment.image_chain import die_with_parent, study_worker_settings
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     die_with_parent(main_pid)
-    single_thread_libraries()
+    study_worker_settings()
 
 
 def _execute_dask(spec, todo, scheduler, on_done):
