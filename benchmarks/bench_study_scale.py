@@ -8,7 +8,9 @@
 2. scale: ``vision-calib study`` of R demo-size runs in a new interpreter (what a user runs) at ``--workers 1``,
    ``--workers 2``, and on a ``distributed.LocalCluster`` of 2 worker processes x 1 thread (the client in a new
    interpreter too): runs/hour over the whole command (start included) and steady (from the runs' file times,
-   after each worker's first run), the 1 -> 2 worker speed-up, the projected hours of a 10,000-run study.
+   after each worker's first run), the 1 -> 2 worker speed-up, the projected hours of a 10,000-run study; the CPU
+   seconds per run of the command and every process it waited for (workers included), and the cores it kept
+   busy (CPU / wall): on a loaded machine the second worker gets less than a core.
 3. memory: one spawned worker runs M small images runs (20 poses x 1 frame, 10 validation poses; seeds and noise
    vary) through ``run_cell``; its RSS after runs 1, 10, 50, 100, 150, M (flat = nothing accumulates per run).
 
@@ -116,13 +118,18 @@ def _one_study(spec: Path, out: Path, how: str) -> dict:
     else:
         cmd = [sys.executable, "-m", "vision_calib.cli", "study", str(spec), "--out", str(out), "--workers", how,
                "--no-plots", "--json"]
+    import resource
+
+    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.time()
     p = subprocess.run(cmd, cwd=ROOT, env=_env(), capture_output=True, text=True, timeout=3600)
     wall = time.time() - t0
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)  # the command and every process it waited for
     if p.returncode != 0:
         raise RuntimeError(f"{how}: exit {p.returncode}\n{p.stderr[-3000:]}")
     done = sorted(f.stat().st_mtime for f in (out / "runs").glob("*.json"))
-    return {"wall": wall, "t0": t0, "done": done}
+    cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
+    return {"wall": wall, "t0": t0, "done": done, "cpu": cpu}
 
 
 def scale(tmp: Path, reps: int, repeat: int) -> None:
@@ -134,13 +141,14 @@ def scale(tmp: Path, reps: int, repeat: int) -> None:
             r = _one_study(spec, tmp / f"scale_{how}_{k}", how)
             n = len(r["done"])
             steady = (n - w) / (r["done"][-1] - r["done"][w - 1]) * 3600 if n > w else float("nan")
-            rows.append((how, k, n, r["wall"], n / r["wall"] * 3600, steady, la))
+            rows.append((how, k, n, r["wall"], n / r["wall"] * 3600, steady, la, r["cpu"]))
     print(f"2. throughput, {reps} demo-size images runs per study (one cell), a new interpreter per study; "
           f"steady = after each worker's first run")
     names = {"1": "--workers 1", "2": "--workers 2", "dask": "LocalCluster 2 proc x 1 thr"}
-    for how, k, n, wall, rate, steady, la in rows:
+    for how, k, n, wall, rate, steady, la, cpu in rows:
         print(f"   {names[how]:28s} try {k + 1}: {n} runs in {wall:6.1f} s = {rate:6.0f} runs/h "
-              f"(steady {steady:6.0f} runs/h); load average before {la}")
+              f"(steady {steady:6.0f} runs/h); CPU {cpu / n:5.2f} s per run, start included, {cpu / wall:4.2f} cores "
+              f"busy; load average before {la}")
     best = {how: max(r[5] for r in rows if r[0] == how) for how in names}
     whole = {how: max(r[4] for r in rows if r[0] == how) for how in names}
     print(f"   1 -> 2 local workers speed-up (best try each): steady x{best['2'] / best['1']:.2f}, "
