@@ -81,3 +81,12 @@ def test_target_needs_its_output_and_is_outside_the_hash(tmp_path):
     a = S.load_study(_spec(tmp_path, target={"position_rms_mm": 0.1}))
     b = S.load_study(_spec(tmp_path, target={"position_rms_mm": 0.3}))
     assert a.hash == b.hash and a.target != b.target  # a new target reuses every run
+
+
+def test_shipped_image_noise_spec():
+    """The shipped images-mode study answers the paper's question: noise x frames x poses, a position target."""
+    from test_study import ROOT
+
+    spec = S.load_study(ROOT / "scenes" / "studies" / "h4_image_noise.yaml")
+    assert spec.mode == "images" and spec.axes == ("noise_grey", "frames", "n_poses")
+    assert spec.target == {"position_rms_mm": 0.15} and {"accuracy", "criteria"} <= set(spec.outputs)
