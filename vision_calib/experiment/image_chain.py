@@ -7,7 +7,10 @@ OpenGL platform and thread environment of a process. Workers hold one OpenGL con
 results do not depend on the worker count. Neither the main process nor the workers import torch for the
 CPU effects. :class:`ImagePool` starts the workers once (``with ImagePool(chain) as pool:
 measure_poses(chain, ..., pool=pool)`` for many runs); workers die with their parent (Linux
-``PR_SET_PDEATHSIG``), also after ``kill -9`` of the main process.
+``PR_SET_PDEATHSIG``), also after ``kill -9`` of the main process. It is what the single-run commands
+(``simulate``, ``demo``) use. :class:`InlineImagePool` runs the same chain in the calling thread, no child process:
+what a study run uses inside its study worker (whose parallelism is the study's; a daemonic Dask worker may not
+have children). Both give the same numbers.
 """
 
 from __future__ import annotations
@@ -92,47 +95,94 @@ def die_with_parent(main_pid: int) -> None:
     threading.Thread(target=watch, name="die-with-main", daemon=True).start()
 
 
-def _worker_init(target_path, intrinsics, supersample, main_pid=None):
-    if main_pid is not None:
-        die_with_parent(main_pid)
-    os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
-    os.environ.setdefault("EGL_PLATFORM", "surfaceless")
-    # one Mesa llvmpipe thread per worker: several threaded workers oversubscribe the cores
-    # (measured: 20 frames/s with Mesa's threads vs 47 frames/s with one, 2 workers, 2 cores)
-    os.environ.setdefault("LP_NUM_THREADS", "1")
+def chain_state(target_path, intrinsics, supersample) -> dict:
+    """What the image chain of one camera/target/supersampling needs and only the setup determines, built once:
+    {"target": TargetSpec, "intr": CameraIntrinsics, "renderer": render.TargetRenderer} (the renderer holds the
+    target's geometry and the polygon backend's distortion tables)."""
+    from ..render import TargetRenderer
+    from ..targets import load_target
+
+    target = load_target(target_path)
+    # the lens distortion drawn geometrically by the polygon backend (exact pixel areas of the distorted
+    # image, as a sensor integrates it): no resampling; a pose that falls back to pyrender gets the
+    # distortion from the sensor stage (sensor.apply_effects)
+    return {"target": target, "intr": intrinsics, "renderer": TargetRenderer(target, intrinsics, supersample,
+                                                                             distort=True)}
+
+
+def single_thread_libraries() -> None:
+    """One OpenCV / Mesa llvmpipe (/ torch, if already imported) thread in this process: what each image worker
+    and each study worker runs with (several threaded workers oversubscribe the cores; measured: 20 frames/s
+    with Mesa's threads vs 47 frames/s with one, 2 workers, 2 cores)."""
     import sys
 
+    os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+    os.environ.setdefault("EGL_PLATFORM", "surfaceless")
+    os.environ.setdefault("LP_NUM_THREADS", "1")
     import cv2
 
     cv2.setNumThreads(1)
     if "torch" in sys.modules:  # only if something imported it already (torch effects import it lazily)
         sys.modules["torch"].set_num_threads(1)
-    from ..render import TargetRenderer
-    from ..targets import load_target
 
-    target = load_target(target_path)
-    _W["target"] = target
-    _W["intr"] = intrinsics
-    # the lens distortion drawn geometrically by the polygon backend (exact pixel areas of the distorted
-    # image, as a sensor integrates it): no resampling; a pose that falls back to pyrender gets the
-    # distortion from the sensor stage (sensor.apply_effects)
-    _W["renderer"] = TargetRenderer(target, intrinsics, supersample, distort=True)
+
+#: glibc ``mallopt`` parameters and the values :func:`heap_for_images` sets: buffers up to 32 MiB (a 2x-supersampled
+#: 1024x768 float32 render is 12 MiB) from the heap, and up to 128 MiB of free heap top kept
+M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3
+HEAP_MMAP_THRESHOLD_BYTES, HEAP_TRIM_THRESHOLD_BYTES = 32 << 20, 128 << 20
+
+
+def heap_for_images() -> bool:
+    """Keep image-sized buffers on the heap of this process (glibc; a no-op returning False elsewhere): without it,
+    each such numpy array is mapped, zeroed by the kernel page by page and unmapped at every allocation. glibc
+    adapts its thresholds by itself unless one is fixed in the environment, as a Dask nanny does for its workers
+    (``MALLOC_TRIM_THRESHOLD_=65536``): measured, a demo-size images run cost 6.2-6.9 s of CPU in such a worker vs
+    3.2-3.5 s with this (same machine and load). Returns whether both settings were applied."""
+    import ctypes
+
+    try:
+        libc = ctypes.CDLL(None)
+        mallopt = libc.mallopt
+    except (OSError, AttributeError):
+        return False
+    return bool(mallopt(M_MMAP_THRESHOLD, HEAP_MMAP_THRESHOLD_BYTES)) & bool(mallopt(M_TRIM_THRESHOLD,
+                                                                                  HEAP_TRIM_THRESHOLD_BYTES))
+
+
+def study_worker_settings() -> None:
+    """What a study worker (a local study process, a Dask worker) runs with: :func:`single_thread_libraries` and
+    :func:`heap_for_images`. Idempotent."""
+    single_thread_libraries()
+    heap_for_images()
+
+
+def _worker_init(target_path, intrinsics, supersample, main_pid=None):
+    if main_pid is not None:
+        die_with_parent(main_pid)
+    single_thread_libraries()
+    _W.update(chain_state(target_path, intrinsics, supersample))
 
 
 def _worker_pose(job):
-    """Render, add effects, (optionally) write PNGs, measure one pose -> (index, PoseMeasurement, timings):
-    only the small measurement goes back to the main process, never the frames; timings are CPU seconds."""
+    """:func:`pose_job` with this worker process's state (set by its initialiser)."""
+    return pose_job(_W, job)
+
+
+def pose_job(state: dict, job):
+    """Render, add effects, (optionally) write PNGs, measure one pose with a :func:`chain_state` ->
+    (index, PoseMeasurement, timings): only the small measurement goes back to the caller, never the frames;
+    timings are CPU seconds of this thread."""
     from ..measure import MeasureConfig, measure_images
     from ..sensor import effects_for_render, pose_frames
 
     i, pose_id, T_cam_target, effects, n_frames, seed, averaging, image_dir = job
-    clock = time.process_time  # this single-threaded worker's CPU time: not inflated by machine load
+    clock = time.thread_time  # this thread's CPU time: not inflated by machine load (nor by other threads)
     t0 = clock()
-    ideal = _W["renderer"].render(T_cam_target)
+    ideal = state["renderer"].render(T_cam_target)
     t1 = clock()
     # OpenCV on the CPU, no torch. Frames drawn on demand: the seeded measurement asks for noise only on the
     # pixels it reads in the frames after the first (sensor.cpu.PoseFrames); written frames are drawn in full
-    frames = pose_frames(ideal, effects_for_render(_W["renderer"], effects), n_frames, seed, _W["intr"])
+    frames = pose_frames(ideal, effects_for_render(state["renderer"], effects), n_frames, seed, state["intr"])
     t2 = clock()
     if image_dir is not None:
         import cv2
@@ -145,7 +195,7 @@ def _worker_pose(job):
             ok, buf = cv2.imencode(".png", fr)
             (d / f"{k:02d}.png").write_bytes(buf.tobytes())
     t3 = clock()
-    pm, _ = measure_images(frames, _W["target"], _W["intr"], pose_id=pose_id, config=MeasureConfig(mode=averaging))
+    pm, _ = measure_images(frames, state["target"], state["intr"], pose_id=pose_id, config=MeasureConfig(mode=averaging))
     t4 = clock()
     import resource
 
@@ -181,15 +231,61 @@ class ImagePool:
         self._ex = ProcessPoolExecutor(self.workers, mp_context=ctx, initializer=_worker_init,
                                        initargs=self.key + (os.getpid(),))
 
+    #: the chain runs in child processes (see :class:`InlineImagePool`)
+    inline = False
+
     def map(self, fn, jobs):
         return self._ex.map(fn, jobs, chunksize=1)
 
-    def close(self) -> None:
+    def run(self, jobs):
+        """(index, PoseMeasurement, timings) of each pose job, in order (:func:`pose_job` in the workers)."""
+        if self._ex is None:
+            raise RuntimeError("ImagePool: closed")
+        return self._ex.map(_worker_pose, jobs, chunksize=1)
+
+    def close(self, cancel: bool = False) -> None:
+        """Stop the workers (idempotent): after the poses already handed to them; ``cancel``: the queued ones
+        are dropped (an error or Ctrl-C in the caller)."""
         ex, self._ex = getattr(self, "_ex", None), None
         if ex is not None:
-            ex.shutdown()
+            ex.shutdown(wait=True, cancel_futures=cancel)
 
     def __enter__(self) -> "ImagePool":
+        return self
+
+    def __exit__(self, exc_type, *exc) -> None:
+        self.close(cancel=exc_type is not None)
+
+
+class InlineImagePool:
+    """The image chain run in the calling thread, no child process: what a study run uses inside its worker
+    (a local study process, a Dask worker -- daemonic or not, threads or processes --, or the main process with
+    ``--workers 1``): its parallelism is the study's, one run per worker, and a daemonic process may not have
+    children. Same interface and same numbers as :class:`ImagePool` (a pose's frames depend on its seed only);
+    its :func:`chain_state` (target, renderer) is built once and reused by every run given this pool. Not
+    thread-safe: one per thread (``study.cells`` keeps one per thread and chain). Nothing to release but the
+    renderer's OpenGL context, if a pose fell back to pyrender (:meth:`close`)."""
+
+    inline = True
+    workers = 1
+
+    def __init__(self, chain: ImageChain):
+        self.key = (str(chain.target_path), chain.camera, int(chain.supersample))
+        self._state = chain_state(*self.key)
+
+    def run(self, jobs):
+        """(index, PoseMeasurement, timings) of each pose job, in order, computed here one after the other."""
+        if self._state is None:
+            raise RuntimeError("InlineImagePool: closed")
+        state = self._state
+        return (pose_job(state, j) for j in jobs)
+
+    def close(self) -> None:
+        state, self._state = self._state, None
+        if state is not None and hasattr(state["renderer"], "close"):
+            state["renderer"].close()
+
+    def __enter__(self) -> "InlineImagePool":
         return self
 
     def __exit__(self, *exc) -> None:
@@ -205,7 +301,8 @@ def measure_poses(chain: ImageChain, T_cam_targets, labels, seed: int, frames: i
                   image_dir=None, progress: bool = False, pool: ImagePool | None = None, stream: int = STREAM_IMAGES,
                   desc: str = "render+measure"):
     """Render + effects + measure every pose T_cam_targets (N, 4, 4) [m, OpenCV camera frame].
-    pool: an open :class:`ImagePool` for this chain's camera/target/supersampling (reused, not closed);
+    pool: an open :class:`ImagePool` or :class:`InlineImagePool` for this chain's camera/target/supersampling
+    (reused, not closed);
     default: a pool of ``workers`` processes for this call only. stream: pose i's frames are seeded from
     ``default_rng([seed, stream, i])`` (another stream for another pose set of the same run, e.g. the
     validation poses, so that their noise is independent of the identification poses'); desc: progress label.
@@ -220,7 +317,7 @@ def measure_poses(chain: ImageChain, T_cam_targets, labels, seed: int, frames: i
     results = [None] * len(jobs)
     stage = {"render": 0.0, "effects": 0.0, "write": 0.0, "measure": 0.0}
     if pool is not None and pool.key != (str(chain.target_path), cam, int(chain.supersample)):
-        raise ConfigError("measure_poses: the ImagePool was started for another target/camera/supersample")
+        raise ConfigError("measure_poses: the image pool was started for another target/camera/supersample")
     own = pool is None
     if own:
         pool = ImagePool(chain, max(1, min(workers or os.cpu_count() or 1, len(jobs))))
@@ -230,13 +327,17 @@ def measure_poses(chain: ImageChain, T_cam_targets, labels, seed: int, frames: i
 
         bar = tqdm(total=len(jobs), desc=desc, unit="pose", leave=False)
     try:
-        for i, pm, t in pool.map(_worker_pose, jobs):
+        for i, pm, t in pool.run(jobs):
             results[i] = pm
             stage["worker_peak_rss_mib"] = max(stage.get("worker_peak_rss_mib", 0.0), t.pop("rss_mib"))
             for k, v in t.items():
                 stage[k] += v
             if bar is not None:
                 bar.update(1)
+    except BaseException:
+        if own:
+            pool.close(cancel=True)
+        raise
     finally:
         if own:
             pool.close()

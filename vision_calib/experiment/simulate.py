@@ -202,11 +202,13 @@ def _intrinsics_sensitivity(scene, ident, meas) -> dict:
 
 def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, method=None, export_recording=None,
                    workers=None, progress=False, overrides=None, plots=True, pool=None,
-                   fix_unidentifiable=False) -> dict:
+                   fix_unidentifiable=False, reference=True) -> dict:
     """The whole simulated experiment; writes ``out_dir/report.json`` (+ plots, calibrated model)
-    when out_dir is given and returns the report dict (with ``summary_text``). pool: an image worker
-    pool to reuse (``image_chain``), else one is started for this run (and shared by the identification and
-    validation poses)."""
+    when out_dir is given and returns the report dict (with ``summary_text``). pool: an image pool to reuse
+    (``image_chain.ImagePool``, or ``InlineImagePool``: the chain in this thread, the validation poses measured
+    after the identification instead of beside it; same numbers), else one is started for this run (and shared by
+    the identification and validation poses). reference: add the report's ``synthetic_reference`` (5 more
+    identifications; a study, which does not record it, leaves it out)."""
     t_start = time.perf_counter()
     if pool is None:
         start_fork_server()  # its imports overlap with the preparation below (no-op if started already)
@@ -239,13 +241,14 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
     own = pool is None
     if own:
         pool = ImagePool(chain, max(1, min(workers or os.cpu_count() or 1, len(poses))))
-    background = ThreadPoolExecutor(1, thread_name_prefix="validation-images")
+    inline = getattr(pool, "inline", False)  # the chain runs in this thread: no second thread may use it
+    background = None if inline else ThreadPoolExecutor(1, thread_name_prefix="validation-images")
     try:
         pms = _render_and_measure(scene, chain, T_true, q_true, poses, seed, frames, workers, export_recording,
                                   progress, pool, timings)
         # the validation poses' images are rendered and measured by the workers while this process identifies
         val_job = None
-        if measured_validation:
+        if measured_validation and not inline:
             val_job = background.submit(_measure_validation, chain, tsetup, validation, x_true, seed, frames, pool,
                                         False, timings)
         meas, ok = Measurements.from_pose_measurements(poses, q_true, pms)
@@ -262,9 +265,20 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
         result, problem, setup = ident.result, ident.problem, ident.setup  # setup: after Setup.prepare (H4 axis)
         sens = _intrinsics_sensitivity(scene, ident, meas_used)
         timings["identify"] = time.perf_counter() - t
-        val_meas, val_idx, val_pms, T_val = val_job.result() if val_job is not None else (None, [], None, None)
+        if val_job is not None:
+            val_meas, val_idx, val_pms, T_val = val_job.result()
+        elif measured_validation:  # inline pool: the same measurements, after the identification
+            val_meas, val_idx, val_pms, T_val = _measure_validation(chain, tsetup, validation, x_true, seed, frames,
+                                                                    pool, False, timings)
+        else:
+            val_meas, val_idx, val_pms, T_val = None, [], None, None
+    except BaseException:  # an error or Ctrl-C: the queued poses are dropped, not measured
+        if own:
+            pool.close(cancel=True)
+        raise
     finally:
-        background.shutdown()  # waits for the validation images (also when the identification failed)
+        if background is not None:
+            background.shutdown()  # waits for the validation images (also when the identification failed)
         if own:
             pool.close()
 
@@ -277,14 +291,14 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
     evals = {"before": scene.setup.evaluate(scene.setup.params.nominal, x_true, validation, val_meas, truth=tsetup),
              "after": setup.evaluate(result.identified, x_true, validation, val_meas, truth=tsetup)}
     # reference: the same experiment with synthetic pose measurements drawn from the measured covariances
-    ref = _reference(scene, method, residual, seed, poses[ok], meas, validation, val_meas, val_idx,
-                     setup.params.mask(rep.base_parameters), x_true, truth)
+    ref = None if not reference else _reference(scene, method, residual, seed, poses[ok], meas, validation, val_meas,
+                                                val_idx, setup.params.mask(rep.base_parameters), x_true, truth)
     timings["evaluate"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t_start
 
     ps = setup.params
     mblock["accuracy_vs_truth"] = meas_acc
-    extra = {"synthetic_reference": ref, "intrinsics_sensitivity": sens}
+    extra = {"intrinsics_sensitivity": sens} if ref is None else {"synthetic_reference": ref, "intrinsics_sensitivity": sens}
     if val_pms is not None:
         vb = measurements_block(val_pms)
         extra["validation_measurements"] = {

@@ -23,6 +23,8 @@ Spec file (YAML; paths relative to the spec file)::
       "sigma_mm,sigma_deg": [[0.05, 0.0075], [0.1, 0.015]]   # linked axes: varied together
     outputs: [parameters, accuracy, criteria, condition]      # default: all four
     parameters: [h4.L, h4.l]         # optional: parameters recorded in the table (default: all)
+    target: {position_rms_mm: 0.1}   # optional: accuracy targets after calibration (position_rms_mm,
+                                     # position_max_mm, rotation_rms_deg, V2_rad, V3_m) -> budget.csv
 
 Sweep/settings keys: ``n_poses`` (int > 0: subset drawn at random from the scene's poses),
 ``sigma_mm``, ``sigma_deg`` (pose noise per component, >= 0), ``method`` (lse|ekf|igm; igm = H4
@@ -80,15 +82,31 @@ Outputs (in ``out_dir``):
 - ``summary.csv``: long table, one row per (cell, metric): the axes, ``metric``, ``n`` (finite
   values), ``mean``, ``std`` (ddof 1), ``rms``, ``p05``, ``p50``, ``p95``. For ``err:`` metrics
   with ``truth: scene`` the std is the Monte Carlo std of the identified parameter.
+- ``budget.csv`` (with ``target``): see Budget below.
 - plots (PNG): ``<metric>_vs_<axis>.png`` (median and 5-95 % band of the main figures vs each
   swept axis) and ``param_std_vs_<axis>.png`` (Monte Carlo std of each identified parameter).
+
+Execution. A run is computed where it is scheduled: in this process (``workers`` 1), in one of ``workers``
+spawned local processes, or on a Dask worker (threads or processes, daemonic or not). An images-mode run renders
+and measures in that process's thread itself (``image_chain.InlineImagePool``: the study's workers are its
+parallelism, so no run starts a pool of its own -- a daemonic Dask worker may not have children), with what only
+the setup determines (target geometry, renderer, sensor tables, detector objects) built once per worker thread and
+reused by its next runs, and without ``simulate``'s synthetic reference (5 more identifications the row does not
+record). Local workers die with the main process (also after kill -9); on an error or Ctrl-C in the main process
+they are stopped at once, and the finished runs are kept in ``runs/`` for a resume.
+
+Budget (``target`` given): ``budget.csv`` and summary lines (:mod:`.budget`): per sensor condition (the values of
+the axes other than ``frames`` and ``n_poses``) and target figure, the cheapest cell -- fewest images = poses x
+frames per pose, then fewest poses -- whose 95th percentile of the after-calibration figure meets the target
+(failed runs count as missing it), else "not reached" with the best cell. Not part of the spec hash: a new target
+reuses every run. The plots draw it as a dashed line.
 
 Workers must see the same files (scene, robot, target) at the same paths: a shared filesystem or
 the same checkout on every Dask worker. Only the calling process writes files.
 
 Modules: :mod:`.spec` (the file, validated), :mod:`.cells` (the scene and one run of a cell),
 :mod:`.run` (execution, resume), :mod:`.tables` (results/summary/parameter tables, summary text),
-:mod:`.plots`.
+:mod:`.budget` (the target's budget table), :mod:`.plots`.
 """
 
 from .cells import run_cell, scene_with, scene_with_trial

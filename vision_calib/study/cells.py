@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import functools
+import threading
 from dataclasses import replace
 
 import numpy as np
@@ -189,27 +190,31 @@ def _run_synthetic(spec: StudySpec, scene, s: dict, seed: int) -> dict:
             "cond": rep.condition_number, "parameters": parameters_table(ps.names, ps.nominal, x_shared, res)}
 
 
-_IMAGE_POOLS: dict = {}
+_LOCAL = threading.local()  # per thread: {chain key: InlineImagePool}
 
 
-def _image_pool(scene):
-    """One image worker per study process and camera/target/supersampling, started at its first images-mode
-    run and reused by the following ones (closed at exit; it dies with this process anyway)."""
-    import atexit
-
-    from ..experiment.image_chain import ImagePool
+def image_pool(scene):
+    """The image chain of an images-mode run, in the thread that runs it (``image_chain.InlineImagePool``): a
+    study's parallelism is its workers (local processes, Dask workers), one run each, so a run never starts a
+    pool of its own (a daemonic Dask worker may not have children; nested pools oversubscribe the cores and were
+    left holding their children). One per thread and camera/target/supersampling, built at the thread's first
+    images-mode run and reused by its next runs (target geometry, renderer, sensor tables built once)."""
+    from ..experiment.image_chain import InlineImagePool
     from ..experiment.simulate import image_chain_of
 
     chain = image_chain_of(scene)
+    pools = getattr(_LOCAL, "pools", None)
+    if pools is None:
+        pools = _LOCAL.pools = {}
     key = (chain.target_path, chain.camera, chain.supersample)
-    if key not in _IMAGE_POOLS:
-        _IMAGE_POOLS[key] = ImagePool(chain, workers=1)
-        atexit.register(_IMAGE_POOLS[key].close)
-    return _IMAGE_POOLS[key]
+    if key not in pools:
+        pools[key] = InlineImagePool(chain)
+    return pools[key]
 
 
 def _run_images(spec: StudySpec, scene, s: dict, seed: int) -> dict:
-    """End-to-end run (render + measure + identify, experiment.simulate.run_simulation)."""
+    """End-to-end run (render + measure + identify, experiment.simulate.run_simulation without its synthetic
+    reference, which the row does not record), the image chain in this thread (:func:`image_pool`)."""
     from ..experiment.simulate import run_simulation
 
     if s.get("residual"):
@@ -217,7 +222,7 @@ def _run_images(spec: StudySpec, scene, s: dict, seed: int) -> dict:
     overrides = {k: s[k] for k in ("noise_grey", "blur_px") if s.get(k) is not None}
     rep = run_simulation(scene, out_dir=None, seed=seed, n_poses=s.get("n_poses"), frames=s.get("frames"),
                          method=s.get("method"), workers=1, progress=False, overrides=overrides,
-                         pool=_image_pool(scene))
+                         pool=image_pool(scene), reference=False)
     ident = rep["identification"]
     return {"converged": ident["converged"], "iterations": ident["iterations"],
             "seconds": rep.get("timings_s", {}).get("identify", float("nan")),

@@ -60,6 +60,9 @@ def write_plots(spec: StudySpec, table: list[dict], cols, out: Path) -> list[str
                 label = ", ".join(f"{a}={_fmt(v)}" for a, v in zip(others, skey)) or "median"
                 line, = ax.plot(xs, med, "o-", label=label)
                 ax.fill_between(xs, lo, hi, color=line.get_color(), alpha=0.2)
+            limit = (spec.target or {}).get(c[len("after_"):]) if c.startswith("after_") else None
+            if limit is not None:  # the spec's target (budget table): the 95 % band's top must be below it
+                ax.axhline(limit * f, color="k", ls="--", lw=1, label=f"target {limit * f:g}")
             ax.set_xlabel(axis)
             ax.set_ylabel(lab)
             if not numeric:

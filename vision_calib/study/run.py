@@ -10,54 +10,93 @@ import time
 from pathlib import Path
 
 from ..io.atomic import write_json_atomic
+from .budget import budget_table, budget_text, write_budget
 from .cells import run_cell
 from .spec import RUN_FORMAT, StudySpec, cell_key, load_study, study_cells
 from .tables import cell_summary, parameter_spread, parameter_table, summary_text, write_outputs, \
     write_parameter_table
 
-def _run_task(spec, cell, rep):
+def _run_task(spec, cell, rep, in_worker: bool = False):
+    """One run -> (cell, rep, row). in_worker: this process is a study worker (local or Dask) whose parallelism is
+    the study's: one OpenCV/Mesa thread, image buffers from the heap (``image_chain.study_worker_settings``, also
+    undoing a Dask nanny's malloc setting that doubles an images run's CPU; idempotent)."""
+    if in_worker:
+        from ..experiment.image_chain import study_worker_settings
+
+        study_worker_settings()
     return cell, rep, run_cell(spec, cell, rep)
 
 
-def _execute(spec, todo, workers, scheduler, on_done):
-    """Run ``todo`` [(cell, rep)] and call on_done(cell, rep, row) as each finishes (in this process)."""
-    if scheduler is not None:
-        from distributed import Client, as_completed
+def _local_worker_init(main_pid: int) -> None:
+    """Initialiser of a local study worker: dies with the main process (also after kill -9), ignores Ctrl-C (the
+    terminal sends SIGINT to the whole process group: the main process alone decides, and stops the workers)."""
+    import signal
 
-        own = not isinstance(scheduler, Client)
-        client = Client(scheduler) if own else scheduler
+    from ..experiment.image_chain import die_with_parent, study_worker_settings
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    die_with_parent(main_pid)
+    study_worker_settings()
+
+
+def _execute_dask(spec, todo, scheduler, on_done):
+    from distributed import Client, as_completed
+
+    own = not isinstance(scheduler, Client)
+    client = Client(scheduler) if own else scheduler
+    try:
+        futs = [client.submit(_run_task, spec, c, r, True, pure=False) for c, r in todo]
         try:
-            futs = [client.submit(_run_task, spec, c, r, pure=False) for c, r in todo]
-            try:
-                for fut in as_completed(futs):
-                    on_done(*fut.result())
-            finally:
-                client.cancel(futs)
+            for fut in as_completed(futs):
+                on_done(*fut.result())
         finally:
-            if own:
-                client.close()
-        return
-    if workers <= 1 or len(todo) <= 1:
-        for c, r in todo:
-            on_done(*_run_task(spec, c, r))
-        return
+            client.cancel(futs)
+    finally:
+        if own:
+            client.close()
+
+
+def _execute_local(spec, todo, workers, on_done):
+    """``todo`` on ``workers`` spawned processes (each runs its runs' image chain itself, no pool of its own).
+    On an error or Ctrl-C in this process the workers are stopped at once (SIGTERM), not waited for."""
     import multiprocessing as mp
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
-    from ..experiment.image_chain import die_with_parent
+    before = set(mp.active_children())
+    ex = ProcessPoolExecutor(max_workers=min(workers, len(todo)), mp_context=mp.get_context("spawn"),
+                             initializer=_local_worker_init, initargs=(os.getpid(),))
+    ok = False
+    try:
+        pending = {ex.submit(_run_task, spec, c, r, True) for c, r in todo}
+        while pending:
+            done, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for f in done:
+                on_done(*f.result())
+        ok = True
+    finally:
+        ours = set(mp.active_children()) - before
+        if not ok:  # error (of a run, of on_done) or KeyboardInterrupt: stop the running runs too
+            for p in ours:
+                p.terminate()
+        ex.shutdown(wait=True, cancel_futures=True)  # after a normal end the workers exit when the queue closes
+        for p in ours:
+            p.join(10)
+            if p.is_alive():  # pragma: no cover (SIGTERM not honoured)
+                p.kill()
+                p.join()
 
-    with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"), initializer=die_with_parent,
-                             initargs=(os.getpid(),)) as ex:
-        pending = {ex.submit(_run_task, spec, c, r) for c, r in todo}
-        try:
-            while pending:
-                done, pending = wait(pending, return_when=FIRST_COMPLETED)
-                for f in done:
-                    on_done(*f.result())
-        except BaseException:
-            for f in pending:
-                f.cancel()
-            raise
+
+def _execute(spec, todo, workers, scheduler, on_done):
+    """Run ``todo`` [(cell, rep)] and call on_done(cell, rep, row) as each finishes (in this process): on the Dask
+    cluster ``scheduler``, on ``workers`` local processes, or here (``workers`` 1). In every case an images-mode
+    run renders and measures in the process (thread) that runs it, never in a pool of its own."""
+    if scheduler is not None:
+        _execute_dask(spec, todo, scheduler, on_done)
+    elif workers <= 1 or len(todo) <= 1:
+        for c, r in todo:
+            on_done(*_run_task(spec, c, r))
+    else:
+        _execute_local(spec, todo, workers, on_done)
 
 
 def _load_run(path: Path, spec_hash: str):
@@ -126,7 +165,10 @@ def run_study(spec, out_dir, workers: int | None = None, scheduler=None, progres
     res["parameters"] = parameter_table(spec, table)
     if res["parameters"]:
         files["parameters_csv"] = write_parameter_table(spec, res["parameters"], out)
-    res["summary_text"] = summary_text(spec, res)
+    res["budget"] = budget_table(spec, table)
+    if res["budget"]:
+        files["budget_csv"] = write_budget(spec, res["budget"], out)
+    res["summary_text"] = "\n".join([summary_text(spec, res), *budget_text(spec, res["budget"])])
     return res
 
 

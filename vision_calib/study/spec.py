@@ -27,6 +27,9 @@ AXES_IMAGES = ("noise_grey", "blur_px", "frames")
 AXES_SYNTHETIC = ("sigma_mm", "sigma_deg", "pose_selection")
 ACCURACY_KEYS = ("position_rms_mm", "position_max_mm", "rotation_rms_deg")
 CRITERIA_KEYS = ("V1_rad", "V2_rad", "V3_m")
+#: figures a spec's ``target`` may bound (after calibration, validation poses): column ``after_<key>`` (not the
+#: signed mean V1)
+TARGET_KEYS = ACCURACY_KEYS + ("V2_rad", "V3_m")
 #: main figures of the summary text and the plots: (column, label, factor for display)
 MAIN_FIGURES = (
     ("after_position_rms_mm", "pos RMS mm", 1.0),
@@ -55,6 +58,8 @@ class StudySpec:
     outputs: tuple
     parameters: tuple | None
     truth_variant: str | None = None
+    #: accuracy targets {figure: threshold} (``TARGET_KEYS``; SI-suffixed units as named) for the budget table
+    target: dict | None = None
     hash: str = ""
     raw: dict = field(default_factory=dict, repr=False, compare=False)
 
@@ -141,7 +146,7 @@ def load_study(path) -> StudySpec:
     path = Path(path)
     top = Section(load_yaml(path), path)
     known = {"name", "scene", "mode", "repetitions", "seed", "truth", "settings", "sweep", "outputs", "parameters",
-             "description", "truth_variant"}
+             "description", "truth_variant", "target"}
     for k in top.keys():
         if k not in known:
             raise top.error(k, f"unknown key (known: {', '.join(sorted(known))})")
@@ -189,14 +194,40 @@ def load_study(path) -> StudySpec:
         tv = _convert(path, "truth_variant", "variant", tv, mode)
         if mode != "synthetic":
             raise top.error("truth_variant", "only mode: synthetic supports another truth model")
+    target = _target(top, outputs)
     spec = StudySpec(path=path, name=name, scene_path=scene_path, mode=mode, repetitions=reps, seed=seed,
                      truth=truth, settings=settings, sweep=tuple(sweep), outputs=tuple(outputs),
                      parameters=None if params is None else tuple(str(p) for p in params), truth_variant=tv,
-                     raw=top.data)
+                     target=target, raw=top.data)
     _check_cells(spec)
     key = {"format": RUN_FORMAT, "mode": mode, "seed": seed, "truth": truth, "truth_variant": tv, "settings": settings,
            "outputs": sorted(outputs), "parameters": spec.parameters, "files": _file_digest(_scene_files(scene_path))}
     return replace(spec, hash=hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16])
+
+
+def _target(top: Section, outputs) -> dict | None:
+    """The ``target`` mapping {figure: threshold > 0}: figures of TARGET_KEYS whose output (accuracy / criteria)
+    the study records. Not part of the spec hash: it only selects rows of the budget table."""
+    raw = top.get("target", dict, None)
+    if raw is None:
+        return None
+    if not raw:
+        raise top.error("target", f"expected at least one of {', '.join(TARGET_KEYS)}")
+    out = {}
+    for k, v in raw.items():
+        if k not in TARGET_KEYS:
+            raise top.error(f"target.{k}", f"unknown figure (known: {', '.join(TARGET_KEYS)})")
+        need = "accuracy" if k in ACCURACY_KEYS else "criteria"
+        if need not in outputs:
+            raise top.error(f"target.{k}", f"needs the {need!r} output")
+        try:
+            x = float(v)
+            if isinstance(v, bool) or not math.isfinite(x) or x <= 0:
+                raise ValueError
+        except (TypeError, ValueError):
+            raise top.error(f"target.{k}", f"expected a finite number > 0, got {v!r}") from None
+        out[str(k)] = x
+    return out
 
 
 def _check_cells(spec: StudySpec) -> None:
