@@ -1,7 +1,20 @@
-"""Command-line interface: thin wrappers over library functions.
+"""Command-line interface: thin wrappers over library functions (one ``_cmd_*`` per subcommand, dispatched
+through :data:`COMMANDS`).
 
-Every user error (VisionCalibError) becomes one line ``vision-calib: error: ...`` on stderr
-and exit code 2; results are printed as JSON with ``--json``.
+Outputs: every command that writes a folder takes ``--out DIR`` (``import-rosi SRC DST`` / ``export-rosi SRC
+DST`` still accept the old positional DST, with a deprecation note on stderr); ``target`` and
+``calibrate-camera`` write one file, also named by ``--out``. Results are printed as JSON with ``--json``.
+
+Exit codes (the same for every command; :data:`EXIT_CODES` is the ``--help`` text)::
+
+    0    done: outputs written and the result is good, or a "warning" verdict (the calibrated model is
+         written; the reason is printed on stderr); also output piped into a closed reader (``| head``)
+    2    bad input or usage: a command-line error (argparse), any user error (a file, key, pose or parameter
+         named in one line ``vision-calib: error: ...`` on stderr, never a traceback), an output folder in use
+         by another run, an unwritable output, out of memory
+    3    outputs written but the result is not good: the identification failed (not converged, not finite) or
+         a gross input error was found after the fit; no calibrated model is written
+    130  interrupted (Ctrl-C); results already written are kept
 """
 
 from __future__ import annotations
@@ -17,7 +30,14 @@ import argparse  # noqa: E402
 import sys  # noqa: E402
 from pathlib import Path  # noqa: E402
 
+from . import __version__  # noqa: E402
 from .errors import VisionCalibError  # noqa: E402
+
+EXIT_CODES = """exit codes:
+  0    done (also a "warning" verdict: calibrated model written, reason on stderr)
+  2    bad input or usage (one line "vision-calib: error: ..." on stderr)
+  3    outputs written but the result is not good (failed fit, gross input error): no calibrated model
+  130  interrupted (Ctrl-C); results already written are kept"""
 
 
 def _chessboard(text: str) -> tuple[int, int]:
@@ -78,58 +98,97 @@ def _scheduler(text: str) -> str:
                                      f"dask-scheduler --scheduler-file), got {text!r}")
 
 
+_METHOD_HELP = ("identification method: lse (least squares), ekf (extended Kalman filter), igm (H4: joint "
+                "residuals through the inverse model) (default: the scene's or recording's)")
+_RESIDUAL_HELP = ("what the residual compares: pose (6 components), position (3), joint (H4 joint values) "
+                  "(default: the scene's)")
+
+
 def _add_common(p, poses=True):
     p.add_argument("scene", help="scene YAML file (see scenes/)")
     if poses:
         p.add_argument("--poses", type=_count, default=None, help="number of identification poses (default: scene's)")
     p.add_argument("--seed", type=_seed, default=None, help="random seed (default: scene's, else 0)")
-    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    _add_json(p)
+
+
+def _add_json(p):
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout instead of the summary")
 
 
 def _add_run_options(p):
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.add_argument("--fix-unidentifiable", action="store_true",
-                   help="accept a pose set that loses parameters varied poses identify (they stay at nominal)")
+                   help="when these poses cannot identify parameters that varied poses would, keep those at their "
+                        "nominal values and go on (by default the run stops with exit code 2 naming them)")
+
+
+def _command(sub, name: str, help: str, examples: str, description: str | None = None):
+    """A subparser with its one-line help, a description and an ``examples:`` epilog (kept as written)."""
+    return sub.add_parser(name, help=help, description=description or help[:1].upper() + help[1:] + ".",
+                          epilog="examples:\n" + examples.strip("\n"),
+                          formatter_class=argparse.RawDescriptionHelpFormatter)
 
 
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="vision-calib", description="Vision-based geometric calibration of robots.")
-    sub = ap.add_subparsers(dest="command", required=True)
+    ap = argparse.ArgumentParser(
+        prog="vision-calib", description="Vision-based geometric calibration of robots.",
+        epilog="examples:\n  vision-calib demo --out out/demo\n  vision-calib process recording/ --out out/run\n"
+               "  vision-calib simulate --help\n\n" + EXIT_CODES,
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--version", action="version", version=f"%(prog)s {__version__}",
+                    help="print the version and exit")
+    sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    p = sub.add_parser("identifiability", help="rank, base parameters, couplings, condition number of a scene")
+    p = _command(sub, "identifiability", "rank, base parameters, couplings, condition number of a scene", """
+  vision-calib identifiability scenes/rx90_eye_in_hand.yaml --poses 12
+  vision-calib identifiability scenes/h4_vision.yaml --residual joint --all --json""")
     _add_common(p)
-    p.add_argument("--residual", choices=["pose", "position", "joint"], default=None)
+    p.add_argument("--residual", choices=["pose", "position", "joint"], default=None, help=_RESIDUAL_HELP)
     p.add_argument("--all", action="store_true", dest="all_params",
                    help="analyse every model parameter, also those fixed by default (Hayati d, M_T_E.z...)")
 
-    p = sub.add_parser("identify-synthetic", help="truth -> synthetic pose measurements (no images) -> identify -> evaluate")
+    p = _command(sub, "identify-synthetic", "truth -> synthetic pose measurements (no images) -> identify -> "
+                 "evaluate", """
+  vision-calib identify-synthetic scenes/rx90_eye_in_hand.yaml --poses 30 --sigma-mm 0.1 --sigma-deg 0.02
+  vision-calib identify-synthetic scenes/h4_vision.yaml --method igm --seed 4 --json""")
     _add_common(p)
-    p.add_argument("--method", choices=["lse", "ekf", "igm"], default=None)
-    p.add_argument("--residual", choices=["pose", "position", "joint"], default=None)
+    p.add_argument("--method", choices=["lse", "ekf", "igm"], default=None, help=_METHOD_HELP)
+    p.add_argument("--residual", choices=["pose", "position", "joint"], default=None, help=_RESIDUAL_HELP)
     p.add_argument("--sigma-mm", type=_sigma, default=None, help="translation noise per component [mm]")
     p.add_argument("--sigma-deg", type=_sigma, default=None, help="rotation noise per component [deg]")
 
-    p = sub.add_parser("simulate", help="end-to-end: render + effects + measure + identify + evaluate")
+    p = _command(sub, "simulate", "end-to-end: render + effects + measure + identify + evaluate", """
+  vision-calib simulate scenes/rx90_eye_in_hand.yaml --poses 12 --frames 2 --out out/rx90
+  vision-calib simulate scenes/h4_vision.yaml --out out/h4 --export-recording out/h4_rec --no-plots""")
     _add_common(p)
-    p.add_argument("--out", required=True, help="output folder (report.json, plots, calibrated model)")
+    p.add_argument("--out", required=True, metavar="DIR",
+                   help="output folder (report.json, summary.txt, plots, calibrated model)")
     p.add_argument("--frames", type=_count, default=None, help="frames per pose (default: scene's)")
-    p.add_argument("--method", choices=["lse", "ekf", "igm"], default=None)
-    p.add_argument("--export-recording", default=None, metavar="DIR", help="also write a recorded folder")
+    p.add_argument("--method", choices=["lse", "ekf", "igm"], default=None, help=_METHOD_HELP)
+    p.add_argument("--export-recording", default=None, metavar="DIR",
+                   help="also write the rendered images as a recorded folder (input of `process`)")
     p.add_argument("--workers", type=_count, default=None, help="processes for rendering/measurement (default: cores)")
     _add_run_options(p)
 
-    p = sub.add_parser("demo", help="the default scene end to end (README's main command)")
-    p.add_argument("--out", default="out/demo", help="output folder (default out/demo)")
-    p.add_argument("--seed", type=_seed, default=None)
+    p = _command(sub, "demo", "the default scene end to end (README's main command)", """
+  vision-calib demo
+  vision-calib demo --out out/demo2 --seed 1 --method lse""")
+    p.add_argument("--out", default="out/demo", metavar="DIR",
+                   help="output folder (report.json, summary.txt, plots, calibrated model; default out/demo)")
+    p.add_argument("--seed", type=_seed, default=None, help="random seed (default: the scene's)")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.add_argument("--method", choices=["igm", "lse", "ekf"], default=None,
                    help="H4 identification: igm (joint residuals, default), lse (pose residuals), ekf")
-    p.add_argument("--json", action="store_true")
+    _add_json(p)
 
-    p = sub.add_parser("process", help="measure -> identify -> report on a recorded image folder")
-    p.add_argument("folder")
-    p.add_argument("--out", required=True)
-    p.add_argument("--method", choices=["lse", "ekf", "igm"], default=None)
+    p = _command(sub, "process", "measure -> identify -> report on a recorded image folder", """
+  vision-calib process recording/ --out out/run
+  vision-calib process recording/ --out out/run --camera camera.yaml --no-plots --json""")
+    p.add_argument("folder", help="recorded folder (recording.yaml, poses.csv, images; README: File formats)")
+    p.add_argument("--out", required=True, metavar="DIR",
+                   help="output folder (report.json, summary.txt, plots, calibrated model)")
+    p.add_argument("--method", choices=["lse", "ekf", "igm"], default=None, help=_METHOD_HELP)
     _add_run_options(p)
     p.add_argument("--allow-symlinks", action="store_true",
                    help="follow symbolic links that lead out of the recorded folder (refused by default)")
@@ -137,36 +196,45 @@ def build_parser() -> argparse.ArgumentParser:
                    help="calibrate the camera from the recording's images even when recording.yaml gives intrinsics")
     p.add_argument("--camera", default=None, metavar="CAMERA_YAML",
                    help="camera intrinsics from this camera.yaml (calibrate-camera's output) instead of recording.yaml's")
-    p.add_argument("--json", action="store_true")
+    _add_json(p)
 
-    p = sub.add_parser("calibrate-camera", help="camera intrinsics + distortion from images of a target")
+    p = _command(sub, "calibrate-camera", "camera intrinsics + distortion from images of a target", """
+  vision-calib calibrate-camera images/ --target targets/charuco_a5.yaml --out camera.yaml""")
     p.add_argument("folder", help="folder of images (searched recursively: png, jpg, jpeg, bmp, tif, tiff)")
     p.add_argument("--target", required=True, help="target YAML (see targets/)")
-    p.add_argument("--out", required=True, help="camera YAML to write (README: File formats)")
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--out", required=True, metavar="FILE", help="camera YAML to write (README: File formats)")
+    _add_json(p)
 
-    p = sub.add_parser("process-poses", help="joints + measured poses (no images) -> identify -> k-fold report "
-                       "(format: docs/measured_poses.md)")
+    p = _command(sub, "process-poses", "joints + measured poses (no images) -> identify -> k-fold report "
+                 "(format: docs/measured_poses.md)", """
+  vision-calib process-poses measured.yaml --out out/poses
+  vision-calib process-poses measured.yaml --out out/poses --method ekf --folds 5 --json""")
     p.add_argument("file", help="measured-pose YAML (with its CSV beside it)")
-    p.add_argument("--out", required=True)
-    p.add_argument("--method", choices=["lse", "ekf"], default=None)
+    p.add_argument("--out", required=True, metavar="DIR",
+                   help="output folder (report.json with the k-fold validation, summary.txt, plots, calibrated model)")
+    p.add_argument("--method", choices=["lse", "ekf"], default=None,
+                   help="identification method: lse (least squares) or ekf (default: the file's, else lse)")
     p.add_argument("--folds", type=_int_at_least(2), default=None,
                    help="k of the held-out validation (default: the file's)")
     _add_run_options(p)
-    p.add_argument("--json", action="store_true")
+    _add_json(p)
 
-    p = sub.add_parser("study", help="parameter sweep x Monte Carlo (local processes or a Dask cluster)")
+    p = _command(sub, "study", "parameter sweep x Monte Carlo (local processes or a Dask cluster)", """
+  vision-calib study scenes/studies/h4_noise.yaml --out out/study --workers 2
+  vision-calib study scenes/studies/h4_noise.yaml --out out/study --scheduler tcp://10.0.0.5:8786""")
     p.add_argument("spec", help="study YAML (see scenes/studies/)")
-    p.add_argument("--out", required=True)
-    p.add_argument("--workers", type=_count, default=None)
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder (results table, summary, plots)")
+    p.add_argument("--workers", type=_count, default=None, help="local worker processes (default: cores)")
     p.add_argument("--scheduler", type=_scheduler, default=None,
                    help="Dask scheduler address (tcp://host:port) or scheduler file")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
-    p.add_argument("--json", action="store_true")
+    _add_json(p)
 
-    p = sub.add_parser("import-visp", help="convert a ViSP eye-to-hand folder into a recorded folder")
-    p.add_argument("src")
-    p.add_argument("--out", required=True)
+    p = _command(sub, "import-visp", "convert a ViSP eye-to-hand folder into a recorded folder", """
+  vision-calib import-visp visp_data/ --out recording/
+  vision-calib import-visp visp_chessboard/ --out recording/ --chessboard 9x6 --square-m 0.025""")
+    p.add_argument("src", metavar="SRC", help="ViSP data folder (images, poses, apriltag-data.txt)")
+    p.add_argument("--out", required=True, metavar="DIR", help="recorded folder to write")
     p.add_argument("--tag-size-m", type=_sigma, default=None, help="tag side [m] (default: from apriltag-data.txt)")
     p.add_argument("--tag-id", type=_seed, default=None, help="tag id (default: detected in the first image)")
     # --- importers (io/visp.py chessboard variant, io/rosi.py)
@@ -177,20 +245,29 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--mount", choices=("eye_in_hand", "fixed"), default="eye_in_hand",
                    help="chessboard folders: where the camera is (default eye_in_hand, ViSP's tutorial)")
 
-    p = sub.add_parser("import-rosi", help="convert a ROS-I industrial_calibration hand-eye data set into a "
-                                           "recorded folder")
-    p.add_argument("src", help="folder with cal_data.yaml (or that file)")
-    p.add_argument("dst", help="recorded folder to write")
+    p = _command(sub, "import-rosi", "convert a ROS-I industrial_calibration hand-eye data set into a recorded "
+                 "folder", """
+  vision-calib import-rosi rosi_data/ --out recording/
+  vision-calib import-rosi rosi_data/cal_data.yaml --out recording/
+  (the old spelling `import-rosi SRC DST` still works; it is deprecated)""")
+    p.add_argument("src", metavar="SRC", help="folder with cal_data.yaml (or that file)")
+    p.add_argument("dst", nargs="?", default=None, metavar="DST", help="deprecated: use --out DIR")
+    p.add_argument("--out", default=None, metavar="DIR", help="recorded folder to write")
     p.add_argument("--allow-symlinks", action="store_true", help="follow symlinks leading out of SRC")
 
-    p = sub.add_parser("export-rosi", help="write a recorded folder (flange poses, ChArUco) as a ROS-I data set")
-    p.add_argument("src", help="recorded folder")
-    p.add_argument("dst", help="folder to write (cal_data.yaml, poses/, images/)")
+    p = _command(sub, "export-rosi", "write a recorded folder (flange poses, ChArUco) as a ROS-I data set", """
+  vision-calib export-rosi recording/ --out rosi_data/
+  (the old spelling `export-rosi SRC DST` still works; it is deprecated)""")
+    p.add_argument("src", metavar="SRC", help="recorded folder")
+    p.add_argument("dst", nargs="?", default=None, metavar="DST", help="deprecated: use --out DIR")
+    p.add_argument("--out", default=None, metavar="DIR", help="folder to write (cal_data.yaml, poses/, images/)")
 
-    p = sub.add_parser("target", help="export a printable target image")
+    p = _command(sub, "target", "export a printable target image", """
+  vision-calib target targets/charuco_a5.yaml --out charuco_a5.pdf
+  vision-calib target targets/charuco_a5.yaml --out charuco_a5.png --dpi 600""")
     p.add_argument("target", help="target YAML (see targets/)")
-    p.add_argument("--out", required=True, help="PNG or PDF file")
-    p.add_argument("--dpi", type=_count, default=300)
+    p.add_argument("--out", required=True, metavar="FILE", help="PNG or PDF file to write (printed at 100 %% scale)")
+    p.add_argument("--dpi", type=_count, default=300, help="resolution of the image [dots per inch] (default 300)")
     for p in sub.choices.values():  # the one rule for paths named in files (config.confine): the user's allowance
         p.add_argument("--allow-path", action="append", default=[], metavar="DIR",
                        help="let files (scene, measured-pose, recording, study, ROS-I files) name files in DIR too "
@@ -198,106 +275,169 @@ def build_parser() -> argparse.ArgumentParser:
     return ap
 
 
-def _dispatch(args) -> int:
+def _positional_out(args, parser) -> None:
+    """``import-rosi SRC DST`` / ``export-rosi SRC DST``: the old positional output, taken as ``--out`` with a
+    deprecation note on stderr; exactly one of the two must be given (argparse error, exit 2, otherwise)."""
+    if args.command not in ("import-rosi", "export-rosi"):
+        return
+    if args.dst is not None and args.out is not None:
+        parser.error(f"{args.command}: give the output folder once: --out DIR (DST is the deprecated spelling)")
+    if args.dst is None and args.out is None:
+        parser.error(f"{args.command}: the output folder is required: --out DIR")
+    if args.dst is not None:
+        print(f"vision-calib: warning: `{args.command} SRC DST` is deprecated; write `{args.command} SRC --out DST`",
+              file=sys.stderr)
+
+
+# --------------------------------------------------------------------------------------------- the commands
+def _cmd_identifiability(args) -> int:
+    from .experiment.synthetic import identifiability_json
     from .io.atomic import to_json
 
-    if args.command == "identifiability":
-        from .experiment.synthetic import identifiability_json
+    out = identifiability_json(args.scene, residual=args.residual, n_poses=args.poses, seed=args.seed,
+                               all_params=args.all_params)
+    print(to_json(out) if args.json else _summary_identifiability(out))
+    return 0
 
-        out = identifiability_json(args.scene, residual=args.residual, n_poses=args.poses, seed=args.seed,
-                                  all_params=args.all_params)
-        print(to_json(out) if args.json else _summary_identifiability(out))
-        return 0
-    if args.command == "identify-synthetic":
-        from .experiment.synthetic import identify_synthetic_json
 
-        out = identify_synthetic_json(
-            args.scene, method=args.method, residual=args.residual, n_poses=args.poses,
-            sigma_mm=args.sigma_mm, sigma_deg=args.sigma_deg, seed=args.seed,
-        )
-        print(to_json(out) if args.json else _summary_synthetic(out))
-        return _status(out["verdict"])
-    if args.command in ("simulate", "demo"):
-        from .experiment.image_chain import start_fork_server
+def _cmd_identify_synthetic(args) -> int:
+    from .experiment.synthetic import identify_synthetic_json
+    from .io.atomic import to_json
 
-        start_fork_server()  # the image workers' imports run beside ours (issue 11: demo wall time)
-        from .experiment.simulate import run_simulation, DEFAULT_SCENE
+    out = identify_synthetic_json(
+        args.scene, method=args.method, residual=args.residual, n_poses=args.poses,
+        sigma_mm=args.sigma_mm, sigma_deg=args.sigma_deg, seed=args.seed,
+    )
+    print(to_json(out) if args.json else _summary_synthetic(out))
+    return _status(out["verdict"])
 
-        scene = DEFAULT_SCENE if args.command == "demo" else args.scene
-        report = run_simulation(
-            scene, out_dir=args.out, seed=args.seed,
-            n_poses=getattr(args, "poses", None), frames=getattr(args, "frames", None),
-            method=getattr(args, "method", None), export_recording=getattr(args, "export_recording", None),
-            workers=getattr(args, "workers", None), progress=not args.json, plots=not args.no_plots,
-            fix_unidentifiable=getattr(args, "fix_unidentifiable", False),
-        )
-        print(to_json(report) if args.json else report["summary_text"])
-        return _status(report["verdict"])
-    if args.command == "process":
-        from .experiment.process import process_folder
 
-        report = process_folder(args.folder, out_dir=args.out, method=args.method, progress=not args.json,
-                                plots=not args.no_plots, fix_unidentifiable=args.fix_unidentifiable,
-                                allow_symlinks=args.allow_symlinks, refine_intrinsics=args.refine_intrinsics,
-                                camera_file=args.camera)
-        print(to_json(report) if args.json else report["summary_text"])
-        return _status(report["verdict"])
-    if args.command == "calibrate-camera":
-        from .measure.intrinsics import calibrate_from_images, find_images, summary_text
-        from .io.camera_file import write_camera_yaml
-        from .targets import load_target
+def _cmd_simulate(args) -> int:
+    """simulate and demo (demo: the default scene, no --poses / --frames / --workers)."""
+    from .experiment.image_chain import start_fork_server
 
-        target = load_target(args.target)
-        res = calibrate_from_images(find_images(args.folder), target, progress=not args.json)
-        write_camera_yaml(args.out, res)
-        print(to_json(res.to_dict()) if args.json else summary_text(res) + f"\nwrote {args.out}")
-        return 0
-    if args.command == "process-poses":
-        from .experiment.poses import process_poses
+    start_fork_server()  # the image workers' imports run beside ours (issue 11: demo wall time)
+    from .experiment.simulate import run_simulation, DEFAULT_SCENE
 
-        report = process_poses(args.file, out_dir=args.out, method=args.method, folds=args.folds,
-                               plots=not args.no_plots, fix_unidentifiable=args.fix_unidentifiable)
-        print(to_json(report) if args.json else report["summary_text"])
-        return _status(report["verdict"])
-    if args.command == "study":
-        from .study import run_study
+    scene = DEFAULT_SCENE if args.command == "demo" else args.scene
+    report = run_simulation(
+        scene, out_dir=args.out, seed=args.seed,
+        n_poses=getattr(args, "poses", None), frames=getattr(args, "frames", None),
+        method=getattr(args, "method", None), export_recording=getattr(args, "export_recording", None),
+        workers=getattr(args, "workers", None), progress=not args.json, plots=not args.no_plots,
+        fix_unidentifiable=getattr(args, "fix_unidentifiable", False),
+    )
+    return _print_report(args, report)
 
-        res = run_study(args.spec, out_dir=args.out, workers=args.workers, scheduler=args.scheduler,
-                        progress=not args.json, plots=not args.no_plots)
-        print(to_json(res) if args.json else res["summary_text"])
-        return 0
-    if args.command == "import-visp":
-        from .errors import ConfigError
-        from .io.visp import import_visp_chessboard, import_visp_eye_to_hand
 
-        if args.chessboard is not None:
-            if args.square_m is None:
-                raise ConfigError("--chessboard needs --square-m (the square side in metres)")
-            notes = []
-            path = import_visp_chessboard(args.src, args.out, *args.chessboard, args.square_m, mount=args.mount,
-                                          notes=notes)
-            for n in notes:
-                print(f"vision-calib: warning: {n}", file=sys.stderr)
-        else:
-            path = import_visp_eye_to_hand(args.src, args.out, tag_m=args.tag_size_m, tag_id=args.tag_id)
-        print(f"wrote recorded folder {path}")
-        return 0
-    if args.command in ("import-rosi", "export-rosi"):
-        from .io.rosi import export_rosi, import_rosi
+def _print_report(args, report: dict) -> int:
+    from .io.atomic import to_json
 
-        if args.command == "import-rosi":
-            path = import_rosi(args.src, args.dst, allow_symlinks=args.allow_symlinks)
-            print(f"wrote recorded folder {path}")
-        else:
-            print(f"wrote ROS-I data set {export_rosi(args.src, args.dst)}")
-        return 0
-    if args.command == "target":
-        from .targets import load_target, export_printable
+    print(to_json(report) if args.json else report["summary_text"])
+    return _status(report["verdict"])
 
-        path = export_printable(load_target(args.target), args.out, dpi=args.dpi)
-        print(f"wrote {path}")
-        return 0
-    raise AssertionError(args.command)
+
+def _cmd_process(args) -> int:
+    from .experiment.process import process_folder
+
+    report = process_folder(args.folder, out_dir=args.out, method=args.method, progress=not args.json,
+                            plots=not args.no_plots, fix_unidentifiable=args.fix_unidentifiable,
+                            allow_symlinks=args.allow_symlinks, refine_intrinsics=args.refine_intrinsics,
+                            camera_file=args.camera)
+    return _print_report(args, report)
+
+
+def _cmd_calibrate_camera(args) -> int:
+    from .io.atomic import to_json
+    from .io.camera_file import write_camera_yaml
+    from .measure.intrinsics import calibrate_from_images, find_images, summary_text
+    from .targets import load_target
+
+    target = load_target(args.target)
+    res = calibrate_from_images(find_images(args.folder), target, progress=not args.json)
+    write_camera_yaml(args.out, res)
+    print(to_json(res.to_dict()) if args.json else summary_text(res) + f"\nwrote {args.out}")
+    return 0
+
+
+def _cmd_process_poses(args) -> int:
+    from .experiment.poses import process_poses
+
+    report = process_poses(args.file, out_dir=args.out, method=args.method, folds=args.folds,
+                           plots=not args.no_plots, fix_unidentifiable=args.fix_unidentifiable)
+    return _print_report(args, report)
+
+
+def _cmd_study(args) -> int:
+    from .io.atomic import to_json
+    from .study import run_study
+
+    res = run_study(args.spec, out_dir=args.out, workers=args.workers, scheduler=args.scheduler,
+                    progress=not args.json, plots=not args.no_plots)
+    print(to_json(res) if args.json else res["summary_text"])
+    return 0
+
+
+def _cmd_import_visp(args) -> int:
+    from .errors import ConfigError
+    from .io.visp import import_visp_chessboard, import_visp_eye_to_hand
+
+    if args.chessboard is not None:
+        if args.square_m is None:
+            raise ConfigError("--chessboard needs --square-m (the square side in metres)")
+        notes = []
+        path = import_visp_chessboard(args.src, args.out, *args.chessboard, args.square_m, mount=args.mount,
+                                      notes=notes)
+        for n in notes:
+            print(f"vision-calib: warning: {n}", file=sys.stderr)
+    else:
+        path = import_visp_eye_to_hand(args.src, args.out, tag_m=args.tag_size_m, tag_id=args.tag_id)
+    print(f"wrote recorded folder {path}")
+    return 0
+
+
+def _cmd_import_rosi(args) -> int:
+    from .io.rosi import import_rosi
+
+    print(f"wrote recorded folder {import_rosi(args.src, _out(args), allow_symlinks=args.allow_symlinks)}")
+    return 0
+
+
+def _cmd_export_rosi(args) -> int:
+    from .io.rosi import export_rosi
+
+    print(f"wrote ROS-I data set {export_rosi(args.src, _out(args))}")
+    return 0
+
+
+def _cmd_target(args) -> int:
+    from .targets import export_printable, load_target
+
+    print(f"wrote {export_printable(load_target(args.target), args.out, dpi=args.dpi)}")
+    return 0
+
+
+#: subcommand -> function(args) -> exit code
+COMMANDS = {
+    "identifiability": _cmd_identifiability,
+    "identify-synthetic": _cmd_identify_synthetic,
+    "simulate": _cmd_simulate,
+    "demo": _cmd_simulate,
+    "process": _cmd_process,
+    "calibrate-camera": _cmd_calibrate_camera,
+    "process-poses": _cmd_process_poses,
+    "study": _cmd_study,
+    "import-visp": _cmd_import_visp,
+    "import-rosi": _cmd_import_rosi,
+    "export-rosi": _cmd_export_rosi,
+    "target": _cmd_target,
+}
+
+
+def _out(args):
+    """The command's output path: --out, else the deprecated positional DST."""
+    out = getattr(args, "out", None)
+    return out if out is not None else getattr(args, "dst", None)
 
 
 #: exit code when the outputs were written but the result is not good (not converged, not finite)
@@ -350,7 +490,7 @@ def _locks(args) -> list:
     from .io.lock import OutputLock
 
     locks = []
-    out = getattr(args, "out", None)
+    out = _out(args)
     if out is not None:
         if args.command in ("target", "calibrate-camera"):  # a file: lock beside it
             locks.append(OutputLock(Path(out).parent, "output file", lock_path=Path(str(out) + ".lock")))
@@ -390,7 +530,7 @@ def _check_outputs(args) -> None:
     ins = _inputs(args)
     for flag in ("out", "dst", "export_recording"):
         out = getattr(args, flag, None)
-        if out is not None and not (args.command == "export-rosi" and flag == "out"):
+        if out is not None:
             check_output_apart(out, ins, "--" + flag.replace("_", "-") if flag != "dst" else "DST")
 
 
@@ -403,7 +543,7 @@ def _run_locked(args) -> int:
         for lock in _locks(args):
             held.append(lock.acquire())
         with allow_paths(args.allow_path):
-            return _dispatch(args)
+            return COMMANDS[args.command](args)
     finally:
         for lock in reversed(held):
             lock.release()
@@ -412,7 +552,9 @@ def _run_locked(args) -> int:
 def main(argv=None) -> int:
     import warnings
 
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    _positional_out(args, parser)
     try:
         with warnings.catch_warnings():  # numpy's floating-point warnings never reach the user: every bad value
             # they come from is refused by a named check (file, line, pose id) or ends in a named failure
