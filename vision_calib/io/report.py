@@ -4,7 +4,7 @@ plots, calibrated model. All writes atomic.
 report.json, version 2 (each value once)::
 
     version: "2.0"
-    kind: simulation | process | process_handeye
+    kind: simulation | process | process_handeye | process_poses
     verdict: {ok, status, usable, converged, adequacy, lack_of_fit, message, n_rejected_poses, warnings: n,
               failure: kind}                                     # read first; failure only when one was found
     failure: {kind, chi2_dof, moves, tests: [{candidate, chi2_dof, fits}], message}  # experiment/gross.py
@@ -33,6 +33,9 @@ report.json, version 2 (each value once)::
     timings_s: {...}
     files: {report, model, residuals_plot, ...}
 
+The machine-readable contract is the JSON Schema shipped beside this module (:data:`SCHEMA_PATH`,
+``report_schema.json``): the keys every kind always writes, their types, open blocks allowed to grow.
+
 Changes from version 1: the parameter table is only in ``parameters`` (``identification.parameters``
 is gone); ``scene`` / ``folder`` moved under ``source``; ``verdict`` added.
 """
@@ -47,6 +50,8 @@ from .atomic import write_json_atomic, write_text_atomic
 from .model_export import write_calibrated_model
 
 REPORT_VERSION = "2.0"
+#: JSON Schema (draft 2020-12) of report.json, shipped as package data
+SCHEMA_PATH = Path(__file__).with_name("report_schema.json")
 
 
 def parameters_table(names, nominal, x_true, result) -> list[dict]:
