@@ -213,7 +213,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, metavar="DIR",
                    help="output folder (report.json with the k-fold validation, summary.txt, plots, calibrated model)")
     p.add_argument("--method", choices=["lse", "ekf"], default=None,
-                   help="identification method: lse (least squares) or ekf (default: the file's, else lse)")
+                   help="identification method: lse (least squares) or ekf (default: its scene's identification.method)")
     p.add_argument("--folds", type=_int_at_least(2), default=None,
                    help="k of the held-out validation (default: the file's)")
     _add_run_options(p)
