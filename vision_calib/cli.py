@@ -99,7 +99,7 @@ def _scheduler(text: str) -> str:
 
 
 _METHOD_HELP = ("identification method: lse (least squares), ekf (extended Kalman filter), igm (H4: joint "
-                "residuals through the inverse model) (default: the scene's or recording's)")
+                "residuals through the inverse model) (default: the scene's identification.method)")
 _RESIDUAL_HELP = ("what the residual compares: pose (6 components), position (3), joint (H4 joint values) "
                   "(default: the scene's)")
 
@@ -213,7 +213,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, metavar="DIR",
                    help="output folder (report.json with the k-fold validation, summary.txt, plots, calibrated model)")
     p.add_argument("--method", choices=["lse", "ekf"], default=None,
-                   help="identification method: lse (least squares) or ekf (default: its scene's identification.method)")
+                   help="identification method: lse (least squares) or ekf (default: its scene's "
+                        "identification.method)")
     p.add_argument("--folds", type=_int_at_least(2), default=None,
                    help="k of the held-out validation (default: the file's)")
     _add_run_options(p)
