@@ -296,18 +296,3 @@ def test_kfold_validation_rejects_unknown_outlier_labels(truths):
     meas = setup.synthetic_measurements(q, x_true, np.random.default_rng(0), ST, SR)
     with pytest.raises(ValueError, match="p999"):
         kfold_validation(setup, meas, "lse", "pose", None, 3, 0, outliers=["p999"])
-
-
-def test_motion_check_rejects_a_pose_whose_joints_are_wrong(tmp_path, truths):
-    """The motion-consistency check of `process` runs in `process-poses`: a pose whose joint 4 reading is
-    0.5 rad off is named as inconsistent, counted once among the rejected poses, and still held out."""
-    scene, x_true = truths[RX90]
-    n = 30
-    q, T = _data(scene, x_true, seed=14, n=n)
-    q[3, 3] += 0.5
-    p = write_measured_poses(tmp_path / "m.yaml", RX90, _ids(n), q, T, "T_cam_target", default_sigma=(ST, SR))
-    rep = process_poses(p, tmp_path / "out", plots=False)
-    assert [r["pose_id"] for r in rep["motion_check"]["inconsistent_poses"]] == ["p003"]
-    assert [o["pose_id"] for o in rep["outliers"]] == ["p003"] and rep["verdict"]["n_rejected_poses"] == 1
-    kf = rep["kfold"]
-    assert kf["overall"]["n_poses"] == n and kf["without_outliers"]["excluded"] == ["p003"]

@@ -20,7 +20,7 @@ import numpy as np
 from ..errors import ConfigError
 from ..io.measured_poses import chain_direction, misreadings, read_measured_poses
 from ..io.report import build_report, parameters_table, residual_stats, write_report
-from .checks import duplicate_poses, screen_measurements
+from .checks import duplicate_poses
 from .gross import gross_failure
 from .steps import check_method, identify_measurements
 
@@ -132,11 +132,8 @@ def process_poses(path, out_dir, method=None, folds=None, plots=True, fix_uniden
     if not 2 <= folds <= len(mp.ids):
         raise ConfigError(f"{mp.path}: folds: {folds} folds need 2 <= folds <= {len(mp.ids)} (the number of poses)")
     residual = setup.residual_for(method, mp.residual)
-    # the motion-consistency check of `process` (full poses only: position rows carry no rotation)
-    screened, inconsistent, motion = (meas, [], None) if mp.position_only else screen_measurements(
-        setup, meas, f"{mp.csv_path}", f"units.length of {mp.path} and the measured: direction")
-    ident = identify_measurements(setup, screened, method, residual, where=str(mp.path),
-                                  fix_unidentifiable=fix_unidentifiable, rejected=inconsistent)
+    ident = identify_measurements(setup, meas, method, residual, where=str(mp.path),
+                                  fix_unidentifiable=fix_unidentifiable)
     result, problem, rep, setup = ident.result, ident.problem, ident.analysis, ident.setup
     t_id = time.perf_counter() - t0
     failure = gross_failure(setup, meas, ident, mp.residual, str(mp.path), misreadings(mp),
@@ -156,7 +153,7 @@ def process_poses(path, out_dir, method=None, folds=None, plots=True, fix_uniden
         measurements={"n_poses": n, "n_valid": n, "n_rejected": 0, "rejected": [], "measured": mp.measured,
                       "noise": mp.sigma_source, "pose_ids": list(mp.ids)},
         identifiability=rep, parameters=parameters_table(ps.names, ps.nominal, None, result), result=result,
-        identified=ident, warnings=duplicate_poses(meas), motion=motion,
+        identified=ident, warnings=duplicate_poses(meas),
         residuals=residual_stats(result.residuals, problem.residual_kind), extra={"kfold": kf},
         timings={"identify": t_id, "total": time.perf_counter() - t0}, failure=failure)
     report["summary_text"] += "\n" + ("\n".join(kfold_lines(kf)) if kf else
