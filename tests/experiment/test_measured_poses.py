@@ -146,6 +146,8 @@ def test_kfold_held_out_residuals_drop(tmp_path, truths):
         assert f["after"]["position_rms_mm"] < 0.5 * f["before"]["position_rms_mm"]
         assert f["after"]["rotation_rms_deg"] < 0.5 * f["before"]["rotation_rms_deg"]
     assert "held-out 4-fold validation" in rep["summary_text"]
+    assert not rep["outliers"] and kf["without_outliers"] is None and kf["overall"]["n_poses"] == len(q)
+    assert f"all {len(q)} poses (none flagged as an outlier)" in rep["summary_text"]
     on_disk = json.loads((tmp_path / "out" / "report.json").read_text())
     assert on_disk["kind"] == "process_poses" and on_disk["kfold"]["overall"] == kf["overall"]
 
@@ -238,3 +240,59 @@ def test_bad_files_exit_2_naming_file_and_key(tmp_path, truths, capsys, case):
     for n in needles:
         assert n in err, (n, err)
     assert not (tmp_path / "out" / "report.json").exists()
+
+
+def test_kfold_holds_out_every_pose_planted_outliers_labelled(tmp_path, truths):
+    """Two poses with a planted 5 mm gross error: the whole-data fit flags them; the held-out figure counts
+    all 40 poses (each outlier predicted by a model fitted without it, so its held-out error is the planted
+    one), the figure without them counts 38 and names them, mean <= RMS <= max, and the summary gives one
+    rejected count."""
+    import re
+
+    scene, x_true = truths[RX90]
+    n, bad, gross = 40, (5, 21), 5e-3
+    q, T = _data(scene, x_true, seed=12, n=n)
+    for k in bad:  # translation-only error: its norm is the same in either pose direction
+        d = np.random.default_rng(k).normal(size=3)
+        T[k, :3, 3] += gross * d / np.linalg.norm(d)
+    p = write_measured_poses(tmp_path / "o.yaml", RX90, _ids(n), q, T, "T_cam_target",
+                             default_sigma=(ST, SR), folds=5, seed=1)
+    rep = process_poses(p, tmp_path / "out", plots=False)
+    planted = [_ids(n)[k] for k in bad]
+    assert sorted(o["pose_id"] for o in rep["outliers"]) == planted
+    kf = rep["kfold"]
+    o, c = kf["overall"], kf["without_outliers"]
+    assert sorted(kf["outliers"]) == planted and c["excluded"] == planted
+    assert o["n_poses"] == n and sum(f["n_test"] for f in kf["per_fold"]) == n
+    assert c["n_poses"] == n - 2 and sum(f["n_outliers_held_out"] for f in kf["per_fold"]) == 2
+    assert all(f["n_train"] == n - f["n_test"] - (2 - f["n_outliers_held_out"]) for f in kf["per_fold"])
+    for blk in (o, c, *kf["per_fold"]):
+        for s in (blk["before"], blk["after"]):
+            for key in ("position", "rotation"):
+                u = "mm" if key == "position" else "deg"
+                assert 0 < s[f"{key}_mean_{u}"] <= s[f"{key}_rms_{u}"] <= s[f"{key}_max_{u}"]
+    a_all, a_clean = o["after"], c["after"]
+    # the overall figure is the per-fold ones pooled, and its excess over the clean one is the outliers' error
+    assert np.isclose(sum(f["n_test"] * f["after"]["position_rms_mm"] ** 2 for f in kf["per_fold"]),
+                      n * a_all["position_rms_mm"] ** 2)
+    excess = np.sqrt((n * a_all["position_rms_mm"] ** 2 - (n - 2) * a_clean["position_rms_mm"] ** 2) / 2)
+    assert abs(excess - gross * 1e3) < 0.1 * gross * 1e3, excess
+    assert a_all["position_max_mm"] > 0.9 * gross * 1e3 > 5 * a_clean["position_max_mm"]
+    text = rep["summary_text"]
+    assert f"all {n} poses (the 2 flagged outliers included)" in text
+    assert f"without the 2 flagged outliers ({', '.join(planted)}), {n - 2} poses" in text
+    assert "position mean" in text and "RMS" in text and "max" in text
+    counts = re.findall(r"\b(\d+) (?:\w+ )?(?:poses? )?rejected", text)
+    assert counts and set(counts) == {"2"}, counts
+    assert "0 rejected" not in text
+
+
+def test_kfold_validation_rejects_unknown_outlier_labels(truths):
+    from vision_calib.experiment.poses import kfold_validation
+
+    scene, x_true = truths[RX90]
+    q, T = _data(scene, x_true, seed=13, n=12)
+    setup = scene.setup
+    meas = setup.synthetic_measurements(q, x_true, np.random.default_rng(0), ST, SR)
+    with pytest.raises(ValueError, match="p999"):
+        kfold_validation(setup, meas, "lse", "pose", None, 3, 0, outliers=["p999"])

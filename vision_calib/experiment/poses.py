@@ -25,13 +25,16 @@ from .gross import gross_failure
 from .steps import check_method, identify_measurements
 
 
-def _rms(r: np.ndarray) -> dict:
-    """RMS / max of the position [mm] (and rotation [deg] for 6-component) residual norms of r (N, m) SI."""
+def _stats(r: np.ndarray) -> dict:
+    """n_poses and mean / RMS / max of the position [mm] (and rotation [deg] for 6-component) residual norms
+    of r (N, m) SI, one norm per pose."""
     dp = np.linalg.norm(r[:, :3], axis=1) * 1e3
-    out = {"position_rms_mm": float(np.sqrt(np.mean(dp**2))), "position_max_mm": float(dp.max())}
+    out = {"n_poses": int(len(r)), "position_mean_mm": float(dp.mean()),
+           "position_rms_mm": float(np.sqrt(np.mean(dp**2))), "position_max_mm": float(dp.max())}
     if r.shape[1] == 6:
         dr = np.degrees(np.linalg.norm(r[:, 3:], axis=1))
-        out |= {"rotation_rms_deg": float(np.sqrt(np.mean(dr**2))), "rotation_max_deg": float(dr.max())}
+        out |= {"rotation_mean_deg": float(dr.mean()), "rotation_rms_deg": float(np.sqrt(np.mean(dr**2))),
+                "rotation_max_deg": float(dr.max())}
     return out
 
 
@@ -41,44 +44,80 @@ def fold_indices(n: int, folds: int, seed: int) -> list[np.ndarray]:
     return [np.sort(p) for p in np.array_split(perm, folds)]
 
 
-def kfold_validation(setup, meas, method: str, residual: str, analysis, folds: int, seed: int) -> dict:
+def kfold_validation(setup, meas, method: str, residual: str, analysis, folds: int, seed: int,
+                     outliers=()) -> dict:
     """Held-out residuals before (nominal) / after (identified on the other folds with the base parameter
-    set of ``analysis``, the whole data's IdentifiabilityReport) per fold and overall:
-    {folds, seed, per_fold: [...], overall: {before, after}}."""
+    set of ``analysis``, the whole data's IdentifiabilityReport) of EVERY pose of ``meas``, per fold and
+    overall. ``outliers``: labels of the poses the whole-data fit flagged; they are left out of every
+    training set but still held out and predicted in their own fold, so ``overall`` counts all poses and
+    ``without_outliers`` (None when there is none) the others.
+    {folds, seed, residual_of, outliers: [label], per_fold: [{fold, n_train, n_test, n_outliers_held_out,
+    converged, n_identified, before, after}], overall: {n_poses, before, after},
+    without_outliers: {n_poses, excluded: [label], before, after} | None}; before/after: :func:`_stats`."""
+    labels = list(meas.labels) or list(range(len(meas.T_cam_target)))
+    flagged = set(outliers)
+    unknown = flagged - set(labels)
+    if unknown:
+        raise ValueError(f"k-fold validation: outliers {sorted(map(str, unknown))} are not poses of the data")
     base = setup.params.mask(analysis.base_parameters)
     params = setup.params.only_free([nm for nm, b in zip(setup.params.names, base) if b])
-    per_fold, rb_all, ra_all = [], [], []
-    parts = fold_indices(len(meas.T_cam_target), folds, seed)
+    per_fold, rb_all, ra_all, test_all = [], [], [], []
+    parts = fold_indices(len(labels), folds, seed)
     for k, test in enumerate(parts):
-        train = np.sort(np.concatenate([p for j, p in enumerate(parts) if j != k]))
+        train = np.array([i for j, p in enumerate(parts) if j != k for i in p if labels[i] not in flagged], int)
+        train.sort()
         result = identify_measurements(setup, meas.subset(train), method, residual, analysis, robust=False,
                                        context=f"k-fold validation, fold {k + 1} of {folds}", cross_check=False).result
         held = setup.problem(meas.subset(test), residual, params=params)
         rb, ra = held.residual(params.nominal), held.residual(result.identified)
         rb_all.append(rb)
         ra_all.append(ra)
+        test_all.append(test)
         per_fold.append({"fold": k + 1, "n_train": int(len(train)), "n_test": int(len(test)),
+                         "n_outliers_held_out": int(sum(labels[i] in flagged for i in test)),
                          "converged": bool(result.converged),
-                         "n_identified": int(np.sum(result.free)), "before": _rms(rb), "after": _rms(ra)})
-    overall = {"before": _rms(np.concatenate(rb_all)), "after": _rms(np.concatenate(ra_all))}
-    return {"folds": int(folds), "seed": int(seed), "residual_of": chain_direction(setup), "per_fold": per_fold,
-            "overall": overall}
+                         "n_identified": int(np.sum(result.free)), "before": _stats(rb), "after": _stats(ra)})
+    rb, ra, idx = np.concatenate(rb_all), np.concatenate(ra_all), np.concatenate(test_all)
+    overall = {"n_poses": int(len(idx)), "before": _stats(rb), "after": _stats(ra)}
+    clean = None
+    if flagged:
+        keep = np.array([labels[i] not in flagged for i in idx])
+        clean = {"n_poses": int(keep.sum()), "excluded": [labels[i] for i in sorted(idx[~keep])],
+                 "before": _stats(rb[keep]), "after": _stats(ra[keep])}
+    return {"folds": int(folds), "seed": int(seed), "residual_of": chain_direction(setup),
+            "outliers": [lab for lab in labels if lab in flagged], "per_fold": per_fold, "overall": overall,
+            "without_outliers": clean}
+
+
+def _fmt(b: dict, a: dict) -> str:
+    """'position mean b -> a, RMS b -> a, max b -> a mm; rotation ... deg' (before -> after)."""
+
+    def one(key, unit, nd):
+        return (f"{key} mean {b[key + '_mean_' + unit]:.{nd}f} -> {a[key + '_mean_' + unit]:.{nd}f}, "
+                f"RMS {b[key + '_rms_' + unit]:.{nd}f} -> {a[key + '_rms_' + unit]:.{nd}f}, "
+                f"max {b[key + '_max_' + unit]:.{nd}f} -> {a[key + '_max_' + unit]:.{nd}f} {unit}")
+
+    s = one("position", "mm", 3)
+    return s + ("; " + one("rotation", "deg", 4) if "rotation_rms_deg" in b else "")
 
 
 def kfold_lines(kf: dict) -> list[str]:
-    """Summary lines of :func:`kfold_validation` (held-out RMS before -> after, per fold and overall)."""
-
-    def fmt(b, a):
-        s = f"position RMS {b['position_rms_mm']:.3f} -> {a['position_rms_mm']:.3f} mm"
-        if "rotation_rms_deg" in b:
-            s += f", rotation RMS {b['rotation_rms_deg']:.4f} -> {a['rotation_rms_deg']:.4f} deg"
-        return s
-
-    o = kf["overall"]
-    lines = [f"held-out {kf['folds']}-fold validation (seed {kf['seed']}, residuals of {kf['residual_of']}): "
-             + fmt(o["before"], o["after"])]
-    lines += [f"  fold {f['fold']} ({f['n_test']} poses held out): " + fmt(f["before"], f["after"])
-              + ("" if f["converged"] else " NOT CONVERGED") for f in kf["per_fold"]]
+    """Summary lines of :func:`kfold_validation`: held-out mean / RMS / max before -> after over all poses,
+    then without the flagged outliers (naming them), then per fold."""
+    o, c, out = kf["overall"], kf.get("without_outliers"), kf.get("outliers") or []
+    names = ", ".join(map(str, out[:10])) + (", ..." if len(out) > 10 else "")
+    lines = [f"held-out {kf['folds']}-fold validation (seed {kf['seed']}, residuals of {kf['residual_of']}"
+             + (f"; the {len(out)} flagged outlier poses are in no training set" if out else "") + "):",
+             f"  all {o['n_poses']} poses" + (f" (the {len(out)} flagged outliers included)" if out else
+                                              " (none flagged as an outlier)") + ": " + _fmt(o["before"], o["after"])]
+    if c:
+        lines.append(f"  without the {len(c['excluded'])} flagged outliers ({names}), {c['n_poses']} poses: "
+                     + _fmt(c["before"], c["after"]))
+    lines += [f"  fold {f['fold']} ({f['n_test']} poses held out"
+              + (f", {f['n_outliers_held_out']} flagged outlier{'s' if f['n_outliers_held_out'] > 1 else ''}"
+                 if f.get("n_outliers_held_out") else "")
+              + "): " + _fmt(f["before"], f["after"]) + ("" if f["converged"] else " NOT CONVERGED")
+              for f in kf["per_fold"]]
     return lines
 
 
@@ -97,11 +136,11 @@ def process_poses(path, out_dir, method=None, folds=None, plots=True, fix_uniden
                                   fix_unidentifiable=fix_unidentifiable)
     result, problem, rep, setup = ident.result, ident.problem, ident.analysis, ident.setup
     t_id = time.perf_counter() - t0
-    kept = [k for k, lab in enumerate(meas.labels) if lab not in {r[0] for r in ident.rejected}]
     failure = gross_failure(setup, meas, ident, mp.residual, str(mp.path), misreadings(mp),
                             untested=f"a wrong robot file or scene mounts ({scene.path}), joint columns in another "
                                      "order, joint or length units (checked up front only for gross factors)")
-    kf = None if failure else kfold_validation(setup, meas.subset(kept), method, mp.residual, rep, folds, mp.seed)
+    kf = None if failure else kfold_validation(setup, meas, method, mp.residual, rep, folds, mp.seed,
+                                               outliers=[r[0] for r in ident.rejected])
     ps = setup.params
     n = len(mp.ids)
     report = build_report(

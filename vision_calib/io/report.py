@@ -243,7 +243,10 @@ def summary_text(report: dict) -> str:
     lines = [verdict_line(v), _what(report)]
     m = report.get("measurements")
     if m:
-        lines.append(f"measurement: {m['n_valid']} of {m['n_poses']} poses valid, {m['n_rejected']} rejected")
+        # no second rejected count: the verdict line gives it (measurement failures + outliers)
+        lines.append(f"measurement: {m['n_valid']} of {m['n_poses']} poses measured"
+                     + (f" ({m['n_rejected']} failed, below; counted in the verdict's rejected poses)"
+                        if m["n_rejected"] else ""))
         lines += [f"  pose {rj['pose_id']}: {rj['reason']}" for rj in m["rejected"][:10]]
         if m.get("dropped_corners"):
             dc = m["dropped_corners"]
