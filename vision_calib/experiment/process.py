@@ -16,6 +16,7 @@ import numpy as np
 
 from ..errors import ConfigError, DataError, IdentifiabilityError
 from ..io.atomic import write_json_atomic
+from ..io.portable import relative_ref
 from ..io.recording import read_recording
 from ..io.report import (REPORT_VERSION, build_report, measurements_block, parameters_table, residual_stats,
                          write_report)
@@ -89,7 +90,9 @@ def process_folder(folder, out_dir, method=None, progress=False, plots=True, fix
     dets = {}
     pms = measure_recording(rec, progress, dets)
     mblock = measurements_block(pms, extra_files_ignored=list(rec.extra_files))
-    write_json_atomic(out / "measurements.json", {"version": REPORT_VERSION, "folder": str(rec.folder), **mblock})
+    out.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(out / "measurements.json",  # the folder relative to this file (io.portable)
+                      {"version": REPORT_VERSION, "folder": relative_ref(rec.folder, out), **mblock})
     t_meas = time.perf_counter() - t0
     if scene is None:
         return _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets)

@@ -369,12 +369,26 @@ def read_measured_poses(path) -> MeasuredPoses:
                          seed)
 
 
+def _scene_ref(scene_path, yaml_path: Path) -> str:
+    """The ``scene`` entry of a measured-pose YAML: relative to its folder; a scene outside that folder is
+    copied (with its robot and target: io.portable) into ``<yaml stem>_scene/`` so the pair moves whole."""
+    from ..rig import load_scene
+    from .portable import copy_scene_bundle, relative_ref
+
+    here = yaml_path.parent.resolve()
+    real = Path(scene_path).resolve()
+    if here in real.parents:
+        return relative_ref(real, here)
+    return relative_ref(copy_scene_bundle(load_scene(scene_path), here / f"{yaml_path.stem}_scene"), here)
+
+
 def write_measured_poses(yaml_path, scene_path, ids, q, T, measured: str, units=None, sigmas=None, cov=None,
                          default_sigma=None, folds: int = 5, seed: int = 0) -> Path:
     """Write a measured-pose YAML + CSV (``<yaml stem>.csv``). q: (N, n) joints [rad]; T: (N, 4, 4) rows of
     ``measured`` [m] (position-only: translations used); units: {length, angle} of the CSV (default m,
     rad); one of sigmas (N, m) per-component std [m, rad], cov (N, m, m) SI, or default_sigma
-    (t [m], r [rad]) written to the YAML."""
+    (t [m], r [rad]) written to the YAML. The scene is named relatively; one outside the YAML's folder is
+    copied there first (``<yaml stem>_scene/``, :func:`_scene_ref`)."""
     import yaml
 
     from .atomic import write_text_atomic
@@ -405,7 +419,7 @@ def write_measured_poses(yaml_path, scene_path, ids, q, T, measured: str, units=
     lines += [",".join([str(pid)] + [repr(float(x)) for x in row]) for pid, row in zip(ids, vals)]
     csv_path = yaml_path.with_suffix(".csv")
     write_text_atomic(csv_path, "\n".join(lines) + "\n")
-    doc = {"format": FORMAT, "scene": str(scene_path), "csv": csv_path.name, "units": dict(units),
+    doc = {"format": FORMAT, "scene": _scene_ref(scene_path, yaml_path), "csv": csv_path.name, "units": dict(units),
            "measured": measured, "folds": int(folds), "seed": int(seed)}
     if default_sigma is not None:
         doc["default_sigma"] = {"t_mm": float(default_sigma[0]) * 1e3} | (
