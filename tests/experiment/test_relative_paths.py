@@ -104,20 +104,18 @@ def test_the_copied_scene_is_the_scene(tmp_path):
 
 
 def test_measured_pose_file_names_its_scene_relatively_and_moves(tmp_path):
-    scene = load_scene(_user_scene(tmp_path / "user"))
+    """A measured-pose file written next to its scene names it relatively: the folder moves whole."""
+    scene = load_scene(_user_scene(tmp_path / "mp"))
     q = np.random.default_rng(0).normal(scale=0.3, size=(6, 6))
     T = scene.setup.T_cam_target(q, scene.setup.params.nominal)
     p = write_measured_poses(tmp_path / "mp" / "m.yaml", scene.path, [f"p{i}" for i in range(6)], q, T,
                              "T_cam_target", default_sigma=(1e-4, 3e-4), folds=2)
-    doc = yaml.safe_load(p.read_text())
-    assert not Path(doc["scene"]).is_absolute() and not doc["scene"].startswith("..")
+    assert yaml.safe_load(p.read_text())["scene"] == "my_cell.yaml"
     shutil.move(str(tmp_path / "mp"), str(tmp_path / "moved"))
-    shutil.move(str(tmp_path / "user"), str(tmp_path / "gone"))
     mp = read_measured_poses(tmp_path / "moved" / "m.yaml")
-    assert mp.scene.name == "my_cell"
-    np.testing.assert_allclose(mp.scene.setup.params.nominal, scene.setup.params.nominal, rtol=0, atol=0)
+    assert mp.scene.name == "my_cell" and mp.scene.path.parent == tmp_path / "moved"
     np.testing.assert_allclose(mp.T_meas, T, rtol=0, atol=1e-12)
-    _no_written_path([tmp_path / "moved"], tmp_path / "mp", tmp_path / "user")
+    _no_written_path([tmp_path / "moved"], tmp_path / "mp")
 
 
 if __name__ == "__main__":

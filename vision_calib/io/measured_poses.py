@@ -370,16 +370,13 @@ def read_measured_poses(path) -> MeasuredPoses:
 
 
 def _scene_ref(scene_path, yaml_path: Path) -> str:
-    """The ``scene`` entry of a measured-pose YAML: relative to its folder; a scene outside that folder is
-    copied (with its robot and target: io.portable) into ``<yaml stem>_scene/`` so the pair moves whole."""
-    from ..rig import load_scene
-    from .portable import copy_scene_bundle, relative_ref
+    """The ``scene`` entry of a measured-pose YAML: a relative ``scene_path`` as given (the reader takes it
+    relative to the YAML's folder), an absolute one made relative to that folder (io.portable); no copy: a
+    scene outside the folder and the shipped scenes stays refused on reading (config.confine)."""
+    from .portable import relative_ref
 
-    here = yaml_path.parent.resolve()
-    real = Path(scene_path).resolve()
-    if here in real.parents:
-        return relative_ref(real, here)
-    return relative_ref(copy_scene_bundle(load_scene(scene_path), here / f"{yaml_path.stem}_scene"), here)
+    p = Path(scene_path)
+    return p.as_posix() if not p.is_absolute() else relative_ref(p, yaml_path.parent)
 
 
 def write_measured_poses(yaml_path, scene_path, ids, q, T, measured: str, units=None, sigmas=None, cov=None,
@@ -387,8 +384,7 @@ def write_measured_poses(yaml_path, scene_path, ids, q, T, measured: str, units=
     """Write a measured-pose YAML + CSV (``<yaml stem>.csv``). q: (N, n) joints [rad]; T: (N, 4, 4) rows of
     ``measured`` [m] (position-only: translations used); units: {length, angle} of the CSV (default m,
     rad); one of sigmas (N, m) per-component std [m, rad], cov (N, m, m) SI, or default_sigma
-    (t [m], r [rad]) written to the YAML. The scene is named relatively; one outside the YAML's folder is
-    copied there first (``<yaml stem>_scene/``, :func:`_scene_ref`)."""
+    (t [m], r [rad]) written to the YAML. The scene is named relative to the YAML (:func:`_scene_ref`)."""
     import yaml
 
     from .atomic import write_text_atomic
