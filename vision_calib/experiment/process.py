@@ -16,6 +16,7 @@ import numpy as np
 
 from ..errors import ConfigError, DataError, IdentifiabilityError
 from ..io.atomic import write_json_atomic
+from ..io.portable import relative_ref
 from ..io.recording import read_recording
 from ..io.report import (REPORT_VERSION, build_report, measurements_block, parameters_table, residual_stats,
                          write_report)
@@ -78,18 +79,22 @@ def process_folder(folder, out_dir, method=None, progress=False, plots=True, fix
     refine_intrinsics: calibrate the camera from the recording's images even when recording.yaml gives
     intrinsics (always done when it gives none); camera_file: a camera.yaml (``calibrate-camera``) used
     instead of recording.yaml's intrinsics; the report's ``intrinsics`` block says which were used."""
-    from .camera_step import fitted_camera, intrinsics_response, intrinsics_sensitivity, recording_intrinsics, remeasure
+    from .camera_step import SOURCE_CAMERA_FILE, fitted_camera, intrinsics_response, intrinsics_sensitivity, recording_intrinsics, remeasure
 
     t0 = time.perf_counter()
     rec = read_recording(folder, allow_symlinks=allow_symlinks)
     rec, intr = recording_intrinsics(rec, refine_intrinsics, progress, camera_file)
     out = Path(out_dir)
+    if rec.camera_file is not None and intr["source"] == f"{SOURCE_CAMERA_FILE} {rec.camera_file}":
+        intr = {**intr, "source": f"{SOURCE_CAMERA_FILE} {relative_ref(rec.camera_file, out)}"}  # relative to report.json
     scene, setup = _recording_setup(rec) if rec.pose_kind != "flange_pose" else (None, None)
     method = None if scene is None else check_method(setup, method or scene.identification.method, "--method")
     dets = {}
     pms = measure_recording(rec, progress, dets)
     mblock = measurements_block(pms, extra_files_ignored=list(rec.extra_files))
-    write_json_atomic(out / "measurements.json", {"version": REPORT_VERSION, "folder": str(rec.folder), **mblock})
+    out.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(out / "measurements.json",  # the folder relative to this file (io.portable)
+                      {"version": REPORT_VERSION, "folder": relative_ref(rec.folder, out), **mblock})
     t_meas = time.perf_counter() - t0
     if scene is None:
         return _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets)
@@ -164,7 +169,7 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None) -> dict:
     pose error in the weights, given by recording.yaml ``robot_pose_std`` or estimated; closed-form start;
     outlier test, adequacy test and variance factor as the robot-chain path)."""
     from ..identify.handeye_problem import handeye_problem, handeye_report, stack_measurements
-    from .camera_step import fitted_camera, intrinsics_directions, residual_response
+    from .camera_step import SOURCE_CAMERA_FILE, fitted_camera, intrinsics_directions, residual_response
     from .handeye_step import handeye_blocks, identify_handeye
 
     ok = [i for i, pm in enumerate(pms) if pm.valid]

@@ -36,8 +36,22 @@ _SCHEMA = {"format": None, **{k: None for k in _CAMERA_KEYS}, "std": None, "dist
 
 
 def write_camera_yaml(path, result) -> Path:
-    """Write an ``measure.intrinsics.IntrinsicsResult`` to path (atomic)."""
+    """Write an ``measure.intrinsics.IntrinsicsResult`` to path (atomic); views named by an absolute image path
+    are named relative to the file's folder (io.portable), in ``views`` and ``warnings`` alike."""
+    from .portable import relative_ref
+
     doc = {"format": FORMAT, **result.to_dict()}
+    rel = {v["name"]: relative_ref(v["name"], Path(path).parent) for v in doc.get("views") or ()
+           if isinstance(v.get("name"), str) and Path(v["name"]).is_absolute()}
+    for v in doc.get("views") or ():
+        v["name"] = rel.get(v.get("name"), v.get("name"))
+    warnings = []
+    for w in doc.get("warnings") or ():
+        for a, r in sorted(rel.items(), key=lambda kv: -len(kv[0])):
+            w = w.replace(a, r) if isinstance(w, str) else w
+        warnings.append(w)
+    if "warnings" in doc:
+        doc["warnings"] = warnings
     return write_text_atomic(Path(path), yaml.safe_dump(doc, sort_keys=False))
 
 

@@ -369,12 +369,22 @@ def read_measured_poses(path) -> MeasuredPoses:
                          seed)
 
 
+def _scene_ref(scene_path, yaml_path: Path) -> str:
+    """The ``scene`` entry of a measured-pose YAML: a relative ``scene_path`` as given (the reader takes it
+    relative to the YAML's folder), an absolute one made relative to that folder (io.portable); no copy: a
+    scene outside the folder and the shipped scenes stays refused on reading (config.confine)."""
+    from .portable import relative_ref
+
+    p = Path(scene_path)
+    return p.as_posix() if not p.is_absolute() else relative_ref(p, yaml_path.parent)
+
+
 def write_measured_poses(yaml_path, scene_path, ids, q, T, measured: str, units=None, sigmas=None, cov=None,
                          default_sigma=None, folds: int = 5, seed: int = 0) -> Path:
     """Write a measured-pose YAML + CSV (``<yaml stem>.csv``). q: (N, n) joints [rad]; T: (N, 4, 4) rows of
     ``measured`` [m] (position-only: translations used); units: {length, angle} of the CSV (default m,
     rad); one of sigmas (N, m) per-component std [m, rad], cov (N, m, m) SI, or default_sigma
-    (t [m], r [rad]) written to the YAML."""
+    (t [m], r [rad]) written to the YAML. The scene is named relative to the YAML (:func:`_scene_ref`)."""
     import yaml
 
     from .atomic import write_text_atomic
@@ -405,7 +415,7 @@ def write_measured_poses(yaml_path, scene_path, ids, q, T, measured: str, units=
     lines += [",".join([str(pid)] + [repr(float(x)) for x in row]) for pid, row in zip(ids, vals)]
     csv_path = yaml_path.with_suffix(".csv")
     write_text_atomic(csv_path, "\n".join(lines) + "\n")
-    doc = {"format": FORMAT, "scene": str(scene_path), "csv": csv_path.name, "units": dict(units),
+    doc = {"format": FORMAT, "scene": _scene_ref(scene_path, yaml_path), "csv": csv_path.name, "units": dict(units),
            "measured": measured, "folds": int(folds), "seed": int(seed)}
     if default_sigma is not None:
         doc["default_sigma"] = {"t_mm": float(default_sigma[0]) * 1e3} | (

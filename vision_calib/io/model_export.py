@@ -4,7 +4,8 @@ Format (YAML)::
 
     format: vision_calib.calibrated_model/1
     kind: serial | h4 | ...                  # a robot kind of vision_calib.rig.registry
-    robot: /abs/path/to/robots/rx90.yaml     # the nominal robot file
+    robot: robot/rx90.yaml                   # the nominal robot file: a copy next to this file, relative to it
+                                             # (io.portable: the folder stays whole when moved)
     # kind-specific keys (Setup.model_dict): serial: mounts {left, right, left_R_nominal, right_R_nominal};
     # h4: model, variant, shared_L, tilts {R_BC0, R_ME0}
     units: {length: m, angle: rad}
@@ -29,15 +30,18 @@ from .atomic import write_text_atomic
 FORMAT = "vision_calib.calibrated_model/1"
 
 
-def calibrated_model_dict(setup, x, std=None, free=None) -> dict:
+def calibrated_model_dict(setup, x, std=None, free=None, robot_ref: str | None = None) -> dict:
     """JSON/YAML-ready description of setup's robot with parameter values x (n,) SI: the common part
-    here, the kind-specific part from ``setup.model_dict()``."""
+    here, the kind-specific part from ``setup.model_dict()``. robot_ref: the ``robot`` entry (a path relative
+    to the file written; :func:`write_calibrated_model` copies the robot file and gives it), else the robot
+    file's name only (never an absolute path)."""
     ps = setup.params
     std = np.full(len(ps), np.nan) if std is None else np.asarray(std, float)
     free = ps.free if free is None else np.asarray(free, bool)
     robot_path = setup.meta.get("robot_path")
     d = {"format": FORMAT, "kind": setup.kind, "units": {"length": "m", "angle": "rad"},
-         "robot": str(Path(robot_path).resolve()) if robot_path else None, **setup.model_dict()}
+         "robot": robot_ref if robot_ref is not None else (Path(robot_path).name if robot_path else None),
+         **setup.model_dict()}
     d["parameters"] = {
         n: {"value": float(v), "std": None if not np.isfinite(s) else float(s), "identified": bool(f)}
         for n, v, s, f in zip(ps.names, x, std, free)
@@ -46,7 +50,13 @@ def calibrated_model_dict(setup, x, std=None, free=None) -> dict:
 
 
 def write_calibrated_model(path, setup, x, std=None, free=None) -> Path:
-    return write_text_atomic(path, yaml.safe_dump(calibrated_model_dict(setup, x, std, free), sort_keys=False))
+    """Write the calibrated-model file ``path`` and a copy of the robot file it refers to
+    (``<path's folder>/robot/<robot file name>``, named relatively): the folder can be moved whole."""
+    from .portable import copy_robot_file
+
+    robot_path = setup.meta.get("robot_path")
+    ref = copy_robot_file(robot_path, Path(path).parent) if robot_path else None
+    return write_text_atomic(path, yaml.safe_dump(calibrated_model_dict(setup, x, std, free, ref), sort_keys=False))
 
 
 def load_calibrated_model(path):

@@ -22,7 +22,10 @@ recording.yaml::
                                             # file or absolute), its size checked against the images
     camera_mount: eye_in_hand | fixed | base
     target: {kind: charuco, rows: .., cols: .., dictionary: .., square_m: .., marker_m: .., ...}
-    scene: /path/to/scene.yaml              # robot model + free parameters (relative to this file or absolute)
+    scene: scene/h4_vision.yaml             # robot model + free parameters (relative to this file, or absolute;
+                                            # inside the folder or the shipped scenes/: config.confine).
+                                            # simulate --export-recording copies the scene, its robot and
+                                            # target into FOLDER/scene/ (io.portable): the folder moves whole
     scene_name: h4_vision                   # fallback: the shipped scenes/<scene_name>.yaml
     poses: joints | flange_pose
     frames_per_pose: 10
@@ -100,8 +103,9 @@ def _target_dict(spec) -> dict:
 
 
 def write_recording(folder, scene, poses, joints, frames: int) -> Path:
-    """Write recording.yaml and poses.csv for a simulated run (images are written by the workers
-    into ``folder/images``). joints: (N, n) rad, the encoder readings of each pose."""
+    """Write recording.yaml, poses.csv and a copy of the scene (``folder/scene/``: scene, robot and target
+    files, named relatively) for a simulated run (images are written by the workers into ``folder/images``).
+    joints: (N, n) rad, the encoder readings of each pose."""
     from ..targets import load_target
 
     folder = Path(folder)
@@ -113,12 +117,15 @@ def write_recording(folder, scene, poses, joints, frames: int) -> Path:
         "camera": setup.camera.to_dict(),
         "camera_mount": setup.mount,
         "target": _target_dict(load_target(scene.target_path)),
-        "scene": str(Path(scene.path).resolve()),
+        "scene": None,  # below: the copied scene, relative to this file
         "scene_name": scene.name,  # fallback when the folder moves to another machine: scenes/<name>.yaml
         "poses": "joints",
         "frames_per_pose": int(frames),
         "averaging": scene.measurement.averaging,
     }
+    from .portable import copy_scene_bundle, relative_ref
+
+    doc["scene"] = relative_ref(copy_scene_bundle(scene, folder / "scene"), folder)
     write_text_atomic(folder / "recording.yaml", yaml.safe_dump(doc, sort_keys=False))
     joints = np.asarray(joints, float)
     buf = io.StringIO()

@@ -10,7 +10,7 @@ report.json, version 2 (each value once)::
     failure: {kind, chi2_dof, moves, tests: [{candidate, chi2_dof, fits}], message}  # experiment/gross.py
     lack_of_fit: identify.lack_of_fit dict                       # measured-data fits (simulate, process)
     intrinsics_sensitivity: {...}                                # process, simulate (experiment/camera_step.py)
-    source: {scene: {name, path, robot_kind}} or {folder: ...}
+    source: {scene: {name, path, robot_kind}} or {folder: ...}    # paths relative to report.json's folder
     seed: int                                                    # simulation only
     settings: {...}                                              # poses, frames, method, residual, camera, ...
     measurements: {n_poses, n_valid, n_rejected, rejected: [{pose_id, reason}], poses: [...], ...}
@@ -48,6 +48,7 @@ import numpy as np
 
 from .atomic import write_json_atomic, write_text_atomic
 from .model_export import write_calibrated_model
+from .portable import relative_source
 
 REPORT_VERSION = "2.0"
 #: JSON Schema (draft 2020-12) of report.json, shipped as package data
@@ -218,7 +219,7 @@ def _what(report) -> str:
         return (f"scene {src['scene']['name']}" + (f"  seed {report['seed']}" if "seed" in report else "")
                 + f"  poses {s.get('poses')}" + (f"  frames {s['frames']}" if s.get("frames") else "")
                 + f"  method {s.get('method')}")
-    return f"{src.get('folder')}"
+    return f"recording {Path(str(src.get('folder'))).name}"  # the folder's name: no absolute path in summary.txt
 
 
 def verdict_line(v: dict) -> str:
@@ -407,6 +408,7 @@ def write_report(out_dir, report: dict, setup=None, result=None, problem=None, e
     parameters.png, and error_map.png with ``evaluations`` = {"before": Evaluation, "after": Evaluation})."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    report["source"] = relative_source(report["source"], out)  # paths relative to report.json (io.portable)
     files = {"report": "report.json"}
     if setup is not None and report["verdict"].get("usable", report["verdict"]["ok"]):  # never from a failed fit
         files["model"] = "calibrated_model.yaml"
