@@ -23,7 +23,7 @@ from ..errors import IdentifiabilityError
 from ..identify import fit_rejecting_outliers, model_adequacy
 from ..identify.handeye_fit import closed_form_comparison, fit_handeye
 from ..identify.handeye_problem import transforms_from_x
-from .steps import NUISANCE_PREFIX, OUTLIER_LEVEL, OUTLIER_MIN_RATIO
+from .steps import NUISANCE_PREFIX, OUTLIER_LEVEL, OUTLIER_MIN_RATIO, misfit_warning
 
 
 @dataclass(frozen=True)
@@ -74,11 +74,8 @@ def identify_handeye(T_base_flange, T_cam_target, mount: str, pose_cov, labels, 
         result = replace(result, std=result.std * np.sqrt(factor), covariance=result.covariance * factor)
     extra = ()
     if adequacy.get("verdict") == "too large":
-        worst = ", ".join(str(w["label"]) for w in adequacy["worst_poses"][:3])
-        extra += (f"the hand-eye model does not explain the data at the measurement noise (camera + robot pose "
-                  f"error, robot std {fit.robot['source']}): chi2/dof = {adequacy['chi2_dof']:.3g} (expected "
-                  f"{adequacy['expected_chi2_dof'][0]:.2g}-{adequacy['expected_chi2_dof'][1]:.2g}); std scaled by "
-                  f"sqrt(chi2/dof); largest residuals at poses {worst}",)
+        extra += (misfit_warning(adequacy, "the hand-eye model", "the measurement noise (camera + robot pose error, "
+                                 f"robot std {fit.robot['source']})"),)
     if rejected:
         extra += (f"{len(rejected)} outlier poses rejected: " + "; ".join(f"{lab}: {why}" for lab, why in rejected[:5]),)
     if extra:

@@ -219,11 +219,7 @@ def identify_measurements(setup: Setup, meas: Measurements, method, residual, an
         result = replace(result, std=result.std * np.sqrt(factor), covariance=result.covariance * factor)
     extra = tuple(plausibility_warnings(params, result)) + ((prepared["warning"],) if prepared.get("warning") else ())
     if adequacy.get("verdict") == "too large":
-        worst = ", ".join(str(w["label"]) for w in adequacy["worst_poses"][:3])
-        extra += (f"the model does not explain the data at the measurement noise: chi2/dof = "
-                  f"{adequacy['chi2_dof']:.3g} (expected {adequacy['expected_chi2_dof'][0]:.2g}-"
-                  f"{adequacy['expected_chi2_dof'][1]:.2g}); std scaled by sqrt(chi2/dof); largest residuals at "
-                  f"poses {worst}",)
+        extra += (misfit_warning(adequacy),)
     lof = lack_of_fit_of(setup, meas, problem, result)
     if lof.get("significant"):
         extra += (lof["message"],)
@@ -319,6 +315,15 @@ def method_check(setup: Setup, meas: Measurements, method: str, problem, result,
                    "scaled by noise_scale (the variance factor of the reported std); chi-square on the directions "
                    "where the difference's variance is at least identify.method_check.MIN_RELATIVE_VARIANCE of the "
                    "estimate's (dof; 'untested': the others, where second-order effects dominate)"}
+
+
+def misfit_warning(adequacy: dict, what: str = "the model", noise: str = "the measurement noise") -> str:
+    """The warning of a "too large" ``identify.model_adequacy`` dict: chi2/dof against its expected band, the std
+    scaled by sqrt(chi2/dof), the poses with the largest residuals."""
+    worst = ", ".join(str(w["label"]) for w in adequacy["worst_poses"][:3])
+    lo, hi = adequacy["expected_chi2_dof"]
+    return (f"{what} does not explain the data at {noise}: chi2/dof = {adequacy['chi2_dof']:.3g} (expected "
+            f"{lo:.2g}-{hi:.2g}); std scaled by sqrt(chi2/dof); largest residuals at poses {worst}")
 
 
 #: name prefix of the nuisance coefficients of a shared measurement error (``identify_measurements(nuisance=)``)
