@@ -133,3 +133,27 @@ def test_prepare_refuses_tilts_when_the_rotation_axis_is_not_fixed():
     # a wobble under the noise (0.005 deg) is not refused
     _, small = sc.setup.prepare(_wobbling(out.measurements, sc.setup, np.radians(0.005)))
     assert small["axis_fixed"] and small["applied"]
+
+
+def test_summary_parameter_table_has_units_values_and_z():
+    """summary.txt ends with a table of the identified parameters: unit (mm / deg), nominal, identified +- std and,
+    in simulation, the true value and z; its numbers are the report's rows converted from SI."""
+    import pytest
+
+    from vision_calib.io.report import parameter_table_text
+
+    rows = [{"name": "d3", "unit": "m", "nominal": 0.45, "true": 0.4502, "identified": 0.45023, "std": 2e-5,
+             "free": True},
+            {"name": "theta2", "unit": "rad", "nominal": 0.0, "true": 1e-3, "identified": 1.01e-3, "std": 2e-5,
+             "free": True},
+            {"name": "a6", "unit": "m", "nominal": 0.0, "true": None, "identified": 0.0, "std": None, "free": False}]
+    text = parameter_table_text(rows).splitlines()
+    assert "true values and z" in text[0] and len(text) == 4  # header lines + the 2 free rows only
+    d3 = text[2].split()
+    assert d3[:2] == ["d3", "mm"] and float(d3[3]) == pytest.approx(450.23) and float(d3[4]) == pytest.approx(0.02)
+    assert float(d3[6]) == pytest.approx((0.45023 - 0.4502) / 2e-5, abs=0.01)
+    th = text[3].split()
+    assert th[1] == "deg" and float(th[3]) == pytest.approx(np.degrees(1.01e-3), abs=1e-5)
+    real = parameter_table_text([dict(r, true=None) for r in rows]).splitlines()
+    assert "measured data" in real[0] and "true" not in real[1]
+    assert parameter_table_text([rows[2]]) == ""

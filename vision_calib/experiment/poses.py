@@ -152,7 +152,7 @@ def process_poses(path, out_dir, method=None, folds=None, plots=True, fix_uniden
                   "folds": folds, "fold_seed": mp.seed},
         measurements={"n_poses": n, "n_valid": n, "n_rejected": 0, "rejected": [], "measured": mp.measured,
                       "noise": mp.sigma_source, "pose_ids": list(mp.ids)},
-        identifiability=rep, parameters=parameters_table(ps.names, ps.nominal, None, result), result=result,
+        identifiability=rep, parameters=parameters_table(ps.names, ps.nominal, None, result, ps.kinds), result=result,
         identified=ident, warnings=duplicate_poses(meas),
         residuals=residual_stats(result.residuals, problem.residual_kind), extra={"kfold": kf},
         timings={"identify": t_id, "total": time.perf_counter() - t0}, failure=failure)

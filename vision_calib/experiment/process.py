@@ -135,7 +135,7 @@ def process_folder(folder, out_dir, method=None, progress=False, plots=True, fix
         measurements=mblock, warnings=[*rec.notes, *intr["warnings"], *([sens["warning"]] if sens["warning"] else []),
                                        *duplicate_poses(meas)],
         identifiability=rep,
-        parameters=parameters_table(ps.names, ps.nominal, None, result), result=result, identified=ident,
+        parameters=parameters_table(ps.names, ps.nominal, None, result, ps.kinds), result=result, identified=ident,
         motion=motion,
         residuals=residual_stats(result.residuals, problem.residual_kind),
         extra={"intrinsics": intr, "intrinsics_sensitivity": sens,

@@ -315,7 +315,7 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
                   "averaging": scene.measurement.averaging, "camera": setup.camera.to_dict(),
                   "effects": scene.effects.to_dict(), "validation_poses": int(len(validation))},
         measurements=mblock, identifiability=ident.analysis or rep, parameters=parameters_table(
-            ps.names, ps.nominal, shared_truth(setup, truth or scene.setup, x_true), result),
+            ps.names, ps.nominal, shared_truth(setup, truth or scene.setup, x_true), result, ps.kinds),
         result=result, identified=ident, motion=motion, accuracy=evals, timings=timings, extra=extra)
     if out_dir is not None:
         preloading.join()

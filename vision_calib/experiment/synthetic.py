@@ -152,7 +152,7 @@ def identify_synthetic_json(scene, method=None, residual=None, n_poses=None, sig
         "sigma_deg": float(np.degrees(sr)),
         "verdict": verdict(res, warnings=warnings[len(res.warnings):], adequacy=adequacy, lack_of_fit=lof),
         "parameters": parameters_table(ps.names, ps.nominal, shared_truth(out.setup, out.truth or scene.setup,
-                                                                          out.x_true), res),
+                                                                          out.x_true), res, ps.kinds),
         "accuracy": {"before": out.before.to_dict(), "after": out.after.to_dict()},
         "converged": bool(res.converged),
         "iterations": int(res.iterations),

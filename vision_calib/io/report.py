@@ -55,15 +55,50 @@ REPORT_VERSION = "2.0"
 SCHEMA_PATH = Path(__file__).with_name("report_schema.json")
 
 
-def parameters_table(names, nominal, x_true, result) -> list[dict]:
-    """Per-parameter rows: name, nominal, true (None on real data), identified, std, free (SI)."""
+#: display unit of a parameter kind in the summary's table: (unit, factor from SI)
+KIND_UNITS = {"length": ("mm", 1e3, "12.4f"), "angle": ("deg", float(np.degrees(1.0)), "12.5f")}
+
+
+def parameters_table(names, nominal, x_true, result, kinds=None) -> list[dict]:
+    """Per-parameter rows: name, unit (SI: "m", "rad" or "" from ``kinds``, the parameter set's kinds, when given),
+    nominal, true (None on real data), identified, std, free (values in SI)."""
     out = []
     for i, n in enumerate(names):
         std = result.std[i]
         true = None if x_true is None or not np.isfinite(x_true[i]) else float(x_true[i])
-        out.append({"name": n, "nominal": float(nominal[i]), "true": true, "identified": float(result.identified[i]),
-                    "std": float(std) if np.isfinite(std) else None, "free": bool(result.free[i])})
+        row = {"name": n, "nominal": float(nominal[i]), "true": true, "identified": float(result.identified[i]),
+               "std": float(std) if np.isfinite(std) else None, "free": bool(result.free[i])}
+        if kinds is not None:
+            row["unit"] = {"length": "m", "angle": "rad"}.get(kinds[i], "")
+        out.append(row)
     return out
+
+
+def parameter_table_text(rows: list[dict]) -> str:
+    """The summary's parameter table of the identified (free) rows of :func:`parameters_table`: name, unit,
+    nominal, identified +- std, and in simulation the true value and z = (identified - true) / std; lengths in
+    mm, angles in deg (rows without a unit: SI). Empty when nothing was identified."""
+    free = [r for r in rows if r.get("free")]
+    if not free:
+        return ""
+    sim = any(r.get("true") is not None for r in free)
+    head = f"{'parameter':<18} {'unit':>4} {'nominal':>12} {'identified':>12} {'+- std':>10}"
+    head += f" {'true':>12} {'z':>6}" if sim else ""
+    lines = ["identified parameters (" + ("simulation: true values and z = (identified - true) / std" if sim
+                                         else "measured data") + "):", head]
+    for r in free:
+        unit = r.get("unit")
+        kind = {"m": "length", "rad": "angle"}.get(unit)
+        shown, f, fmt = KIND_UNITS.get(kind, (unit or "SI", 1.0, "12.6g"))
+        std = r.get("std")
+        line = (f"{r['name']:<18} {shown:>4} {r['nominal'] * f:{fmt}} {r['identified'] * f:{fmt}} "
+                f"{'n/a' if std is None else format(std * f, '.3g'):>10}")
+        if sim:
+            t = r.get("true")
+            z = (r["identified"] - t) / std if t is not None and std else None
+            line += f" {'n/a' if t is None else format(t * f, fmt):>12} {'n/a' if z is None else format(z, '+.2f'):>6}"
+        lines.append(line)
+    return "\n".join(lines)
 
 
 def identification_block(result) -> dict:
@@ -423,7 +458,8 @@ def write_report(out_dir, report: dict, setup=None, result=None, problem=None, e
         except Exception as exc:  # a plot must never cost the report
             report.setdefault("warnings", []).append(f"plotting failed: {exc}")
     report["files"] = files
-    write_text_atomic(out / "summary.txt", report.get("summary_text", "") + "\n")
+    table = parameter_table_text(report.get("parameters") or [])
+    write_text_atomic(out / "summary.txt", report.get("summary_text", "") + "\n" + (f"\n{table}\n" if table else ""))
     write_json_atomic(out / files["report"], report)
     return out / files["report"]
 
