@@ -134,10 +134,9 @@ def intrinsics_response(dets: dict, rec, block: dict, used: list | None = None):
 
     def response(setup, meas, problem, x):
         labels = list(problem.labels)
-        pos = {lab: k for k, lab in enumerate(meas.labels)}
-        sub = meas.subset([pos[lab] for lab in labels])
+        sub = meas.select(labels)
         return residual_response(dirs, dets, labels, rec, x, np.asarray(problem.residual(x), float),
-                                 lambda T: setup.problem(type(sub)(sub.poses, sub.joints, T, sub.cov, sub.labels),
+                                 lambda T: setup.problem(replace(sub, T_cam_target=T),
                                                          problem.residual_kind, params=problem.params), used)
 
     return response
@@ -232,8 +231,7 @@ def intrinsics_sensitivity(ident, meas, camera, remeasure_with, given_std: bool 
 
     problem, result, setup = ident.problem, ident.result, ident.setup
     labels = list(problem.labels)
-    pos = {lab: k for k, lab in enumerate(meas.labels)}
-    sub = meas.subset([pos[lab] for lab in labels])
+    sub = meas.select(labels)
     x = np.asarray(result.identified, float)
     r0 = np.asarray(problem.residual(x), float)
     names, dR = [], []
@@ -241,7 +239,7 @@ def intrinsics_sensitivity(ident, meas, camera, remeasure_with, given_std: bool 
         T = remeasure_with(shifted_camera(camera, nm, px), labels)
         if T is None:
             continue
-        moved = type(sub)(sub.poses, sub.joints, T, sub.cov, sub.labels)
+        moved = replace(sub, T_cam_target=T)
         dR.append(np.asarray(setup.problem(moved, problem.residual_kind, params=problem.params).residual(x)) - r0)
         names.append(nm)
     out = {"px": float(px), "std_per_px": {}, "shift_per_px": {}, "largest": {}, "intrinsics_std_given": given_std,

@@ -247,8 +247,7 @@ def lack_of_fit_of(setup: Setup, meas: Measurements, problem, result, level: flo
     from ..identify.lack_of_fit import DEFAULT_LEVEL, lack_of_fit
 
     try:
-        pos = {lab: k for k, lab in enumerate(meas.labels)}
-        sub = meas.subset([pos[lab] for lab in problem.labels]) if problem.labels and meas.labels else meas
+        sub = meas.select(problem.labels)
         x = np.asarray(result.identified, float)
         q = np.asarray(sub.joints, float)
         G = np.zeros((problem.n_obs, problem.m, q.shape[1]))
@@ -282,8 +281,7 @@ def method_check(setup: Setup, meas: Measurements, method: str, problem, result,
 
     t0 = time.perf_counter()
     other = setup.cross_methods[method]
-    pos = {lab: k for k, lab in enumerate(meas.labels)}
-    kept = meas.subset([pos[lab] for lab in problem.labels]) if meas.labels else meas
+    kept = meas.select(problem.labels)
     params = problem.params
     r_a, r_b = problem.residual_kind, setup.residual_for(other)
     prob_b = setup.problem(kept, r_b, params=params)

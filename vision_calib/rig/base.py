@@ -49,6 +49,14 @@ class Measurements:
         return Measurements(self.poses[idx], self.joints[idx], self.T_cam_target[idx], self.cov[idx], labels,
                             self.cov_scale)
 
+    def select(self, labels) -> "Measurements":
+        """The poses with these ``labels`` (e.g. a problem's kept poses), in that order; self when either side
+        carries no labels. KeyError naming the label when one is not here."""
+        if not labels or not self.labels:
+            return self
+        pos = {lab: k for k, lab in enumerate(self.labels)}
+        return self.subset([pos[lab] for lab in labels])
+
     @classmethod
     def from_pose_measurements(cls, poses, joints, pms) -> tuple["Measurements", list[int]]:
         """Measurements of the valid ``measure.PoseMeasurement`` of ``pms`` (one per commanded pose of

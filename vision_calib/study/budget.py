@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io.atomic import write_text_atomic
-from .spec import StudySpec, _fmt, run_seed
+from .spec import StudySpec, format_value, run_seed
 
 #: axes that set the cost of an acquisition; every other axis is a condition the budget is given for
 COST_AXES = ("n_poses", "frames")
@@ -106,7 +106,7 @@ def budget_text(spec: StudySpec, rows: list[dict]) -> list[str]:
     lines = ["budget: cheapest acquisition whose 95th percentile after calibration meets the target "
              "(images = poses x frames per pose; failed runs count as missing it):"]
     for r in rows:
-        cond = " ".join(f"{a}={_fmt(r[a])}" for a in conds) or "all runs"
+        cond = " ".join(f"{a}={format_value(r[a])}" for a in conds) or "all runs"
         what = f"{r['n_poses']} poses x {r['frames']} frame{'s' if r['frames'] != 1 else ''} ({r['images']} images)"
         p95 = "-" if not math.isfinite(r["p95"]) else f"{r['p95']:.3g}"
         p50 = "-" if not math.isfinite(r["p50"]) else f"{r['p50']:.3g}"

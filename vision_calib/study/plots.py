@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io.atomic import write_bytes_atomic
-from .spec import MAIN_FIGURES, StudySpec, _fmt
+from .spec import MAIN_FIGURES, StudySpec, format_value
 from .tables import _value
 
 def _save_fig(fig, path: Path) -> str:
@@ -57,7 +57,7 @@ def write_plots(spec: StudySpec, table: list[dict], cols, out: Path) -> list[str
                     vals = vals[np.isfinite(vals)]
                     p = np.percentile(vals, [5, 50, 95]) if vals.size else [np.nan] * 3
                     lo.append(p[0]), med.append(p[1]), hi.append(p[2])
-                label = ", ".join(f"{a}={_fmt(v)}" for a, v in zip(others, skey)) or "median"
+                label = ", ".join(f"{a}={format_value(v)}" for a, v in zip(others, skey)) or "median"
                 line, = ax.plot(xs, med, "o-", label=label)
                 ax.fill_between(xs, lo, hi, color=line.get_color(), alpha=0.2)
             limit = (spec.target or {}).get(c[len("after_"):]) if c.startswith("after_") else None

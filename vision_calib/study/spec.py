@@ -305,13 +305,14 @@ def run_seed(spec_seed: int, repetition: int) -> int:
     return int(np.random.SeedSequence([int(spec_seed), int(repetition)]).generate_state(1)[0])
 
 
-def _fmt(v) -> str:
+def format_value(v) -> str:
+    """A swept value as it appears in run keys, tables and plot labels (floats in %g)."""
     return f"{v:g}" if isinstance(v, float) else str(v)
 
 
 def cell_key(cell: dict, repetition: int) -> str:
     """File-name-safe key of one run, e.g. ``n_poses=6,rep=0003``."""
-    parts = [f"{k}={_fmt(v)}" for k, v in cell.items()] + [f"rep={repetition:04d}"]
+    parts = [f"{k}={format_value(v)}" for k, v in cell.items()] + [f"rep={repetition:04d}"]
     return re.sub(r"[^A-Za-z0-9_.=,+-]", "_", ",".join(parts))
 
 

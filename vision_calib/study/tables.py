@@ -13,7 +13,7 @@ import numpy as np
 from ..errors import VisionCalibError
 from ..io.atomic import write_bytes_atomic, write_text_atomic
 from .cells import cell_poses, scene_for
-from .spec import MAIN_FIGURES, StudySpec, _fmt, run_seed, study_cells
+from .spec import MAIN_FIGURES, StudySpec, format_value, run_seed, study_cells
 
 PARAMETER_COLUMNS = ("parameter", "kind", "true_deviation", "identifiable", "noise_free", "identified_mean", "mc_std",
                      "predicted_std", "mc_rms_error", "n", "note", "thesis_reported")
@@ -124,7 +124,7 @@ def parameter_text(spec: StudySpec, prows: list[dict]) -> list[str]:
     lines = ["parameters: deviation from nominal, mm / mrad (true, noise-free = the value the identifiable "
              "parameters take with exact data, identified mean ± Monte Carlo std)"]
     for key, params in blocks.items():
-        title = " ".join(f"{a}={_fmt(v)}" for a, v in zip(axes, key)) or "all cells"
+        title = " ".join(f"{a}={format_value(v)}" for a, v in zip(axes, key)) or "all cells"
         head = ["param", "true", "ident", "noise-free"] + [f"{m or 'identified'} mean ± std" for m in methods]
         head += ["thesis"] if has_thesis else []
         head += ["note"]
@@ -299,7 +299,7 @@ def summary_text(spec: StudySpec, res: dict) -> str:
              f"{res['n_failed']} failed) -> {res['out_dir']}"]
     body = []
     for s in res["summary"]:
-        cells = [_fmt(s[a]) for a in spec.axes] + [str(s["n_runs"] - s["n_failed"]), f"{s['converged']:.2f}"]
+        cells = [format_value(s[a]) for a in spec.axes] + [str(s["n_runs"] - s["n_failed"]), f"{s['converged']:.2f}"]
         for c, _, f in figs:
             v = s["figures"].get(c)
             if v is None or not math.isfinite(v["mean"]):
@@ -317,7 +317,7 @@ def summary_text(spec: StudySpec, res: dict) -> str:
     if spread:
         lines.append("parameter spread (geometric mean over the identified parameters; SI units):")
         for o in spread:
-            cell = " ".join(f"{a}={_fmt(o[a])}" for a in spec.axes)
+            cell = " ".join(f"{a}={format_value(o[a])}" for a in spec.axes)
             lines.append(f"  {cell}: predicted std {o['predicted_std_geomean']:.3g}, Monte Carlo RMS error "
                          f"{o['mc_rms_error_geomean']:.3g} ({o['n_params']} parameters); predicted std x"
                          f"{o['predicted_std_vs_first']:.3g} of the first cell")
