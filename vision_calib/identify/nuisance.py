@@ -90,26 +90,4 @@ def split_nuisance(result: IdentificationResult, n: int) -> tuple[Identification
                  "std": [float(v) for v in std_c]}
 
 
-def solve_nuisance_unknown_noise(problem: IdentificationProblem, U, x0=None, prefix: str = "nuisance",
-                                 max_iter: int = 50, rtol: float = 1e-4):
-    """(LSE result of the augmented problem, s2): the fit with total covariance s2 obs_cov + U U^T when the
-    pose covariance is known only up to a factor s2 (e.g. it misses the robot's own pose error) and the
-    shared error's is known. s2 is the fixed point of s2 <- s2 chi2/dof (the augmented fit's chi2/dof is then
-    1, its covariance needs no further scaling); scaling obs_cov AND U U^T by chi2/dof instead would weaken the
-    coefficients' prior and let them absorb the misfit. x0: (n,) start of the parameters (coefficients at 0).
-    s2 increases with each step (s2 chi2(s2) grows with s2) and converges; stops after max_iter steps."""
-    from .lse import solve_lse
-
-    U = np.asarray(U, float)
-    x = None if x0 is None else np.concatenate([np.asarray(x0, float), np.zeros(U.shape[2])])
-    s2 = 1.0
-    for _ in range(max_iter):
-        res = solve_lse(with_nuisance(dataclasses.replace(problem, obs_cov=problem.obs_cov * s2), U, prefix), x)
-        f, x = float(res.chi2_dof), res.identified
-        if not (np.isfinite(f) and f > 0) or abs(f - 1.0) < rtol:
-            break
-        s2 *= f
-    return res, s2
-
-
-__all__ = ["with_nuisance", "split_nuisance", "nuisance_names", "solve_nuisance_unknown_noise"]
+__all__ = ["with_nuisance", "split_nuisance", "nuisance_names"]
