@@ -43,7 +43,7 @@ import numpy as np  # noqa: E402
 from bench_measure import APRILGRID, CHARUCO, INTR  # noqa: E402
 from vision_calib import frames  # noqa: E402
 from vision_calib.measure import DetectConfig, detect_batch, measure_pose  # noqa: E402
-from vision_calib.measure.accuracy import pose_seeds, random_view_pose  # noqa: E402
+from vision_calib.sim.accuracy import pose_seeds, random_view_pose  # noqa: E402
 from vision_calib.measure.pnp import target_lookup  # noqa: E402
 from vision_calib.sensor import SensorEffects, apply_effects, effects_for_render  # noqa: E402
 

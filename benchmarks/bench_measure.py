@@ -31,7 +31,7 @@ import numpy as np  # noqa: E402
 from vision_calib import frames  # noqa: E402
 from vision_calib.camera import CameraIntrinsics  # noqa: E402
 from vision_calib.measure import DetectConfig, MeasureConfig, detect_batch, measure_pose  # noqa: E402
-from vision_calib.measure.accuracy import (accuracy_study, format_study, pose_seeds,  # noqa: E402
+from vision_calib.sim.accuracy import (accuracy_study, format_study, pose_seeds,  # noqa: E402
                                            random_view_pose)
 from vision_calib.sensor import SensorEffects, apply_effects, effects_for_render  # noqa: E402
 from vision_calib.targets.spec import TargetSpec  # noqa: E402
@@ -174,7 +174,7 @@ def run_phase_terms(n_poses, seed, step_deg=3.0, blur_px=None):
 
 
 def run_scene_z(scenes, n_poses, seeds):
-    from vision_calib.measure.accuracy import scene_z_study
+    from vision_calib.sim.accuracy import scene_z_study
 
     for path in scenes:
         section(f"pose covariance z-scores: {path}, {n_poses} scene poses x noise seeds {seeds}, 10 frames")

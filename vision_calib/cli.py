@@ -293,7 +293,7 @@ def _positional_out(args, parser) -> None:
 # --------------------------------------------------------------------------------------------- the commands
 def _cmd_identifiability(args) -> int:
     from .experiment.synthetic import identifiability_json
-    from .io.atomic import to_json
+    from .serialize import to_json
 
     out = identifiability_json(args.scene, residual=args.residual, n_poses=args.poses, seed=args.seed,
                                all_params=args.all_params)
@@ -303,7 +303,7 @@ def _cmd_identifiability(args) -> int:
 
 def _cmd_identify_synthetic(args) -> int:
     from .experiment.synthetic import identify_synthetic_json
-    from .io.atomic import to_json
+    from .serialize import to_json
 
     out = identify_synthetic_json(
         args.scene, method=args.method, residual=args.residual, n_poses=args.poses,
@@ -332,7 +332,7 @@ def _cmd_simulate(args) -> int:
 
 
 def _print_report(args, report: dict) -> int:
-    from .io.atomic import to_json
+    from .serialize import to_json
 
     print(to_json(report) if args.json else report["summary_text"])
     return _status(report["verdict"])
@@ -349,7 +349,7 @@ def _cmd_process(args) -> int:
 
 
 def _cmd_calibrate_camera(args) -> int:
-    from .io.atomic import to_json
+    from .serialize import to_json
     from .io.camera_file import write_camera_yaml
     from .measure.intrinsics import calibrate_from_images, find_images, summary_text
     from .targets import load_target
@@ -370,7 +370,7 @@ def _cmd_process_poses(args) -> int:
 
 
 def _cmd_study(args) -> int:
-    from .io.atomic import to_json
+    from .serialize import to_json
     from .study import run_study
 
     res = run_study(args.spec, out_dir=args.out, workers=args.workers, scheduler=args.scheduler,

@@ -170,7 +170,7 @@ def test_rendered_h4_poses_are_whitened():
     whitened by the covariance has z RMS in [0.5, 1.6] per component (24 poses: sampling std of an RMS
     ~15 %; on 100 poses x seeds it is 0.73-1.09, benchmarks/bench_measure.py) and no |z| > 4; the
     frame-scatter-only covariance gives z RMS more than twice as large on the same data (bench: 3.7-4.9)."""
-    from vision_calib.measure.accuracy import scene_z_study
+    from vision_calib.sim.accuracy import scene_z_study
 
     res = scene_z_study("scenes/h4_vision.yaml", n_poses=24, seeds=(1,))  # rendered as the image chain does
     assert res["n"] == 24
@@ -190,7 +190,7 @@ def test_rendered_charuco_views_phase_locked_tail(charuco):
     seeds); the independent model's tail is heavier (3.58-4.65: the poses whose corners share their phase)."""
     from vision_calib.camera import CameraIntrinsics
     from vision_calib.measure import detect_batch
-    from vision_calib.measure.accuracy import random_view_pose
+    from vision_calib.sim.accuracy import random_view_pose
     from vision_calib.render import TargetRenderer
     from vision_calib.sensor import apply_effects, effects_for_render
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import frames as F
-from ..errors import DataError, IdentifiabilityError
+from ..errors import DataError
 from ..rig import Measurements, Setup
 
 #: relative length-scale error above which the measured motions are refused (wrong target size / fx / units)
@@ -167,19 +167,3 @@ def screen_measurements(setup: Setup, meas: Measurements, where: str, scale_hint
     motion = check_motion(setup, meas, where, scale_hint)
     meas, inconsistent = drop_inconsistent(meas, motion, where)
     return meas, degenerate + inconsistent, motion
-
-
-def structural_rank_check(setup: Setup, rep, residual: str, where: str, accept: bool = False,
-                          n_generic: int = 200) -> list[str]:
-    """IdentifiabilityError naming the parameters the user's pose set loses compared with generic poses
-    (``rep``: IdentifiabilityReport of the user's poses), unless ``accept``; returns those names."""
-    from .steps import analyze_setup
-
-    ref, _ = analyze_setup(setup, setup.generic_poses(np.random.default_rng(12345), n_generic), residual)
-    lost = [n for n in rep.non_identifiable if n not in ref.non_identifiable]
-    if rep.rank < ref.rank and lost and not accept:
-        raise IdentifiabilityError(
-            f"{where}: the {rep.n_obs} poses identify {rep.rank} of the {ref.rank} parameters that varied poses "
-            f"identify; not identifiable from these poses: {', '.join(lost)}. Use more (and more varied) poses, "
-            "or accept fixing them at nominal (--fix-unidentifiable)")
-    return lost

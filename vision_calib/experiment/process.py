@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ConfigError, DataError, IdentifiabilityError
-from ..io.atomic import write_json_atomic
+from ..serialize import write_json_atomic
 from ..io.portable import relative_ref
 from ..io.recording import read_recording
 from ..io.report import (REPORT_VERSION, build_report, measurements_block, parameters_table, residual_stats,
@@ -168,7 +168,8 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None) -> dict:
     """Flange poses known: identify the camera mount and the target mount only (``handeye_step``: the robot's
     pose error in the weights, given by recording.yaml ``robot_pose_std`` or estimated; closed-form start;
     outlier test, adequacy test and variance factor as the robot-chain path)."""
-    from ..identify.handeye_problem import handeye_problem, handeye_report, stack_measurements
+    from ..identify.handeye_problem import handeye_problem, stack_measurements
+    from ..io.report import handeye_report
     from .camera_step import SOURCE_CAMERA_FILE, fitted_camera, intrinsics_directions, residual_response
     from .handeye_step import handeye_blocks, identify_handeye
 

@@ -21,7 +21,7 @@ import numpy as np
 
 from .. import frames as F
 from ..errors import DataError
-from ..io.atomic import write_json_atomic
+from ..serialize import write_json_atomic
 from ..io.report import REPORT_VERSION, build_report, measurements_block, parameters_table, write_report
 from ..rig import Measurements, Scene, SCENES_DIR, load_scene, scene_poses
 from .image_chain import ImageChain, ImagePool, measure_poses, start_fork_server

@@ -50,6 +50,20 @@ def analyze_setup(setup: Setup, poses, residual: str | None = None, all_params: 
     return analyze(problem, selection=BASE_SELECTION), problem
 
 
+def structural_rank_check(setup: Setup, rep, residual: str, where: str, accept: bool = False,
+                          n_generic: int = 200) -> list[str]:
+    """IdentifiabilityError naming the parameters the user's pose set loses compared with generic poses
+    (``rep``: IdentifiabilityReport of the user's poses), unless ``accept``; returns those names."""
+    ref, _ = analyze_setup(setup, setup.generic_poses(np.random.default_rng(12345), n_generic), residual)
+    lost = [n for n in rep.non_identifiable if n not in ref.non_identifiable]
+    if rep.rank < ref.rank and lost and not accept:
+        raise IdentifiabilityError(
+            f"{where}: the {rep.n_obs} poses identify {rep.rank} of the {ref.rank} parameters that varied poses "
+            f"identify; not identifiable from these poses: {', '.join(lost)}. Use more (and more varied) poses, "
+            "or accept fixing them at nominal (--fix-unidentifiable)")
+    return lost
+
+
 def truth_poses(scene: Scene) -> np.ndarray:
     """The pose set the scene's truth is drawn on (its default identification poses, truth seed)."""
     return scene_poses(scene, np.random.default_rng([scene.truth.seed, 0]))
@@ -171,8 +185,6 @@ def identify_measurements(setup: Setup, meas: Measurements, method, residual, an
     nuisance coefficients (``identify.nuisance``: the GLS fit with C = obs_cov + U U^T). With ``cross_check``
     and a method the setup's ``cross_methods`` pairs with another, that one runs too (:func:`method_check`)."""
     from ..identify import fit_rejecting_outliers, model_adequacy
-
-    from .checks import structural_rank_check
 
     where = where or setup.name
     before = setup.params.free_names

@@ -387,7 +387,7 @@ def write_measured_poses(yaml_path, scene_path, ids, q, T, measured: str, units=
     (t [m], r [rad]) written to the YAML. The scene is named relative to the YAML (:func:`_scene_ref`)."""
     import yaml
 
-    from .atomic import write_text_atomic
+    from ..serialize import write_text_atomic
 
     yaml_path = Path(yaml_path)
     units = units or {"length": "m", "angle": "rad"}

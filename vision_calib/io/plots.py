@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import write_bytes_atomic
+from ..serialize import write_bytes_atomic
 
 
 def _fig():

@@ -54,7 +54,7 @@ import yaml
 from ..camera import CameraIntrinsics
 from ..config import Section, load_yaml
 from ..errors import DataError
-from .atomic import write_text_atomic
+from ..serialize import write_text_atomic
 from .images import IMAGE_EXT, check_image_sizes  # IMAGE_EXT: the formats accepted in images/<pose_id>/
 
 FORMAT = "vision_calib.recording/1"

@@ -105,7 +105,7 @@ def _detect_tag_id(image_path, dictionary: str) -> int:
     return int(ids[0][0])
 
 
-def _copy_no_looser(src_file: Path, dst_file: Path) -> None:
+def copy_no_looser(src_file: Path, dst_file: Path) -> None:
     """Copy a file's bytes; the copy is never more readable/writable than the source (mode & source mode)."""
     import shutil
 
@@ -157,7 +157,7 @@ def _write_visp_recording(src, dst, intr, poses, images, mount: str, target: dic
 
     import yaml
 
-    from .atomic import write_text_atomic
+    from ..serialize import write_text_atomic
 
     dst.mkdir(parents=True, exist_ok=True)
     doc = {
@@ -183,7 +183,7 @@ def _write_visp_recording(src, dst, intr, poses, images, mount: str, target: dic
     for k, p in images.items():
         d = dst / "images" / str(k)
         d.mkdir(parents=True, exist_ok=True)
-        _copy_no_looser(p, d / f"00{p.suffix.lower()}")
+        copy_no_looser(p, d / f"00{p.suffix.lower()}")
     return dst
 
 

@@ -286,7 +286,7 @@ def corner_error_split(T_true: np.ndarray, p_target: np.ndarray, mean_uv_px: np.
 # - ChArUco (saddle corner refined by cv2.cornerSubPix in a (2 w + 1)^2 window, w = DetectConfig.subpix_win):
 #   mu = mid + C/2 erf(n1.x / (sqrt2 s)) erf(n2.x / (sqrt2 s)), n1, n2 the image normals of the two
 #   board edges through the corner; F summed over the window's pixels.
-# - Chessboard: the same saddle model (corners from the saddle-point fit of measure/saddle.py, window radius
+# - Chessboard: the same saddle model (corners from the saddle-point fit of targets/kinds/saddle.py, window radius
 #   <= 12 px; the (2 w + 1)^2 window is an approximation): measured corner scatter 0.0045 / 0.0172 px vs the
 #   model's 0.0038 / 0.0159 px at read noise 1 / 8 (benchmarks/bench_detect.py --targets chessboard), i.e. the
 #   model is 18 % / 8 % optimistic.

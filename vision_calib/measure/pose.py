@@ -21,9 +21,10 @@ import numpy as np
 from .. import frames
 from ..camera import CameraIntrinsics
 from ..errors import ConfigError
-from ..io.atomic import jsonable
+from ..serialize import jsonable
 from .covariance import corner_estimator, pose_covariance
-from .detect import DetectConfig, Detection, detect_batch
+from .batch import detect_batch
+from .detect import DetectConfig, Detection
 from .pnp import (project_pinhole, solve_pnp_planar,
                   target_lookup, undistort_px)
 from .view_checks import check_view, hull_area

@@ -48,7 +48,7 @@ class URDFSetup(SerialSetup):
 
     def export_model_files(self, out_dir, x) -> dict:
         """``calibrated_model.urdf``: the source URDF with the calibrated joint origins (atomic write)."""
-        from ..io.atomic import write_bytes_atomic
+        from ..serialize import write_bytes_atomic
         from ..kinematics.urdf import export_urdf
 
         with tempfile.TemporaryDirectory() as tmp:

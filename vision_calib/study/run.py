@@ -9,7 +9,7 @@ import sys
 import time
 from pathlib import Path
 
-from ..io.atomic import write_json_atomic
+from ..serialize import write_json_atomic
 from .budget import budget_table, budget_text, write_budget
 from .cells import run_cell
 from .spec import RUN_FORMAT, StudySpec, cell_key, load_study, study_cells

@@ -30,13 +30,14 @@ edges are not quantised to texture pixels.
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass, fields
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import ConfigError
+from .coverage import accumulate_coverage
+from .kinds.base import check_memory
 from .kinds import KINDS as _REGISTRY
 from .kinds import get_kind
 
@@ -238,8 +239,6 @@ class TargetSpec:
                 img[j0:j0 + oy.size, i0:i0 + ox.size] -= oy[:, None] * ox[None, :]
         polys = self.black_polygons()
         if len(polys):
-            from ..render.coverage import accumulate_coverage  # exact signed-area coverage (no import cycle)
-
             px = (polys - [x_min, y_min]) * [sx, sy]
             img -= accumulate_coverage(px, -np.ones(len(px)), H, W)  # TL->TR->BR->BL counts -1 per area
         return np.clip(img, 0.0, 1.0)
@@ -254,29 +253,6 @@ class TargetSpec:
             else:
                 del out["blob_detector"]
         return out
-
-
-def available_memory() -> int | None:
-    """Bytes of memory available now (Linux MemAvailable), None where unknown."""
-    try:
-        with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    try:
-        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    except (ValueError, OSError, AttributeError):
-        return None
-
-
-def check_memory(nbytes: int, what: str, fraction: float = 0.5) -> None:
-    """ConfigError before an allocation of ``nbytes`` larger than ``fraction`` of the available memory."""
-    avail = available_memory()
-    if avail is not None and nbytes > fraction * avail:
-        raise ConfigError(f"{what} needs about {nbytes / 2**30:.3g} GiB of memory, more than {fraction:.0%} of the "
-                          f"{avail / 2**30:.3g} GiB available; use a lower resolution (dpi)")
 
 
 def _overlap_1d(a: float, b: float, n: int) -> tuple[np.ndarray, int]:

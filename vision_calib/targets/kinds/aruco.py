@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 
 from ...errors import ConfigError
-from . import TargetKind
+from .base import TargetKind
 from ._grid import SquareCorners
 
 _BORDER_BITS = 1  # OpenCV markers: one black border bit around the data bits

@@ -14,7 +14,7 @@ board can then only serve intrinsics calibration (measure_pose refuses it).
 Detection: the whole board (all inner corners must be visible) is found by ``cv2.findChessboardCorners``
 (flags :data:`CLASSIC_FLAGS`, a few ms), else by ``cv2.findChessboardCornersSB`` (flags :data:`SB_FLAGS`,
 ~0.1 s: it finds the far and steeply tilted boards FAST_CHECK misses); the corners are then located by
-the saddle-point fit of :mod:`vision_calib.measure.saddle` (corners it rejects are dropped). In the seeded
+the saddle-point fit of :mod:`.saddle` (corners it rejects are dropped). In the seeded
 batch mode (measure/seeded.py, mode "saddle") every other frame of a pose is refined by the same fit from
 the seed frame's corners. Measured figures: :data:`SB_FLAGS`.
 """
@@ -25,8 +25,8 @@ import cv2
 import numpy as np
 
 from ...errors import ConfigError
-from ...measure.saddle import refine_detected
-from . import TargetKind
+from .saddle import refine_detected
+from .base import TargetKind
 from ._grid import SquareCorners, apply_h, fit_homography, front_facing, sample_mean
 
 #: Detectors, measured on polygon-renderer images at the H4 geometry (1024 x 768, f 1013 px, chessboard_a4,
@@ -95,7 +95,7 @@ class ChessboardKind(SquareCorners, TargetKind):
         uv, ok = refine_detected(img, G.reshape(-1, 2), MAX_MOVE_PX)
         diag["saddle_rejected"] = int((~ok).sum())
         if not ok.any():
-            return None, "no chessboard corner passed the saddle-point fit (measure/saddle.py)"
+            return None, "no chessboard corner passed the saddle-point fit (targets/kinds/saddle.py)"
         return np.flatnonzero(ok), uv[ok]
 
     def orient(self, spec, img, G):

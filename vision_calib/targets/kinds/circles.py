@@ -34,7 +34,7 @@ import cv2
 import numpy as np
 
 from ...errors import ConfigError
-from . import TargetKind
+from .base import TargetKind, check_memory
 from ._grid import apply_h, fit_homography, front_facing
 from .dot_grid import MAX_OFF_GRID, candidate_grids, grid_consistency, not_found_message
 
@@ -164,8 +164,6 @@ def find_ordered(spec, img, diag, intrinsics, patterns, flags_list, order, what,
 def _check_polygon_memory(spec, n_dots: int) -> None:
     """ConfigError before drawing n_dots polygons would take more than half the available memory (the polygon
     array, its pixel copy and the coverage pass: about 4 x n_dots x N_VERTICES x 2 float64)."""
-    from ..spec import check_memory
-
     check_memory(4 * n_dots * N_VERTICES * 2 * 8, f"target {spec.name!r}: drawing {n_dots} dots")
 
 
