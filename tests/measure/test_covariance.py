@@ -10,8 +10,8 @@ from scipy.special import erf
 
 from vision_calib import frames
 from vision_calib.measure import MeasureConfig, measure_pose
-from vision_calib.measure.covariance import (corner_error_split, phase_directions, pixel_variance, pose_covariance,
-                                             saddle_info)
+from vision_calib.measure.covariance import corner_error_split, phase_directions, pose_covariance
+from vision_calib.targets.kinds.image_model import pixel_variance, saddle_info
 from vision_calib.measure.detect import Detection
 from vision_calib.sensor import SensorEffects
 
@@ -234,7 +234,8 @@ def test_apriltag_growth_term_by_corner_estimator(aprilgrid, intr):
     """A per-pose tag growth of the size measured for the seeded edge fits (0.007 px RMS) biases the depth:
     the "edges" terms whiten tz (z RMS near 1), the covariance without a growth term does not; detections
     of OpenCV's per-frame refinement (no "batch" diagnostic) get the larger "opencv" terms."""
-    from vision_calib.measure.covariance import APRILTAG_TERMS, corner_estimator
+    from vision_calib.measure.covariance import corner_estimator
+    from vision_calib.targets.kinds.image_model import APRILTAG_TERMS
 
     rng = np.random.default_rng(3)
     z_with, z_without, ratio = [], [], []

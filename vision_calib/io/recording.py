@@ -45,7 +45,7 @@ from __future__ import annotations
 
 import csv
 import io
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -95,11 +95,8 @@ class Recording:
 
 
 def _target_dict(spec) -> dict:
-    d = {}
-    for f in fields(spec):
-        v = getattr(spec, f.name)
-        d[f.name] = v.item() if hasattr(v, "item") else v
-    return d
+    """The target's own keys (its kind's typed spec: no other kind's keys), numpy scalars as Python numbers."""
+    return {k: v.item() if isinstance(v, np.generic) else v for k, v in spec.to_dict().items()}
 
 
 def write_recording(folder, scene, poses, joints, frames: int) -> Path:

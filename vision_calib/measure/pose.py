@@ -38,7 +38,7 @@ class MeasureConfig:
     a smooth per-pose corner error field (a lens-model residual) in the covariance (None:
     ``covariance.LENS_FIELD_STD``, zeros: none measured in simulation). phase_share: share of the systematic
     corner variance locked to the pixel phase (0, the default: independent corner errors; None: the target
-    kind's ``covariance.PHASE_LOCKED_SHARE``, 0.92 for ChArUco's cornerSubPix corners; the module docstring of
+    kind's ``TargetKind.phase_locked_share``, 0.92 for ChArUco's cornerSubPix corners; the module docstring of
     measure/covariance.py says where it helps and where it fails).
     min_view_corners, min_area_fraction, corner_noise_px: the per-view rule of
     :mod:`vision_calib.measure.view_checks` (>= 6 corners, or all of a smaller target; corner hull >= 10 %

@@ -21,12 +21,14 @@ the seed frame's corners. Measured figures: :data:`SB_FLAGS`.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import cv2
 import numpy as np
 
 from ...errors import ConfigError
 from .saddle import refine_detected
-from .base import TargetKind
+from .base import TargetKind, TargetSpec
 from ._grid import SquareCorners, apply_h, fit_homography, front_facing, sample_mean
 
 #: Detectors, measured on polygon-renderer images at the H4 geometry (1024 x 768, f 1013 px, chessboard_a4,
@@ -52,12 +54,20 @@ SB_FLAGS = 0
 MAX_MOVE_PX = 1.0
 
 
+@dataclass(frozen=True)
+class ChessboardSpec(TargetSpec):
+    """Chessboard: square_m [m]; allow_symmetric: accept a 180-degree-symmetric board (rows + cols even;
+    intrinsics calibration only)."""
+
+    square_m: float = 0.0
+    allow_symmetric: bool = False
+
+
 class ChessboardKind(SquareCorners, TargetKind):
     name = "chessboard"
-    keys = ("square_m", "allow_symmetric")
+    spec_class = ChessboardSpec
     required = ("square_m",)
     auto_extra_subpix = False
-    info_model = "saddle"
     sb_flags = SB_FLAGS
     classic_flags = CLASSIC_FLAGS
 
