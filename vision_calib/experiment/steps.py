@@ -15,7 +15,10 @@ import numpy as np
 
 from ..errors import ConfigError, IdentifiabilityError
 from ..identify import analyze, solve_ekf, solve_lse
+from ..identify.identifiability import IdentifiabilityReport
 from ..identify.nuisance import split_nuisance, with_nuisance
+from ..identify.problem import IdentificationProblem, IdentificationResult
+from ..kinematics.params import ParameterSet
 from ..io.report import method_check_line
 from ..rig import Measurements, Scene, Setup, scene_poses, true_parameters
 
@@ -147,14 +150,14 @@ class Identified:
     report (None when the caller gave the base mask), the poses rejected as outliers [(label, reason)],
     the chi-square adequacy of the fit (``identify.model_adequacy``, before scaling) and the factor."""
 
-    result: object
-    problem: object
-    params: object
-    analysis: object
+    result: IdentificationResult
+    problem: IdentificationProblem
+    params: ParameterSet
+    analysis: IdentifiabilityReport | None
     rejected: tuple
     adequacy: dict
     variance_factor: float
-    setup: object = None  #: the setup identified (after ``Setup.prepare``): evaluate and export with it
+    setup: Setup | None = None  #: the setup identified (after ``Setup.prepare``): evaluate and export with it
     prepared: dict = None  #: what ``Setup.prepare`` determined from the data (e.g. the H4 camera axis)
     #: shared measurement error fitted as nuisance coefficients (``identify.nuisance``): {n_directions,
     #: coefficients (d,) and their std (posterior, in prior std units), std_inflation {name: std / std without

@@ -335,13 +335,14 @@ def read_measured_poses(path) -> MeasuredPoses:
     """Read and validate a measured-pose YAML + CSV (see the module docstring). ConfigError for the YAML,
     DataError for the CSV, each naming the file and the key / line / pose / column."""
     from ..rig import Measurements, load_scene
+    from ..rig.base import ChainMeasured
 
     path = Path(path)
     top = Section(load_yaml(path), path)
     scene_path, csv_path, Lf, Af, units, measured, default, folds, seed = _settings(top)
     scene = load_scene(scene_path)
     setup = scene.setup
-    if not hasattr(setup, "chain_measurements"):
+    if not isinstance(setup, ChainMeasured):
         raise top.error("scene", f"measured-pose files need a robot commanded by joint sets (serial, URDF); "
                                  f"{scene.path} is a {setup.kind} robot")
     pos_only = measured.startswith("p_")

@@ -132,8 +132,7 @@ def measure_pose(detections: Sequence[Detection], target, intrinsics: CameraIntr
     (invalid frames are skipped and recorded; an unusable pose gives valid=False + reason). ConfigError for a
     target whose poses are ambiguous (a 180-degree-symmetric board, ``allow_symmetric``).
     Longer than 80 lines: one pass over the frames' detections (validity, averaging, PnP, residuals, covariance, diagnostics) sharing the per-corner arrays."""
-    if hasattr(target, "check_pose_measurable"):
-        target.check_pose_measurable()  # ConfigError: a 180-degree-symmetric board gives ambiguous poses
+    target.check_pose_measurable()  # ConfigError: a 180-degree-symmetric board gives ambiguous poses
     lookup = target_lookup(target)
     need = max(config.min_corners, min(config.min_view_corners, len(lookup)))  # per-view rule: view_checks
     board_area = hull_area(np.array([p[:2] for p in lookup.values()]))

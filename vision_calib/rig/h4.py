@@ -20,7 +20,7 @@ from typing import ClassVar
 import numpy as np
 
 from ..errors import ConfigError, DataError, ParameterError
-from ..kinematics.h4 import TILT_NAMES
+from ..kinematics.h4 import TILT_NAMES, H4Robot
 from .base import Evaluation, Setup
 
 #: significance level at which a measured camera/target tilt replaces the nominal one (chi-square, 2 dof)
@@ -48,7 +48,7 @@ class H4Setup(Setup):
     joint-reading noise of the IGM problem (0: measurement noise only). ``robot_path``, ``model``,
     ``variant``: where the robot came from (for variants and the calibrated-model file)."""
 
-    robot: object = None
+    robot: H4Robot | None = None
     sigma_q_rad: float = 0.0
     robot_path: str = ""
     variant: str | None = None
