@@ -9,11 +9,13 @@ batch refinement it supports and the image model of its corner error (``corner_i
 never branch on the kind's name.
 
 Adding a kind = one module (the kind class and its spec class) and one registry line (for the shipped kinds:
-the lines at the end; from another package: an entry point, :func:`load_plugins`).
+the lines at the end; from another package: an entry point of the group ``vision_calib.targets``,
+:mod:`vision_calib.plugins`).
 """
 
 from __future__ import annotations
 
+from ...plugins import TARGET_GROUP, load_entry_points
 from .base import KINDS, TargetKind, TargetSpec, get_kind, register, unregister
 
 
@@ -26,6 +28,12 @@ def _register_shipped() -> None:
         register(cls())
 
 
-_register_shipped()
+def _register_plugin(obj) -> None:
+    """An entry point's object: a TargetKind subclass (instantiated) or instance."""
+    register(obj() if isinstance(obj, type) and issubclass(obj, TargetKind) else obj)
 
-__all__ = ["KINDS", "TargetKind", "TargetSpec", "get_kind", "register", "unregister"]
+
+_register_shipped()
+PLUGINS = load_entry_points(TARGET_GROUP, _register_plugin)  #: names of the target kinds registered by entry points
+
+__all__ = ["KINDS", "PLUGINS", "TargetKind", "TargetSpec", "get_kind", "register", "unregister"]
