@@ -461,7 +461,8 @@ def _status(verdict: dict) -> int:
 
 def _summary_identifiability(out: dict) -> str:
     lines = [
-        f"{out['scene']}: {out['n_params']} parameters, rank {out['rank']}, condition number {out['condition_number']:.4g}",
+        f"{out['scene']}: {out['n_params']} parameters, rank {out['rank']}, condition number {out['condition_number']:.4g}"
+        + (f" (of the {out['condition_number_of']})" if out.get("condition_number_of") else ""),
         f"non-identifiable: {', '.join(out['non_identifiable']) or 'none'}",
     ]
     for c in out["couplings"]:
