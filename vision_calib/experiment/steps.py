@@ -185,7 +185,7 @@ def identify_measurements(setup: Setup, meas: Measurements, method, residual, an
     rep = analysis if setup.params.free_names == before else None  # prepare() freed parameters: analyse again
     if rep is None:
         if len(meas.T_cam_target) == 0:
-            raise IdentifiabilityError(f"{where}: no usable pose" + (f" ({context})" if context else ""))
+            raise IdentifiabilityError(f"{where}: no usable poses" + (f" ({context})" if context else ""))
         try:
             rep = analyze(setup.problem(meas, residual), selection=BASE_SELECTION)
         except IdentifiabilityError as exc:
