@@ -137,6 +137,22 @@ def _detection_summary(inp: NoiseInput, det, ids_all) -> dict:
     return d
 
 
+def _one_frame_fit(inp: NoiseInput, det, img) -> dict | None:
+    """Blur, levels (and a missing dot diameter) fitted on a single frame (the report of a set too small for the
+    scatter); None when the fit is not possible on it."""
+    from .noise_sim import fit_blur_levels, fit_dot_diameter, mean_pose_of, render_ideal
+
+    try:
+        spec, fd, mean = inp.target, None, img.astype(np.float64)
+        if spec.kind == "modified_circle_grid" and not spec.diameter_m > 0:
+            fd = fit_dot_diameter(spec, inp.camera, det.ids, det.uv_px, mean)
+            spec = replace(spec, diameter_m=fd["diameter_m"], origin_diameter_m=0.0)
+        ideal, _ = render_ideal(spec, inp.camera, mean_pose_of(spec, det.ids, det.uv_px, inp.camera))
+        return {**fit_blur_levels(mean, ideal, det.uv_px), **({"dot_diameter": fd} if fd else {})}
+    except (DataError, ConfigError, ValueError, np.linalg.LinAlgError):
+        return None
+
+
 def measure_noise(folder, out_dir, target=None, camera=None, sim_frames: int = DEFAULT_SIM_FRAMES, seed: int = 0,
                   allow_symlinks: bool = False, detect_config: DetectConfig = DetectConfig()) -> dict:
     """Measure the noise of a folder of repeated frames of a static target and fit the simulator settings that
@@ -172,9 +188,15 @@ def measure_noise(folder, out_dir, target=None, camera=None, sim_frames: int = D
         what = (f"{len(imgs)} frame" if len(imgs) < 2 else
                 f"{len(imgs)} entries name {distinct} image file" if distinct < 2 else
                 f"the {len(imgs)} frames are pixel-identical copies")
+        one = _one_frame_fit(inp, dets[0], imgs[0]) if "pnp_rms_px" in det else None
+        if one:
+            doc["image_fit_one_frame"] = one
         found = (f"{det['n_corners']} of {det['n_target_corners']} target points detected"
                  + (f", PnP reprojection RMS {det['pnp_rms_px']:.3g} px, target at {det['distance_m']:.3f} m"
-                    if "pnp_rms_px" in det else ""))
+                    if "pnp_rms_px" in det else "")
+                 + (f"; image fit of this frame: blur {one['blur_sigma_px']:.3g} +- {one['blur_se_px']:.2g} px"
+                    + (f", dot diameter {one['dot_diameter']['diameter_m'] * 1e3:.4g} mm" if "dot_diameter" in one else "")
+                    if one else ""))
         msg = (f"{inp.source}: the scatter needs >= 2 repeated frames of the static target ({what}); detection on "
                f"{inp.images[0]}: {found} (written to {out_dir / 'noise.json'})")
         doc["error"] = msg
