@@ -79,7 +79,8 @@ def test_charuco_folder_recovers_the_settings_and_the_scatter(tmp_path, seed):
     # the measured corner noise against the true settings' (a fresh 40-frame simulation)
     true = simulate_scatter(t, CAM, T, TRUTH, 40, 999, DetectConfig())
     c = res["corner_noise"]["xy"]
-    z = np.log(c["std_px"] / true["corners"]["xy"].std) / np.hypot(true["corners"]["xy"].rel_se, 1 / np.sqrt(2 * c["dof"]))
+    t_xy = true["corners"]["xy"]
+    z = np.log(c["std_px"] / t_xy.std) / np.hypot(t_xy.rel_se, 1 / np.sqrt(2 * c["dof"]))
     assert abs(z) < 3
     assert c["ci95_px"][0] < c["std_px"] < c["ci95_px"][1]
     # the pose scatter of the simulator with the fitted settings: per axis, an F test of the two variances

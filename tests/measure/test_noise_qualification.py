@@ -53,8 +53,8 @@ def test_pose_scatter_matches_its_prediction_and_names_a_moved_frame():
     for j, (name, a) in enumerate(ps.axes.items()):
         assert a.dof == 39
         # measured std against the Cramer-Rao std of the true noise: inside the 99.9 % chi-square interval
-        lo, hi = (Scatter.from_ss(39 * a.std**2, 39, level=0.999).lo, Scatter.from_ss(39 * a.std**2, 39, level=0.999).hi)
-        assert lo < ps.predicted_std[j] < hi, name
+        wide = Scatter.from_ss(39 * a.std**2, 39, level=0.999)
+        assert wide.lo < ps.predicted_std[j] < wide.hi, name
     assert ps.residual_noise_px.lo < 0.05 < ps.residual_noise_px.hi
     # frame 7 shifted by 0.1 px (2 sigma of one corner, but 24 corners move together)
     ids, uv = _frames_uv(T, t, 0.05, 12, np.random.default_rng(3), shift={7: (0.1, 0.0)})

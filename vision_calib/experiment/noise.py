@@ -195,7 +195,8 @@ def measure_noise(folder, out_dir, target=None, camera=None, sim_frames: int = D
                  + (f", PnP reprojection RMS {det['pnp_rms_px']:.3g} px, target at {det['distance_m']:.3f} m"
                     if "pnp_rms_px" in det else "")
                  + (f"; image fit of this frame: blur {one['blur_sigma_px']:.3g} +- {one['blur_se_px']:.2g} px"
-                    + (f", dot diameter {one['dot_diameter']['diameter_m'] * 1e3:.4g} mm" if "dot_diameter" in one else "")
+                    + (f", dot diameter {one['dot_diameter']['diameter_m'] * 1e3:.4g} mm"
+                       if "dot_diameter" in one else "")
                     if one else ""))
         msg = (f"{inp.source}: the scatter needs >= 2 repeated frames of the static target ({what}); detection on "
                f"{inp.images[0]}: {found} (written to {out_dir / 'noise.json'})")
@@ -248,6 +249,9 @@ def measure_noise(folder, out_dir, target=None, camera=None, sim_frames: int = D
                                                                                          "photon", "bins")},
                           "cov": np.asarray(pt["cov"]).tolist(), **ns}
     doc["image_fit"] = {**fb, **({"dot_diameter": fit_d} if fit_d else {})}
+    if not (ns["read_noise_grey"] > 0 or ns["full_well_e"] > 0):
+        raise DataError(f"{inp.source}: the frames show no pixel noise on flat areas (identical but for a few "
+                        "pixels?): give raw repeated frames of the camera")
     base = dict(blur_sigma_px=fb["blur_sigma_px"], exposure=fb["exposure"], black_level_grey=fb["black_level_grey"],
                 gain=1.0, apply_distortion=True)
     eff0 = SensorEffects(read_noise_grey=ns["read_noise_grey"], full_well_e=ns["full_well_e"], **base)
@@ -328,8 +332,8 @@ def summary_text(doc: dict, inp: NoiseInput) -> str:
     lines = [f"noise: {doc['n_frames']} frames of {inp.source} ({inp.camera.width}x{inp.camera.height}, target "
              f"{inp.target.kind} {inp.target.cols}x{inp.target.rows}, {c['n_corners']} points in every frame)",
              f"corner noise about each point's mean [px, {_CI[2:]} % CI]: x {_fmt_scatter(c['x'])}, y "
-             f"{_fmt_scatter(c['y'])} (dof {c['x']['dof']} each); per point median {c['per_corner_std_px']['median']:.3g},"
-             f" max {c['per_corner_std_px']['max']:.3g}",
+             f"{_fmt_scatter(c['y'])} (dof {c['x']['dof']} each); per point median "
+             f"{c['per_corner_std_px']['median']:.3g}, max {c['per_corner_std_px']['max']:.3g}",
              "pose scatter of one frame (target origin, camera axes) std [CI] (predicted from the corner noise):"]
     for name, unit, _ in POSE_AXES:
         a = doc["pose_scatter"]["axes"][name]
@@ -345,9 +349,9 @@ def summary_text(doc: dict, inp: NoiseInput) -> str:
                      f"{dd['diameter_se_m'] * 1e3:.2g} mm")
     lines.append(f"image fit ({fb['patches']} patches of the mean frame vs the rendered pose): blur "
                  f"{fb['blur_sigma_px']:.3g} +- {fb['blur_se_px']:.2g} px, black level {fb['black_level_grey']:.4g} +- "
-                 f"{fb['black_se']:.2g} grey, exposure {fb['exposure']:.4g} +- {fb['exposure_se']:.2g} (spread over the "
-                 f"board {100 * fb['exposure_spread']:.2g} %)" + (" [blur at the grid's 4 px limit]" if fb["at_grid_edge"]
-                                                                else ""))
+                 f"{fb['black_se']:.2g} grey, exposure {fb['exposure']:.4g} +- {fb['exposure_se']:.2g} (spread over "
+                 f"the board {100 * fb['exposure_spread']:.2g} %)"
+                 + (" [blur at the grid's 4 px limit]" if fb["at_grid_edge"] else ""))
     w = sim["with_pixel_noise"]
     r = w["measured_over_simulated"]
     lines.append(f"simulator ({sim['frames']} frames) with the pixel noise: corner noise "

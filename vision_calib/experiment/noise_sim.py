@@ -9,9 +9,10 @@ check go through the same code as ``simulate``.
   (half-size 0.45 x the median distance between neighbouring features, 3..25 px) is fitted by least squares with
   ``a + b * G_sigma(ideal)``: a per-patch offset a (the ink's grey level: ``black_level_grey``) and scale b
   (``exposure``, gain 1) for every sigma of a 0.05 px grid (0..4 px; ``cv2.GaussianBlur`` with the sensor
-  stage's kernel). The blur is the minimum of the summed cost (parabola through the 3 grid points around it);
-  its standard error is the std of the per-patch minima / sqrt(patches) (with :data:`SE_FLOOR`). Noise is zero-mean, so it does not
-  bias this fit; a pose off by a fraction of a pixel adds only second-order blur.
+  stage's kernel). The blur is the minimum of the summed cost (on the grid, then parabolas through costs 0.02 px
+  apart);
+  its standard error is the std of the per-patch minima / sqrt(patches) (with :data:`SE_FLOOR`). Noise is
+  zero-mean, so it does not bias this fit; a pose off by a fraction of a pixel adds only second-order blur.
 - dot diameter, when the target does not give it (ROS-I sets): the same fit over a grid of d / spacing
   (0.15 .. 0.66; the origin dot twice the others), the pose re-solved for each (the modified grid's corner
   coordinates depend on the diameters); minimum of the summed cost, standard error from the per-patch minima.
@@ -43,7 +44,8 @@ DIAMETER_GRID = np.round(np.arange(0.15, 0.6601, 0.03), 4)
 
 
 def render_ideal(target, camera: CameraIntrinsics, T_cam_target: np.ndarray) -> np.ndarray:
-    """Ideal grey image (H, W) float32 [0, 255] of the target at T_cam_target, lens distortion drawn exactly."""
+    """(ideal grey image (H, W) float32 [0, 255] of the target at T_cam_target, lens distortion drawn exactly;
+    the TargetRenderer that drew it, for ``sensor.effects_for_render``)."""
     from ..render import TargetRenderer
 
     r = TargetRenderer(target, camera, backend="polygon", distort=any(camera.dist))
