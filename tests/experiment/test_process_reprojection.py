@@ -64,17 +64,22 @@ def test_reprojection_counts_only_the_points_the_measurement_used():
     ("recording.yaml", None, 0.1, 5.0 * np.sqrt(2) * 0.1, True),   # 5 x: the warning
     ("calibrated from the recording", None, 0.1, 50.0, False),     # refined intrinsics: not the pointer
     ("recording.yaml", {"source": "given", "translation_mm": 0.2, "rotation_deg": 0.02}, 0.1, 2.0, False),
-    ("recording.yaml", {"source": "estimated", "translation_mm": 1.3, "rotation_deg": 0.2}, 0.1, 2.0, True),
+    ("recording.yaml", {"source": "estimated", "translation_mm": 1.3, "rotation_deg": 0.2}, 0.1, 2.0, "note"),
 ])
 def test_noise_check_threshold(source, robot, sigma, rms, warned):
     """Ratio to sqrt(2 sigma^2 + robot px^2) above REPROJECTION_K warns with given intrinsics; a given robot
-    error that explains the RMS does not; an estimated one is named in the warning for the user to judge."""
+    error that explains the RMS does not; an estimated one that explains it is a note (not a warning) naming the
+    estimate for the user to judge."""
     pms = [_pm(str(k), [], sigma) for k in range(5)]
     robot_px2 = 0.0 if robot is None else 1.5**2
     rec, warn = reprojection_noise_check({"rms_px": rms, "points": "over 40 of 40 points"}, pms, {"source": source},
                                          robot_px2, robot)
     assert rec["corner_noise_px"] == pytest.approx(sigma)
     assert rec["ratio"] == pytest.approx(rms / np.sqrt(2 * sigma**2 + robot_px2))
+    if warned == "note":
+        warn, warned = rec["note"], True
+    else:
+        assert "note" not in rec
     assert (warn is not None) == warned, warn
     if warned:
         assert f"reprojection RMS {rms:.3g} px over 40 of 40 points" in warn and "process --refine-intrinsics" in warn
@@ -118,10 +123,11 @@ def test_wrong_given_focal_length_warns_and_points_to_refine(recording, tmp_path
 
 
 @pytest.mark.skipif(not REAL.is_dir(), reason="real ViSP data not available")
-def test_real_visp_set_warns_with_its_factory_intrinsics(tmp_path, capsys):
+def test_real_visp_set_notes_its_factory_intrinsics(tmp_path, capsys):
     """The real ViSP eye-to-hand set (read in place): 5-6 px with the camera's factory intrinsics, far above its
-    corner noise, which the fit ascribes to an estimated robot error: the warning says so and points to
-    --refine-intrinsics (where 0 warnings were reported before)."""
+    corner noise, which the fit ascribes to an estimated robot error. Eight poses cannot tell that robot error from
+    wrong intrinsics (a clean simulated 0.2 mm robot gives the same pattern), so it is a printed note naming the
+    estimate and pointing to --refine-intrinsics, not a verdict warning."""
     from vision_calib.cli import main
 
     assert main(["import-visp", str(REAL), "--out", str(tmp_path / "rec")]) == 0
@@ -129,9 +135,10 @@ def test_real_visp_set_warns_with_its_factory_intrinsics(tmp_path, capsys):
     cap = capsys.readouterr()
     rep = json.loads((tmp_path / "out" / "report.json").read_text())
     chk = rep["reprojection"]["noise_check"]
-    assert chk["ratio_corner_noise"] > REPROJECTION_K and rep["verdict"]["warnings"] >= 1
+    assert chk["ratio_corner_noise"] > REPROJECTION_K and chk["ratio"] <= REPROJECTION_K
     robot = rep["handeye"]["robot_pose_std"]
-    warn = [w for w in rep["warnings"] if w.startswith("reprojection RMS")]
-    assert len(warn) == 1 and f"{rep['reprojection']['rms_px']:.3g} px over 32 of 32 points" in warn[0]
-    assert f"estimated from these data at {robot['translation_mm']:.3g} mm" in warn[0]
-    assert "--refine-intrinsics" in warn[0] and "--refine-intrinsics" in cap.out + cap.err
+    assert not [w for w in rep["warnings"] if w.startswith("reprojection RMS")]
+    note = chk["note"]
+    assert f"{rep['reprojection']['rms_px']:.3g} px over 32 of 32 points" in note
+    assert f"estimated from these data at {robot['translation_mm']:.3g} mm" in note
+    assert "--refine-intrinsics" in note and note in cap.out + cap.err
