@@ -182,8 +182,14 @@ def parameters_section(report: dict) -> str:
 
 def handeye_section(report: dict) -> str:
     he = report["handeye"]
+    tf = he.get("transforms") or {}
+    # the two transforms the summary names (io.report: the identified A, B for eye-in-hand; else the base-camera
+    # and flange-target ones); the inverses stay in report.json
+    names = ((he.get("A"), he.get("B")) if (report.get("settings") or {}).get("mount") == "eye_in_hand"
+             else ("T_base_cam", "T_flange_target"))
     body = []
-    for name, t in (he.get("transforms") or {}).items():
+    for name in [n for n in names if n in tf] or list(tf):
+        t = tf[name]
         if not isinstance(t, dict) or "xyz_m" not in t:
             continue
         body.append([esc(name)] + [f"{num(v * 1e3, '.2f')} ± {num(s * 1e3, '.2g')}" for v, s in
