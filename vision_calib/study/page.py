@@ -59,7 +59,8 @@ def study_html(spec: StudySpec, res: dict, table_rows: list[dict], out_dir) -> s
     names = sorted({Path(str(v)).name for k, v in (res.get("files") or {}).items() if k != "plots" and v})
     parts.append('<section id="more"><h2>Files and the text summary</h2><p>files beside this page: '
                  + ", ".join(f'<a href="{esc(n)}">{esc(n)}</a>' for n in names) + "</p><details><summary>"
-                 "summary text</summary><pre>" + esc(res.get("summary_text", "")) + "</pre></details></section>")
+                 "summary text</summary><pre>" + esc(res.get("summary_text", "").replace(f"-> {res.get('out_dir')}", "-> .")) +
+                 "</pre></details></section>")  # no absolute path in the page: it moves with its folder
     return page(f"vision_calib study {spec.name}", "\n".join(parts))
 
 
