@@ -169,3 +169,21 @@ def test_page_in_a_headless_browser(runs, name, tmp_path):
     top = im[:300].reshape(-1, 3)
     colour = np.array(STATUS_RGB[rep["verdict"]["status"]])
     assert np.mean(np.all(np.abs(top.astype(int) - colour) <= 2, axis=1)) > 0.05  # the verdict's colour on top
+
+
+@pytest.mark.slow
+def test_failed_and_warning_verdicts_read_first(runs, tmp_path):
+    """The page of the same report with a failed (gross input error) and a warning verdict: the state, its reason
+    and whether a model was written, in the verdict box."""
+    from vision_calib.io.report_html import report_html
+
+    rep = json.loads((runs["proc"] / "report.json").read_text())
+    failed = {**rep, "verdict": {**rep["verdict"], "status": "failed", "ok": False, "usable": False,
+                                 "failure": "wrong_robot", "message": "the joints do not fit this robot"},
+              "failure": {"kind": "wrong_robot", "message": "the joints do not fit this robot"}}
+    box = section(report_html(failed, runs["proc"]), "verdict")
+    assert 'class="verdict failed"' in box and "Verdict: FAILED (wrong_robot)" in box
+    assert box.count("the joints do not fit this robot") == 1 and "no calibrated model was written" in box
+    warn = {**rep, "verdict": {**rep["verdict"], "status": "warning", "ok": False, "message": "model does not fit"}}
+    box = section(report_html(warn, runs["proc"]), "verdict")
+    assert 'class="verdict warning"' in box and "Verdict: WARNING" in box and "<li>model does not fit</li>" in box

@@ -111,14 +111,18 @@ def _what(report: dict) -> str:
 
 
 def verdict_section(report: dict) -> str:
-    from .report import verdict_line
-
     v = report["verdict"]
     status = v.get("status", "ok" if v.get("ok") else "failed")
+    state = STATE_WORDS.get(status, esc(status))
+    if status == "failed":  # as io.report.verdict_line names it
+        state += (f" ({esc(v['failure'])})" if v.get("failure") else ": not finite" if not v.get("finite", True)
+                  else ": not converged")
+    counts = (f"{v.get('n_rejected_poses', 0)} poses rejected ({v.get('n_outliers', 0)} as outliers); model "
+              f"adequacy: {v.get('adequacy') or 'n/a'}; {v.get('warnings', 0)} warnings")
     items = []
     if v.get("message"):
         items.append(v["message"])
-    if report.get("failure"):
+    if report.get("failure") and report["failure"].get("message") != v.get("message"):
         items.append(f"gross input error ({report['failure'].get('kind')}): {report['failure'].get('message', '')}")
     if v.get("note"):
         items.append("note: " + v["note"])
@@ -128,9 +132,8 @@ def verdict_section(report: dict) -> str:
            (report.get("files") or {}).get("model") else
            "no calibrated model was written" if not v.get("usable") else "")
     body = "".join(f"<li>{esc(t)}</li>" for t in items) or "<li>no warnings</li>"
-    return (f'<section id="verdict" class="verdict {status}"><div class="state">Verdict: '
-            f'{STATE_WORDS.get(status, esc(status))}</div>'
-            f'<div class="num">{esc(verdict_line(v))}</div>'
+    return (f'<section id="verdict" class="verdict {status}"><div class="state">Verdict: {state}</div>'
+            f'<div class="num">{esc(counts)}</div>'
             + (f"<div>{esc(use)}</div>" if use else "") + f'<ul class="w">{body}</ul></section>')
 
 
