@@ -86,6 +86,8 @@ def test_every_command_writes_a_self_contained_page(runs, name):
     rep = json.loads((out / "report.json").read_text())
     text = (out / "report.html").read_text()
     assert rep["files"]["html"] == "report.html"
+    assert not [w for w in rep["warnings"] if w.startswith(("overlay images failed", "report.html failed",
+                                                             "plotting failed"))]
     assert network_references(text) == []
     for root in (out.parent, out.parent.resolve(), SCENES_DIR.resolve()):  # no absolute path: the folder can move
         assert str(root) not in text
