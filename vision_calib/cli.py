@@ -263,6 +263,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("dst", nargs="?", default=None, metavar="DST", help="deprecated: use --out DIR")
     p.add_argument("--out", default=None, metavar="DIR", help="folder to write (cal_data.yaml, poses/, images/)")
 
+    p = _command(sub, "noise", "camera noise from repeated frames of a static target: corner and pose scatter, and "
+                 "the simulator settings that reproduce it (docs/noise.md)", """
+  vision-calib noise rosi_noise_qualification/ --out out/noise
+  vision-calib noise frames/ --target targets/charuco_a5.yaml --camera camera.yaml --out out/noise --json""")
+    p.add_argument("folder", help="ROS-I noise-qualification folder (cal_data.yaml), or a folder of images of one "
+                                  "static target (with --target and --camera)")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder (noise.json, sensor.yaml, summary.txt)")
+    p.add_argument("--target", default=None, help="target YAML (see targets/; overrides cal_data.yaml's target_finder)")
+    p.add_argument("--camera", default=None, metavar="CAMERA_YAML",
+                   help="camera.yaml (calibrate-camera's output; overrides cal_data.yaml's intrinsics)")
+    p.add_argument("--sim-frames", type=_int_at_least(2), default=30,
+                   help="frames the simulator draws to check the fitted settings (default 30)")
+    p.add_argument("--seed", type=_seed, default=0, help="seed of the simulator's noise (default 0)")
+    p.add_argument("--allow-symlinks", action="store_true", help="follow symlinks leading out of the folder")
+    _add_json(p)
+
     p = _command(sub, "target", "export a printable target image", """
   vision-calib target targets/charuco_a5.yaml --out charuco_a5.pdf
   vision-calib target targets/charuco_a5.yaml --out charuco_a5.png --dpi 600""")
@@ -411,6 +427,16 @@ def _cmd_export_rosi(args) -> int:
     return 0
 
 
+def _cmd_noise(args) -> int:
+    from .experiment.noise import measure_noise
+    from .io.atomic import to_json
+
+    res = measure_noise(args.folder, args.out, target=args.target, camera=args.camera, sim_frames=args.sim_frames,
+                        seed=args.seed, allow_symlinks=args.allow_symlinks)
+    print(to_json({k: v for k, v in res.items() if k != "summary_text"}) if args.json else res["summary_text"])
+    return 0
+
+
 def _cmd_target(args) -> int:
     from .targets import export_printable, load_target
 
@@ -431,6 +457,7 @@ COMMANDS = {
     "import-visp": _cmd_import_visp,
     "import-rosi": _cmd_import_rosi,
     "export-rosi": _cmd_export_rosi,
+    "noise": _cmd_noise,
     "target": _cmd_target,
 }
 
@@ -461,7 +488,8 @@ def _status(verdict: dict) -> int:
 
 def _summary_identifiability(out: dict) -> str:
     lines = [
-        f"{out['scene']}: {out['n_params']} parameters, rank {out['rank']}, condition number {out['condition_number']:.4g}",
+        f"{out['scene']}: {out['n_params']} parameters, rank {out['rank']}, condition number {out['condition_number']:.4g}"
+        + (f" (of the {out['condition_number_of']})" if out.get("condition_number_of") else ""),
         f"non-identifiable: {', '.join(out['non_identifiable']) or 'none'}",
     ]
     for c in out["couplings"]:
@@ -513,6 +541,9 @@ def _inputs(args) -> list:
     if c == "import-rosi":
         src = Path(args.src)
         return [(src if src.is_dir() else src.parent, "folder")]
+    if c == "noise":
+        src = Path(args.folder)
+        return [(src if src.is_dir() else src.parent, "folder")] + [(f, "file") for f in (args.target, args.camera) if f]
     if c == "process-poses":
         return [(args.file, "file")]
     if c in ("simulate", "identifiability", "identify-synthetic"):

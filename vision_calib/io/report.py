@@ -341,8 +341,10 @@ def summary_text(report: dict) -> str:
         pri = idf.get("prior_parameters") or []
         lines.append(f"identifiability: {idf['n_params']} parameters"
                      + (f" ({len(pri)} with a prior: {', '.join(pri)})" if pri else "")
-                     + f", rank {idf['rank']}, cond {idf['condition_number']:.3g}"
+                     + f", rank {idf['rank']}"
                      + (f"; not identifiable: {', '.join(idf['non_identifiable'])}" if idf["non_identifiable"] else ""))
+        lines.append(f"  condition number {idf['condition_number']:.3g}"
+                     + (f" (of the {idf['condition_number_of']})" if idf.get("condition_number_of") else ""))
     lines.append(f"identification ({ident['method']}): converged={ident['converged']} iterations={ident['iterations']} "
                  f"cost {ident['cost_initial']:.4g} -> {ident['cost_final']:.4g}")
     check = method_check_line(report["method_check"]) if "method_check" in report else None
