@@ -148,8 +148,26 @@ def process_folder(folder, out_dir, method=None, progress=False, plots=True, fix
                "reprojection": reproj},
         timings={"measure": t_meas, "identify": t_id, "total": time.perf_counter() - t0}, failure=failure)
     report["summary_text"] += points_line(report.get("reprojection"))
-    write_report(out, report, setup, result, problem, plots=plots)
+    write_report(out, report, setup, result, problem, plots=plots,
+                 overlays=_overlay_source(rec, dets, setup if report["verdict"].get("usable") else None,
+                                          result) if plots else None)
     return report
+
+
+def _overlay_source(rec, dets, setup=None, result=None):
+    """report.html's overlay images of a recorded folder: its files and detections; the calibrated model's
+    reprojection from the pose's joint readings when a usable ``setup`` is given (through the recording's
+    intrinsics, as the measured poses)."""
+    from ..io.overlay import OverlaySource, recording_frames
+
+    index = {str(p): i for i, p in enumerate(rec.pose_ids)}
+
+    def model_pose(pid):
+        i = index.get(str(pid))
+        return None if i is None or setup is None else setup.predict_from_joints(rec.poses[i:i + 1],
+                                                                                 result.identified)[0]
+
+    return OverlaySource(recording_frames(rec.images, dets), rec.target, rec.camera, model_pose)
 
 
 def _camera_values(cam) -> dict:
@@ -232,7 +250,7 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None) -> dict:
         extra={"handeye": he, "intrinsics": intr, "reprojection": he["reprojection"]},
         timings={"total": time.perf_counter() - t0})
     report["summary_text"] += points_line(report.get("reprojection"))
-    write_report(out, report, plots=plots)
+    write_report(out, report, plots=plots, overlays=_overlay_source(rec, dets) if plots else None)
     return report
 
 

@@ -321,5 +321,25 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
         result=result, identified=ident, motion=motion, accuracy=evals, timings=timings, extra=extra)
     if out_dir is not None:
         preloading.join()
-        write_report(out_dir, report, setup, result, problem, evals, plots=plots)
+        write_report(out_dir, report, setup, result, problem, evals, plots=plots,
+                     overlays=_overlay_source(scene, chain, setup, result, report, T_true, q_true, seed, frames)
+                     if plots else None)
     return report
+
+
+def _overlay_source(scene, chain, setup, result, report, T_true, q_true, seed, frames):
+    """report.html's overlay images of a simulated run: the few poses shown rendered again (the frames of the run
+    are not kept), the model's reprojection from the joint readings q_true through the identified parameters."""
+    from ..io.overlay import OverlaySource
+    from ..targets import load_target
+    from .image_chain import overlay_frames
+
+    labels = [f"{i:03d}" for i in range(len(T_true))]  # as _render_and_measure
+    usable = report["verdict"].get("usable")
+
+    def model_pose(pid):
+        i = labels.index(pid) if pid in labels else None
+        return None if i is None or not usable else setup.predict_from_joints(q_true[i:i + 1], result.identified)[0]
+
+    return OverlaySource(lambda ids: overlay_frames(chain, T_true, labels, seed, frames, ids),
+                         load_target(scene.target_path), chain.camera, model_pose)

@@ -20,6 +20,8 @@ report.json, version 2 (each value once)::
                      correlation_warnings, warnings}             # no parameter values (they are above)
     accuracy: {before: {...}, after: {...}}                      # validation poses, simulation only
     residuals: {...}                                             # RMS per component (process)
+    pose_residuals: {kind, how, poses: [{pose_id, chi2, p_value, translation_mm, rotation_deg | joint_deg}]}
+                                                                 # every kept pose's final residual, worst first
     method_check: {methods: [ran, other], verdict, chi2, dof, p_value, max_abs_z, parameters: [{name,
                    difference, std, z}], ...}                    # H4 igm / lse: the other method, same poses
     intrinsics: {source: "recording.yaml" | "calibrated from the recording", values, std, rms_px,
@@ -31,7 +33,7 @@ report.json, version 2 (each value once)::
                                                                  # process_handeye (experiment/handeye_step.py)
     warnings: [str]
     timings_s: {...}
-    files: {report, model, residuals_plot, ...}
+    files: {report, model, residuals_plot, html, ...}           # html: report.html (io/report_html.py)
 
 The machine-readable contract is the JSON Schema shipped beside this module (:data:`SCHEMA_PATH`,
 ``report_schema.json``): the keys every kind always writes, their types, open blocks allowed to grow.
@@ -116,6 +118,41 @@ def residual_stats(r, kind) -> dict:
             d["rotation_rms_deg"] = [float(v) for v in np.degrees(np.sqrt(np.mean(r[:, 3:] ** 2, axis=0)))]
         return d
     return {"joint_rms_deg": [float(v) for v in np.degrees(np.sqrt(np.mean(r**2, axis=0)))]}
+
+
+#: per-pose residual columns of report.json's ``pose_residuals`` per residual kind: (key, columns, factor from SI)
+POSE_RESIDUAL_COLUMNS = {
+    "pose": (("translation_mm", slice(0, 3), 1e3), ("rotation_deg", slice(3, 6), float(np.degrees(1.0)))),
+    "position": (("translation_mm", slice(0, 3), 1e3),),
+    "joint": (("joint_deg", slice(None), float(np.degrees(1.0))),),
+}
+
+
+def pose_residuals_block(result) -> dict:
+    """Final residual of every pose the fit kept, worst first (JSON-ready): {kind, how, poses: [{pose_id, chi2
+    (squared norm of the whitened residual; null when the fit gave none), p_value (upper tail of chi2(m), m the
+    residual components per pose), translation_mm / rotation_deg (pose kinds: norm of that part) or joint_deg}]};
+    sorted by chi2 (else by the first norm), largest first."""
+    from scipy.stats import chi2 as chi2_dist
+
+    r = np.atleast_2d(np.asarray(result.residuals, float))
+    kind = result.residual_kind
+    cols = [c for c in POSE_RESIDUAL_COLUMNS.get(kind, POSE_RESIDUAL_COLUMNS["joint"])
+            if c[1].stop is None or r.shape[1] >= c[1].stop]
+    pc = None if result.pose_chi2 is None else np.asarray(result.pose_chi2, float)
+    labels = list(result.labels) if result.labels else [f"#{k}" for k in range(len(r))]
+    rows = []
+    for k, lab in enumerate(labels[:len(r)]):
+        c2 = None if pc is None or not np.isfinite(pc[k]) else float(pc[k])
+        row = {"pose_id": str(lab), "chi2": c2,
+               "p_value": None if c2 is None else float(chi2_dist.sf(c2, r.shape[1]))}
+        row.update({key: float(np.linalg.norm(r[k, sl]) * f) for key, sl, f in cols})
+        rows.append(row)
+    first = cols[0][0] if cols else None
+    rows.sort(key=lambda e: -(e["chi2"] if e["chi2"] is not None else (e.get(first) or 0.0)))
+    return {"kind": kind, "how": "final residual (measured - model) per pose; chi2: squared norm of the pose's "
+            "whitened residual (its measurement covariance), expected about m = " + str(r.shape[1]) +
+            " for a right model", "poses": rows}
 
 
 def measurements_block(pms, **extra) -> dict:
@@ -239,6 +276,8 @@ def build_report(kind: str, *, source: dict, settings: dict, result, measurement
         report["accuracy"] = {k: v.to_dict() for k, v in accuracy.items()}
     if residuals is not None:
         report["residuals"] = residuals
+    if np.ndim(getattr(result, "residuals", None)) == 2 and len(result.residuals):
+        report["pose_residuals"] = pose_residuals_block(result)
     report.update(extra or {})
     report["warnings"] = warnings
     if timings is not None:
@@ -440,9 +479,12 @@ def _handeye_lines(report: dict) -> list[str]:
 
 
 def write_report(out_dir, report: dict, setup=None, result=None, problem=None, evaluations=None,
-                 plots: bool = True) -> Path:
-    """report.json + summary.txt (+ calibrated_model.yaml with a setup; + residuals.png,
-    parameters.png, and error_map.png with ``evaluations`` = {"before": Evaluation, "after": Evaluation})."""
+                 plots: bool = True, overlays=None) -> Path:
+    """report.json + summary.txt + report.html (+ calibrated_model.yaml with a setup; + residuals.png,
+    parameters.png, and error_map.png with ``evaluations`` = {"before": Evaluation, "after": Evaluation}).
+    overlays: an ``io.overlay.OverlaySource`` (the images of the run's poses): report.html then shows what the
+    detector found on the rejected and the worst poses. A failing plot, overlay or page costs a warning, never
+    the report."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     report["source"] = relative_source(report["source"], out)  # paths relative to report.json (io.portable)
@@ -459,9 +501,26 @@ def write_report(out_dir, report: dict, setup=None, result=None, problem=None, e
             files.update(_write_plots(out, report, setup, result, problem, evaluations))
         except Exception as exc:  # a plot must never cost the report
             report.setdefault("warnings", []).append(f"plotting failed: {exc}")
+    shown = None
+    if overlays is not None:
+        try:
+            from .overlay import build_overlays
+
+            shown = build_overlays(report, overlays)
+        except Exception as exc:  # an overlay must never cost the report
+            report.setdefault("warnings", []).append(f"overlay images failed: {exc}")
+    files["html"] = "report.html"
     report["files"] = files
     table = parameter_table_text(report.get("parameters") or [])
     write_text_atomic(out / "summary.txt", report.get("summary_text", "") + "\n" + (f"\n{table}\n" if table else ""))
+    try:
+        from .report_html import write_report_html
+
+        write_report_html(out, report, shown)
+    except Exception as exc:  # the page must never cost report.json
+        files.pop("html")
+        (out / "report.html").unlink(missing_ok=True)  # not an earlier run's page
+        report.setdefault("warnings", []).append(f"report.html failed: {exc}")
     write_json_atomic(out / files["report"], report)
     return out / files["report"]
 
