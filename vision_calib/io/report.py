@@ -120,6 +120,20 @@ def residual_stats(r, kind) -> dict:
     return {"joint_rms_deg": [float(v) for v in np.degrees(np.sqrt(np.mean(r**2, axis=0)))]}
 
 
+#: summary labels of residual_stats keys: (words, unit)
+RESIDUAL_LABELS = {"translation_rms_mm": ("translation x, y, z", "mm"), "rotation_rms_deg": ("rotation x, y, z", "deg"),
+                   "joint_rms_deg": ("joints 1..n", "deg")}
+
+
+def residuals_line(res: dict) -> str:
+    """One summary line of a :func:`residual_stats` block, each figure with what it is and its unit."""
+    parts = [f"{RESIDUAL_LABELS.get(k, (k, ''))[0]} " + ", ".join(f"{x:.4g}" for x in vals)
+             + f" {RESIDUAL_LABELS.get(k, ('', ''))[1]}".rstrip() for k, vals in res.items()]
+    where = ("" if set(res) == {"joint_rms_deg"} else
+             ", per axis of the measured transform's left frame")
+    return f"residual RMS after the fit (measured - model{where}): " + "; ".join(parts)
+
+
 #: per-pose residual columns of report.json's ``pose_residuals`` per residual kind: (key, columns, factor from SI)
 POSE_RESIDUAL_COLUMNS = {
     "pose": (("translation_mm", slice(0, 3), 1e3), ("rotation_deg", slice(3, 6), float(np.degrees(1.0)))),
@@ -346,7 +360,8 @@ def summary_text(report: dict) -> str:
         lines.append(f"  condition number {idf['condition_number']:.3g}"
                      + (f" (of the {idf['condition_number_of']})" if idf.get("condition_number_of") else ""))
     lines.append(f"identification ({ident['method']}): converged={ident['converged']} iterations={ident['iterations']} "
-                 f"cost {ident['cost_initial']:.4g} -> {ident['cost_final']:.4g}")
+                 f"cost {ident['cost_initial']:.4g} at the start -> {ident['cost_final']:.4g} (half the sum of squared "
+                 "whitened residuals, no unit; about half the residual dof when the model fits)")
     check = method_check_line(report["method_check"]) if "method_check" in report else None
     lines += [f"warning: {w}" for w in ident.get("warnings", []) if w != check]  # a disagreement: once, below
     if check:
@@ -358,8 +373,7 @@ def summary_text(report: dict) -> str:
         lines.append("intrinsics sensitivity (largest shift per px, in std): " + ", ".join(
             f"{k} -> {v['parameter']} {v['std_per_px']:+.3g}" for k, v in largest.items()))
     if "residuals" in report:
-        lines.append("residual RMS: " + "; ".join(f"{k} " + ", ".join(f"{x:.4g}" for x in vals)
-                                                  for k, vals in report["residuals"].items()))
+        lines.append(residuals_line(report["residuals"]))
     if "reprojection" in report:
         from ..measure.reprojection import reprojection_line
 
