@@ -84,24 +84,33 @@ def motion_consistency(setup: Setup, meas: Measurements) -> dict:
                                    for k in bad]}
 
 
-def check_motion(setup: Setup, meas: Measurements, where: str, scale_hint: str) -> dict:
-    """:func:`motion_consistency`, refusing (DataError naming ``where`` and the likely cause) measured
-    motions whose length scale is off by more than SCALE_TOL or whose rotations do not follow the joints
-    at all. ``scale_hint``: the keys that set the length scale (e.g. the target's square size, fx)."""
+def motion_verdict(setup: Setup, meas: Measurements, where: str, scale_hint: str) -> tuple[dict, str | None]:
+    """(:func:`motion_consistency` record, None) when the measured motions follow the commanded joints, else
+    (record, the refusal naming ``where`` and the likely cause): a length scale off by more than SCALE_TOL, or
+    rotations that do not follow the joints at all. ``scale_hint``: the keys that set the length scale (e.g. the
+    target's square size, fx). Fewer than 3 poses: ({}, None). Blind to a whole pose set inverted (the other
+    ``measured:`` direction): a relative motion and its inverse have the same angle and |pitch|."""
     if len(meas.T_cam_target) < 3:
-        return {}
+        return {}, None
     out = motion_consistency(setup, meas)
     med_rot = out["median_rotation_deg"]
     if out["angle_mismatch_median_deg"] > max(2.0, 0.1 * med_rot):
-        raise DataError(
+        return out, (
             f"{where}: the measured rotations between poses do not follow the commanded joints (median mismatch "
             f"{out['angle_mismatch_median_deg']:.3g} deg for a median commanded rotation of {med_rot:.3g} deg): "
             "joint values in the wrong angle unit, a joint order different from the robot's, or the wrong robot model")
     s = out["scale"]
     if np.isfinite(s) and abs(s - 1) > SCALE_TOL:
-        raise DataError(
-            f"{where}: the measured motions are {s:.3g} x the commanded ones ({out['n_scale_pairs']} pose pairs): "
-            f"a wrong length scale -- check {scale_hint} and the length units")
+        return out, (f"{where}: the measured motions are {s:.3g} x the commanded ones ({out['n_scale_pairs']} pose "
+                     f"pairs): a wrong length scale -- check {scale_hint} and the length units")
+    return out, None
+
+
+def check_motion(setup: Setup, meas: Measurements, where: str, scale_hint: str) -> dict:
+    """:func:`motion_verdict`, its refusal raised as a DataError; returns the record."""
+    out, refusal = motion_verdict(setup, meas, where, scale_hint)
+    if refusal:
+        raise DataError(refusal)
     return out
 
 

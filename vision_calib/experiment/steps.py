@@ -42,15 +42,20 @@ def rngs(seed: int):
             np.random.default_rng([seed, STREAM_VALIDATION]))
 
 
+#: the rows' weighting of :func:`analyze_setup` (exact measurements, no noise model), in words
+PLANNING_WEIGHTING = "unweighted (no noise model: 1 mm and 1 mrad of residual weigh alike)"
+
+
 def analyze_setup(setup: Setup, poses, residual: str | None = None, all_params: bool = False):
     """Identifiability of the setup's free parameters (every model parameter with ``all_params``)
     over commanded ``poses`` at the nominal geometry with exact measurements:
-    (IdentifiabilityReport, problem)."""
+    (IdentifiabilityReport, problem). Its condition number weighs every pose's components alike
+    (PLANNING_WEIGHTING); measured data are analysed whitened by their covariances (:func:`identify_measurements`)."""
     meas = setup.synthetic_measurements(poses, setup.params.nominal, np.random.default_rng(0))
     problem = setup.problem(meas, residual)
     if all_params:  # bypass the builders' refusal of known-redundant pairs: the analysis must find them
         problem = problem.with_params(problem.params.only_free(problem.params.names))
-    return analyze(problem, selection=BASE_SELECTION), problem
+    return analyze(problem, selection=BASE_SELECTION, weighting=PLANNING_WEIGHTING), problem
 
 
 def structural_rank_check(setup: Setup, rep, residual: str, where: str, accept: bool = False,
@@ -195,7 +200,7 @@ def identify_measurements(setup: Setup, meas: Measurements, method, residual, an
     rep = analysis if setup.params.free_names == before else None  # prepare() freed parameters: analyse again
     if rep is None:
         if len(meas.T_cam_target) == 0:
-            raise IdentifiabilityError(f"{where}: no usable pose" + (f" ({context})" if context else ""))
+            raise IdentifiabilityError(f"{where}: no usable poses" + (f" ({context})" if context else ""))
         try:
             rep = analyze(setup.problem(meas, residual), selection=BASE_SELECTION)
         except IdentifiabilityError as exc:

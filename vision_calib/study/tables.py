@@ -284,12 +284,11 @@ def cell_summary(spec: StudySpec, table: list[dict]) -> list[dict]:
     return out
 
 
-def summary_text(spec: StudySpec, res: dict) -> str:
-    """One screen: per cell mean ± std of the main figures."""
+def summary_table(spec: StudySpec, res: dict) -> tuple[list[str], list[list[str]]]:
+    """(head, body) of the per-cell table: the axes, runs that did not fail, converged fraction, and the mean ±
+    std of each main figure in its display unit (the text summary and the study page show it)."""
     figs = [(c, lab, f) for c, lab, f in MAIN_FIGURES if any(c in s["figures"] for s in res["summary"])]
     head = [*spec.axes, "runs", "conv"] + [lab for _, lab, _ in figs]
-    lines = [f"study {spec.name}: {res['n_runs']} runs ({res['n_computed']} computed, {res['n_reused']} reused, "
-             f"{res['n_failed']} failed) -> {res['out_dir']}"]
     body = []
     for s in res["summary"]:
         cells = [format_value(s[a]) for a in spec.axes] + [str(s["n_runs"] - s["n_failed"]), f"{s['converged']:.2f}"]
@@ -303,6 +302,14 @@ def summary_text(spec: StudySpec, res: dict) -> str:
                 sd = f" ± {v['std'] * f:.2g}" if math.isfinite(v["std"]) else ""
                 cells.append(f"{v['mean'] * f:.3g}{sd}")
         body.append(cells)
+    return head, body
+
+
+def summary_text(spec: StudySpec, res: dict) -> str:
+    """One screen: per cell mean ± std of the main figures."""
+    head, body = summary_table(spec, res)
+    lines = [f"study {spec.name}: {res['n_runs']} runs ({res['n_computed']} computed, {res['n_reused']} reused, "
+             f"{res['n_failed']} failed) -> {res['out_dir']}"]
     widths = [max(len(h), *(len(b[i]) for b in body)) if body else len(h) for i, h in enumerate(head)]
     lines.append("  ".join(h.rjust(w) for h, w in zip(head, widths)))
     lines.extend("  ".join(c.rjust(w) for c, w in zip(b, widths)) for b in body)
