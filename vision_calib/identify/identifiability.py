@@ -240,7 +240,6 @@ def _select_base(A: np.ndarray, rank: int, tol_abs: float, selection: str) -> np
 
 
 # ----------------------------------------------------------------------------- main API
-@single_threaded_blas
 def condition_description(params, base_idx, problem: IdentificationProblem, at_nominal: bool,
                           normalize: bool = False, weighting: str | None = None) -> str:
     """What :func:`analyze`'s condition number is computed on, in words: the base columns (their count), the
@@ -261,6 +260,7 @@ def condition_description(params, base_idx, problem: IdentificationProblem, at_n
             + ", ".join(scales) + ("; then normalised" if normalize else ""))
 
 
+@single_threaded_blas
 def analyze(
     problem: IdentificationProblem,
     x=None,
