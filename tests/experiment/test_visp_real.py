@@ -22,7 +22,8 @@ def test_import_and_process_visp_eye_to_hand(tmp_path, capsys):
     capsys.readouterr()
     rep = json.loads((tmp_path / "out" / "report.json").read_text())
     assert rep["measurements"]["n_valid"] == 8
-    for p in rep["measurements"]["poses"]:
+    assert "poses" not in rep["measurements"] and rep["measurements"]["poses_file"] == "measurements.json"
+    for p in json.loads((tmp_path / "out" / "measurements.json").read_text())["poses"]:
         assert p["reprojection_rms_px"] < 0.5
     he = rep["handeye"]
     assert he["converged"]
@@ -48,7 +49,7 @@ def test_import_and_process_visp_eye_to_hand(tmp_path, capsys):
     from vision_calib import frames as F
 
     r = read_recording(rec)
-    T = np.array([p["T_cam_target"] for p in rep["measurements"]["poses"]])
+    T = np.array([p["T_cam_target"] for p in json.loads((tmp_path / "out" / "measurements.json").read_text())["poses"]])
     A0, _ = handeye_initial_guess(r.poses, T, "fixed")
     d = np.abs(F.inv_T(A0)[:3, 3] - np.array(cam["xyz_m"])) / np.array(cam["std_xyz_m"])
     assert d.max() < 4, d

@@ -44,6 +44,7 @@ is gone); ``scene`` / ``folder`` moved under ``source``; ``verdict`` added.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -497,8 +498,29 @@ def write_report(out_dir, report: dict, setup=None, result=None, problem=None, e
         files.pop("html")
         (out / "report.html").unlink(missing_ok=True)  # not an earlier run's page
         report.setdefault("warnings", []).append(f"report.html failed: {exc}")
-    write_json_atomic(out / files["report"], report)
+    write_json_atomic(out / files["report"], on_disk(report, out))
     return out / files["report"]
+
+
+#: file beside report.json holding the per-pose measurements (written before identification)
+MEASUREMENTS_FILE = "measurements.json"
+
+
+def on_disk(report: dict, out: Path) -> dict:
+    """The report as written: per-pose measurements once. When ``out`` holds :data:`MEASUREMENTS_FILE` with the
+    same poses, the ``measurements`` block keeps its counts and names the file (``poses_file``) instead of
+    repeating the per-pose list (the in-memory report keeps it)."""
+    m = report.get("measurements")
+    path = out / MEASUREMENTS_FILE
+    if not isinstance(m, dict) or "poses" not in m or not path.is_file():
+        return report
+    try:
+        on_file = json.loads(path.read_text()).get("poses")
+    except (OSError, ValueError):
+        return report
+    if not isinstance(on_file, list) or [p.get("pose_id") for p in on_file] != [p.get("pose_id") for p in m["poses"]]:
+        return report
+    return {**report, "measurements": {**{k: v for k, v in m.items() if k != "poses"}, "poses_file": MEASUREMENTS_FILE}}
 
 
 def _write_plots(out: Path, report: dict, setup, result, problem, evaluations) -> dict:
