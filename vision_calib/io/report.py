@@ -342,7 +342,7 @@ def summary_text(report: dict) -> str:
                          f"ids {[c['id'] for c in dc[0]['corners']]})")
         acc = m.get("accuracy_vs_truth")
         if acc:
-            lines.append("  pose error vs truth, RMS per component: t = "
+            lines.append("  measured target pose vs truth, RMS per axis of the camera frame (x, y, z): t = "
                          + ", ".join(f"{x:.3f}" for x in acc["translation_rms_mm"]) + " mm; r = "
                          + ", ".join(f"{x:.4f}" for x in acc["rotation_rms_deg"]) + " deg")
     if "intrinsics" in report:
