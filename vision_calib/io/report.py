@@ -223,7 +223,7 @@ def verdict(result, measurements: dict | None = None, identified=None, warnings=
            "finite": finite, "n_rejected_poses": (measurements or {}).get("n_rejected", 0) + n_out,
            "n_outliers": n_out, "adequacy": adq, "lack_of_fit": None if lack_of_fit is None else lof,
            "message": message,
-           "warnings": len(warnings) + len(result.warnings)}
+           "warnings": len(set(warnings) | set(result.warnings))}  # a warning given by both: counted once
     if failure is not None:
         out["failure"] = failure["kind"]
     if adq == "too small":
@@ -253,7 +253,7 @@ def build_report(kind: str, *, source: dict, settings: dict, result, measurement
     ``experiment.steps.Identified`` of a measured-data fit (outliers, adequacy, variance factor);
     motion: the motion-consistency check (``experiment.checks``); failure: a gross input error
     (``experiment.gross``), kept as ``failure`` and read by the verdict."""
-    warnings = list(warnings)
+    warnings = list(dict.fromkeys(warnings))  # each once, in order
     report = {
         "version": REPORT_VERSION,
         "kind": kind,
@@ -361,7 +361,8 @@ def summary_text(report: dict) -> str:
                  f"cost {ident['cost_initial']:.4g} at the start -> {ident['cost_final']:.4g} (half the sum of squared "
                  "whitened residuals, no unit; about half the residual dof when the model fits)")
     check = method_check_line(report["method_check"]) if "method_check" in report else None
-    lines += [f"warning: {w}" for w in ident.get("warnings", []) if w != check]  # a disagreement: once, below
+    given = set(report.get("warnings", []))  # printed above: once
+    lines += [f"warning: {w}" for w in ident.get("warnings", []) if w != check and w not in given]  # check: below
     if check:
         lines.append(check)
     if report.get("lack_of_fit"):
