@@ -48,3 +48,99 @@ class SquareCorners:
         r, c = np.divmod(np.arange(self.n_corners(spec)), spec.cols - 1)
         p = np.column_stack([(c + 1) * spec.square_m, (r + 1) * spec.square_m, np.zeros(r.size)])
         return np.arange(p.shape[0]), p
+
+
+# ------------------------------------------------------------------ lattice of points (dot grids seen in photos)
+def _unimodular(n: int = 2) -> list[np.ndarray]:
+    """2x2 integer matrices with entries in [-n, n] and determinant +-1 (changes of lattice basis)."""
+    r = range(-n, n + 1)
+    return [np.array([[a, b], [c, d]]) for a in r for b in r for c in r for d in r if abs(a * d - b * c) == 1]
+
+
+_BASES = _unimodular()
+
+
+def _predict(ij_known: np.ndarray, uv_known: np.ndarray, ij: np.ndarray) -> np.ndarray | None:
+    """Image position (2,) px of lattice cell ij (2,) from the known cells nearest to it (homography of the <= 12
+    nearest in lattice distance, or their affine map when fewer than 6); None when they are collinear."""
+    d = np.abs(ij_known - ij).sum(axis=1)
+    near = np.argsort(d, kind="stable")[:12]
+    a, b = ij_known[near].astype(np.float64), uv_known[near]
+    if np.linalg.matrix_rank(a - a.mean(axis=0), tol=1e-6) < 2:
+        return None
+    if len(near) >= 6:
+        Hm, _ = cv2.findHomography(a, b, 0)
+        if Hm is not None and np.all(np.isfinite(Hm)):
+            return apply_h(Hm, ij[None].astype(np.float64))[0]
+    A = np.column_stack([a, np.ones(len(a))])
+    coef, *_ = np.linalg.lstsq(A, b, rcond=None)
+    return np.array([ij[0], ij[1], 1.0]) @ coef
+
+
+def grow_lattice(pts: np.ndarray, seed: int, tol: float = 0.3, areas: np.ndarray | None = None) -> dict:
+    """{(i, j) lattice cell: index into pts} of the point lattice grown from pts[seed] (pts (M, 2) px): the seed's
+    two shortest non-collinear neighbour vectors v whose opposite -v is also a neighbour (within 0.25 |v|) span the
+    first cells; each empty cell next to a found one is predicted from the found ones (:func:`_predict`) and takes
+    the nearest point within ``tol`` x the local spacing (and, with ``areas`` (M,), of 0.15-6 x the mean area of its
+    found neighbours: a dot, not a speck of background beside the board). Empty dict when the seed has no such neighbours. The
+    basis is a lattice basis, not necessarily the board's axes (see :func:`board_axes`)."""
+    d = np.linalg.norm(pts - pts[seed], axis=1)
+    nb = np.argsort(d)[1:9]
+    v = pts[nb] - pts[seed]
+    pairs = [k for k in range(len(nb)) if np.min(np.linalg.norm(v + v[k], axis=1)) < 0.25 * np.linalg.norm(v[k])]
+    if len(pairs) < 2:
+        return {}
+    a = v[pairs[0]]
+    b = next((v[k] for k in pairs[1:] if abs(a[0] * v[k][1] - a[1] * v[k][0]) > 0.5 * np.linalg.norm(a) * np.linalg.norm(v[k])),
+             None)
+    if b is None:
+        return {}
+    def sized(k, nbs):
+        if areas is None:
+            return True
+        r = areas[k] / np.mean(areas[nbs])
+        return 0.15 < r < 6.0
+
+    cells = {(0, 0): seed}
+    used = {seed}
+    for ij, vec in (((1, 0), a), ((-1, 0), -a), ((0, 1), b), ((0, -1), -b)):
+        k = int(np.argmin(np.linalg.norm(pts - (pts[seed] + vec), axis=1)))
+        if (k not in used and np.linalg.norm(pts[k] - pts[seed] - vec) < tol * min(np.linalg.norm(a), np.linalg.norm(b))
+                and sized(k, [seed])):
+            cells[ij] = k
+            used.add(k)
+    frontier = True
+    while frontier:
+        frontier = False
+        ij_known = np.array(list(cells.keys()))
+        uv_known = pts[list(cells.values())]
+        todo = {(i + di, j + dj) for i, j in cells for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1))} - set(cells)
+        for ij in sorted(todo):
+            q = _predict(ij_known, uv_known, np.array(ij))
+            if q is None:
+                continue
+            # local spacing: distance from the prediction to the nearest found neighbour cell
+            nbs = [cells[n] for n in ((ij[0] + 1, ij[1]), (ij[0] - 1, ij[1]), (ij[0], ij[1] + 1), (ij[0], ij[1] - 1))
+                   if n in cells]
+            step = min(np.linalg.norm(q - pts[n]) for n in nbs)
+            dd = np.linalg.norm(pts - q, axis=1)
+            k = int(np.argmin(dd))
+            if dd[k] < tol * step and k not in used and sized(k, nbs):
+                cells[ij] = k
+                used.add(k)
+                frontier = True
+    return cells
+
+
+def board_axes(cells) -> np.ndarray:
+    """(N, 2) int cell coordinates of the lattice cells (an iterable of (i, j)) in the lattice basis whose bounding
+    box is smallest (the board's rows and columns: a sheared basis spans a larger box), shifted to start at 0."""
+    ij = np.array(list(cells), dtype=np.int64).reshape(-1, 2)
+    best = None
+    for M in _BASES:
+        c = ij @ M.T
+        ext = c.max(axis=0) - c.min(axis=0) + 1
+        key = (int(ext[0] * ext[1]), int(abs(M).sum()))
+        if best is None or key < best[0]:
+            best = (key, c - c.min(axis=0))
+    return best[1]

@@ -30,6 +30,7 @@ import cv2
 import numpy as np
 
 from ...errors import ConfigError
+from ._grid import apply_h, board_axes, grow_lattice
 
 #: OpenCV SimpleBlobDetector_Params fields a target's ``blob_detector`` mapping may set, with their types
 BLOB_KEYS = {"minThreshold": float, "maxThreshold": float, "thresholdStep": float, "minRepeatability": int,
@@ -105,6 +106,173 @@ def flatten(img: np.ndarray, dot_px: float) -> np.ndarray:
     if small > 1:
         bg = cv2.resize(bg, (img.shape[1], img.shape[0]), interpolation=cv2.INTER_LINEAR)
     return np.clip(255.0 * img / np.maximum(bg.astype(np.float64), 8.0), 0, 255).astype(np.uint8)
+
+
+#: levels (fraction of the local background) at which the flattened image is cut into dark components
+LEVELS = (0.35, 0.5, 0.65)
+
+
+def _components(flat: np.ndarray, level: float, max_area: float):
+    """Dark connected components of the flattened image below level x 255 that look like a filled ellipse:
+    (centres (M, 2) px, covariances (M, 2, 2) px^2 of their pixels, areas (M,) px). Kept: 4 px <= area <= max_area,
+    not touching the image border, area / area of the moment ellipse (4 pi sqrt(det cov)) in 0.8-1.2, axis ratio
+    < 4."""
+    n, lab, st, _ = cv2.connectedComponentsWithStats((flat < level * 255).astype(np.uint8), connectivity=8)
+    h, w = flat.shape
+    area = st[:, cv2.CC_STAT_AREA].astype(np.float64)
+    x0, y0 = st[:, cv2.CC_STAT_LEFT], st[:, cv2.CC_STAT_TOP]
+    ok = ((area >= 4) & (area <= max_area) & (x0 > 0) & (y0 > 0) & (x0 + st[:, cv2.CC_STAT_WIDTH] < w)
+          & (y0 + st[:, cv2.CC_STAT_HEIGHT] < h))
+    ok[0] = False
+    if not ok.any():
+        return np.zeros((0, 2)), np.zeros((0, 2, 2)), np.zeros(0)
+    yy, xx = np.nonzero(np.isin(lab, np.flatnonzero(ok)))
+    L = lab[yy, xx]
+    m = np.bincount(L, minlength=n).astype(np.float64)
+    sx, sy = np.bincount(L, xx, n), np.bincount(L, yy, n)
+    sxx, syy, sxy = np.bincount(L, xx * xx, n), np.bincount(L, yy * yy, n), np.bincount(L, xx * yy, n)
+    idx = np.flatnonzero(ok)
+    mm = m[idx]
+    cx, cy = sx[idx] / mm, sy[idx] / mm
+    # pixel covariance (+ 1/12: a pixel's own extent)
+    cxx, cyy, cxy = sxx[idx] / mm - cx * cx + 1 / 12, syy[idx] / mm - cy * cy + 1 / 12, sxy[idx] / mm - cx * cy
+    det = np.maximum(cxx * cyy - cxy * cxy, 1e-12)
+    fill = mm / (4 * np.pi * np.sqrt(det))
+    tr = cxx + cyy
+    disc = np.sqrt(np.maximum(tr * tr / 4 - det, 0))
+    ratio = np.sqrt((tr / 2 + disc) / np.maximum(tr / 2 - disc, 1e-12))
+    good = (fill > 0.8) & (fill < 1.2) & (ratio < 4)
+    cov = np.stack([np.stack([cxx, cxy], -1), np.stack([cxy, cyy], -1)], -2)
+    return np.column_stack([cx, cy])[good], cov[good], mm[good]
+
+
+def _on_board(img: np.ndarray, c: np.ndarray, cov: np.ndarray) -> bool:
+    """Whether the dark ellipse (centre c px, pixel covariance cov) lies on a uniform lighter surround (a dot on the
+    board, not background texture): as :func:`dark_on_light`, with the ellipse's own shape (inner: within 0.6 of
+    its boundary, ring: 1.5-2.1 times its size)."""
+    h, w = img.shape
+    R = int(np.ceil(2.2 * 2 * np.sqrt(np.linalg.eigvalsh(cov)[1]))) + 1
+    x0, x1, y0, y1 = int(c[0]) - R, int(c[0]) + R + 1, int(c[1]) - R, int(c[1]) + R + 1
+    if x0 < 0 or y0 < 0 or x1 > w or y1 > h:
+        return False
+    win = img[y0:y1, x0:x1].astype(np.float64)
+    yy, xx = np.mgrid[y0:y1, x0:x1]
+    d = np.stack([xx - c[0], yy - c[1]], -1)
+    rho = np.sqrt(np.einsum("...i,ij,...j->...", d, np.linalg.inv(cov), d)) / 2  # 1 on the ellipse's boundary
+    inner, ring = win[rho <= 0.6], win[(rho >= 1.5) & (rho <= 2.1)]
+    if inner.size == 0 or ring.size < 8:
+        return False
+    lo, med, hi = np.percentile(ring, [10, 50, 90])
+    con = med - inner.mean()
+    return bool(con > 15 and con > 1.2 * (hi - lo) and con > 0.5 * med)
+
+
+def dark_ellipses(img: np.ndarray, report: dict | None = None):
+    """Dot candidates of a photo: (centres (M, 2) px, pixel covariances (M, 2, 2) px^2, areas (M,) px) of the dark
+    ellipses on a lighter surround, at every level of :data:`LEVELS` of the image flattened by its local
+    background (:func:`flatten`; first with a kernel for dots of 1/36 of the image size, then again for the
+    median dot found when it differs by more than 1.5 x). A dot seen at several levels is kept once (the first
+    level at which it is seen, 0.5 first)."""
+    dot_px = max(img.shape) / 36
+    found = []
+    for attempt in range(2):
+        flat = flatten(img, dot_px)
+        for level in (LEVELS[1], LEVELS[0], LEVELS[2]):
+            c, cov, a = _components(flat, level, 0.05 * img.size)
+            for k in range(len(c)):
+                if _on_board(img, c[k], cov[k]):
+                    found.append((c[k], cov[k], a[k]))
+        if not found or attempt:
+            break
+        new = float(np.median([2 * np.sqrt(a / np.pi) for _, _, a in found]))
+        if max(new, dot_px) / min(new, dot_px) < 1.5:
+            break
+        dot_px = new
+    keep = []
+    for c, cov, a in found:
+        inv = np.linalg.inv(cov)
+        if not any(np.sqrt((c - k[0]) @ inv @ (c - k[0])) / 2 < 1.0 or np.linalg.norm(c - k[0]) < 1.0 for k in keep):
+            keep.append((c, cov, a))
+    if report is not None:
+        report["ellipses"] = len(keep)
+    if not keep:
+        return np.zeros((0, 2)), np.zeros((0, 2, 2)), np.zeros(0)
+    return np.array([k[0] for k in keep]), np.array([k[1] for k in keep]), np.array([k[2] for k in keep])
+
+
+def _dot_component(win: np.ndarray, q: np.ndarray, lo: float, hi: float):
+    """(labels, index of the dot's component) of the window win cut at the first of the levels 0.5, 0.35, 0.25,
+    0.65 between lo and hi where the dark component nearest q (px, window coordinates) is ellipse-like
+    (:func:`_components`' fill test), lies within the window and holds q's nearest dark pixel; or None."""
+    h, w = win.shape
+    for f in (0.5, 0.35, 0.25, 0.65):
+        n, lab, st, cen = cv2.connectedComponentsWithStats((win < lo + f * (hi - lo)).astype(np.uint8), connectivity=8)
+        if n < 2:
+            continue
+        k = 1 + int(np.argmin(np.linalg.norm(cen[1:] - q, axis=1)))
+        x0, y0, bw, bh, a = st[k]
+        if x0 == 0 or y0 == 0 or x0 + bw == w or y0 + bh == h:
+            continue
+        yy, xx = np.nonzero(lab == k)
+        cov = np.cov(np.vstack([xx, yy])) + np.eye(2) / 12 if a > 2 else np.eye(2)
+        fill = a / (4 * np.pi * np.sqrt(max(np.linalg.det(cov), 1e-12)))
+        if 0.8 < fill < 1.2:
+            return lab, k
+    return None
+
+
+def refine_dot(img: np.ndarray, uv, radius: float):
+    """(centre (2,) px, dark area px^2) of the dot nearest uv (2,) px, or None: the darkness-weighted centroid of
+    the dot's image (the centre of its ellipse for any symmetric blur). In the window of half-size ``radius``
+    (~ the distance to the dot's farthest grid neighbour), the dot is the ellipse-like dark component nearest uv
+    (:func:`_dot_component`, levels between the window's 2nd and 95th percentiles: a shadow edge across the
+    window is cut away at the lower levels); the background is a plane fitted to the ring around it (2-4 px beyond
+    the component, other dark components masked out), the darkness w = clip((plane - I) / (plane - dot level), 0, 1)
+    is summed over the component grown by a margin of max(2, a third of its radius) px. Where the ring is not
+    flat (residual > 8 % of the dot's contrast: a shadow edge or a neighbour), the component's own centroid and area
+    are returned instead."""
+    h, w = img.shape
+    r = int(np.ceil(radius))
+    x0, x1, y0, y1 = max(int(uv[0]) - r, 0), min(int(uv[0]) + r + 2, w), max(int(uv[1]) - r, 0), min(int(uv[1]) + r + 2, h)
+    win = img[y0:y1, x0:x1].astype(np.float64)
+    if win.size < 9:
+        return None
+    lo, hi = np.percentile(win, [2, 95])
+    if hi - lo < 10:
+        return None
+    got = _dot_component(win, np.asarray(uv, float) - [x0, y0], lo, hi)
+    if got is None:
+        return None
+    lab, k = got
+    comp = (lab == k).astype(np.uint8)
+    a = float(comp.sum())
+    yy, xx = np.mgrid[0:win.shape[0], 0:win.shape[1]].astype(np.float64)
+    c = comp.astype(bool)
+    fallback = np.array([xx[c].mean() + x0, yy[c].mean() + y0]), a
+    m = max(2, int(round(np.sqrt(a / np.pi) / 3)))
+    ker = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * m + 1, 2 * m + 1))
+    grown = cv2.dilate(comp, ker)
+    ring = cv2.dilate(grown, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (7, 7))) & ~grown & 1
+    other = cv2.dilate(((lab > 0) & (lab != k)).astype(np.uint8), ker)
+    ring &= 1 - other
+    grown &= 1 - other
+    sel = ring.astype(bool)
+    if sel.sum() < 12:
+        return fallback
+    A = np.column_stack([xx[sel], yy[sel], np.ones(sel.sum())])
+    coef, *_ = np.linalg.lstsq(A, win[sel], rcond=None)
+    plane = xx * coef[0] + yy * coef[1] + coef[2]
+    core = cv2.erode(comp, np.ones((3, 3), np.uint8)) if a > 30 else comp
+    level = float(np.median(win[core.astype(bool)]))
+    resid = float(np.sqrt(np.mean((win[sel] - plane[sel]) ** 2)))
+    if resid > 0.08 * (float(np.median(plane[sel])) - level):
+        return fallback
+    g = grown.astype(bool)
+    wt = np.clip((plane[g] - win[g]) / np.maximum(plane[g] - level, 1.0), 0, 1)
+    s = wt.sum()
+    if s <= 0:
+        return fallback
+    return np.array([(wt * xx[g]).sum() / s + x0, (wt * yy[g]).sum() / s + y0]), float(s)
 
 
 def _blobs(img, settings) -> tuple[np.ndarray, np.ndarray]:
@@ -224,16 +392,27 @@ def grid_from_points(pts, shape_img, pattern, flags) -> np.ndarray | None:
 
 
 def candidate_grids(img, n_dots: int, patterns, flags_list, given: tuple = (), dot_ratio: float = 0.0,
-                    big: bool = False, report: dict | None = None):
+                    big: bool = False, report: dict | None = None, lattice: bool = False):
     """Yield (stage, pattern, centres (n_dots, 2) px in OpenCV's grid order) for each grid found, stages as in the
-    module docstring. report: filled with {stage: (blobs found, best window count, min size, max size)}."""
+    module docstring (``lattice``: the lattice stage, symmetric grids only, after 'default'). report: filled with
+    {stage: (blobs found, best window count, min size, max size)}."""
     report = {} if report is None else report
     stages = []
     if given:
         stages.append(("given", img, dict(given), False))
-    stages += [("default", img, default_settings(img), False), ("sized", img, permissive_settings(img), True)]
+    stages.append(("default", img, default_settings(img), False))
+    if lattice:
+        stages.append(("lattice", None, None, False))
+    stages += [("sized", img, permissive_settings(img), True), ("flattened", None, permissive_settings(img), True)]
     dot_px = 0.0
-    for name, im, settings, windows in stages + [("flattened", None, permissive_settings(img), True)]:
+    for name, im, settings, windows in stages:
+        if name == "lattice":
+            pts, _, areas = dark_ellipses(img)
+            sizes = 2 * np.sqrt(areas / np.pi)
+            report[name] = (len(pts), len(pts), float(sizes.min()) if len(sizes) else 0.0, float(sizes.max(initial=0)))
+            for pattern, G in lattice_grids(img, pts, areas, patterns):
+                yield name, pattern, G.reshape(-1, 2)
+            continue
         if im is None:
             im = flatten(img, dot_px or max(img.shape) / 50)
         pts, sizes = _blobs(im, settings)
@@ -253,6 +432,134 @@ def candidate_grids(img, n_dots: int, patterns, flags_list, given: tuple = (), d
                     c = grid_from_points(pts[w], img.shape[:2], pattern, flags)
                     if c is not None:
                         yield name, pattern, c
+
+
+def _grid_step(G: np.ndarray) -> np.ndarray:
+    """(R, C) largest distance [px] of each dot of the grid G (R, C, 2) to its row/column neighbours."""
+    R, C = G.shape[:2]
+    s = np.zeros((R, C))
+    if C > 1:
+        dx = np.linalg.norm(np.diff(G, axis=1), axis=2)
+        s[:, 1:] = np.maximum(s[:, 1:], dx)
+        s[:, :-1] = np.maximum(s[:, :-1], dx)
+    if R > 1:
+        dy = np.linalg.norm(np.diff(G, axis=0), axis=2)
+        s[1:] = np.maximum(s[1:], dy)
+        s[:-1] = np.maximum(s[:-1], dy)
+    return s
+
+
+def refine_grid(img: np.ndarray, G: np.ndarray):
+    """Each dot of the grid G (R, C, 2) px re-measured by :func:`refine_dot` (window: 0.75 x the distance to its
+    farthest row/column neighbour): (centres (R, C, 2) px, dark areas (R, C) px^2) or (None, why) when a dot is
+    not found or lies farther than 0.3 x its nearest neighbour's distance from the grid position."""
+    step = _grid_step(G)
+    out, area = np.empty_like(G), np.empty(G.shape[:2])
+    near = _nn(G.reshape(-1, 2)).reshape(G.shape[:2])
+    for r, c in np.ndindex(*G.shape[:2]):
+        got = refine_dot(img, G[r, c], 0.75 * step[r, c])
+        if got is None or np.linalg.norm(got[0] - G[r, c]) > 0.3 * near[r, c]:
+            return None, f"dot ({r}, {c}) of the grid (near {G[r, c].round(1).tolist()} px) not measurable"
+        out[r, c], area[r, c] = got
+    return out, area
+
+
+def lattice_grids(img: np.ndarray, pts: np.ndarray, areas: np.ndarray, patterns, max_seeds: int = 12):
+    """Yield (pattern, grid (rows, per row, 2) px) for each point lattice grown from the dot candidates pts (M, 2)
+    (:func:`._grid.grow_lattice`, seeds: candidates of about the median area, each lattice once) whose board axes
+    (:func:`._grid.board_axes`) span one of the patterns (OpenCV patternSize (per row, rows)). A lattice one
+    row or column short is extended on the side where the predicted dots are found in the image
+    (:func:`refine_dot`); an outer row with at most 30 % of its dots (strays on the lattice) is dropped; empty
+    cells inside are predicted from the lattice and measured."""
+    if len(pts) < 4:
+        return
+    med = np.median(areas)
+    seeds = np.argsort(np.abs(np.log(areas / med)), kind="stable")
+    tried = set()
+    for s in seeds[:4 * max_seeds]:
+        if int(s) in tried or len(tried) >= max_seeds * 20:
+            continue
+        cells = grow_lattice(pts, int(s), areas=areas)
+        tried.update(cells.values())
+        tried.add(int(s))
+        if len(cells) < 4:
+            continue
+        ij = board_axes(cells)
+        idx = np.array(list(cells.values()))
+        ij, uv = _fit_extent(img, ij, pts[idx], patterns)
+        if ij is None:
+            continue
+        n1, n2 = ij.max(axis=0) + 1
+        G = np.full((n2, n1, 2), np.nan)
+        G[ij[:, 1], ij[:, 0]] = uv
+        holes = np.argwhere(np.isnan(G[..., 0]))
+        if len(holes) > 0.25 * n1 * n2:
+            continue
+        Hm, _ = cv2.findHomography(ij.astype(np.float64), uv, 0)
+        ok = Hm is not None
+        for r, c in holes if ok else []:
+            q = apply_h(Hm, np.array([[c, r]], np.float64))[0]
+            step = float(np.linalg.norm(apply_h(Hm, np.array([[c + 1.0, r]]))[0] - q))
+            step2 = float(np.linalg.norm(apply_h(Hm, np.array([[c, r + 1.0]]))[0] - q))
+            got = refine_dot(img, q, 0.75 * max(step, step2))
+            if got is None or np.linalg.norm(got[0] - q) > 0.3 * min(step, step2):
+                ok = False
+                break
+            G[r, c] = got[0]
+        if ok:
+            yield (int(n1), int(n2)), G
+
+
+def _line_count(ij: np.ndarray, axis: int, value: int) -> int:
+    return int(np.sum(ij[:, axis] == value))
+
+
+def _fit_extent(img, ij: np.ndarray, uv: np.ndarray, patterns):
+    """(ij, uv) of a lattice (cells ij (N, 2) from 0, their points uv (N, 2) px) trimmed or extended by at most one
+    line per axis to span a pattern (n1, n2) of ``patterns``, or (None, None)."""
+    for _ in range(4):
+        ext = tuple(int(e) for e in ij.max(axis=0) + 1)
+        if ext in [tuple(p) for p in patterns]:
+            return ij, uv
+        want = [p for p in patterns if all(abs(int(p[a]) - ext[a]) <= 1 for a in (0, 1))]
+        if not want:
+            return None, None
+        axis = next((a for a in (0, 1) if ext[a] != want[0][a]), None)
+        if axis is None:
+            return None, None
+        if ext[axis] > want[0][axis]:  # drop the outer line with fewer dots if it has few
+            other = ext[1 - axis]
+            lo, hi = _line_count(ij, axis, 0), _line_count(ij, axis, ext[axis] - 1)
+            v = 0 if lo <= hi else ext[axis] - 1
+            if min(lo, hi) > 0.3 * other:
+                return None, None
+            keep = ij[:, axis] != v
+            ij, uv = ij[keep], uv[keep]
+            ij = ij - ij.min(axis=0)
+            continue
+        # one line short: predict the line beyond each end, keep the side where its dots are found
+        Hm, _ = cv2.findHomography(ij.astype(np.float64), uv, 0)
+        if Hm is None:
+            return None, None
+        best = None
+        h, w = img.shape
+        for v in (-1, ext[axis]):
+            cells = np.array([[v, t] if axis == 0 else [t, v] for t in range(ext[1 - axis])], np.float64)
+            inner = cells + (np.array([1.0, 0]) if axis == 0 else np.array([0, 1.0])) * (1 if v < 0 else -1)
+            found = []
+            for cell, qq, qi in zip(cells, apply_h(Hm, cells), apply_h(Hm, inner)):
+                st = float(np.linalg.norm(qq - qi))
+                got = refine_dot(img, qq, 0.75 * st) if 0 <= qq[0] < w and 0 <= qq[1] < h else None
+                if got is not None and np.linalg.norm(got[0] - qq) < 0.3 * st:
+                    found.append((cell, got[0]))
+            if len(found) >= 0.7 * len(cells) and (best is None or len(found) > len(best)):
+                best = found
+        if best is None:
+            return None, None
+        ij = np.vstack([ij, np.array([f[0] for f in best], np.int64)])
+        uv = np.vstack([uv, np.array([f[1] for f in best])])
+        ij = ij - ij.min(axis=0)
+    return None, None
 
 
 def not_found_message(what: str, n_dots: int, report: dict, rejected: list) -> str:
