@@ -31,57 +31,18 @@ sys.path.insert(0, str(ROOT / "tests" / "targets"))
 
 import numpy as np  # noqa: E402
 
-from photo_views import F, H, W, photo_view  # noqa: E402
+from photo_views import F, H, KINDS, W, degraded_view  # noqa: E402
 from vision_calib.camera import CameraIntrinsics  # noqa: E402
 from vision_calib.measure.detect import detect  # noqa: E402
 from vision_calib.targets.kinds.circles import ellipse_centre_offset  # noqa: E402
-from vision_calib.targets.spec import TargetSpec  # noqa: E402
 
 INTR = CameraIntrinsics(W, H, F, F, W / 2, H / 2)
-
-
-def grid_for(dot_px: float) -> TargetSpec:
-    """A modified circle grid (d = 0.4 spacing) whose frontal view spans <= ~60 % of the image width."""
-    n = int(np.clip(0.6 * W / (dot_px / 0.4), 3, 10))
-    return TargetSpec(kind="modified_circle_grid", name="m", rows=max(n - 1, 3), cols=n, spacing_m=0.025,
-                      diameter_m=0.01, margin_m=0.015)
-
-
-def draw(kind: str, rng) -> tuple[float, dict]:
-    """(dot diameter px, photo_view keyword arguments) of one view of a degradation kind."""
-    dot = float(np.exp(rng.uniform(np.log(12), np.log(40))))
-    roll = dict(roll_deg=rng.uniform(0, 360))
-    if kind == "lighting":
-        return dot, dict(light=0.6, **roll)
-    if kind == "defocus":
-        return dot, dict(blur_px=2.0, **roll)
-    if kind == "jpeg":
-        return dot, dict(jpeg=30, **roll)
-    if kind == "perspective":
-        return dot, dict(tilt_deg=60.0, **roll)
-    if kind == "shadow":
-        return dot, dict(shadow=0.5, **roll)
-    if kind == "sizes":
-        dot = float(np.exp(rng.uniform(np.log(5), np.log(60))))
-        return dot, dict(tilt_deg=rng.uniform(0, 30), light=0.2, blur_px=min(0.8, dot / 8), **roll)
-    if kind == "mixed":
-        return dot, dict(tilt_deg=rng.uniform(0, 60), light=rng.uniform(0, 0.6), shadow=rng.uniform(0, 0.5),
-                         blur_px=rng.uniform(0, 2.0), jpeg=int(rng.uniform(30, 95)), **roll)
-    raise SystemExit(f"unknown kind {kind!r}")
-
-
-KINDS = ("lighting", "defocus", "jpeg", "perspective", "shadow", "sizes", "mixed")
 
 
 def run_view(kind: str, rng):
     """One view where the whole board is visible: (detected right, raw errors (K,) px or None, corrected errors,
     kwargs, dot px, reason)."""
-    while True:
-        dot, kw = draw(kind, rng)
-        spec = grid_for(dot)
-        img, uv, whole = photo_view(spec, rng, dot, **kw)
-        if whole:
-            break
+    spec, img, uv, dot, kw = degraded_view(kind, rng)
     d = detect(img, spec)
     if not (d.valid and d.n_corners == len(uv)):
         return False, None, None, kw, dot, d.reason

@@ -78,23 +78,31 @@ def _predict(ij_known: np.ndarray, uv_known: np.ndarray, ij: np.ndarray) -> np.n
 
 
 def grow_lattice(pts: np.ndarray, seed: int, tol: float = 0.3, areas: np.ndarray | None = None) -> dict:
-    """{(i, j) lattice cell: index into pts} of the point lattice grown from pts[seed] (pts (M, 2) px): the seed's
-    two shortest non-collinear neighbour vectors v whose opposite -v is also a neighbour (within 0.25 |v|) span the
-    first cells; each empty cell next to a found one is predicted from the found ones (:func:`_predict`) and takes
-    the nearest point within ``tol`` x the local spacing (and, with ``areas`` (M,), of 0.15-6 x the mean area of its
-    found neighbours: a dot, not a speck of background beside the board). Empty dict when the seed has no such neighbours. The
-    basis is a lattice basis, not necessarily the board's axes (see :func:`board_axes`)."""
+    """{(i, j) lattice cell: index into pts} of the point lattice grown from pts[seed] (pts (M, 2) px): the two
+    non-collinear vectors to the seed's 6 nearest neighbours with the smallest sum of lengths whose cell closes (a
+    point at seed + a + b, within 0.25 of the shorter) span the first cells; each empty cell one or two steps from a
+    found one is predicted from the found ones (:func:`_predict`) and takes the nearest point within ``tol`` x the
+    local spacing (and, with ``areas`` (M,), of 0.15-6 x the mean area of its found neighbours: a dot, not a speck
+    of background beside the board). Empty dict when the seed has no such neighbours. The basis is a lattice
+    basis, not necessarily the board's axes (see :func:`board_axes`)."""
     d = np.linalg.norm(pts - pts[seed], axis=1)
-    nb = np.argsort(d)[1:9]
+    nb = np.argsort(d)[1:7]
     v = pts[nb] - pts[seed]
-    pairs = [k for k in range(len(nb)) if np.min(np.linalg.norm(v + v[k], axis=1)) < 0.25 * np.linalg.norm(v[k])]
-    if len(pairs) < 2:
+    n = np.linalg.norm(v, axis=1)
+    basis = None
+    for x in range(len(nb)):
+        for y in range(x + 1, len(nb)):
+            cross = abs(v[x, 0] * v[y, 1] - v[x, 1] * v[y, 0])
+            if cross < 0.5 * n[x] * n[y] or max(n[x], n[y]) > 3 * min(n[x], n[y]):
+                continue
+            # a lattice cell: the fourth corner seed + v_x + v_y is a point too
+            if np.min(np.linalg.norm(pts - (pts[seed] + v[x] + v[y]), axis=1)) < 0.25 * min(n[x], n[y]):
+                if basis is None or n[x] + n[y] < basis[0]:
+                    basis = (n[x] + n[y], v[x], v[y])
+    if basis is None:
         return {}
-    a = v[pairs[0]]
-    b = next((v[k] for k in pairs[1:] if abs(a[0] * v[k][1] - a[1] * v[k][0]) > 0.5 * np.linalg.norm(a) * np.linalg.norm(v[k])),
-             None)
-    if b is None:
-        return {}
+    a, b = basis[1], basis[2]
+
     def sized(k, nbs):
         if areas is None:
             return True
@@ -114,15 +122,18 @@ def grow_lattice(pts: np.ndarray, seed: int, tol: float = 0.3, areas: np.ndarray
         frontier = False
         ij_known = np.array(list(cells.keys()))
         uv_known = pts[list(cells.values())]
-        todo = {(i + di, j + dj) for i, j in cells for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1))} - set(cells)
+        # next cells, and the cells beyond them (growth goes past a dot missing from pts)
+        todo = {(i + di, j + dj) for i, j in cells
+                for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1), (2, 0), (-2, 0), (0, 2), (0, -2))} - set(cells)
         for ij in sorted(todo):
             q = _predict(ij_known, uv_known, np.array(ij))
             if q is None:
                 continue
             # local spacing: distance from the prediction to the nearest found neighbour cell
-            nbs = [cells[n] for n in ((ij[0] + 1, ij[1]), (ij[0] - 1, ij[1]), (ij[0], ij[1] + 1), (ij[0], ij[1] - 1))
-                   if n in cells]
-            step = min(np.linalg.norm(q - pts[n]) for n in nbs)
+            nbs = [cells[n] for n in ((ij[0] + s, ij[1]) for s in (1, -1, 2, -2)) if n in cells]
+            nbs += [cells[n] for n in ((ij[0], ij[1] + s) for s in (1, -1, 2, -2)) if n in cells]
+            step = min(np.linalg.norm(q - pts[n]) / max(abs(np.subtract(c, ij)).sum(), 1)
+                       for c, n in cells.items() if n in nbs)
             dd = np.linalg.norm(pts - q, axis=1)
             k = int(np.argmin(dd))
             if dd[k] < tol * step and k not in used and sized(k, nbs):

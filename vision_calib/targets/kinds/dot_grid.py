@@ -202,16 +202,18 @@ def dark_ellipses(img: np.ndarray, report: dict | None = None):
 
 def _dot_component(win: np.ndarray, q: np.ndarray, lo: float, hi: float):
     """(labels, index of the dot's component) of the window win cut at the first of the levels 0.5, 0.35, 0.25,
-    0.65 between lo and hi where the dark component nearest q (px, window coordinates) is ellipse-like
-    (:func:`_components`' fill test), lies within the window and holds q's nearest dark pixel; or None."""
+    0.65 between lo and hi where the dark component holding the dark pixel nearest q (px, window coordinates) is
+    ellipse-like (:func:`_components`' fill test), of >= 4 px and inside the window; or None."""
     h, w = win.shape
     for f in (0.5, 0.35, 0.25, 0.65):
-        n, lab, st, cen = cv2.connectedComponentsWithStats((win < lo + f * (hi - lo)).astype(np.uint8), connectivity=8)
+        n, lab, st, _ = cv2.connectedComponentsWithStats((win < lo + f * (hi - lo)).astype(np.uint8), connectivity=8)
         if n < 2:
             continue
-        k = 1 + int(np.argmin(np.linalg.norm(cen[1:] - q, axis=1)))
+        dy, dx = np.nonzero(lab)
+        j = int(np.argmin((dx - q[0]) ** 2 + (dy - q[1]) ** 2))
+        k = int(lab[dy[j], dx[j]])
         x0, y0, bw, bh, a = st[k]
-        if x0 == 0 or y0 == 0 or x0 + bw == w or y0 + bh == h:
+        if a < 4 or x0 == 0 or y0 == 0 or x0 + bw == w or y0 + bh == h:
             continue
         yy, xx = np.nonzero(lab == k)
         cov = np.cov(np.vstack([xx, yy])) + np.eye(2) / 12 if a > 2 else np.eye(2)
@@ -229,8 +231,8 @@ def refine_dot(img: np.ndarray, uv, radius: float):
     window is cut away at the lower levels); the background is a plane fitted to the ring around it (2-4 px beyond
     the component, other dark components masked out), the darkness w = clip((plane - I) / (plane - dot level), 0, 1)
     is summed over the component grown by a margin of max(2, a third of its radius) px. Where the ring is not
-    flat (residual > 8 % of the dot's contrast: a shadow edge or a neighbour), the component's own centroid and area
-    are returned instead."""
+    flat (residual > 8 % of the dot's contrast: a shadow edge), the background inside the grown component is
+    inpainted from its surround (Telea) and w = clip((1 - I / background) / (1 - core ratio), 0, 1)."""
     h, w = img.shape
     r = int(np.ceil(radius))
     x0, x1, y0, y1 = max(int(uv[0]) - r, 0), min(int(uv[0]) + r + 2, w), max(int(uv[1]) - r, 0), min(int(uv[1]) + r + 2, h)
@@ -264,11 +266,20 @@ def refine_dot(img: np.ndarray, uv, radius: float):
     plane = xx * coef[0] + yy * coef[1] + coef[2]
     core = cv2.erode(comp, np.ones((3, 3), np.uint8)) if a > 30 else comp
     level = float(np.median(win[core.astype(bool)]))
+    g = grown.astype(bool)
     resid = float(np.sqrt(np.mean((win[sel] - plane[sel]) ** 2)))
     if resid > 0.08 * (float(np.median(plane[sel])) - level):
-        return fallback
-    g = grown.astype(bool)
-    wt = np.clip((plane[g] - win[g]) / np.maximum(plane[g] - level, 1.0), 0, 1)
+        # not flat (a shadow edge): the background inside the dot inpainted from around it, the darkness from the
+        # ratio I / background (shading multiplies), relative to the dot core's ratio
+        bg = cv2.inpaint(np.clip(win, 0, 255).astype(np.uint8), (grown | other).astype(np.uint8), 3,
+                         cv2.INPAINT_TELEA).astype(np.float64)
+        ratio = win / np.maximum(bg, 1.0)
+        rho = float(np.median(ratio[core.astype(bool)]))
+        if not rho < 0.8:
+            return fallback
+        wt = np.clip((1 - ratio[g]) / (1 - rho), 0, 1)
+    else:
+        wt = np.clip((plane[g] - win[g]) / np.maximum(plane[g] - level, 1.0), 0, 1)
     s = wt.sum()
     if s <= 0:
         return fallback
@@ -464,21 +475,23 @@ def refine_grid(img: np.ndarray, G: np.ndarray):
     return out, area
 
 
-def lattice_grids(img: np.ndarray, pts: np.ndarray, areas: np.ndarray, patterns, max_seeds: int = 12):
+def lattice_grids(img: np.ndarray, pts: np.ndarray, areas: np.ndarray, patterns, max_seeds: int = 40):
     """Yield (pattern, grid (rows, per row, 2) px) for each point lattice grown from the dot candidates pts (M, 2)
-    (:func:`._grid.grow_lattice`, seeds: candidates of about the median area, each lattice once) whose board axes
+    (:func:`._grid.grow_lattice`; seeds: the largest candidates first, each lattice once, at most max_seeds) whose board axes
     (:func:`._grid.board_axes`) span one of the patterns (OpenCV patternSize (per row, rows)). A lattice one
     row or column short is extended on the side where the predicted dots are found in the image
     (:func:`refine_dot`); an outer row with at most 30 % of its dots (strays on the lattice) is dropped; empty
     cells inside are predicted from the lattice and measured."""
     if len(pts) < 4:
         return
-    med = np.median(areas)
-    seeds = np.argsort(np.abs(np.log(areas / med)), kind="stable")
-    tried = set()
-    for s in seeds[:4 * max_seeds]:
-        if int(s) in tried or len(tried) >= max_seeds * 20:
+    seeds = np.argsort(-areas, kind="stable")  # large first: background specks are small
+    tried, n_seeds = set(), 0
+    for s in seeds:
+        if int(s) in tried:
             continue
+        n_seeds += 1
+        if n_seeds > max_seeds:
+            return
         cells = grow_lattice(pts, int(s), areas=areas)
         tried.update(cells.values())
         tried.add(int(s))
