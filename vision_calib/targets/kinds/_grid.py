@@ -82,7 +82,7 @@ def grow_lattice(pts: np.ndarray, seed: int, tol: float = 0.3, areas: np.ndarray
     non-collinear vectors to the seed's 6 nearest neighbours with the smallest sum of lengths whose cell closes (a
     point at seed + a + b, within 0.25 of the shorter) span the first cells; each empty cell one or two steps from a
     found one is predicted from the found ones (:func:`_predict`) and takes the nearest point within ``tol`` x the
-    local spacing (and, with ``areas`` (M,), of 0.15-6 x the mean area of its found neighbours: a dot, not a speck
+    local spacing (and, with ``areas`` (M,), of 0.2-6 x the median area of its found neighbours: a dot, not a speck
     of background beside the board). Empty dict when the seed has no such neighbours. The basis is a lattice
     basis, not necessarily the board's axes (see :func:`board_axes`)."""
     d = np.linalg.norm(pts - pts[seed], axis=1)
@@ -106,8 +106,8 @@ def grow_lattice(pts: np.ndarray, seed: int, tol: float = 0.3, areas: np.ndarray
     def sized(k, nbs):
         if areas is None:
             return True
-        r = areas[k] / np.mean(areas[nbs])
-        return 0.15 < r < 6.0
+        r = areas[k] / np.median(areas[nbs])
+        return 0.2 < r < 6.0
 
     cells = {(0, 0): seed}
     used = {seed}

@@ -528,25 +528,24 @@ def _line_count(ij: np.ndarray, axis: int, value: int) -> int:
 
 
 def _fit_extent(img, ij: np.ndarray, uv: np.ndarray, patterns):
-    """(ij, uv) of a lattice (cells ij (N, 2) from 0, their points uv (N, 2) px) trimmed or extended by at most one
-    line per axis to span a pattern (n1, n2) of ``patterns``, or (None, None)."""
-    for _ in range(4):
+    """(ij, uv) of a lattice (cells ij (N, 2) from 0, their points uv (N, 2) px) fitted to span a pattern (n1, n2) of
+    ``patterns``, or (None, None): outer lines holding at most 30 % of a line's dots (background specks taken
+    into the lattice) are dropped while the lattice is longer than the pattern, and one missing line per axis is
+    searched for on both sides."""
+    for _ in range(24):
         ext = tuple(int(e) for e in ij.max(axis=0) + 1)
         if ext in [tuple(p) for p in patterns]:
             return ij, uv
-        want = [p for p in patterns if all(abs(int(p[a]) - ext[a]) <= 1 for a in (0, 1))]
-        if not want:
+        fits = [p for p in patterns if all(ext[a] >= int(p[a]) - 1 for a in (0, 1))]
+        if not fits:
             return None, None
-        axis = next((a for a in (0, 1) if ext[a] != want[0][a]), None)
-        if axis is None:
-            return None, None
-        if ext[axis] > want[0][axis]:  # drop the outer line with fewer dots if it has few
-            other = ext[1 - axis]
+        want = min(fits, key=lambda p: abs(ext[0] - p[0]) + abs(ext[1] - p[1]))
+        axis = next(a for a in (0, 1) if ext[a] != want[a])
+        if ext[axis] > want[axis]:  # drop the outer line with fewer dots if it has few
             lo, hi = _line_count(ij, axis, 0), _line_count(ij, axis, ext[axis] - 1)
-            v = 0 if lo <= hi else ext[axis] - 1
-            if min(lo, hi) > 0.3 * other:
+            if min(lo, hi) > 0.3 * min(want):
                 return None, None
-            keep = ij[:, axis] != v
+            keep = ij[:, axis] != (0 if lo <= hi else ext[axis] - 1)
             ij, uv = ij[keep], uv[keep]
             ij = ij - ij.min(axis=0)
             continue
