@@ -31,7 +31,8 @@ sys.path.insert(0, str(ROOT))
 
 from vision_calib.frames import perturb_pose, so3_exp  # noqa: E402
 from vision_calib.identify.camera_axis import estimate_camera_axis  # noqa: E402
-from vision_calib.kinematics.h4 import load_h4_robot, random_workspace_poses  # noqa: E402
+from vision_calib.kinematics.h4 import random_workspace_poses  # noqa: E402
+from vision_calib.kinematics.h4_io import load_h4_robot  # noqa: E402
 
 SIG_T, SIG_R = 2e-4, np.deg2rad(0.03)
 TILT_CAM_DEG = [0.4, -0.3]  # truth camera tilt (tilt_cam_rad's convention: R_BC0 = R_BC0_nominal so3_exp(w))

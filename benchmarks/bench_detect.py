@@ -43,7 +43,7 @@ import numpy as np  # noqa: E402
 from bench_measure import APRILGRID, CHARUCO, INTR  # noqa: E402
 from vision_calib import frames  # noqa: E402
 from vision_calib.measure import DetectConfig, detect_batch, measure_pose  # noqa: E402
-from vision_calib.measure.accuracy import pose_seeds, random_view_pose  # noqa: E402
+from vision_calib.sim.accuracy import pose_seeds, random_view_pose  # noqa: E402
 from vision_calib.measure.pnp import target_lookup  # noqa: E402
 from vision_calib.sensor import SensorEffects, apply_effects, effects_for_render  # noqa: E402
 
@@ -256,7 +256,7 @@ def run_new_kind(name, n_poses, n_seeds, n_frames, seed, effects):
               f"{np.sqrt(np.mean(rnd[:, :3] ** 2)):8.4f} {np.sqrt(np.mean(rnd[:, 3:] ** 2)):7.4f} | "
               f"{np.sqrt(np.nanmean(e[..., :3] ** 2)):7.4f} {np.sqrt(np.nanmean(e[..., 3:] ** 2)):7.4f} | "
               f"{int(np.isfinite(e[..., 0]).sum())}/{e.shape[0] * e.shape[1]}")
-    print(f"    image-model corner scatter (corner_info, info_model {target.kind_impl.info_model!r}): "
+    print(f"    image-model corner scatter (corner_info of kind {target.kind!r}): "
           f"{np.sqrt(np.mean(np.concatenate(pred_var))):.4f} px per coordinate")
     if len(variants) > 1:
         base = variants[0][0]

@@ -32,7 +32,9 @@ PAPER_T1 = {"model 12": 257, "model 31 without d": 421, "model 31 with d": 1900}
 PAPER_T3 = dict(zip("ABCDEFGH", (115, 160, 116, 161, 187, 192, 194, 220)))
 from vision_calib.identify import analyze
 from vision_calib.identify.serial_problem import serial_problem
-from vision_calib.kinematics.h4 import load_h4_robot, random_workspace_poses
+from vision_calib.kinematics import h4_variants  # noqa: E402
+from vision_calib.kinematics.h4 import random_workspace_poses
+from vision_calib.kinematics.h4_io import load_h4_robot
 from vision_calib.kinematics.serial import load_serial_robot
 
 
@@ -90,7 +92,7 @@ def cond_and_weakest(J, names, how="unit", scale=None, k=5):
 
 def table1_rows(r12, X):
     """(label, robot, names, J (4N, k)) of table 1: geometric parameters, X known in B."""
-    r31 = r12.to_model31()
+    r31 = h4_variants.to_model31(r12)
     rows = (("model 12", r12, list(r12.names[:12])),
             ("model 31 without d", r31, [n for n in r31.names[:31] if n != "h4.d"]),
             ("model 31 with d", r31, list(r31.names[:31])))
@@ -99,7 +101,7 @@ def table1_rows(r12, X):
 
 def variant_jacobian(r12, letter, X):
     """Stacked d q / d (free parameters) of a table-2 variant, external parameters included."""
-    r = r12.variant(letter)
+    r = h4_variants.variant(r12, letter)
     nm = r.params.free_names
     J = r.igm_from_camera_jacobian(r.camera_measurement(X))[..., r.params.indices(nm)].reshape(-1, len(nm))
     return r, nm, J

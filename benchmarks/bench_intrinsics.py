@@ -4,7 +4,7 @@ RMS, time; the spread over seeds vs the mean reported std; a white-noise check o
     .venv/bin/python benchmarks/bench_intrinsics.py [--seeds 0,1,2,3,4] [--views 20] [--resampled]
 
 Setting: 1024 x 768, fx = fy = 1100 px, distortion (-0.1, 0.05, 5e-4, -5e-4, 0), ChArUco 7 x 10 (30 mm),
-views from ``measure.intrinsics_sim.calibration_poses`` (tilt 20-45 deg, 0.4-0.65 m), distortion drawn
+views from ``sim.intrinsics_views.calibration_poses`` (tilt 20-45 deg, 0.4-0.65 m), distortion drawn
 geometrically (``render_views``; --resampled: the sensor stage's bilinear resampling instead, for comparison)
 + SensorEffects() defaults (blur 0.6 px, ~2 grey levels noise), one frame per view.
 """
@@ -23,7 +23,7 @@ import numpy as np  # noqa: E402
 from vision_calib.camera import CameraIntrinsics  # noqa: E402
 from vision_calib.measure.detect import Detection, DetectConfig, detect  # noqa: E402
 from vision_calib.measure.intrinsics import PARAM_NAMES, calibrate_intrinsics, distortion_displacement  # noqa: E402
-from vision_calib.measure.intrinsics_sim import calibration_poses, render_views  # noqa: E402
+from vision_calib.sim.intrinsics_views import calibration_poses, render_views  # noqa: E402
 from vision_calib.targets.spec import TargetSpec  # noqa: E402
 
 INTR = CameraIntrinsics(1024, 768, 1100.0, 1100.0, 515.3, 380.7, (-0.1, 0.05, 0.0005, -0.0005, 0.0))

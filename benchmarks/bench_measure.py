@@ -31,7 +31,7 @@ import numpy as np  # noqa: E402
 from vision_calib import frames  # noqa: E402
 from vision_calib.camera import CameraIntrinsics  # noqa: E402
 from vision_calib.measure import DetectConfig, MeasureConfig, detect_batch, measure_pose  # noqa: E402
-from vision_calib.measure.accuracy import (accuracy_study, format_study, pose_seeds,  # noqa: E402
+from vision_calib.sim.accuracy import (accuracy_study, format_study, pose_seeds,  # noqa: E402
                                            random_view_pose)
 from vision_calib.sensor import SensorEffects, apply_effects, effects_for_render  # noqa: E402
 from vision_calib.targets.spec import TargetSpec  # noqa: E402
@@ -73,7 +73,7 @@ def run_detector_terms(n_poses, seed):
     """Corner errors common to a pose (pose covariance model, measure/covariance.py): per pose, a least-squares
     fit to the true corner error (noise-free frame) of a common shift, tag growth (AprilTag) and the smooth
     field terms; mean / RMS over poses and the leak of the independent part into the same fit (RMS)."""
-    from vision_calib.measure.covariance import field_directions
+    from vision_calib.targets.kinds.image_model import field_directions
     from vision_calib.render import TargetRenderer
 
     clean = SensorEffects(full_well_e=0.0, read_noise_grey=0.0)
@@ -128,7 +128,7 @@ def phase_split(e_px, uv_px):
 
 def run_phase_terms(n_poses, seed, step_deg=3.0, blur_px=None):
     """Pixel-phase-locked corner error of the ChArUco corners (cv2.cornerSubPix; measure/covariance.py
-    PHASE_LOCKED_SHARE): random views with the board rolled uniformly about its normal, noise-free frames; per
+    TargetKind.phase_locked_share): random views with the board rolled uniformly about its normal, noise-free frames; per
     band of the board's edge angle to the pixel axes (folded to 0-45 deg) the split (a, b) of the error's
     covariance between corners into cos 2 pi du / cos 2 pi dv terms (:func:`phase_split`) and their sum, the
     phase-locked share. blur_px: the sensor's Gaussian blur (None: SensorEffects' default)."""
@@ -170,11 +170,11 @@ def run_phase_terms(n_poses, seed, step_deg=3.0, blur_px=None):
             print(f"  edge angle {lo:4.1f}-{hi:4.1f} deg ({len(k):3d} views): a {a:.2f}, b {b:.2f}, "
                   f"phase-locked share a + b {a + b:.2f}")
     print(f"  phase-locked share over the bands: mean {np.mean(shares):.2f}, range {np.min(shares):.2f}-"
-          f"{np.max(shares):.2f} (covariance.PHASE_LOCKED_SHARE)")
+          f"{np.max(shares):.2f} (TargetKind.phase_locked_share)")
 
 
 def run_scene_z(scenes, n_poses, seeds):
-    from vision_calib.measure.accuracy import scene_z_study
+    from vision_calib.sim.accuracy import scene_z_study
 
     for path in scenes:
         section(f"pose covariance z-scores: {path}, {n_poses} scene poses x noise seeds {seeds}, 10 frames")

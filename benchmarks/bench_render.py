@@ -7,9 +7,9 @@
    4x) and "pyrender" (s = 2, as the image chain runs it), beside the floor (``cv2.warpPerspective`` of
    the 4096-texel board texture at 2x + area average, as in ``bench_end_to_end.py``), min of ``--reps``
    interleaved repetitions, one process, one OpenCV / llvmpipe thread; ratios to the floor.
-2. Accuracy on the H4 board, the A5 board and the AprilTag grid (``vision_calib.render.bench.SCENES``,
+2. Accuracy on the H4 board, the A5 board and the AprilTag grid (``vision_calib.sim.render_bench.SCENES``,
    first pose fronto-parallel, then random views tilted up to the scene's limit): cornerSubPix corners of
-   each render minus the same detector on the 8x CPU reference (``render.bench.reference_image``): mean,
+   each render minus the same detector on the 8x CPU reference (``sim.render_bench.reference_image``): mean,
    RMS, max [px].
 """
 
@@ -28,7 +28,7 @@ import numpy as np
 
 from vision_calib.camera import CameraIntrinsics
 from vision_calib.render import TargetRenderer, look_at_target
-from vision_calib.render.bench import SCENES, reference_image, subpix_at
+from vision_calib.sim.render_bench import SCENES, reference_image, subpix_at
 from vision_calib.render.warp import supersampled_K
 from vision_calib.targets import TargetSpec, load_target
 

@@ -231,19 +231,31 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     _add_json(p)
 
-    p = _command(sub, "import-visp", "convert a ViSP eye-to-hand folder into a recorded folder", """
+    p = _command(sub, "import-visp", "convert a ViSP hand-eye folder into a recorded folder", """
   vision-calib import-visp visp_data/ --out recording/
-  vision-calib import-visp visp_chessboard/ --out recording/ --chessboard 9x6 --square-m 0.025""")
-    p.add_argument("src", metavar="SRC", help="ViSP data folder (images, poses, apriltag-data.txt)")
+  vision-calib import-visp visp_chessboard/ --out recording/ --chessboard 9x6 --square-m 0.025""", description="""\
+Convert a ViSP hand-eye folder into a recorded folder. The files, as ViSP's acquisition apps write them
+(visp-acquire-franka-calib-data and the like):
+  franka_camera.xml       intrinsics (any *camera*.xml)
+  franka_image-N.png      one image per pose (any *image-N.png|jpg|bmp|tif)
+  franka_pose_rPe_N.yaml  flange pose in the robot base, t [m] + theta-u [rad] (also *pose_fPe_N.yaml,
+                          *w_P_ee-N.yaml)
+  chessboard-data.txt     "Chessboard / 9 x 6 / square size: 0.0236 m": a chessboard (eye-in-hand unless --mount)
+  apriltag-data.txt       "36h11 ... / size: 0.048 m": one AprilTag on the flange, fixed camera (eye-to-hand)
+The pattern is read from the folder's own chessboard-data.txt or apriltag-data.txt; --chessboard /
+--square-m / --tag-size-m give or override it.""")
+    p.add_argument("src", metavar="SRC", help="ViSP data folder (images, poses, camera XML, pattern file)")
     p.add_argument("--out", required=True, metavar="DIR", help="recorded folder to write")
-    p.add_argument("--tag-size-m", type=_sigma, default=None, help="tag side [m] (default: from apriltag-data.txt)")
+    p.add_argument("--tag-size-m", type=_sigma, default=None,
+                   help="AprilTag side [m] (default: from apriltag-data.txt)")
     p.add_argument("--tag-id", type=_seed, default=None, help="tag id (default: detected in the first image)")
     # --- importers (io/visp.py chessboard variant, io/rosi.py)
     p.add_argument("--chessboard", type=_chessboard, default=None, metavar="COLSxROWS",
-                   help="chessboard folder: inner corners as ViSP's -w x -h (e.g. 9x6); the target has one more "
-                        "square each way")
-    p.add_argument("--square-m", type=_sigma, default=None, help="chessboard square side [m] (ViSP's --square_size)")
-    p.add_argument("--mount", choices=("eye_in_hand", "fixed"), default="eye_in_hand",
+                   help="chessboard inner corners as ViSP's -w x -h (e.g. 9x6; default: from chessboard-data.txt); "
+                        "the target has one more square each way")
+    p.add_argument("--square-m", type=_sigma, default=None,
+                   help="chessboard square side [m] (ViSP's --square-size; default: from chessboard-data.txt)")
+    p.add_argument("--mount", choices=("eye_in_hand", "fixed"), default=None,
                    help="chessboard folders: where the camera is (default eye_in_hand, ViSP's tutorial)")
 
     p = _command(sub, "import-rosi", "convert a ROS-I industrial_calibration hand-eye data set into a recorded "
@@ -262,6 +274,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("src", metavar="SRC", help="recorded folder")
     p.add_argument("dst", nargs="?", default=None, metavar="DST", help="deprecated: use --out DIR")
     p.add_argument("--out", default=None, metavar="DIR", help="folder to write (cal_data.yaml, poses/, images/)")
+
+    p = _command(sub, "noise", "camera noise from repeated frames of a static target: corner and pose scatter, and "
+                 "the simulator settings that reproduce it (docs/noise.md)", """
+  vision-calib noise rosi_noise_qualification/ --out out/noise
+  vision-calib noise frames/ --target targets/charuco_a5.yaml --camera camera.yaml --out out/noise --json""")
+    p.add_argument("folder", help="ROS-I noise-qualification folder (cal_data.yaml), or a folder of images of one "
+                                  "static target (with --target and --camera)")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder (noise.json, sensor.yaml, summary.txt)")
+    p.add_argument("--target", default=None, help="target YAML (see targets/; overrides cal_data.yaml's target_finder)")
+    p.add_argument("--camera", default=None, metavar="CAMERA_YAML",
+                   help="camera.yaml (calibrate-camera's output; overrides cal_data.yaml's intrinsics)")
+    p.add_argument("--sim-frames", type=_int_at_least(2), default=30,
+                   help="frames the simulator draws to check the fitted settings (default 30)")
+    p.add_argument("--seed", type=_seed, default=0, help="seed of the simulator's noise (default 0)")
+    p.add_argument("--allow-symlinks", action="store_true", help="follow symlinks leading out of the folder")
+    _add_json(p)
 
     p = _command(sub, "target", "export a printable target image", """
   vision-calib target targets/charuco_a5.yaml --out charuco_a5.pdf
@@ -293,7 +321,7 @@ def _positional_out(args, parser) -> None:
 # --------------------------------------------------------------------------------------------- the commands
 def _cmd_identifiability(args) -> int:
     from .experiment.synthetic import identifiability_json
-    from .io.atomic import to_json
+    from .serialize import to_json
 
     out = identifiability_json(args.scene, residual=args.residual, n_poses=args.poses, seed=args.seed,
                                all_params=args.all_params)
@@ -303,7 +331,7 @@ def _cmd_identifiability(args) -> int:
 
 def _cmd_identify_synthetic(args) -> int:
     from .experiment.synthetic import identify_synthetic_json
-    from .io.atomic import to_json
+    from .serialize import to_json
 
     out = identify_synthetic_json(
         args.scene, method=args.method, residual=args.residual, n_poses=args.poses,
@@ -332,7 +360,7 @@ def _cmd_simulate(args) -> int:
 
 
 def _print_report(args, report: dict) -> int:
-    from .io.atomic import to_json
+    from .serialize import to_json
 
     print(to_json(report) if args.json else report["summary_text"])
     return _status(report["verdict"])
@@ -349,7 +377,7 @@ def _cmd_process(args) -> int:
 
 
 def _cmd_calibrate_camera(args) -> int:
-    from .io.atomic import to_json
+    from .serialize import to_json
     from .io.camera_file import write_camera_yaml
     from .measure.intrinsics import calibrate_from_images, find_images, summary_text
     from .targets import load_target
@@ -370,7 +398,7 @@ def _cmd_process_poses(args) -> int:
 
 
 def _cmd_study(args) -> int:
-    from .io.atomic import to_json
+    from .serialize import to_json
     from .study import run_study
 
     res = run_study(args.spec, out_dir=args.out, workers=args.workers, scheduler=args.scheduler,
@@ -380,19 +408,13 @@ def _cmd_study(args) -> int:
 
 
 def _cmd_import_visp(args) -> int:
-    from .errors import ConfigError
-    from .io.visp import import_visp_chessboard, import_visp_eye_to_hand
+    from .io.visp import import_visp
 
-    if args.chessboard is not None:
-        if args.square_m is None:
-            raise ConfigError("--chessboard needs --square-m (the square side in metres)")
-        notes = []
-        path = import_visp_chessboard(args.src, args.out, *args.chessboard, args.square_m, mount=args.mount,
-                                      notes=notes)
-        for n in notes:
-            print(f"vision-calib: warning: {n}", file=sys.stderr)
-    else:
-        path = import_visp_eye_to_hand(args.src, args.out, tag_m=args.tag_size_m, tag_id=args.tag_id)
+    notes = []
+    path = import_visp(args.src, args.out, chessboard=args.chessboard, square_m=args.square_m,
+                       tag_m=args.tag_size_m, tag_id=args.tag_id, mount=args.mount, notes=notes)
+    for n in notes:
+        print(f"vision-calib: warning: {n}", file=sys.stderr)
     print(f"wrote recorded folder {path}")
     return 0
 
@@ -408,6 +430,16 @@ def _cmd_export_rosi(args) -> int:
     from .io.rosi import export_rosi
 
     print(f"wrote ROS-I data set {export_rosi(args.src, _out(args))}")
+    return 0
+
+
+def _cmd_noise(args) -> int:
+    from .experiment.noise import measure_noise
+    from .serialize import to_json
+
+    res = measure_noise(args.folder, args.out, target=args.target, camera=args.camera, sim_frames=args.sim_frames,
+                        seed=args.seed, allow_symlinks=args.allow_symlinks)
+    print(to_json({k: v for k, v in res.items() if k != "summary_text"}) if args.json else res["summary_text"])
     return 0
 
 
@@ -431,6 +463,7 @@ COMMANDS = {
     "import-visp": _cmd_import_visp,
     "import-rosi": _cmd_import_rosi,
     "export-rosi": _cmd_export_rosi,
+    "noise": _cmd_noise,
     "target": _cmd_target,
 }
 
@@ -461,7 +494,8 @@ def _status(verdict: dict) -> int:
 
 def _summary_identifiability(out: dict) -> str:
     lines = [
-        f"{out['scene']}: {out['n_params']} parameters, rank {out['rank']}, condition number {out['condition_number']:.4g}",
+        f"{out['scene']}: {out['n_params']} parameters, rank {out['rank']}, condition number {out['condition_number']:.4g}"
+        + (f" (of the {out['condition_number_of']})" if out.get("condition_number_of") else ""),
         f"non-identifiable: {', '.join(out['non_identifiable']) or 'none'}",
     ]
     for c in out["couplings"]:
@@ -513,6 +547,9 @@ def _inputs(args) -> list:
     if c == "import-rosi":
         src = Path(args.src)
         return [(src if src.is_dir() else src.parent, "folder")]
+    if c == "noise":
+        src = Path(args.folder)
+        return [(src if src.is_dir() else src.parent, "folder")] + [(f, "file") for f in (args.target, args.camera) if f]
     if c == "process-poses":
         return [(args.file, "file")]
     if c in ("simulate", "identifiability", "identify-synthetic"):

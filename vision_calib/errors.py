@@ -36,3 +36,8 @@ class IdentifiabilityError(VisionCalibError):
 
 class MeasurementError(VisionCalibError):
     """Detection / PnP failed for a whole batch where a per-pose rejection is not possible."""
+
+
+class MissingExtraError(VisionCalibError, ImportError):
+    """An optional dependency is not installed: message names the feature and the extra that installs it
+    (e.g. ``pip install 'vision_calib[gpu]'`` for the torch/kornia sensor path)."""

@@ -14,7 +14,7 @@ from vision_calib.config import allow_paths
 from vision_calib.errors import ConfigError, DataError
 from vision_calib.experiment.process import process_folder
 from vision_calib.io.camera_file import load_camera_yaml
-from vision_calib.measure.intrinsics_sim import calibration_poses, render_views
+from vision_calib.sim.intrinsics_views import calibration_poses, render_views
 from vision_calib.targets.spec import TargetSpec
 
 pytestmark = pytest.mark.slow

@@ -13,8 +13,7 @@ from vision_calib.targets import load_target
 def test_shipped_scenes_poses_identify_what_varied_poses_identify(path):
     """Each shipped scene's own pose set loses no parameter that 200 generic poses of the robot identify
     (the pipelines refuse a pose set that does), and leaves at least one equation per parameter to spare."""
-    from vision_calib.experiment.checks import structural_rank_check
-    from vision_calib.experiment.steps import analyze_setup
+    from vision_calib.experiment.steps import analyze_setup, structural_rank_check
 
     scene = load_scene(path)
     poses = scene_poses(scene, np.random.default_rng(0))

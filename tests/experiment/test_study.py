@@ -222,13 +222,14 @@ def test_process_pool_and_dask_equal_local(tmp_path):
 
 
 def test_variant_axis_follows_free_mask(tmp_path):
-    from vision_calib.kinematics.h4 import load_h4_robot
+    from vision_calib.kinematics import h4_variants
+    from vision_calib.kinematics.h4_io import load_h4_robot
 
     scene = load_scene(SCENE)
     robot12 = load_h4_robot(ROOT / "scenes" / "robots" / "h4.yaml", model="12")
     for letter in ("A", "E"):
         sc = S.scene_with(scene, variant=letter)
-        ref = robot12.variant(letter).params
+        ref = h4_variants.variant(robot12, letter).params
         assert sc.setup.params.names == ref.names
         assert np.array_equal(sc.setup.params.free, ref.free)
         assert sc.setup.robot.model == ("12" if letter == "A" else "31")

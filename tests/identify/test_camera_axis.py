@@ -12,7 +12,9 @@ from vision_calib.frames import perturb_pose, skew, so3_exp
 from vision_calib.identify import solve_lse
 from vision_calib.identify.camera_axis import estimate_camera_axis, robot_with_camera_axis
 from vision_calib.identify.h4_problem import h4_igm_problem, synthetic_h4_measurements
-from vision_calib.kinematics.h4 import load_h4_robot, random_workspace_poses, yaw_of
+from vision_calib.kinematics import h4_variants
+from vision_calib.kinematics.h4 import random_workspace_poses, yaw_of
+from vision_calib.kinematics.h4_io import load_h4_robot
 
 SCENE = Path(__file__).resolve().parents[2] / "scenes" / "robots" / "h4.yaml"
 EZ = np.array([0.0, 0.0, 1.0])
@@ -115,7 +117,7 @@ def _validation_error_mm(robot, seed, tilt_deg, use_estimate):
 def test_estimated_axis_restores_accuracy_under_a_camera_tilt(r12):
     """Same seeds (same parameters, noise and poses) with no tilt, with an unmodelled 0.5 deg
     tilt, and with the tilt estimated from the rotation axis before identification."""
-    robot = r12.variant("D")
+    robot = h4_variants.variant(r12, "D")
     seeds = range(5)
     base = np.mean([_validation_error_mm(robot, s, 0.0, False) for s in seeds])
     blind = np.mean([_validation_error_mm(robot, s, 0.5, False) for s in seeds])

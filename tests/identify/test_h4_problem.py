@@ -12,7 +12,9 @@ from vision_calib.frames import pose_error
 from vision_calib.identify import analyze, solve_lse
 from vision_calib.identify.h4_problem import h4_igm_problem, h4_pose_problem, synthetic_h4_measurements
 from vision_calib.identify.problem import NOISE_ESTIMATED
-from vision_calib.kinematics.h4 import load_h4_robot, random_workspace_poses
+from vision_calib.kinematics import h4_variants
+from vision_calib.kinematics.h4 import random_workspace_poses
+from vision_calib.kinematics.h4_io import load_h4_robot
 from vision_calib.kinematics.h4_variants import with_tilt_params
 
 SCENE = Path(__file__).resolve().parents[2] / "scenes" / "robots" / "h4.yaml"
@@ -79,7 +81,7 @@ def test_residual_zero_at_truth_and_jacobian_is_its_derivative(r12):
 def test_recovers_truth_from_noise_free_data(r12, variant):
     """Model 12 (variant D, 19 parameters) and model 31 (variant H, 36 parameters): geometric
     and external parameters identified together from the 81-pose grid."""
-    robot = r12.variant(variant)
+    robot = h4_variants.variant(r12, variant)
     rng = np.random.default_rng(1)
     x_true = truth(robot, rng)
     q, T = synthetic_h4_measurements(robot, robot.pose_grid(), x_true, rng)
@@ -172,7 +174,7 @@ def test_pose_problem_residual_and_jacobian(r12, kind):
     """Pose residual = 0 at the truth; analytic Jacobian (implicit FGM + camera-measurement Jacobian) equals
     central finite differences over every parameter, geometric, external and tilt, away from the truth."""
     robot = {"12": r12, "12+tilts": with_tilt_params(r12, [0.01, -0.02, 0.015, 0.005], [True] * 4),
-             "31": r12.variant("H")}[kind]
+             "31": h4_variants.variant(r12, "H")}[kind]
     rng = np.random.default_rng(5)
     x_true = truth(robot, rng)
     X = random_workspace_poses(12, rng)

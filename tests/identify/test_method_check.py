@@ -13,7 +13,8 @@ from vision_calib.identify import solve_lse
 from vision_calib.identify.h4_problem import h4_igm_problem, h4_noise_response, h4_pose_problem, h4_raw_noise_cov
 from vision_calib.identify.method_check import method_difference
 from vision_calib.identify.nuisance import split_nuisance, with_nuisance
-from vision_calib.kinematics.h4 import load_h4_robot
+from vision_calib.kinematics import h4_variants
+from vision_calib.kinematics.h4_io import load_h4_robot
 
 SCENE = Path(__file__).resolve().parents[2] / "scenes" / "robots" / "h4.yaml"
 SQ, ST, SR = 1e-4, 2e-4, np.deg2rad(0.03)
@@ -125,7 +126,7 @@ def test_disagree_when_the_model_is_wrong(r12):
     the check says 'disagree'; the same noise on a model-12 truth agrees. (With a diagonal pose noise and no
     joint noise the two least-squares fits are, to first order, one GLS in two coordinates: such a model
     error moves both alike and the check cannot see it; the adequacy test does.)"""
-    r31 = r12.variant("H")
+    r31 = h4_variants.variant(r12, "H")
     rng = np.random.default_rng(2)
     x31 = r31.params.nominal.copy()
     f = r31.params.free_index

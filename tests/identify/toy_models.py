@@ -150,14 +150,15 @@ def h4_problem(variant="D", sigma_q_rad=0.0, seed=0, n_poses=None, all_free=Fals
     (1e-4 rad for the weighting when the data are noise-free)."""
     import pytest
 
-    h4 = pytest.importorskip("vision_calib.kinematics.h4")
+    h4_io = pytest.importorskip("vision_calib.kinematics.h4_io")
+    h4_variants = pytest.importorskip("vision_calib.kinematics.h4_variants")
     hp = pytest.importorskip("vision_calib.identify.h4_problem")
     from pathlib import Path
 
     scene = Path(__file__).resolve().parents[2] / "scenes" / "robots" / "h4.yaml"
     if not scene.exists():
         pytest.skip(f"{scene} missing")
-    rob = h4.load_h4_robot(scene).variant(variant)
+    rob = h4_variants.variant(h4_io.load_h4_robot(scene), variant)
     rng = np.random.default_rng(seed)
     x_true = rob.params.nominal + rob.params.scale * rng.uniform(-2, 2, len(rob.params))
     X = rob.pose_grid()

@@ -10,16 +10,17 @@ import pytest
 
 from vision_calib.errors import ConfigError, DataError, ParameterError, UnreachablePoseError
 from vision_calib.frames import perturb_pose
+from vision_calib.kinematics import h4_variants
 from vision_calib.kinematics.h4 import (
     EPS_D,
     EXTERNAL_NAMES,
     H4Robot,
-    load_h4_robot,
     model31_names,
     pose_grid_81,
     random_workspace_poses,
     yaw_of,
 )
+from vision_calib.kinematics.h4_io import load_h4_robot
 from vision_calib.frames import rot_x, rot_z
 
 from kin_helpers import fd  # tests/kinematics helper
@@ -34,7 +35,7 @@ def r12():
 
 @pytest.fixture(scope="module")
 def r31(r12):
-    return r12.to_model31()
+    return h4_variants.to_model31(r12)
 
 
 def perturbed(robot, rng, k=3.0):
@@ -140,9 +141,9 @@ def test_d_has_no_influence_in_model_12(r12):
     for d in (0.0, 0.05, 0.2):
         r = replace(r12, d12=d)
         np.testing.assert_allclose(r.igm(X), q, atol=1e-13)
-        np.testing.assert_allclose(r.to_model31().igm(X), q, atol=1e-12)
+        np.testing.assert_allclose(h4_variants.to_model31(r).igm(X), q, atol=1e-12)
     # but in model 31 (free motors) d matters
-    r31 = r12.to_model31()
+    r31 = h4_variants.to_model31(r12)
     x = r31.params.vector({"h4.d": 0.06})
     assert np.abs(r31.igm(X, x) - q).max() > 1e-3
 
@@ -256,7 +257,7 @@ def test_model12_externals_rank_19_of_20(r12):
     assert rank == 19
     assert set(lost) == {"B_T_C.z", "M_T_E.z"} and lost["B_T_C.z"] == pytest.approx(lost["M_T_E.z"])
     # with M_T_E.z fixed (variant D) it is full rank
-    D = r12.variant("D")
+    D = h4_variants.variant(r12, "D")
     assert _rank_and_cond(_stacked(D, D.params.free_names, X))[0] == 19
 
 
@@ -295,7 +296,7 @@ def test_model31_externals_rank_36_of_38_and_couplings(r31):
     assert rank == 36
     assert np.all(rel < 1e-12)
     # the two directions span the whole null space: fixing d and B_T_C.theta (variant H) restores full rank
-    H = r31.variant("H")
+    H = h4_variants.variant(r31, "H")
     assert H.params.n_free == 36
     assert _rank_and_cond(_stacked(H, H.params.free_names, X))[0] == 36
 
@@ -350,7 +351,7 @@ def test_condition_numbers_table3_variants(r12):
     X = r12.pose_grid()[np.sort(np.random.default_rng(0).choice(81, 71, replace=False))]
     c = {}
     for letter in "ABCDEFGH":
-        r = r12.variant(letter)
+        r = h4_variants.variant(r12, letter)
         A = _stacked(r, r.params.free_names, X)
         rank, c[letter], _ = _rank_and_cond(A)
         assert rank == r.params.n_free, letter
@@ -375,28 +376,28 @@ def test_variants_fix_the_right_parameters(r12):
         "D": {"M_T_E.z"},
     }
     for letter, fixed in expect_fixed.items():
-        r = r12.variant(letter)
+        r = h4_variants.variant(r12, letter)
         assert set(r.names) - set(r.params.free_names) == fixed, letter
     ls = {f"h4.l{i}" for i in range(1, 5)}
     gauge = {"M_T_E.z", "h4.d", "B_T_C.theta"}
     expect31 = {"E": ls | {"h4.h"} | gauge, "F": ls | {"h4.h"} | gauge, "G": ls | gauge, "H": gauge}
     counts = {}
     for letter, fixed in expect31.items():
-        r = r12.variant(letter)
+        r = h4_variants.variant(r12, letter)
         assert r.model == "31"
         assert set(r.names) - set(r.params.free_names) == fixed, letter
         counts[letter] = r.params.n_free
-    E = r12.variant("E")
+    E = h4_variants.variant(r12, "E")
     assert E.shared_L and "h4.L" in E.params.free_names and "h4.L1" not in E.names
     assert counts == {"E": 28, "F": 31, "G": 32, "H": 36}  # paper table 2 totals
-    assert [r12.variant(k).params.n_free for k in "ABCD"] == [17, 18, 18, 19]
+    assert [h4_variants.variant(r12, k).params.n_free for k in "ABCD"] == [17, 18, 18, 19]
     # shared L gives the same joints as four equal arms
     X = r12.pose_grid()
     np.testing.assert_allclose(E.igm(X), r12.igm(X), atol=1e-12)
     with pytest.raises(ParameterError, match="variant"):
-        r12.variant("Z")
+        h4_variants.variant(r12, "Z")
     with pytest.raises(ParameterError, match="model 12"):
-        r12.to_model31().variant("A")
+        h4_variants.variant(h4_variants.to_model31(r12), "A")
 
 
 def test_robot_rejects_wrong_parameter_names(r12):

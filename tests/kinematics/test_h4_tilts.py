@@ -11,7 +11,9 @@ import pytest
 from vision_calib.experiment.synthetic import run_synthetic
 from vision_calib.frames import perturb_pose
 from vision_calib.identify.camera_axis import estimate_camera_axis
-from vision_calib.kinematics.h4 import TILT_NAMES, load_h4_robot
+from vision_calib.kinematics import h4_variants
+from vision_calib.kinematics.h4 import TILT_NAMES
+from vision_calib.kinematics.h4_io import load_h4_robot
 from vision_calib.kinematics.h4_variants import with_tilt_params, without_tilt_params
 from vision_calib.rig import load_scene
 
@@ -29,7 +31,7 @@ def r12():
 
 @pytest.mark.parametrize("model", ["12", "31"])
 def test_tilt_jacobian_columns_match_finite_differences(r12, model):
-    base = r12 if model == "12" else r12.to_model31()
+    base = r12 if model == "12" else h4_variants.to_model31(r12)
     r = with_tilt_params(base, TILTS, free=[True] * 4)
     rng = np.random.default_rng(1)
     X = r.pose_grid()[::4]
@@ -53,7 +55,7 @@ def test_fold_keeps_the_camera_view_and_variants_keep_the_tilts(r12):
     assert folded.names == r12.names
     np.testing.assert_allclose(folded.camera_measurement(X, x[:-4]), r.camera_measurement(X, x), atol=1e-14)
     for letter in ("A", "H"):
-        v = r.variant(letter)
+        v = h4_variants.variant(r, letter)
         assert v.tilt_params and v.names[-4:] == TILT_NAMES
         np.testing.assert_allclose(v.params.nominal[-4:], TILTS)
         assert list(v.params.free[-4:]) == [True, True, False, False]

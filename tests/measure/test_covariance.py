@@ -10,8 +10,8 @@ from scipy.special import erf
 
 from vision_calib import frames
 from vision_calib.measure import MeasureConfig, measure_pose
-from vision_calib.measure.covariance import (corner_error_split, phase_directions, pixel_variance, pose_covariance,
-                                             saddle_info)
+from vision_calib.measure.covariance import corner_error_split, phase_directions, pose_covariance
+from vision_calib.targets.kinds.image_model import pixel_variance, saddle_info
 from vision_calib.measure.detect import Detection
 from vision_calib.sensor import SensorEffects
 
@@ -170,7 +170,7 @@ def test_rendered_h4_poses_are_whitened():
     whitened by the covariance has z RMS in [0.5, 1.6] per component (24 poses: sampling std of an RMS
     ~15 %; on 100 poses x seeds it is 0.73-1.09, benchmarks/bench_measure.py) and no |z| > 4; the
     frame-scatter-only covariance gives z RMS more than twice as large on the same data (bench: 3.7-4.9)."""
-    from vision_calib.measure.accuracy import scene_z_study
+    from vision_calib.sim.accuracy import scene_z_study
 
     res = scene_z_study("scenes/h4_vision.yaml", n_poses=24, seeds=(1,))  # rendered as the image chain does
     assert res["n"] == 24
@@ -190,7 +190,7 @@ def test_rendered_charuco_views_phase_locked_tail(charuco):
     seeds); the independent model's tail is heavier (3.58-4.65: the poses whose corners share their phase)."""
     from vision_calib.camera import CameraIntrinsics
     from vision_calib.measure import detect_batch
-    from vision_calib.measure.accuracy import random_view_pose
+    from vision_calib.sim.accuracy import random_view_pose
     from vision_calib.render import TargetRenderer
     from vision_calib.sensor import apply_effects, effects_for_render
 
@@ -234,7 +234,8 @@ def test_apriltag_growth_term_by_corner_estimator(aprilgrid, intr):
     """A per-pose tag growth of the size measured for the seeded edge fits (0.007 px RMS) biases the depth:
     the "edges" terms whiten tz (z RMS near 1), the covariance without a growth term does not; detections
     of OpenCV's per-frame refinement (no "batch" diagnostic) get the larger "opencv" terms."""
-    from vision_calib.measure.covariance import APRILTAG_TERMS, corner_estimator
+    from vision_calib.measure.covariance import corner_estimator
+    from vision_calib.targets.kinds.image_model import APRILTAG_TERMS
 
     rng = np.random.default_rng(3)
     z_with, z_without, ratio = [], [], []
@@ -246,6 +247,7 @@ def test_apriltag_growth_term_by_corner_estimator(aprilgrid, intr):
         z_with.append(e[2] / m.std[2])
         class _Plain:  # the same target without a kind: no detector terms
             corner_points = aprilgrid.corner_points
+            check_pose_measurable = aprilgrid.check_pose_measurable
         z_without.append(e[2] / measure_pose(dets, _Plain(), intr).std[2])
         for d in dets:
             d.diagnostics.clear()

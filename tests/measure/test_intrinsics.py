@@ -9,7 +9,7 @@ from vision_calib.camera import CameraIntrinsics
 from vision_calib.errors import DataError
 from vision_calib.measure.detect import Detection, DetectConfig, detect
 from vision_calib.measure.intrinsics import PARAM_NAMES, calibrate_intrinsics, coverage, distortion_displacement
-from vision_calib.measure.intrinsics_sim import calibration_poses, render_views
+from vision_calib.sim.intrinsics_views import calibration_poses, render_views
 
 TRUE = CameraIntrinsics(1024, 768, 1100.0, 1100.0, 515.3, 380.7, (-0.1, 0.05, 0.0005, -0.0005, 0.0))
 

@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from vision_calib import frames
-from vision_calib.identify.handeye_problem import handeye_report, solve_handeye
+from vision_calib.identify.handeye_problem import solve_handeye
+from vision_calib.io.report_handeye import handeye_report
 from vision_calib.measure import Detection
 from vision_calib.measure.reprojection import chain_reprojection
 

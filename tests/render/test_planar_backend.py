@@ -11,10 +11,10 @@ import pytest
 import trimesh
 
 from vision_calib.frames import make_T
-from vision_calib.measure.accuracy import accuracy_study, random_view_pose
-from vision_calib.measure.detect import detect_batch
+from vision_calib.sim.accuracy import accuracy_study, random_view_pose
+from vision_calib.measure.batch import detect_batch
 from vision_calib.render import TargetRenderer, look_at_target
-from vision_calib.render.coverage import accumulate_coverage
+from vision_calib.targets.coverage import accumulate_coverage
 from vision_calib.rig import load_scene
 from vision_calib.sensor import apply_effects
 from vision_calib.targets import load_target

@@ -170,7 +170,7 @@ def test_apriltag_corners_match_projectpoints():
     """AprilTag grid: aruco's subpixel marker corners on the render agree with the same detector on an
     independent CPU rendering (homography warp of the texture, 8x supersampled) to < 0.05 px, and with
     cv2.projectPoints up to the detector's own inward bias on L-shaped corners (~0.2 px, zero mean)."""
-    from vision_calib.render.bench import reference_image
+    from vision_calib.sim.render_bench import reference_image
 
     spec = load_target(ROOT / "targets" / "apriltag_grid.yaml")
     K = CameraIntrinsics(1024, 768, 1100.0, 1000.0, 520.8, 361.2)
@@ -311,7 +311,7 @@ def test_charuco_corners_unbiased_on_non_power_of_two_texture(backend):
     ~0.005 px mean here), and with the same detector on a CPU reference (homography warp of the texture,
     8x supersampled) to 0.03 px RMS (pyrender before the fix: mean dv +0.03 px, RMS 0.07-0.11 px; the
     polygon backend: < 0.01 px RMS, measured 0.005 px, the reference's own sampling error)."""
-    from vision_calib.render.bench import reference_image, subpix_at
+    from vision_calib.sim.render_bench import reference_image, subpix_at
 
     rng = np.random.default_rng(3)
     poses = [look_at_target(H4_LIKE, 0.68)] + [

@@ -1,6 +1,7 @@
 import numpy as np
 import pytest
-import torch
+
+torch = pytest.importorskip("torch", reason="the torch/kornia sensor path is the optional extra [gpu]")
 
 from vision_calib.camera import CameraIntrinsics
 from vision_calib.errors import ConfigError, DataError

@@ -34,13 +34,13 @@ def test_real_rosi_photo_all_dots_and_origin(settings):
     circle_detector_params (import-rosi's mapping)."""
     import cv2
 
-    from vision_calib.io.rosi import _target
+    from vision_calib.io.rosi import target_from_rosi
     from vision_calib.config import parse_yaml
     from vision_calib.errors import DataError
 
     if settings == "recording":
         tf = parse_yaml(REAL / "cal_data.yaml", DataError, "x")["target_finder"]
-        spec = target_from_dict(_target(tf, "cal_data.yaml"), "t")
+        spec = target_from_dict(target_from_rosi(tf, "cal_data.yaml"), "t")
         assert dict(spec.blob_detector)["minArea"] == 25.0 and dict(spec.blob_detector)["thresholdStep"] == 10.0
     else:
         spec = rosi_10x10()

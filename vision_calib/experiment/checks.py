@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import frames as F
-from ..errors import DataError, IdentifiabilityError
+from ..errors import DataError
 from ..rig import Measurements, Setup
 
 #: relative length-scale error above which the measured motions are refused (wrong target size / fx / units)
@@ -84,24 +84,33 @@ def motion_consistency(setup: Setup, meas: Measurements) -> dict:
                                    for k in bad]}
 
 
-def check_motion(setup: Setup, meas: Measurements, where: str, scale_hint: str) -> dict:
-    """:func:`motion_consistency`, refusing (DataError naming ``where`` and the likely cause) measured
-    motions whose length scale is off by more than SCALE_TOL or whose rotations do not follow the joints
-    at all. ``scale_hint``: the keys that set the length scale (e.g. the target's square size, fx)."""
+def motion_verdict(setup: Setup, meas: Measurements, where: str, scale_hint: str) -> tuple[dict, str | None]:
+    """(:func:`motion_consistency` record, None) when the measured motions follow the commanded joints, else
+    (record, the refusal naming ``where`` and the likely cause): a length scale off by more than SCALE_TOL, or
+    rotations that do not follow the joints at all. ``scale_hint``: the keys that set the length scale (e.g. the
+    target's square size, fx). Fewer than 3 poses: ({}, None). Blind to a whole pose set inverted (the other
+    ``measured:`` direction): a relative motion and its inverse have the same angle and |pitch|."""
     if len(meas.T_cam_target) < 3:
-        return {}
+        return {}, None
     out = motion_consistency(setup, meas)
     med_rot = out["median_rotation_deg"]
     if out["angle_mismatch_median_deg"] > max(2.0, 0.1 * med_rot):
-        raise DataError(
+        return out, (
             f"{where}: the measured rotations between poses do not follow the commanded joints (median mismatch "
             f"{out['angle_mismatch_median_deg']:.3g} deg for a median commanded rotation of {med_rot:.3g} deg): "
             "joint values in the wrong angle unit, a joint order different from the robot's, or the wrong robot model")
     s = out["scale"]
     if np.isfinite(s) and abs(s - 1) > SCALE_TOL:
-        raise DataError(
-            f"{where}: the measured motions are {s:.3g} x the commanded ones ({out['n_scale_pairs']} pose pairs): "
-            f"a wrong length scale -- check {scale_hint} and the length units")
+        return out, (f"{where}: the measured motions are {s:.3g} x the commanded ones ({out['n_scale_pairs']} pose "
+                     f"pairs): a wrong length scale -- check {scale_hint} and the length units")
+    return out, None
+
+
+def check_motion(setup: Setup, meas: Measurements, where: str, scale_hint: str) -> dict:
+    """:func:`motion_verdict`, its refusal raised as a DataError; returns the record."""
+    out, refusal = motion_verdict(setup, meas, where, scale_hint)
+    if refusal:
+        raise DataError(refusal)
     return out
 
 
@@ -167,19 +176,3 @@ def screen_measurements(setup: Setup, meas: Measurements, where: str, scale_hint
     motion = check_motion(setup, meas, where, scale_hint)
     meas, inconsistent = drop_inconsistent(meas, motion, where)
     return meas, degenerate + inconsistent, motion
-
-
-def structural_rank_check(setup: Setup, rep, residual: str, where: str, accept: bool = False,
-                          n_generic: int = 200) -> list[str]:
-    """IdentifiabilityError naming the parameters the user's pose set loses compared with generic poses
-    (``rep``: IdentifiabilityReport of the user's poses), unless ``accept``; returns those names."""
-    from .steps import analyze_setup
-
-    ref, _ = analyze_setup(setup, setup.generic_poses(np.random.default_rng(12345), n_generic), residual)
-    lost = [n for n in rep.non_identifiable if n not in ref.non_identifiable]
-    if rep.rank < ref.rank and lost and not accept:
-        raise IdentifiabilityError(
-            f"{where}: the {rep.n_obs} poses identify {rep.rank} of the {ref.rank} parameters that varied poses "
-            f"identify; not identifiable from these poses: {', '.join(lost)}. Use more (and more varied) poses, "
-            "or accept fixing them at nominal (--fix-unidentifiable)")
-    return lost

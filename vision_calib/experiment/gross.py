@@ -24,6 +24,13 @@ moves stay warnings). Those are a sign, direction or convention error in the inp
 reversed gives an equivalent model with an offset of 180 deg and a mount turned over, at the same
 residuals): a failure naming the joint or mount; each joint's readings negated in turn are refitted to
 find the one that explains it.
+
+**Motions that do not follow the joints** (``checks.motion_verdict``, the check ``process`` applies before
+its fit, given here by ``process-poses``): rotations between poses that do not follow the commanded joints
+(a joint's sign or unit, the joint order) or a length scale off by more than 5 %. It is a failure by itself
+(even when the fit absorbed it), and the same check runs on every alternative reading: a reading fits only
+when its motions follow its joints. It cannot see a reversed ``measured:`` direction (inverting every pose
+keeps each relative motion's angle and |pitch|): the refits above find that one.
 """
 
 from __future__ import annotations
@@ -150,34 +157,45 @@ def _fmt(v: float) -> str:
 
 
 def gross_failure(setup, meas: Measurements, ident, residual: str, where: str, alternatives: dict | None = None,
-                  untested: str = "") -> dict | None:
+                  untested: str = "", motion_refusal: str | None = None, motion_check=None) -> dict | None:
     """None when the fit of ``ident`` (``steps.Identified`` of ``meas``) is neither far beyond its noise model
-    nor moved to where no correction can be (module docstring); else {kind: "gross misfit" | "convention error",
-    chi2_dof, moves: [text], tests: [{candidate, chi2_dof, fits}], message}. ``alternatives``: {what: Measurements}
-    the caller builds from its raw input (e.g. the other pose direction); joint sign reversals are always
-    tried. ``untested``: the causes the caller cannot test (named in the message)."""
+    nor moved to where no correction can be (module docstring), and ``motion_refusal`` is None; else {kind:
+    "gross misfit" | "convention error" | "inconsistent motions", chi2_dof, moves: [text], motion_check: refusal
+    or None, tests: [{candidate, chi2_dof, fits, fits_with_moves, motions_follow_joints}], message}.
+    ``alternatives``: {what: Measurements} the caller builds from its raw input (e.g. the other pose direction);
+    joint sign reversals are always tried. ``untested``: the causes the caller cannot test (named in the
+    message). ``motion_refusal``: the refusal of the caller's motion-consistency check on ``meas``
+    (``checks.motion_verdict``: rotations that do not follow the joints, a wrong length scale), a failure by
+    itself; ``motion_check(Measurements) -> refusal | None``: that check, run on every candidate reading, which
+    then fits only when its motions follow its joints too."""
     res, params = ident.result, ident.params
     chi2 = float(res.chi2_dof)
     moves = convention_moves(params, res)
     gross = np.isfinite(chi2) and chi2 > GROSS_CHI2_DOF
-    if not gross and not moves:
+    if not gross and not moves and not motion_refusal:
         return None
     cands = dict(alternatives or {})
     cands.update(joint_sign_candidates(meas))
-    tests = []
+    tests, plain = [], []  # plain: the readings that fit without a convention move (whatever their motions)
     for what, alt in cands.items():
         c, r = _refit(setup, alt, residual, params)
         if gross:
             fits = bool(np.isfinite(c) and c < GROSS_CHI2_DOF and c * FIT_GAIN < chi2)
-        else:  # a convention move at a good fit: the alternative must fit as well
+        else:  # a convention move or inconsistent motions at a good fit: the alternative must fit as well
             fits = bool(np.isfinite(c) and c <= 1.5 * chi2 + 1.0)
         moved = [m["text"] for m in convention_moves(params, r)] if fits else []
-        tests.append({"candidate": what, "chi2_dof": c if np.isfinite(c) else None, "fits": fits and not moved,
-                      "fits_with_moves": moved})
+        follow = None if motion_check is None or not fits else motion_check(alt) is None
+        tests.append({"candidate": what, "chi2_dof": c if np.isfinite(c) else None,
+                      "fits": fits and not moved and follow is not False,
+                      "fits_with_moves": moved if follow is not False else [], "motions_follow_joints": follow})
+        if fits and not moved:
+            plain.append(what)
     # an equivalent model reached by another reading (e.g. two parallel joints negated) fits too, but only the
     # right reading brings the model back to the nominal one: those are the hits; the others are named after
     hits = [t for t in tests if t["fits"]] or [t for t in tests if t["fits_with_moves"]]
     shown = hits or [t for t in tests if not t["candidate"].startswith("joint ")] or tests
+    if not hits:  # readings that fit the poses but not their motions are named too
+        shown += [t for t in tests if t["motions_follow_joints"] is False and t["candidate"] in plain and t not in shown]
 
     def line(t):
         c = _fmt(np.nan if t["chi2_dof"] is None else t["chi2_dof"])
@@ -185,12 +203,15 @@ def gross_failure(setup, meas: Measurements, ident, residual: str, where: str, a
             return f"{t['candidate']}: chi2/dof {c} -- this fits"
         if t["fits_with_moves"]:
             return f"{t['candidate']}: chi2/dof {c} -- fits, but moves {t['fits_with_moves'][0]}"
+        if t["motions_follow_joints"] is False:
+            return f"{t['candidate']}: chi2/dof {c} -- fits the poses, but its motions do not follow the joints"
         return f"{t['candidate']}: chi2/dof {c}"
 
     tested = "; ".join(line(t) for t in shown)
     n_joint = sum(t["candidate"].startswith("joint ") for t in tests)
     if not hits and n_joint and len(shown) < len(tests):
         tested += f"; each of the {n_joint} joints' readings negated: no fit"
+    also = f"; {motion_refusal}" if motion_refusal else ""
     if gross:
         kind = "gross misfit"
         head = (f"{where}: the fit is far beyond the noise model: chi2/dof {chi2:.3g} (residuals {np.sqrt(chi2):.0f} "
@@ -198,15 +219,21 @@ def gross_failure(setup, meas: Measurements, ident, residual: str, where: str, a
                 f"{GROSS_CHI2_DOF:g}): a gross error in the input, not a calibration")
         if moves:
             head += f" (the fit moved {', '.join(m['text'] for m in moves[:3])})"
-    else:
+        head += also
+    elif moves:
         kind = "convention error"
         head = (f"{where}: the identified model differs from the nominal one by more than any calibration correction: "
                 f"{', '.join(m['text'] for m in moves[:6])}: a sign, direction or convention error in the input "
-                f"(joint direction, joint zero, mount orientation or frame convention), not a calibration")
-    msg = (f"{head}. Likely causes, refitted on {min(len(meas.T_cam_target), REFIT_POSES)} poses: {tested}"
+                f"(joint direction, joint zero, mount orientation or frame convention), not a calibration{also}")
+    else:
+        kind = "inconsistent motions"
+        head = (f"{where}: {motion_refusal} (the fit itself reaches chi2/dof {_fmt(chi2)}: the model absorbed it), "
+                "not a calibration")
+    msg = (f"{head}. Likely causes" + (", each checked for motion consistency and" if motion_check is not None
+                                       else ",") + f" refitted on {min(len(meas.T_cam_target), REFIT_POSES)} poses: {tested}"
            + ("" if hits else " (none fits)") + (f". Not tested here: {untested}" if untested else ""))
     return {"kind": kind, "chi2_dof": chi2 if np.isfinite(chi2) else None, "limit_chi2_dof": GROSS_CHI2_DOF,
-            "moves": [m["text"] for m in moves], "tests": tests, "message": msg}
+            "moves": [m["text"] for m in moves], "motion_check": motion_refusal, "tests": tests, "message": msg}
 
 
 __all__ = ["gross_failure", "convention_moves", "joint_sign_candidates", "describe", "GROSS_CHI2_DOF",

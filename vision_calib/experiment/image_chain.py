@@ -292,6 +292,35 @@ class InlineImagePool:
         self.close()
 
 
+def overlay_frames(chain: ImageChain, T_cam_targets, labels, seed: int, frames: int, wanted,
+                   stream: int = None) -> dict:
+    """The first frame of the poses ``wanted`` (labels) rendered again exactly as :func:`measure_poses` drew them
+    (same per-pose seed), in this thread, with its detection: {label: (frame (H, W) uint8, Detection, "")}
+    (report.html's overlays: a few poses, rather than keeping every frame of the run). T_cam_targets (N, 4, 4) m
+    and labels (N,) as given to measure_poses."""
+    from ..measure import detect
+    from ..sensor import effects_for_render, pose_frames
+
+    stream = STREAM_IMAGES if stream is None else stream
+    index = {str(lab): i for i, lab in enumerate(labels)}
+    todo = [(str(w), index[str(w)]) for w in wanted if str(w) in index]
+    if not todo:
+        return {}
+    state = chain_state(chain.target_path, chain.camera, chain.supersample)
+    out = {}
+    try:
+        for lab, i in todo:
+            ideal = state["renderer"].render(np.asarray(T_cam_targets[i], float))
+            s = int(np.random.default_rng([seed, int(stream), i]).integers(2**31 - 1))
+            img = pose_frames(ideal, effects_for_render(state["renderer"], chain.effects), frames, s,
+                              state["intr"]).frame(0, full=True)
+            out[lab] = (img, detect(img, state["target"], state["intr"], frame_index=0), "")
+    finally:
+        if hasattr(state["renderer"], "close"):
+            state["renderer"].close()
+    return out
+
+
 #: random stream of the image noise of identification poses: pose i of run seed s draws from
 #: ``default_rng([s, STREAM_IMAGES, i])`` (experiment.steps numbers the other streams 1-4)
 STREAM_IMAGES = 5

@@ -17,10 +17,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ConfigError
+from ..errors import ConfigError, DataError
 from ..io.measured_poses import chain_direction, misreadings, read_measured_poses
 from ..io.report import build_report, parameters_table, residual_stats, write_report
-from .checks import duplicate_poses
+from .checks import drop_inconsistent, duplicate_poses, motion_verdict
 from .gross import gross_failure
 from .steps import check_method, identify_measurements
 
@@ -121,6 +121,34 @@ def kfold_lines(kf: dict) -> list[str]:
     return lines
 
 
+#: what sets the length scale of a measured-pose file (named by the motion check's scale refusal)
+SCALE_HINT = "the x,y,z columns of the CSV against the scene's robot lengths"
+
+
+def screen_motions(setup, mp):
+    """The motion-consistency check of ``process`` on a measured-pose file (``checks.motion_verdict``; full
+    poses only: position rows carry no rotation). Never raises: a refusal goes to the gross-error diagnosis
+    (``gross.gross_failure``), which also runs the check on each alternative reading of the file.
+    Returns (measurements without the poses whose motion does not follow their joints, [(label, reason)] of
+    those, the check's record (None for positions), the refusal or None, the check as
+    ``f(Measurements) -> refusal | None`` (None for positions))."""
+    meas = mp.measurements
+    if mp.position_only:
+        return meas, [], None, None, None
+
+    def check(m):
+        return motion_verdict(setup, m, "the motion-consistency check", SCALE_HINT)[1]
+
+    motion, refusal = motion_verdict(setup, meas, "the motion-consistency check", SCALE_HINT)
+    if refusal:
+        return meas, [], {**motion, "refusal": refusal}, refusal, check
+    try:
+        kept, inconsistent = drop_inconsistent(meas, motion, "the motion-consistency check")
+    except DataError as exc:  # too many poses inconsistent: the readings, not some poses, are wrong
+        return meas, [], {**motion, "refusal": str(exc)}, str(exc), check
+    return kept, inconsistent, motion, None, check
+
+
 def process_poses(path, out_dir, method=None, folds=None, plots=True, fix_unidentifiable=False) -> dict:
     """Identify a robot from a measured-pose file (YAML + CSV); writes DIR/report.json, summary.txt,
     calibrated_model.yaml (+ plots). folds: k of the held-out validation (default: the file's)."""
@@ -132,13 +160,16 @@ def process_poses(path, out_dir, method=None, folds=None, plots=True, fix_uniden
     if not 2 <= folds <= len(mp.ids):
         raise ConfigError(f"{mp.path}: folds: {folds} folds need 2 <= folds <= {len(mp.ids)} (the number of poses)")
     residual = setup.residual_for(method, mp.residual)
-    ident = identify_measurements(setup, meas, method, residual, where=str(mp.path),
-                                  fix_unidentifiable=fix_unidentifiable)
+    where = str(mp.path)
+    screened, inconsistent, motion, refusal, check = screen_motions(setup, mp)
+    ident = identify_measurements(setup, screened, method, residual, where=where,
+                                  fix_unidentifiable=fix_unidentifiable, rejected=inconsistent)
     result, problem, rep, setup = ident.result, ident.problem, ident.analysis, ident.setup
     t_id = time.perf_counter() - t0
-    failure = gross_failure(setup, meas, ident, mp.residual, str(mp.path), misreadings(mp),
+    failure = gross_failure(setup, screened, ident, mp.residual, where, misreadings(mp),
                             untested=f"a wrong robot file or scene mounts ({scene.path}), joint columns in another "
-                                     "order, joint or length units (checked up front only for gross factors)")
+                                     "order, joint or length units (checked up front only for gross factors)",
+                            motion_refusal=refusal, motion_check=check)
     kf = None if failure else kfold_validation(setup, meas, method, mp.residual, rep, folds, mp.seed,
                                                outliers=[r[0] for r in ident.rejected])
     ps = setup.params
@@ -153,7 +184,7 @@ def process_poses(path, out_dir, method=None, folds=None, plots=True, fix_uniden
         measurements={"n_poses": n, "n_valid": n, "n_rejected": 0, "rejected": [], "measured": mp.measured,
                       "noise": mp.sigma_source, "pose_ids": list(mp.ids)},
         identifiability=rep, parameters=parameters_table(ps.names, ps.nominal, None, result, ps.kinds), result=result,
-        identified=ident, warnings=duplicate_poses(meas),
+        identified=ident, warnings=duplicate_poses(meas), motion=motion,
         residuals=residual_stats(result.residuals, problem.residual_kind), extra={"kfold": kf},
         timings={"identify": t_id, "total": time.perf_counter() - t0}, failure=failure)
     report["summary_text"] += "\n" + ("\n".join(kfold_lines(kf)) if kf else

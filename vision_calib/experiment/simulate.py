@@ -21,7 +21,7 @@ import numpy as np
 
 from .. import frames as F
 from ..errors import DataError
-from ..io.atomic import write_json_atomic
+from ..serialize import write_json_atomic
 from ..io.report import REPORT_VERSION, build_report, measurements_block, parameters_table, write_report
 from ..rig import Measurements, Scene, SCENES_DIR, load_scene, scene_poses
 from .image_chain import ImageChain, ImagePool, measure_poses, start_fork_server
@@ -259,7 +259,9 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
         t = time.perf_counter()
         meas_used, inconsistent, motion = screen_measurements(setup, meas, str(scene.path),
                                                               f"the target's square size ({scene.target_path})")
-        ident = identify_measurements(setup, meas_used, method, residual, rep if not inconsistent else None,
+        # analysed again on the measured poses, whitened by their measured covariances, as `process` does (the
+        # planning analysis `rep` has no noise model: 1 mm and 1 mrad weigh alike, another condition number)
+        ident = identify_measurements(setup, meas_used, method, residual, None,
                                       context=rejection_summary(pms), where=str(scene.path),
                                       fix_unidentifiable=fix_unidentifiable, rejected=inconsistent)
         result, problem, setup = ident.result, ident.problem, ident.setup  # setup: after Setup.prepare (H4 axis)
@@ -314,10 +316,30 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
         settings={"poses": int(len(poses)), "frames": int(frames), "method": method, "residual": residual,
                   "averaging": scene.measurement.averaging, "camera": setup.camera.to_dict(),
                   "effects": scene.effects.to_dict(), "validation_poses": int(len(validation))},
-        measurements=mblock, identifiability=ident.analysis or rep, parameters=parameters_table(
+        measurements=mblock, identifiability=ident.analysis, parameters=parameters_table(
             ps.names, ps.nominal, shared_truth(setup, truth or scene.setup, x_true), result, ps.kinds),
         result=result, identified=ident, motion=motion, accuracy=evals, timings=timings, extra=extra)
     if out_dir is not None:
         preloading.join()
-        write_report(out_dir, report, setup, result, problem, evals, plots=plots)
+        write_report(out_dir, report, setup, result, problem, evals, plots=plots,
+                     overlays=_overlay_source(scene, chain, setup, result, report, T_true, q_true, seed, frames)
+                     if plots else None)
     return report
+
+
+def _overlay_source(scene, chain, setup, result, report, T_true, q_true, seed, frames):
+    """report.html's overlay images of a simulated run: the few poses shown rendered again (the frames of the run
+    are not kept), the model's reprojection from the joint readings q_true through the identified parameters."""
+    from ..io.overlay import OverlaySource
+    from ..targets import load_target
+    from .image_chain import overlay_frames
+
+    labels = [f"{i:03d}" for i in range(len(T_true))]  # as _render_and_measure
+    usable = report["verdict"].get("usable")
+
+    def model_pose(pid):
+        i = labels.index(pid) if pid in labels else None
+        return None if i is None or not usable else setup.predict_from_joints(q_true[i:i + 1], result.identified)[0]
+
+    return OverlaySource(lambda ids: overlay_frames(chain, T_true, labels, seed, frames, ids),
+                         load_target(scene.target_path), chain.camera, model_pose)

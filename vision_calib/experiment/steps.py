@@ -15,7 +15,10 @@ import numpy as np
 
 from ..errors import ConfigError, IdentifiabilityError
 from ..identify import analyze, solve_ekf, solve_lse
+from ..identify.identifiability import IdentifiabilityReport
 from ..identify.nuisance import split_nuisance, with_nuisance
+from ..identify.problem import IdentificationProblem, IdentificationResult
+from ..kinematics.params import ParameterSet
 from ..io.report import method_check_line
 from ..rig import Measurements, Scene, Setup, scene_poses, true_parameters
 
@@ -39,15 +42,34 @@ def rngs(seed: int):
             np.random.default_rng([seed, STREAM_VALIDATION]))
 
 
+#: the rows' weighting of :func:`analyze_setup` (exact measurements, no noise model), in words
+PLANNING_WEIGHTING = "unweighted (no noise model: 1 mm and 1 mrad of residual weigh alike)"
+
+
 def analyze_setup(setup: Setup, poses, residual: str | None = None, all_params: bool = False):
     """Identifiability of the setup's free parameters (every model parameter with ``all_params``)
     over commanded ``poses`` at the nominal geometry with exact measurements:
-    (IdentifiabilityReport, problem)."""
+    (IdentifiabilityReport, problem). Its condition number weighs every pose's components alike
+    (PLANNING_WEIGHTING); measured data are analysed whitened by their covariances (:func:`identify_measurements`)."""
     meas = setup.synthetic_measurements(poses, setup.params.nominal, np.random.default_rng(0))
     problem = setup.problem(meas, residual)
     if all_params:  # bypass the builders' refusal of known-redundant pairs: the analysis must find them
         problem = problem.with_params(problem.params.only_free(problem.params.names))
-    return analyze(problem, selection=BASE_SELECTION), problem
+    return analyze(problem, selection=BASE_SELECTION, weighting=PLANNING_WEIGHTING), problem
+
+
+def structural_rank_check(setup: Setup, rep, residual: str, where: str, accept: bool = False,
+                          n_generic: int = 200) -> list[str]:
+    """IdentifiabilityError naming the parameters the user's pose set loses compared with generic poses
+    (``rep``: IdentifiabilityReport of the user's poses), unless ``accept``; returns those names."""
+    ref, _ = analyze_setup(setup, setup.generic_poses(np.random.default_rng(12345), n_generic), residual)
+    lost = [n for n in rep.non_identifiable if n not in ref.non_identifiable]
+    if rep.rank < ref.rank and lost and not accept:
+        raise IdentifiabilityError(
+            f"{where}: the {rep.n_obs} poses identify {rep.rank} of the {ref.rank} parameters that varied poses "
+            f"identify; not identifiable from these poses: {', '.join(lost)}. Use more (and more varied) poses, "
+            "or accept fixing them at nominal (--fix-unidentifiable)")
+    return lost
 
 
 def truth_poses(scene: Scene) -> np.ndarray:
@@ -133,14 +155,14 @@ class Identified:
     report (None when the caller gave the base mask), the poses rejected as outliers [(label, reason)],
     the chi-square adequacy of the fit (``identify.model_adequacy``, before scaling) and the factor."""
 
-    result: object
-    problem: object
-    params: object
-    analysis: object
+    result: IdentificationResult
+    problem: IdentificationProblem
+    params: ParameterSet
+    analysis: IdentifiabilityReport | None
     rejected: tuple
     adequacy: dict
     variance_factor: float
-    setup: object = None  #: the setup identified (after ``Setup.prepare``): evaluate and export with it
+    setup: Setup | None = None  #: the setup identified (after ``Setup.prepare``): evaluate and export with it
     prepared: dict = None  #: what ``Setup.prepare`` determined from the data (e.g. the H4 camera axis)
     #: shared measurement error fitted as nuisance coefficients (``identify.nuisance``): {n_directions,
     #: coefficients (d,) and their std (posterior, in prior std units), std_inflation {name: std / std without
@@ -172,15 +194,13 @@ def identify_measurements(setup: Setup, meas: Measurements, method, residual, an
     and a method the setup's ``cross_methods`` pairs with another, that one runs too (:func:`method_check`)."""
     from ..identify import fit_rejecting_outliers, model_adequacy
 
-    from .checks import structural_rank_check
-
     where = where or setup.name
     before = setup.params.free_names
     setup, prepared = setup.prepare(meas)
     rep = analysis if setup.params.free_names == before else None  # prepare() freed parameters: analyse again
     if rep is None:
         if len(meas.T_cam_target) == 0:
-            raise IdentifiabilityError(f"{where}: no usable pose" + (f" ({context})" if context else ""))
+            raise IdentifiabilityError(f"{where}: no usable poses" + (f" ({context})" if context else ""))
         try:
             rep = analyze(setup.problem(meas, residual), selection=BASE_SELECTION)
         except IdentifiabilityError as exc:

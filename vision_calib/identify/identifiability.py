@@ -51,6 +51,9 @@ from ..errors import DataError, IdentifiabilityError, ParameterError
 from .problem import IdentificationProblem
 from .threads import single_threaded_blas
 
+#: the weighting :func:`analyze` describes by default (``weighting`` names another, e.g. a planning analysis')
+WEIGHTING_COV = "whitened by the poses' covariances"
+
 #: |coefficient| below this fraction of the largest one is pruned from a reported coupling
 COUPLING_PRUNE_REL = 1e-6
 
@@ -60,7 +63,8 @@ class IdentifiabilityReport:
     """Result of :func:`analyze`. Arrays are in *scaled* units (see module docstring).
 
     names: (n,) free parameter names analysed, in ``params`` order. singular_values: (n,)
-    of the scaled whitened Jacobian A. condition_number: s_max / s_min over the base set.
+    of the scaled whitened Jacobian A. condition_number: s_max / s_min over the base set; condition_of:
+    what it is computed on, in words (which Jacobian, how many parameters and poses, weighting, column scaling).
     non_identifiable / base_parameters: names (partition of ``names``). couplings: one dict
     per dropped parameter: {"parameter", "combination" {base name: coeff (scaled)},
     "combination_si" {base name: coeff in SI ratio}, "fit_residual" (relative norm of the
@@ -87,6 +91,8 @@ class IdentifiabilityReport:
     #: free parameters with a prior row in the analysed problem (``IdentificationProblem.prior_rows``): their
     #: identifiability comes partly from that prior (e.g. the H4 mount tilts' rotation-axis estimate)
     prior_parameters: tuple = ()
+    #: what ``condition_number`` is computed on, in words (printed beside it: reports, CLI summaries)
+    condition_of: str = ""
 
     @property
     def identifiable(self) -> bool:
@@ -110,6 +116,7 @@ class IdentifiabilityReport:
             "tol_rel": self.tol,
             "singular_values": [float(s) for s in self.singular_values],
             "condition_number": float(self.condition_number),
+            "condition_number_of": self.condition_of,
             "non_identifiable": list(self.non_identifiable),
             "base_parameters": list(self.base_parameters),
             "prior_parameters": list(self.prior_parameters),
@@ -233,6 +240,26 @@ def _select_base(A: np.ndarray, rank: int, tol_abs: float, selection: str) -> np
 
 
 # ----------------------------------------------------------------------------- main API
+def condition_description(params, base_idx, problem: IdentificationProblem, at_nominal: bool,
+                          normalize: bool = False, weighting: str | None = None) -> str:
+    """What :func:`analyze`'s condition number is computed on, in words: the base columns (their count), the
+    point of linearisation, the poses and equations, the weighting and the column scales (per parameter kind)."""
+    kinds = np.asarray(params.kinds, dtype=object)[params.free_index][base_idx]
+    scale = params.scale[params.free_index][base_idx]
+    unit = {"length": (1e3, "mm"), "angle": (1e3, "mrad"), "coefficient": (1.0, "")}
+    scales = []
+    for k in dict.fromkeys(kinds):
+        f, u = unit.get(k, (1.0, ""))
+        vals = sorted({float(v) for v in scale[kinds == k]})
+        txt = "/".join(f"{v * f:g}" for v in vals)
+        scales.append(f"{txt} {u} per {k}".replace("  ", " ") if u else f"{txt} per {k}")
+    prior = f" + {problem.n_prior} prior rows" if problem.n_prior else ""
+    return (f"Jacobian of the {len(base_idx)} identifiable parameters at "
+            f"{'the nominal model' if at_nominal else 'the given parameters'}, {problem.n_obs} poses "
+            f"({problem.n_obs * problem.m} equations{prior}), {weighting or WEIGHTING_COV}, columns scaled by "
+            + ", ".join(scales) + ("; then normalised" if normalize else ""))
+
+
 @single_threaded_blas
 def analyze(
     problem: IdentificationProblem,
@@ -241,6 +268,7 @@ def analyze(
     normalize: bool = False,
     selection: str = "order",
     jacobian: np.ndarray | None = None,
+    weighting: str | None = None,
 ) -> IdentifiabilityReport:
     """Identifiability of the free parameters of ``problem`` at ``x`` (n,) (default nominal).
 
@@ -249,6 +277,7 @@ def analyze(
     selection: "order" (default: prefer earlier parameters, stable over pose subsets) or "pivot"
         (QR with column pivoting).
     jacobian: (n_obs, m, n) Jacobian at x already validated by :func:`check_problem` (skips a recompute).
+    weighting: how the rows are weighted, in words, for ``condition_of`` (default WEIGHTING_COV).
     Raises IdentifiabilityError when there are fewer scalar equations than free parameters,
     ParameterError when nothing is free, DataError on non-finite data (naming the poses).
     Longer than 80 lines: one sequence (checks, scaled whitened Jacobian, SVD, base selection, couplings, indices) over shared arrays; split, it would pass ten arrays between helpers.
@@ -317,6 +346,9 @@ def analyze(
         + ("; then each column divided by its norm" if normalize else "; no column normalisation")
     )
     return IdentifiabilityReport(
+        condition_of=condition_description(
+            params, base_idx, problem, x is None or np.array_equal(np.asarray(x, float).reshape(-1), params.nominal),
+            normalize, weighting),
         prior_parameters=tuple(n for n in names if n in problem.prior_rows),
         names=tuple(names),
         n_params=n,

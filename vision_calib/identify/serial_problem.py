@@ -23,6 +23,7 @@ import numpy as np
 
 from ..errors import DataError, ParameterError
 from ..frames import inv_T, inverse_error_map, perturb_pose, pose_error, so3_right_jacobian_inv  # noqa: F401
+from ..kinematics.protocols import ChainModel
 from ..kinematics.serial import SerialChain
 from .problem import NOISE_ESTIMATED, IdentificationProblem
 
@@ -127,9 +128,9 @@ def serial_problem(
     a Hayati ``beta3`` and ``d3``) are both free.
     Longer than 80 lines: input validation then the residual and Jacobian closures over the same checked arrays.
     """
-    # duck-typed: SerialChain or any chain with the same protocol (e.g. kinematics.urdf.URDFChain)
-    if not all(hasattr(chain, a) for a in ("params", "forward", "pose_jacobian", "check_joints", "redundant_pairs")):
-        raise ParameterError(f"serial_problem needs a SerialChain-like chain, got {type(chain).__name__}")
+    if not isinstance(chain, ChainModel):  # SerialChain, URDFChain or any chain of that interface
+        raise ParameterError(f"serial_problem needs a chain of the kinematics.protocols.ChainModel interface "
+                             f"(e.g. a SerialChain), got {type(chain).__name__}")
     if residual not in ("pose", "position"):
         raise ParameterError(f"residual must be 'pose' or 'position', got {residual!r}")
     q = chain.check_joints(q)

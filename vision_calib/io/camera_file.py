@@ -26,7 +26,7 @@ import yaml
 from ..camera import CameraIntrinsics
 from ..config import Section, check_keys, load_yaml
 from ..errors import ConfigError
-from .atomic import write_text_atomic
+from ..serialize import write_text_atomic
 
 FORMAT = "vision_calib.camera/1"
 _CAMERA_KEYS = ("width", "height", "fx", "fy", "cx", "cy", "dist")

@@ -5,7 +5,10 @@ Two files: a YAML description and a CSV with one row per robot pose::
 
     # measured_poses.yaml
     format: vision_calib.measured_poses/1
-    scene: ../scenes/rx90_eye_in_hand.yaml   # robot + mounts + free parameters (relative to this file)
+    scene: ../scenes/rx90_eye_in_hand.yaml   # robot + mounts + free parameters (relative to this file),
+                                             # or the scene itself, with only the keys read here:
+                                             # {robot: arm.urdf, mount: eye_in_hand, mounts: {..}, [urdf: {..}],
+                                             #  [units], [identification], [name]}   (INLINE_SCENE_KEYS)
     csv: measured_poses.csv                  # default: this file's name with .csv
     units: {length: mm, angle: deg}          # REQUIRED: of the CSV (joints, positions, sigmas, covariances)
     measured: T_cam_target                   # T_cam_target | T_target_cam | p_cam_target | p_target_cam
@@ -43,6 +46,8 @@ from ..errors import DataError
 
 FORMAT = "vision_calib.measured_poses/1"
 YAML_KEYS = ("format", "scene", "csv", "units", "measured", "default_sigma", "folds", "seed")
+#: the keys of a scene written inside the file (``scene:`` a mapping): those process-poses reads
+INLINE_SCENE_KEYS = ("name", "robot", "mount", "units", "mounts", "urdf", "identification")
 MEASURED = ("T_cam_target", "T_target_cam", "p_cam_target", "p_target_cam")
 POSE_COLS = ("x", "y", "z", "qx", "qy", "qz", "qw")
 COMPONENTS = ("x", "y", "z", "rx", "ry", "rz")
@@ -298,12 +303,12 @@ def _check_plausible(csv_path, setup, measured, q, T, units: dict) -> None:
 
 
 def _settings(top: Section):
-    """(scene Path, csv Path, Lf, Af, units, measured, default sigmas or None, folds, seed)."""
+    """(scene Path or inline scene Section, csv Path, Lf, Af, units, measured, default sigmas or None, folds, seed)."""
     _only(top, YAML_KEYS)
     fmt = top.get("format", str)
     if fmt != FORMAT:
         raise top.error("format", f"expected {FORMAT!r}, got {fmt!r}")
-    scene_path = top.path_value("scene")
+    scene_path = top.section("scene") if isinstance(top.data.get("scene"), dict) else top.path_value("scene")
     csv_path = top.path_value("csv", None) or top.file.with_suffix(".csv")
     us = _only(top.section("units"), ("length", "angle"))
     units = {"length": us.get("length", str, choices=LENGTH_UNITS), "angle": us.get("angle", str, choices=ANGLE_UNITS)}
@@ -331,17 +336,35 @@ def _settings(top: Section):
             default, folds, seed)
 
 
+def _load_scene(ref):
+    """The scene of the ``scene`` entry: a scene file (its simulation keys allowed, unused here), or a mapping
+    written in the file, which may hold only :data:`INLINE_SCENE_KEYS` (ConfigError naming every other key)."""
+    from ..rig import load_scene
+    from ..rig.scene import scene_from_section
+
+    if not isinstance(ref, Section):
+        return load_scene(ref)
+    unused = [str(k) for k in ref.keys() if str(k) not in INLINE_SCENE_KEYS]
+    if unused:
+        hint = _suggest(unused[0], INLINE_SCENE_KEYS)
+        raise ref.error(None, f"{', '.join(unused)}: not read by process-poses (a scene written here takes only "
+                              f"{', '.join(INLINE_SCENE_KEYS)}; camera, target and simulation settings belong in a "
+                              f"scene file){hint}")
+    return scene_from_section(ref)
+
+
 def read_measured_poses(path) -> MeasuredPoses:
     """Read and validate a measured-pose YAML + CSV (see the module docstring). ConfigError for the YAML,
     DataError for the CSV, each naming the file and the key / line / pose / column."""
-    from ..rig import Measurements, load_scene
+    from ..rig import Measurements
+    from ..rig.base import ChainMeasured
 
     path = Path(path)
     top = Section(load_yaml(path), path)
     scene_path, csv_path, Lf, Af, units, measured, default, folds, seed = _settings(top)
-    scene = load_scene(scene_path)
+    scene = _load_scene(scene_path)
     setup = scene.setup
-    if not hasattr(setup, "chain_measurements"):
+    if not isinstance(setup, ChainMeasured):
         raise top.error("scene", f"measured-pose files need a robot commanded by joint sets (serial, URDF); "
                                  f"{scene.path} is a {setup.kind} robot")
     pos_only = measured.startswith("p_")
@@ -384,10 +407,11 @@ def write_measured_poses(yaml_path, scene_path, ids, q, T, measured: str, units=
     """Write a measured-pose YAML + CSV (``<yaml stem>.csv``). q: (N, n) joints [rad]; T: (N, 4, 4) rows of
     ``measured`` [m] (position-only: translations used); units: {length, angle} of the CSV (default m,
     rad); one of sigmas (N, m) per-component std [m, rad], cov (N, m, m) SI, or default_sigma
-    (t [m], r [rad]) written to the YAML. The scene is named relative to the YAML (:func:`_scene_ref`)."""
+    (t [m], r [rad]) written to the YAML. The scene is named relative to the YAML (:func:`_scene_ref`), or
+    written in it when ``scene_path`` is a mapping (:data:`INLINE_SCENE_KEYS`)."""
     import yaml
 
-    from .atomic import write_text_atomic
+    from ..serialize import write_text_atomic
 
     yaml_path = Path(yaml_path)
     units = units or {"length": "m", "angle": "rad"}
@@ -415,7 +439,8 @@ def write_measured_poses(yaml_path, scene_path, ids, q, T, measured: str, units=
     lines += [",".join([str(pid)] + [repr(float(x)) for x in row]) for pid, row in zip(ids, vals)]
     csv_path = yaml_path.with_suffix(".csv")
     write_text_atomic(csv_path, "\n".join(lines) + "\n")
-    doc = {"format": FORMAT, "scene": _scene_ref(scene_path, yaml_path), "csv": csv_path.name, "units": dict(units),
+    scene = dict(scene_path) if isinstance(scene_path, dict) else _scene_ref(scene_path, yaml_path)
+    doc = {"format": FORMAT, "scene": scene, "csv": csv_path.name, "units": dict(units),
            "measured": measured, "folds": int(folds), "seed": int(seed)}
     if default_sigma is not None:
         doc["default_sigma"] = {"t_mm": float(default_sigma[0]) * 1e3} | (
@@ -424,5 +449,5 @@ def write_measured_poses(yaml_path, scene_path, ids, q, T, measured: str, units=
     return yaml_path
 
 
-__all__ = ["FORMAT", "MEASURED", "MeasuredPoses", "read_measured_poses", "write_measured_poses",
+__all__ = ["FORMAT", "MEASURED", "INLINE_SCENE_KEYS", "MeasuredPoses", "read_measured_poses", "write_measured_poses",
            "to_camera_convention", "chain_direction", "misreadings"]

@@ -25,7 +25,7 @@ import yaml
 
 from ..config import Section, load_yaml
 from ..errors import ConfigError, ParameterError
-from .atomic import write_text_atomic
+from ..serialize import write_text_atomic
 
 FORMAT = "vision_calib.calibrated_model/1"
 

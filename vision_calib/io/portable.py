@@ -16,7 +16,7 @@ from pathlib import Path
 
 import yaml
 
-from .atomic import write_bytes_atomic, write_text_atomic
+from ..serialize import write_bytes_atomic, write_text_atomic
 
 #: keys of report.json's ``source`` (and of its ``scene``) whose values are file or folder paths
 SOURCE_PATH_KEYS = ("path", "folder", "file", "csv")

@@ -45,7 +45,7 @@ from __future__ import annotations
 
 import csv
 import io
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -54,7 +54,7 @@ import yaml
 from ..camera import CameraIntrinsics
 from ..config import Section, load_yaml
 from ..errors import DataError
-from .atomic import write_text_atomic
+from ..serialize import write_text_atomic
 from .images import IMAGE_EXT, check_image_sizes  # IMAGE_EXT: the formats accepted in images/<pose_id>/
 
 FORMAT = "vision_calib.recording/1"
@@ -95,11 +95,8 @@ class Recording:
 
 
 def _target_dict(spec) -> dict:
-    d = {}
-    for f in fields(spec):
-        v = getattr(spec, f.name)
-        d[f.name] = v.item() if hasattr(v, "item") else v
-    return d
+    """The target's own keys (its kind's typed spec: no other kind's keys), numpy scalars as Python numbers."""
+    return {k: v.item() if isinstance(v, np.generic) else v for k, v in spec.to_dict().items()}
 
 
 def write_recording(folder, scene, poses, joints, frames: int) -> Path:

@@ -20,6 +20,8 @@ report.json, version 2 (each value once)::
                      correlation_warnings, warnings}             # no parameter values (they are above)
     accuracy: {before: {...}, after: {...}}                      # validation poses, simulation only
     residuals: {...}                                             # RMS per component (process)
+    pose_residuals: {kind, how, poses: [{pose_id, chi2, p_value, translation_mm, rotation_deg | joint_deg}]}
+                                                                 # every kept pose's final residual, worst first
     method_check: {methods: [ran, other], verdict, chi2, dof, p_value, max_abs_z, parameters: [{name,
                    difference, std, z}], ...}                    # H4 igm / lse: the other method, same poses
     intrinsics: {source: "recording.yaml" | "calibrated from the recording", values, std, rms_px,
@@ -31,7 +33,7 @@ report.json, version 2 (each value once)::
                                                                  # process_handeye (experiment/handeye_step.py)
     warnings: [str]
     timings_s: {...}
-    files: {report, model, residuals_plot, ...}
+    files: {report, model, residuals_plot, html, ...}           # html: report.html (io/report_html.py)
 
 The machine-readable contract is the JSON Schema shipped beside this module (:data:`SCHEMA_PATH`,
 ``report_schema.json``): the keys every kind always writes, their types, open blocks allowed to grow.
@@ -46,17 +48,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import write_json_atomic, write_text_atomic
+from ..serialize import write_json_atomic, write_text_atomic
 from .model_export import write_calibrated_model
 from .portable import relative_source
+from .report_text import KIND_UNITS, lack_of_fit_line, method_check_line
 
 REPORT_VERSION = "2.0"
 #: JSON Schema (draft 2020-12) of report.json, shipped as package data
 SCHEMA_PATH = Path(__file__).with_name("report_schema.json")
-
-
-#: display unit of a parameter kind in the summary's table: (unit, factor from SI)
-KIND_UNITS = {"length": ("mm", 1e3, "12.4f"), "angle": ("deg", float(np.degrees(1.0)), "12.5f")}
 
 
 def parameters_table(names, nominal, x_true, result, kinds=None) -> list[dict]:
@@ -116,6 +115,55 @@ def residual_stats(r, kind) -> dict:
             d["rotation_rms_deg"] = [float(v) for v in np.degrees(np.sqrt(np.mean(r[:, 3:] ** 2, axis=0)))]
         return d
     return {"joint_rms_deg": [float(v) for v in np.degrees(np.sqrt(np.mean(r**2, axis=0)))]}
+
+
+#: summary labels of residual_stats keys: (words, unit)
+RESIDUAL_LABELS = {"translation_rms_mm": ("translation x, y, z", "mm"), "rotation_rms_deg": ("rotation x, y, z", "deg"),
+                   "joint_rms_deg": ("joints 1..n", "deg")}
+
+
+def residuals_line(res: dict) -> str:
+    """One summary line of a :func:`residual_stats` block, each figure with what it is and its unit."""
+    parts = [f"{RESIDUAL_LABELS.get(k, (k, ''))[0]} " + ", ".join(f"{x:.4g}" for x in vals)
+             + f" {RESIDUAL_LABELS.get(k, ('', ''))[1]}".rstrip() for k, vals in res.items()]
+    where = ("" if set(res) == {"joint_rms_deg"} else
+             ", per axis of the measured transform's left frame")
+    return f"residual RMS after the fit (measured - model{where}): " + "; ".join(parts)
+
+
+#: per-pose residual columns of report.json's ``pose_residuals`` per residual kind: (key, columns, factor from SI)
+POSE_RESIDUAL_COLUMNS = {
+    "pose": (("translation_mm", slice(0, 3), 1e3), ("rotation_deg", slice(3, 6), float(np.degrees(1.0)))),
+    "position": (("translation_mm", slice(0, 3), 1e3),),
+    "joint": (("joint_deg", slice(None), float(np.degrees(1.0))),),
+}
+
+
+def pose_residuals_block(result) -> dict:
+    """Final residual of every pose the fit kept, worst first (JSON-ready): {kind, how, poses: [{pose_id, chi2
+    (squared norm of the whitened residual; null when the fit gave none), p_value (upper tail of chi2(m), m the
+    residual components per pose), translation_mm / rotation_deg (pose kinds: norm of that part) or joint_deg}]};
+    sorted by chi2 (else by the first norm), largest first."""
+    from scipy.stats import chi2 as chi2_dist
+
+    r = np.atleast_2d(np.asarray(result.residuals, float))
+    kind = result.residual_kind
+    cols = [c for c in POSE_RESIDUAL_COLUMNS.get(kind, POSE_RESIDUAL_COLUMNS["joint"])
+            if c[1].stop is None or r.shape[1] >= c[1].stop]
+    pc = None if result.pose_chi2 is None else np.asarray(result.pose_chi2, float)
+    labels = list(result.labels) if result.labels else [f"#{k}" for k in range(len(r))]
+    rows = []
+    for k, lab in enumerate(labels[:len(r)]):
+        c2 = None if pc is None or not np.isfinite(pc[k]) else float(pc[k])
+        row = {"pose_id": str(lab), "chi2": c2,
+               "p_value": None if c2 is None else float(chi2_dist.sf(c2, r.shape[1]))}
+        row.update({key: float(np.linalg.norm(r[k, sl]) * f) for key, sl, f in cols})
+        rows.append(row)
+    first = cols[0][0] if cols else None
+    rows.sort(key=lambda e: -(e["chi2"] if e["chi2"] is not None else (e.get(first) or 0.0)))
+    return {"kind": kind, "how": "final residual (measured - model) per pose; chi2: squared norm of the pose's "
+            "whitened residual (its measurement covariance), expected about m = " + str(r.shape[1]) +
+            " for a right model", "poses": rows}
 
 
 def measurements_block(pms, **extra) -> dict:
@@ -239,6 +287,8 @@ def build_report(kind: str, *, source: dict, settings: dict, result, measurement
         report["accuracy"] = {k: v.to_dict() for k, v in accuracy.items()}
     if residuals is not None:
         report["residuals"] = residuals
+    if np.ndim(getattr(result, "residuals", None)) == 2 and len(result.residuals):
+        report["pose_residuals"] = pose_residuals_block(result)
     report.update(extra or {})
     report["warnings"] = warnings
     if timings is not None:
@@ -302,10 +352,13 @@ def summary_text(report: dict) -> str:
         pri = idf.get("prior_parameters") or []
         lines.append(f"identifiability: {idf['n_params']} parameters"
                      + (f" ({len(pri)} with a prior: {', '.join(pri)})" if pri else "")
-                     + f", rank {idf['rank']}, cond {idf['condition_number']:.3g}"
+                     + f", rank {idf['rank']}"
                      + (f"; not identifiable: {', '.join(idf['non_identifiable'])}" if idf["non_identifiable"] else ""))
+        lines.append(f"  condition number {idf['condition_number']:.3g}"
+                     + (f" (of the {idf['condition_number_of']})" if idf.get("condition_number_of") else ""))
     lines.append(f"identification ({ident['method']}): converged={ident['converged']} iterations={ident['iterations']} "
-                 f"cost {ident['cost_initial']:.4g} -> {ident['cost_final']:.4g}")
+                 f"cost {ident['cost_initial']:.4g} at the start -> {ident['cost_final']:.4g} (half the sum of squared "
+                 "whitened residuals, no unit; about half the residual dof when the model fits)")
     check = method_check_line(report["method_check"]) if "method_check" in report else None
     lines += [f"warning: {w}" for w in ident.get("warnings", []) if w != check]  # a disagreement: once, below
     if check:
@@ -317,8 +370,7 @@ def summary_text(report: dict) -> str:
         lines.append("intrinsics sensitivity (largest shift per px, in std): " + ", ".join(
             f"{k} -> {v['parameter']} {v['std_per_px']:+.3g}" for k, v in largest.items()))
     if "residuals" in report:
-        lines.append("residual RMS: " + "; ".join(f"{k} " + ", ".join(f"{x:.4g}" for x in vals)
-                                                  for k, vals in report["residuals"].items()))
+        lines.append(residuals_line(report["residuals"]))
     if "reprojection" in report:
         from ..measure.reprojection import reprojection_line
 
@@ -359,41 +411,6 @@ def _reference_lines(report: dict) -> list[str]:
     if "V2_rad" in a:
         out += f", V2 median {a['V2_rad']:.3g} rad (range {rg['V2_rad'][0]:.3g}-{rg['V2_rad'][1]:.3g})"
     return [out]
-
-
-def lack_of_fit_line(lof: dict) -> str:
-    """One summary line of an ``identify.lack_of_fit`` dict: what is flagged (or the smallest p-value) and the
-    joint errors (2nd harmonic, best-worst phase) the tests would detect."""
-    if lof.get("error"):
-        return f"lack of fit: {lof['error']}"
-    groups = [g for g in lof.get("groups", []) if g.get("p_value") is not None]
-    if lof.get("significant"):
-        head = f"lack of fit ({lof['test']} tests, level {lof['level']:g}): {lof['message']}"
-    elif groups:
-        g = min(groups, key=lambda g: g["p_value"])
-        head = (f"lack of fit ({lof['test']} tests, level {lof['level']:g}): no dependence on the joints or the image "
-                f"position (smallest p {g['p_value']:.2g}, {g['name']})")
-    else:
-        return "lack of fit: no test possible"
-    det = []
-    for g in groups:
-        h = next((h for h in g.get("harmonics", []) if h["order"] == 2), None)
-        if h and h["detectable_amplitude_deg"][0] is not None:
-            lo, hi = h["detectable_amplitude_deg"]
-            det.append(f"{g['term']} {lo:.2g}-{'any' if hi is None else f'{hi:.2g}'}")
-    return head + (f"; detectable joint error A sin(2q + phase), deg (best-worst phase; any: a phase the parameters "
-                   f"absorb): {', '.join(det)}" if det else "")
-
-
-def method_check_line(check: dict) -> str:
-    """'method check (a vs b on the same N poses): agree|DISAGREE at level L: chi2 .. on .. dof (p ..), max |z| ..'
-    of the report's ``method_check`` block (``experiment.steps.method_check``)."""
-    a, b = check["methods"]
-    verdict = "agree" if check["verdict"] == "agree" else "DISAGREE"
-    return (f"method check ({a} vs {b} on the same {check['n_poses']} poses): {verdict} at level {check['level']:g}: "
-            f"chi2 {check['chi2']:.3g} on {check['dof']} dof (p {check['p_value']:.2g}"
-            + (f"; {check['untested']} directions where they differ by < 3 % of a std untested" if check.get("untested")
-               else "") + f"), max |z| {check['max_abs_z']:.2f} ({check['worst']})")
 
 
 def _intrinsics_line(block: dict) -> str:
@@ -438,9 +455,12 @@ def _handeye_lines(report: dict) -> list[str]:
 
 
 def write_report(out_dir, report: dict, setup=None, result=None, problem=None, evaluations=None,
-                 plots: bool = True) -> Path:
-    """report.json + summary.txt (+ calibrated_model.yaml with a setup; + residuals.png,
-    parameters.png, and error_map.png with ``evaluations`` = {"before": Evaluation, "after": Evaluation})."""
+                 plots: bool = True, overlays=None) -> Path:
+    """report.json + summary.txt + report.html (+ calibrated_model.yaml with a setup; + residuals.png,
+    parameters.png, and error_map.png with ``evaluations`` = {"before": Evaluation, "after": Evaluation}).
+    overlays: an ``io.overlay.OverlaySource`` (the images of the run's poses): report.html then shows what the
+    detector found on the rejected and the worst poses. A failing plot, overlay or page costs a warning, never
+    the report."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     report["source"] = relative_source(report["source"], out)  # paths relative to report.json (io.portable)
@@ -457,9 +477,26 @@ def write_report(out_dir, report: dict, setup=None, result=None, problem=None, e
             files.update(_write_plots(out, report, setup, result, problem, evaluations))
         except Exception as exc:  # a plot must never cost the report
             report.setdefault("warnings", []).append(f"plotting failed: {exc}")
+    shown = None
+    if overlays is not None:
+        try:
+            from .overlay import build_overlays
+
+            shown = build_overlays(report, overlays)
+        except Exception as exc:  # an overlay must never cost the report
+            report.setdefault("warnings", []).append(f"overlay images failed: {exc}")
+    files["html"] = "report.html"
     report["files"] = files
     table = parameter_table_text(report.get("parameters") or [])
     write_text_atomic(out / "summary.txt", report.get("summary_text", "") + "\n" + (f"\n{table}\n" if table else ""))
+    try:
+        from .report_html import write_report_html
+
+        write_report_html(out, report, shown)
+    except Exception as exc:  # the page must never cost report.json
+        files.pop("html")
+        (out / "report.html").unlink(missing_ok=True)  # not an earlier run's page
+        report.setdefault("warnings", []).append(f"report.html failed: {exc}")
     write_json_atomic(out / files["report"], report)
     return out / files["report"]
 

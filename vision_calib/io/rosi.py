@@ -67,7 +67,7 @@ import numpy as np
 import yaml
 
 from ..errors import ConfigError, DataError
-from .atomic import write_text_atomic
+from ..serialize import write_text_atomic
 from .images import check_image_sizes, image_size, is_image
 from .recording import FORMAT, MAX_ABS_POSITION_M, check_inside
 
@@ -123,8 +123,9 @@ def _dictionary_name(value, where: str) -> str:
     return names[0]
 
 
-def _target(tf, where: str) -> dict:
-    """Our target dict from a ROS-I target_finder mapping."""
+def target_from_rosi(tf, where: str) -> dict:
+    """Our target dict (the keys of targets.spec.target_from_dict) from a ROS-I target_finder mapping;
+    ConfigError naming ``where`` and the key."""
     if not isinstance(tf, dict) or "type" not in tf:
         raise ConfigError(f"{where}: expected a mapping with a 'type' key")
     if tf["type"] not in CHARUCO_TYPES + CIRCLE_TYPES:
@@ -236,7 +237,7 @@ def import_rosi(src, dst, allow_symlinks: bool = False) -> Path:
     format. Returns dst; the written folder is read back with :func:`read_recording`."""
     from ..camera import CameraIntrinsics
     from .recording import read_recording
-    from .visp import _copy_no_looser
+    from .visp import copy_no_looser
 
     index = _index(Path(src))
     folder = index.parent
@@ -247,7 +248,7 @@ def import_rosi(src, dst, allow_symlinks: bool = False) -> Path:
     intr, where_i = _section(doc, "intrinsics", folder, "camera_intr.yaml", index)
     k = {key: _num(intr, key, where_i) for key in ("fx", "fy", "cx", "cy")}
     tf, where_t = _section(doc, "target_finder", folder, "target_finder.yaml", index)
-    target = _target(tf, where_t)
+    target = target_from_rosi(tf, where_t)
     noise = {}
     if "homography_threshold" in doc:  # ROS-I's acceptance of a view: our view rule at the same residual
         from ..measure.view_checks import RMS_K
@@ -299,7 +300,7 @@ def import_rosi(src, dst, allow_symlinks: bool = False) -> Path:
         d = dst / "images" / pid
         d.mkdir(parents=True, exist_ok=True)
         for j, p in enumerate(imgs):
-            _copy_no_looser(p, d / f"{j:02d}{p.suffix.lower()}")
+            copy_no_looser(p, d / f"{j:02d}{p.suffix.lower()}")
     write_text_atomic(dst / "poses.csv", buf.getvalue())
     write_text_atomic(dst / "recording.yaml", yaml.safe_dump(rec_doc, sort_keys=False))
     read_recording(dst)
@@ -384,4 +385,36 @@ def export_rosi(rec_folder, dst) -> Path:
     return dst
 
 
-__all__ = ["import_rosi", "export_rosi", "read_rosi_pose"]
+def read_rosi_image_set(src, allow_symlinks: bool = False, with_target: bool = True) -> dict:
+    """A ROS-I data set read for its images only (the noise-qualification layout: ``cal_data.yaml`` with
+    ``data: [{image: images/0.png}, ...]``, ``intrinsics`` and ``target_finder``, no poses; a hand-eye set's
+    ``pose`` keys are ignored). Returns {"index": Path of cal_data.yaml, "images": [Path] in the file's order
+    (an image listed twice appears twice), "intrinsics": {fx, fy, cx, cy} px, "dist": [k1, k2, p1, p2, k3]
+    (zeros unless the extension key is given), "target": our target dict (as :func:`import_rosi`; None when
+    ``with_target`` is False: the caller has its own target file and the finder is not read)}.
+    DataError/ConfigError naming the file and key (missing image, no data list, unsupported finder)."""
+    index = _index(Path(src))
+    folder = index.parent
+    doc = _load(index, "ROS-I data set index")
+    if not isinstance(doc, dict) or not isinstance(doc.get("data"), list) or not doc["data"]:
+        raise DataError(f"{index}: key 'data': expected a non-empty list of {{image: <file>}} entries")
+    intr, where_i = _section(doc, "intrinsics", folder, "camera_intr.yaml", index)
+    k = {key: _num(intr, key, where_i) for key in ("fx", "fy", "cx", "cy")}
+    target = target_from_rosi(*_section(doc, "target_finder", folder, "target_finder.yaml", index)) if with_target else None
+    dist = doc.get("distortion", [0.0] * 5)
+    if not (isinstance(dist, list) and len(dist) == 5 and all(isinstance(v, (int, float)) for v in dist)):
+        raise ConfigError(f"{index}: key 'distortion': expected [k1, k2, p1, p2, k3], got {dist!r}")
+    images = []
+    for i, e in enumerate(doc["data"]):
+        where = f"{index}: data[{i}]"
+        if not isinstance(e, dict) or not isinstance(e.get("image"), str):
+            raise DataError(f"{where}: expected {{image: <file>}}, got {e!r}")
+        img = folder / e["image"]
+        if not img.is_file():
+            raise DataError(f"{where}: file not found: {img}")
+        check_inside(img, folder, allow_symlinks)
+        images.append(img)
+    return {"index": index, "images": images, "intrinsics": k, "dist": [float(v) for v in dist], "target": target}
+
+
+__all__ = ["import_rosi", "export_rosi", "read_rosi_pose", "read_rosi_image_set"]

@@ -1,5 +1,16 @@
-"""ViSP files: camera XML (vpXmlParserCamera), pose YAML (t + theta-u vectors), and hand-eye folders
-(AprilTag eye-to-hand, chessboard tutorials) converted into recorded folders."""
+"""ViSP files: camera XML (vpXmlParserCamera), pose YAML (t + theta-u vectors), pattern descriptions
+(``chessboard-data.txt``, ``apriltag-data.txt``), and hand-eye folders (AprilTag eye-to-hand, chessboard
+eye-in-hand) converted into recorded folders (:func:`import_visp` picks the kind from the folder's own files).
+
+A ViSP hand-eye folder, as its acquisition apps write it (``visp-acquire-franka-calib-data``)::
+
+    franka_camera.xml        intrinsics (any ``*camera*.xml``)
+    franka_image-N.png       one image per robot pose (any ``*image-N.<png|jpg|bmp|tif>``)
+    franka_pose_rPe_N.yaml   flange pose in the robot base, t [m] + theta-u [rad] (``*pose_rPe_N`` /
+                             ``*pose_fPe_N`` / ``*w_P_ee-N``)
+    chessboard-data.txt      "Chessboard / 9 x 6 / square size: 0.0236 m" (inner corners, ViSP's -w x -h)
+    apriltag-data.txt        "36h11 ... / size: 0.048 m" (the tag family and side)
+"""
 
 from __future__ import annotations
 
@@ -105,7 +116,7 @@ def _detect_tag_id(image_path, dictionary: str) -> int:
     return int(ids[0][0])
 
 
-def _copy_no_looser(src_file: Path, dst_file: Path) -> None:
+def copy_no_looser(src_file: Path, dst_file: Path) -> None:
     """Copy a file's bytes; the copy is never more readable/writable than the source (mode & source mode)."""
     import shutil
 
@@ -130,17 +141,21 @@ def _collect(src: Path, allow_symlinks: bool):
     if not cams:
         raise DataError(f"{src}: no ViSP camera XML (*camera*.xml)")
     intr = read_visp_camera_xml(cams[0])
-    poses = {}
-    for p in src.glob("*pose_[rf]Pe_*.yaml"):
-        m = re.search(r"_(\d+)\.yaml$", p.name)
+    poses, named = {}, {}
+    for p in sorted([*src.glob("*pose_[rf]Pe_*.yaml"), *src.glob("*w_P_ee-*.yaml")]):
+        m = re.search(r"[_-](\d+)\.yaml$", p.name)
         if m:
+            if int(m.group(1)) in named:
+                raise DataError(f"{src}: two flange poses for image {m.group(1)}: {named[int(m.group(1))].name} and "
+                                f"{p.name}; keep one")
+            named[int(m.group(1))] = p
             T = read_visp_pose_yaml(check_inside(p, src, allow_symlinks))
             if np.max(np.abs(T[:3, 3])) > MAX_ABS_POSITION_M:
                 raise DataError(f"{p}: data: translation {np.max(np.abs(T[:3, 3])):.4g} m from the robot base "
                                 f"(limit {MAX_ABS_POSITION_M:g} m): millimetres written as metres? ViSP poses are in m")
             poses[int(m.group(1))] = T
     if not poses:
-        raise DataError(f"{src}: no ViSP flange poses (*_pose_rPe_N.yaml or *pose_fPe_N.yaml)")
+        raise DataError(f"{src}: no ViSP flange poses (*pose_rPe_N.yaml, *pose_fPe_N.yaml or *w_P_ee-N.yaml)")
     images = {}
     for p in sorted(src.glob("*image-*.*")):
         m = re.search(r"-(\d+)\.[A-Za-z]+$", p.name)
@@ -157,7 +172,7 @@ def _write_visp_recording(src, dst, intr, poses, images, mount: str, target: dic
 
     import yaml
 
-    from .atomic import write_text_atomic
+    from ..serialize import write_text_atomic
 
     dst.mkdir(parents=True, exist_ok=True)
     doc = {
@@ -183,42 +198,105 @@ def _write_visp_recording(src, dst, intr, poses, images, mount: str, target: dic
     for k, p in images.items():
         d = dst / "images" / str(k)
         d.mkdir(parents=True, exist_ok=True)
-        _copy_no_looser(p, d / f"00{p.suffix.lower()}")
+        copy_no_looser(p, d / f"00{p.suffix.lower()}")
     return dst
 
 
+#: ViSP's pattern descriptions (beside the images), in the order looked for
+PATTERN_FILES = ("chessboard-data.txt", "apriltag-data.txt")
+#: AprilTag families of ViSP's apriltag-data.txt first line -> OpenCV dictionaries
+TAG_FAMILIES = {"36h11": "DICT_APRILTAG_36h11", "36h10": "DICT_APRILTAG_36h10", "25h9": "DICT_APRILTAG_25h9",
+                "16h5": "DICT_APRILTAG_16h5"}
+
+
+def read_pattern_file(src, allow_symlinks: bool = False) -> dict | None:
+    """The pattern description of a ViSP folder: ``chessboard-data.txt`` ("Chessboard", "9 x 6" inner corners as
+    ViSP's -w x -h, "square size: 0.0236 m") -> {file, kind: "chessboard", inner: (cols, rows), square_m}, or
+    ``apriltag-data.txt`` ("36h11 ...", "size: 0.048 m") -> {file, kind: "apriltag", tag_m (None without a size
+    line), dictionary}; None
+    when the folder has neither. DataError naming the file when a value cannot be read, or when both exist."""
+    import re
+
+    from ..config import read_text
+    from .recording import check_inside
+
+    src = Path(src)
+    found = [src / n for n in PATTERN_FILES if (src / n).is_file()]
+    if not found:
+        return None
+    if len(found) > 1:
+        raise DataError(f"{src}: both {' and '.join(p.name for p in found)}: keep the one of the pattern in the images")
+    path = found[0]
+    text = read_text(check_inside(path, src, allow_symlinks), DataError)
+    num = r"([0-9]*\.?[0-9]+(?:[eE][+-]?[0-9]+)?)"
+    if path.name == "chessboard-data.txt":
+        size = re.search(r"^\s*(\d+)\s*[xX]\s*(\d+)\s*$", text, re.M)
+        sq = re.search(r"square[ _-]?size\s*:\s*" + num + r"\s*m\b", text)
+        if not size or not sq:
+            raise DataError(f"{path}: expected a line 'W x H' (inner corners, ViSP's -w x -h) and 'square size: S m'"
+                            f"; found {'neither' if not (size or sq) else 'no square size' if size else 'no W x H line'}")
+        return {"file": path, "kind": "chessboard", "inner": (int(size.group(1)), int(size.group(2))),
+                "square_m": float(sq.group(1))}
+    m = re.search(r"size\s*:\s*" + num + r"\s*m\b", text)
+    fam = re.search(r"\b(36h11|36h10|25h9|16h5)\b", text)
+    return {"file": path, "kind": "apriltag", "tag_m": float(m.group(1)) if m else None,
+            "dictionary": TAG_FAMILIES[fam.group(1)] if fam else "DICT_APRILTAG_36h11"}
+
+
+def import_visp(src, dst, chessboard: tuple[int, int] | None = None, square_m: float | None = None,
+                tag_m: float | None = None, tag_id: int | None = None, mount: str | None = None,
+                allow_symlinks: bool = False, notes: list | None = None) -> Path:
+    """A ViSP hand-eye folder (module docstring) into a recorded folder, the pattern taken from the folder's own
+    ``chessboard-data.txt`` or ``apriltag-data.txt`` unless given: ``chessboard`` (inner cols, rows) and
+    ``square_m`` [m] (each overriding the file's), or ``tag_m`` [m] / ``tag_id`` for an AprilTag. mount: where the
+    camera is for a chessboard (default eye_in_hand, ViSP's eye-in-hand tutorial); an AprilTag folder is ViSP's
+    eye-to-hand one (fixed camera, tag on the flange). DataError naming the files looked for when the pattern is
+    neither given nor described in the folder."""
+    src = Path(src)
+    if not src.is_dir():
+        raise DataError(f"{src}: ViSP folder not found")
+    info = read_pattern_file(src, allow_symlinks)
+    if chessboard is not None or (info and info["kind"] == "chessboard" and tag_m is None):
+        inner = chessboard or (info["inner"] if info and info["kind"] == "chessboard" else None)
+        square = square_m or (info["square_m"] if info and info["kind"] == "chessboard" else None)
+        if square is None:
+            raise ConfigError(f"{src}: --chessboard needs --square-m (the square side in metres): no "
+                              f"{PATTERN_FILES[0]} with 'square size: S m' in the folder")
+        return import_visp_chessboard(src, dst, *inner, square, mount=mount or "eye_in_hand",
+                                      allow_symlinks=allow_symlinks, notes=notes)
+    if (info is None or info["kind"] != "apriltag") and tag_m is None:
+        raise DataError(f"{src}: no pattern description: looked for {' and '.join(PATTERN_FILES)} (ViSP's data files "
+                        "beside the images) and found neither; give --chessboard COLSxROWS --square-m S for a "
+                        "chessboard, or --tag-size-m S for an AprilTag")
+    if mount not in (None, "fixed"):
+        raise ConfigError(f"{src}: an AprilTag folder is ViSP's eye-to-hand one (fixed camera, tag on the flange); "
+                          f"--mount {mount} applies to chessboard folders")
+    return import_visp_eye_to_hand(src, dst, tag_m=tag_m, tag_id=tag_id, allow_symlinks=allow_symlinks)
+
+
 def import_visp_eye_to_hand(src, dst, tag_m: float | None = None, tag_id: int | None = None,
-                            dictionary: str = "DICT_APRILTAG_36h11", allow_symlinks: bool = False):
+                            dictionary: str | None = None, allow_symlinks: bool = False):
     """Convert a ViSP hand-eye folder (``*_camera.xml``, ``*_pose_rPe_N.yaml`` flange poses in the
     base as t + theta-u, ``*_image-N.png``) into a recorded folder (DESIGN.md §5) with flange poses:
     fixed camera, one AprilTag on the flange. tag_m: tag side [m] (default: read from
-    ``apriltag-data.txt`` 'size: 0.048 m'). Files that are symbolic links leading out of ``src`` are
-    refused unless allow_symlinks; copied images keep no looser permissions than their source.
-    Returns the destination Path."""
-    import re
-
-    from .recording import check_inside
-
+    ``apriltag-data.txt`` 'size: 0.048 m'); dictionary: OpenCV's (default: the family named there, else
+    36h11). Files that are symbolic links leading out of ``src`` are refused unless allow_symlinks; copied
+    images keep no looser permissions than their source. Returns the destination Path."""
     src, dst = Path(src), Path(dst)
     intr, poses, images = _collect(src, allow_symlinks)
+    info = read_pattern_file(src, allow_symlinks) if tag_m is None or dictionary is None else None
+    info = info if info is not None and info["kind"] == "apriltag" else {}
     if tag_m is None:
-        info = src / "apriltag-data.txt"
-        from ..config import read_text
-
-        text = read_text(check_inside(info, src, allow_symlinks), DataError) if info.is_file() else ""
-        m = re.search(r"size:\s*([0-9.eE+-]+)\s*m", text)
-        if not m:
-            raise DataError(f"{src}: tag size unknown: give tag_m (no 'size: <x> m' in apriltag-data.txt); "
-                            "a chessboard folder needs --chessboard COLSxROWS --square-m S")
-        try:
-            tag_m = float(m.group(1))
-        except ValueError:
-            raise DataError(f"{info}: tag size {m.group(1)!r} is not a number; give tag_m") from None
+        tag_m = info.get("tag_m")
+        if tag_m is None:
+            raise DataError(f"{src}: tag size unknown: give tag_m (--tag-size-m); looked for 'size: <x> m' in "
+                            f"{PATTERN_FILES[1]}" + ("" if info else " (not in the folder)"))
+    dictionary = dictionary or info.get("dictionary", "DICT_APRILTAG_36h11")
     if not (tag_m > 0 and np.isfinite(tag_m)):
         raise DataError(f"tag size must be > 0 m, got {tag_m}")
     if tag_id is None:
         tag_id = _detect_tag_id(images[min(images)], dictionary) if images else 0
-    target = {"kind": "apriltag_grid", "name": f"tag36h11_{tag_id}", "rows": 1, "cols": 1,
+    target = {"kind": "apriltag_grid", "name": f"tag{dictionary.rsplit('_', 1)[-1]}_{tag_id}", "rows": 1, "cols": 1,
               "dictionary": dictionary, "tag_m": float(tag_m), "spacing_m": 0.01, "first_id": int(tag_id),
               "margin_m": 0.01}
     return _write_visp_recording(src, dst, intr, poses, images, "fixed", target)

@@ -121,7 +121,8 @@ def model31_names(shared_L: bool = False) -> tuple[str, ...]:
     return tuple(names)
 
 
-def _kind(name: str) -> str:
+def param_kind(name: str) -> str:
+    """"angle" or "length": the ParameterSet kind of an H4 parameter name."""
     base = name.split(".")[-1]
     if name.startswith("q0_") or base.startswith(("alpha", "psi", "beta", "theta")):
         return "angle"
@@ -588,25 +589,7 @@ class H4Robot:
             return J, Jp @ self.nacelle_pose_jacobian_meas(T_cam_target, x)
         return J
 
-    # ------------------------------------------------------------------ conversions / variants
-    def to_model31(self, x=None) -> "H4Robot":
-        """Exact model-31 description of a model-12 robot (at x, default nominal); d = d12.
-        Free mask: variant H (d and B_T_C.theta fixed as well as M_T_E.z). See :mod:`.h4_variants`."""
-        from .h4_variants import to_model31
-
-        return to_model31(self, x)
-
-    def variant(self, letter: str) -> "H4Robot":
-        """Seed table 2 variant: same values, free mask (and arm-length sharing for E) set.
-        A-D (model 12; M_T_E.z fixed): A fixes h and l, B fixes h, C fixes l, D fixes none
-        (17, 18, 18, 19 free). E-H (model 31; M_T_E.z, d and B_T_C.theta fixed -- the two
-        couplings of the base-frame form, see module doc): H none (36 free), G fixes l1..4 (32),
-        F fixes h and l1..4 (31), E also shares one arm length h4.L (28). A model-12 robot
-        asked for E-H is converted with :meth:`to_model31` first. See :mod:`.h4_variants`."""
-        from .h4_variants import variant
-
-        return variant(self, letter)
-
+    # ------------------------------------------------------------------ copies
     def with_values(self, x) -> "H4Robot":
         """Copy whose nominal values are x (n,) (e.g. a perturbed 'true' robot)."""
         return replace(self, params=self.params.with_nominal(self._x(x)))
@@ -615,10 +598,3 @@ class H4Robot:
         """The seed's 81-pose grid on this robot's workspace, (81, 4)."""
         return pose_grid_81(self.center, self.size, self.theta_deg)
 
-
-# ----------------------------------------------------------------------------- loading
-def load_h4_robot(path, model: str | None = None) -> H4Robot:
-    """Load an H4 scene file (see scenes/robots/h4.yaml); implemented in :mod:`.h4_io`."""
-    from .h4_io import load_h4_robot as _load
-
-    return _load(path, model)

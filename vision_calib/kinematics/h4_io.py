@@ -1,5 +1,5 @@
 """H4 scene-file loader (scenes/robots/h4.yaml): geometry, external parameters, workspace,
-column scales. Split from :mod:`.h4`; ``vision_calib.kinematics.h4.load_h4_robot`` calls it."""
+column scales. Split from :mod:`.h4` (imported from it, never the reverse)."""
 
 from __future__ import annotations
 
@@ -17,9 +17,10 @@ from .h4 import (
     EXTERNAL_NAMES,
     MODEL12_NAMES,
     H4Robot,
-    _kind,
+    param_kind,
     model31_names,
 )
+from .h4_variants import to_model31, variant
 from .params import ParameterSet
 
 
@@ -52,7 +53,7 @@ _H4_SCHEMA = {
 def load_h4_robot(path, model: str | None = None) -> H4Robot:
     """Load an H4 scene file (see scenes/robots/h4.yaml; lengths m, angles in *_deg keys).
     model: "12" or "31" (default: the file's ``model``); model 31 is built from the model-12
-    nominal by :meth:`H4Robot.to_model31`. Free mask: variant D (model 12) or H (model 31),
+    nominal by :func:`.h4_variants.to_model31`. Free mask: variant D (model 12) or H (model 31),
     then the file's optional ``fixed`` list of names is applied."""
     from ..config import parse_yaml
 
@@ -94,20 +95,20 @@ def load_h4_robot(path, model: str | None = None) -> H4Robot:
     sc = Section(doc.get("scale") or {}, path, "scale")
     scale_len = sc.number("length_m", float, 1e-3, min=0, min_open=True, unit="m")
     scale_ang = np.deg2rad(sc.number("angle_deg", float, float(np.rad2deg(1e-3)), min=0, min_open=True, unit="deg"))
-    kinds = [_kind(n) for n in names]
+    kinds = [param_kind(n) for n in names]
     ps = ParameterSet.from_lists(names, [vals[n] for n in names], kinds,
                                  scale=[scale_len if k == "length" else scale_ang for k in kinds])  # fmt: skip
     ws = doc.get("workspace", {}) or {}
     center = _get(ws, "center", path, "workspace.", (3,)) if "center" in ws else DEFAULT_CENTER
     size = _get(ws, "size", path, "workspace.", (3,)) if "size" in ws else DEFAULT_SIZE
     th = tuple(Section(ws, path, "workspace").floats("theta_deg", None, np.asarray(DEFAULT_THETA_DEG, float)))
-    robot = H4Robot("12", ps, d12=d12, R_BC0=tilts["B_T_C"], R_ME0=tilts["M_T_E"], center=center, size=size,
-                    theta_deg=th).variant("D")  # fmt: skip
+    robot = variant(H4Robot("12", ps, d12=d12, R_BC0=tilts["B_T_C"], R_ME0=tilts["M_T_E"], center=center, size=size,
+                            theta_deg=th), "D")  # fmt: skip
     model = str(doc.get("model", "12")) if model is None else str(model)
     if model not in ("12", "31"):
         raise ConfigError(f"{path}: 'model' must be \"12\" or \"31\", got {model!r}")
     if model == "31":
-        robot = robot.to_model31()
+        robot = to_model31(robot)
     fixed = doc.get("fixed") or []
     if fixed:
         try:

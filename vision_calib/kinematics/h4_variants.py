@@ -1,5 +1,5 @@
 """H4 model conversion (model 12 -> 31) and the seed's table-2 variants A-H (free masks).
-Split from :mod:`.h4`; :meth:`H4Robot.to_model31` and :meth:`H4Robot.variant` call these."""
+Functions of an :class:`~.h4.H4Robot` (split from :mod:`.h4`, which they import, never the reverse)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..errors import ParameterError
-from .h4 import EPS_D, EPS_H, EXTERNAL_NAMES, TILT_NAMES, H4Robot, _kind, model31_names
+from .h4 import EPS_D, EPS_H, EXTERNAL_NAMES, TILT_NAMES, H4Robot, param_kind, model31_names
 from .params import ParameterSet
 
 
@@ -41,8 +41,8 @@ def to_model31(robot: H4Robot, x=None) -> H4Robot:
     all_names = names + EXTERNAL_NAMES
     sc_len, sc_ang = robot.params.scale[robot.params.index("h4.L")], robot.params.scale[robot.params.index("h4.alpha1")]
     ext_scale = dict(zip(robot.params.names, robot.params.scale))
-    sc = [ext_scale.get(nm, sc_ang if _kind(nm) == "angle" else sc_len) for nm in all_names]
-    ps = ParameterSet.from_lists(all_names, geo + ext, [_kind(n) for n in all_names], scale=sc)
+    sc = [ext_scale.get(nm, sc_ang if param_kind(nm) == "angle" else sc_len) for nm in all_names]
+    ps = ParameterSet.from_lists(all_names, geo + ext, [param_kind(n) for n in all_names], scale=sc)
     r = replace(robot, model="31", params=ps, P1=P1, shared_L=False)
     return variant(r, "H")
 
@@ -52,7 +52,7 @@ def variant(robot: H4Robot, letter: str) -> H4Robot:
     (17, 18, 18, 19 free). E-H (model 31; M_T_E.z, d and B_T_C.theta fixed -- the two
     couplings of the base-frame form, see module doc): H none (36 free), G fixes l1..4 (32),
     F fixes h and l1..4 (31), E also shares one arm length h4.L (28). A model-12 robot
-    asked for E-H is converted with :meth:`to_model31` first."""
+    asked for E-H is converted with :func:`to_model31` first."""
     letter = str(letter).upper()
     if robot.tilt_params:  # the variant's mask on the rest; the tilts keep theirs
         free = [robot.params.free[robot.params.index(n)] for n in TILT_NAMES]

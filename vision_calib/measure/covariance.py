@@ -27,7 +27,7 @@ accounted for by propagation: the pose error of the (unweighted) PnP is delta = 
 
     Cov(delta) = (J^T J)^-1 J^T D J (J^T J)^-1      [m, rad; frames.pose_error convention].
 
-Pixel-phase-locked corner error (ChArUco corners, cv2.cornerSubPix; ``TargetKind.phase_model``). The
+Pixel-phase-locked corner error (ChArUco corners, cv2.cornerSubPix; ``TargetKind.phase_locked_share``). The
 systematic error of a corner is nearly a periodic function of its sub-pixel position in the detector's
 (distorted) pixels: on noise-free renders of the UR5e and RX-90 scenes (1500 poses each) the errors of two
 corners of a pose correlate +0.91 when their separation is within 0.1 px of an integer in u and v, and -0.81
@@ -41,7 +41,7 @@ over the UR5e poses; chi2_6 / 6: 1, 2.80). With the board's sub-pixel position r
 (du, dv: the corners' separation in px), i.e. 8 random amplitudes (cos and sin of 2 pi u and of 2 pi v for
 each coordinate, :func:`phase_directions`) entering as columns sigma_s S0, and sigma_s^2 estimated with
 E[r^T r] = sum_i (sigma_f^2 / n_i)(1 - H_ii) + sigma_s^2 (||(I - H) S0||_F^2 + (1 - rho)(2K - 6)).
-rho (:data:`PHASE_LOCKED_SHARE`, ``benchmarks/bench_measure.py --phase-terms``): fitting a cos 2 pi du +
+rho (``TargetKind.phase_locked_share``, ``benchmarks/bench_measure.py --phase-terms``): fitting a cos 2 pi du +
 b cos 2 pi dv to the pairs per 3-degree band of the board's edge angle to the pixel axes gives a + b = 0.88-0.97
 (3000 random views, blur 0.6 px; 0.82-0.96 at 0.3 px, 0.83-0.94 at 1.2 px, 900 views each). The split between
 the two terms depends on the edge angle and the blur (a = 0.97 at 0-3 deg and 0.29-0.31 at 9-21 deg with blur
@@ -84,7 +84,7 @@ of the independent part into the same fit):
   RMS (0.045, 0.055) px (leak 0.02; ``apriltag_offset_px`` = -0.5 has corrected its +0.46 to +0.49 px
   convention offset); strain and keystone 0.045-0.087 px (leak 0.036-0.074; on a second pose set
   0.033-0.053, leak 0.032-0.064); growth at the leak.
-:data:`DETECTOR_TERMS` adds them as columns of S, per kind and corner estimator (measured with
+``TargetKind.bias_columns`` adds them as columns of S, per kind and corner estimator (measured with
 ``benchmarks/bench_measure.py --detector-terms``).
 """
 
@@ -96,6 +96,8 @@ import numpy as np
 
 from ..camera import CameraIntrinsics
 from ..frames import transform_points
+from ..targets.kinds import KINDS
+from ..targets.kinds.image_model import field_directions
 from .pnp import project_pinhole, reprojection_jacobian
 
 
@@ -103,37 +105,6 @@ from .pnp import project_pinhole, reprojection_jacobian
 #: keystone (u, v); zero: none left in simulation once the distortion is applied on the supersampled render
 #: (module docstring); a real camera's lens-model residual can be given with MeasureConfig.lens_field_std
 LENS_FIELD_STD = (0.0, 0.0, 0.0, 0.0)
-#: stds [px] of the AprilTag detector terms, per corner estimator (module docstring): common shift per axis,
-#: tag growth, smooth field (strain u, v, keystone u, v; px at the pattern's edge)
-APRILTAG_TERMS = {"edges": (0.0, 0.007, (0.0, 0.0, 0.0, 0.0)),
-                  "opencv": (0.05, 0.015, (0.05, 0.05, 0.05, 0.05))}
-
-
-def _apriltag_terms(ids: np.ndarray, uv_px: np.ndarray, estimator: str = "edges") -> np.ndarray:
-    """(2K, m) columns of S for AprilTag-grid corners (ids 4 marker + k): common shift u, v, tag growth and
-    the smooth field terms, scaled by :data:`APRILTAG_TERMS` of the corner estimator; zero columns dropped."""
-    shift, growth, field = APRILTAG_TERMS[estimator]
-    tag = np.asarray(ids) // 4
-    centre = np.zeros_like(uv_px)
-    for t in np.unique(tag):
-        centre[tag == t] = uv_px[tag == t].mean(axis=0)
-    d = uv_px - centre
-    n = d / np.maximum(np.linalg.norm(d, axis=1), 1e-9)[:, None]
-    n[np.bincount(tag)[tag] < 2] = 0.0  # a lone corner of its tag: no growth direction
-    S = np.column_stack([shift * np.tile(np.eye(2), (len(ids), 1)), growth * n.ravel(),
-                         field_directions(uv_px) * np.asarray(field, float)])
-    return S[:, np.any(S != 0, axis=0)]
-
-
-#: per bias model (``TargetKind.bias_model``): (corner ids (K,), uv (K, 2) px, corner estimator) -> (2K, m)
-#: detector-bias columns of S (module docstring)
-DETECTOR_TERMS = {"apriltag": _apriltag_terms}
-
-#: share rho of the systematic corner variance sigma_s^2 that is locked to the pixel phase, per
-#: ``TargetKind.phase_model`` (module docstring; ``benchmarks/bench_measure.py --phase-terms``)
-PHASE_LOCKED_SHARE = {"subpix": 0.92}
-
-
 def phase_directions(uv_dist_px: np.ndarray, share: float) -> np.ndarray:
     """(2K, 8) columns S0 of the pixel-phase-locked corner error per unit sigma_s (module docstring): b = sigma_s
     (S0 xi + sqrt(1 - share) eta), xi (8,), eta (2K,) independent N(0, 1). uv_dist_px (K, 2): the corners in the
@@ -146,17 +117,6 @@ def phase_directions(uv_dist_px: np.ndarray, share: float) -> np.ndarray:
     S0[0::2, :4] = F
     S0[1::2, 4:] = F
     return S0
-
-
-def _kind_attr(target_kind, attr):
-    from ..targets.kinds import KINDS
-
-    kind = KINDS.get(target_kind)
-    return None if kind is None else getattr(kind, attr, None)
-
-
-def _bias_model(target_kind):
-    return _kind_attr(target_kind, "bias_model")
 
 
 def corner_estimator(detections) -> str:
@@ -191,21 +151,6 @@ def _sandwich(J: np.ndarray, d: np.ndarray, S: np.ndarray | None = None) -> np.n
     return A @ M @ A
 
 
-def field_directions(uv_px: np.ndarray) -> np.ndarray:
-    """(2K, 4) d(uv)/d(eps_u, eps_v, kappa_u, kappa_v) [px per px of amplitude] of the smooth corner error
-    field (module docstring) at the corners uv_px (K, 2): x = (uv - mean) / (largest |uv - mean|), strain
-    terms e = a x (per axis), keystone terms e = x (kappa . x); rows (u0, v0, u1, v1, ...)."""
-    d = uv_px - uv_px.mean(axis=0)
-    x = d / max(float(np.max(np.linalg.norm(d, axis=1))), 1e-9)
-    A = np.zeros((2 * len(x), 4))
-    A[0::2, 0] = x[:, 0]
-    A[1::2, 1] = x[:, 1]
-    for j in range(2):
-        A[0::2, 2 + j] = x[:, 0] * x[:, j]
-        A[1::2, 2 + j] = x[:, 1] * x[:, j]
-    return A
-
-
 def pose_covariance(T_cam_target: np.ndarray, p_target: np.ndarray, mean_uv_px: np.ndarray, n_obs: np.ndarray,
                     sigma_frame_px: float, intr: CameraIntrinsics,
                     field_std=None, target_kind: str | None = None, ids=None,
@@ -217,10 +162,10 @@ def pose_covariance(T_cam_target: np.ndarray, p_target: np.ndarray, mean_uv_px: 
     frame-to-frame corner std (px, per coordinate; NaN with a single frame: then the random and
     systematic parts cannot be told apart and the whole residual variance is used as one sigma);
     field_std: (4,) stds of the smooth error field terms (None: :data:`LENS_FIELD_STD`); target_kind, ids
-    (K,) corner ids: add the kind's detector-bias terms (:data:`DETECTOR_TERMS`) of the corner estimator
+    (K,) corner ids: add the kind's detector-bias terms (``TargetKind.bias_columns``) of the corner estimator
     ("edges" | "opencv", :func:`corner_estimator`); phase_share: share of the systematic variance locked to the
     pixel phase (:func:`phase_directions`; 0: independent corners, the default; None: the kind's
-    :data:`PHASE_LOCKED_SHARE`, 0 for kinds without one; used with >= 2 frames)."""
+    ``TargetKind.phase_locked_share``, 0 for kinds without one; used with >= 2 frames)."""
     p_target = np.asarray(p_target, dtype=float)
     n_obs = np.asarray(n_obs, dtype=float)
     J = reprojection_jacobian(T_cam_target, p_target, intr)
@@ -233,14 +178,16 @@ def pose_covariance(T_cam_target: np.ndarray, p_target: np.ndarray, mean_uv_px: 
         field_std = LENS_FIELD_STD
     uv = project_pinhole(T_cam_target, p_target, intr)
     S = field_directions(uv) * np.asarray(field_std, float)
-    model = _bias_model(target_kind)
-    if model in DETECTOR_TERMS and ids is not None:
-        S = np.column_stack([S, DETECTOR_TERMS[model](np.asarray(ids, dtype=int), uv, estimator)])
+    kind = KINDS.get(target_kind)
+    if kind is not None and ids is not None:
+        cols = kind.bias_columns(np.asarray(ids, dtype=int), uv, estimator)
+        if cols is not None:
+            S = np.column_stack([S, cols])
     S_perp = S - J @ (Jp @ (J.T @ S))
     ss_field = float(np.sum(S_perp**2))  # expected share of the strain in r^T r
     # systematic part per unit sigma_s^2: independent (nugget) + phase-locked columns S0 (module docstring)
     if phase_share is None:
-        phase_share = PHASE_LOCKED_SHARE.get(_kind_attr(target_kind, "phase_model"), 0.0)
+        phase_share = KINDS[target_kind].phase_locked_share if target_kind in KINDS else 0.0
     if not 0.0 <= phase_share <= 1.0:
         raise ValueError(f"pose_covariance: phase_share must be in [0, 1], got {phase_share}")
     nug, S0 = np.ones(J.shape[0]), np.zeros((J.shape[0], 0))
@@ -275,101 +222,15 @@ def corner_error_split(T_true: np.ndarray, p_target: np.ndarray, mean_uv_px: np.
             "orthogonal_rms_px": float(np.sqrt(np.mean((e - ex) ** 2))), "n": int(len(e))}
 
 
-# ----------------------------------------------------------------------------- image-model bound
-# The bound below is computed from the image model alone (the sensor's noise and blur, the target's
-# contrast, the detector's window), not from measured frames: for a corner at position q seen in an image
-# mu(x - q) + noise, the Fisher information is F = sum over the pixels the detector uses of
-# grad(mu) grad(mu)^T / var(pixel) (Gaussian pixel noise), and CRLB(q) = F^-1.
-# - mu: white 255, black 0 (target texture) times exposure x gain, blurred by the sensor blur and the
-#   pixel's area (variance blur_sigma^2 + 1/12 px^2; a disc of radius R adds R^2 / 4).
-# - var(pixel) [grey^2] = photon (mu gain 255 / full_well) + read noise^2 + 1/12 (8-bit rounding).
-# - ChArUco (saddle corner refined by cv2.cornerSubPix in a (2 w + 1)^2 window, w = DetectConfig.subpix_win):
-#   mu = mid + C/2 erf(n1.x / (sqrt2 s)) erf(n2.x / (sqrt2 s)), n1, n2 the image normals of the two
-#   board edges through the corner; F summed over the window's pixels.
-# - Chessboard: the same saddle model (corners from the saddle-point fit of measure/saddle.py, window radius
-#   <= 12 px; the (2 w + 1)^2 window is an approximation): measured corner scatter 0.0045 / 0.0172 px vs the
-#   model's 0.0038 / 0.0159 px at read noise 1 / 8 (benchmarks/bench_detect.py --targets chessboard), i.e. the
-#   model is 18 % / 8 % optimistic.
-# - Circle grid (dark-area centroid of each dot): see :func:`circle_info`.
-# - AprilTag grid (OpenCV's AprilTag refinement fits a line to each tag side and intersects them): per
-#   unit length an edge of contrast C gives I1 = C^2 / (2 sqrt(pi) s var_mid); a line fitted over a side of
-#   L px locates its end (the corner) along its normal with variance 4 / (I1 L); F = sum_i n_i n_i^T I1 L_i / 4.
-# Corners are taken as independent and the distortion's local scale (~1) is ignored.
-
-def _edge_sigma_px(effects) -> float:
-    return float(np.sqrt(effects.blur_sigma_px**2 + effects.blur_disc_radius_px**2 / 4 + 1.0 / 12))
-
-
-def pixel_variance(mean_grey, effects) -> np.ndarray:
-    """Per-pixel noise variance [grey^2] of the sensor model (sensor.SensorEffects) at mean grey levels."""
-    mean_grey = np.asarray(mean_grey, dtype=float)
-    v = np.full(mean_grey.shape, effects.read_noise_grey**2 + 1.0 / 12)
-    if effects.full_well_e > 0:
-        v = v + np.maximum(mean_grey - effects.black_level_grey, 0.0) * effects.gain * 255.0 / effects.full_well_e
-    return v
-
-
-def _contrast(effects) -> float:
-    return 255.0 * effects.exposure * effects.gain
-
-
-def saddle_info(normals: np.ndarray, effects, half_win: int) -> np.ndarray:
-    """(K, 2, 2) Fisher information [1/px^2] of saddle corners with edge normals (K, 2, 2) in a
-    (2 half_win + 1)^2 pixel window (see the comment above)."""
-    g = np.arange(-half_win, half_win + 1, dtype=float)
-    P = np.stack(np.meshgrid(g, g), axis=-1).reshape(-1, 2)  # (N, 2)
-    s, C = _edge_sigma_px(effects), _contrast(effects)
-    a1 = np.einsum("nd,kd->kn", P, normals[:, 0]) / s
-    a2 = np.einsum("nd,kd->kn", P, normals[:, 1]) / s
-    e1, e2 = erf_(a1 / np.sqrt(2)), erf_(a2 / np.sqrt(2))
-    mu = C / 2 * (1 + e1 * e2) + effects.black_level_grey
-    k = np.sqrt(2 / np.pi) / s
-    grad = C / 2 * k * ((np.exp(-a1**2 / 2) * e2)[..., None] * normals[:, None, 0]
-                        + (np.exp(-a2**2 / 2) * e1)[..., None] * normals[:, None, 1])  # (K, N, 2)
-    w = 1.0 / pixel_variance(mu, effects)
-    return np.einsum("kn,kna,knb->kab", w, grad, grad)
-
-
-def tag_edge_info(normals: np.ndarray, side_px: np.ndarray, effects) -> np.ndarray:
-    """(K, 2, 2) Fisher information [1/px^2] of tag corners from two fitted sides of side_px (K, 2) px."""
-    s, C = _edge_sigma_px(effects), _contrast(effects)
-    I1 = C**2 / (2 * np.sqrt(np.pi) * s) / pixel_variance(C / 2 + effects.black_level_grey, effects)
-    return np.einsum("ki,kia,kib->kab", I1 * side_px / 4, normals, normals)
-
-
-def erf_(x):  # noqa: D103 (scipy imported lazily: measure imports stay light)
-    from scipy.special import erf
-
-    return erf(x)
-
-
 def corner_info(target, T_cam_target, p_target, intr: CameraIntrinsics, effects, detect_config=None) -> np.ndarray:
     """(K, 2, 2) image-model Fisher information of the target's corners p_target (K, 3) seen from
-    T_cam_target, by target kind (:data:`CORNER_INFO`)."""
+    T_cam_target: the target kind's image model (``TargetKind.corner_info``, :mod:`vision_calib.targets.kinds.image_model`)."""
     from .detect import DetectConfig
     from .pnp import corner_edge_normals
 
     cfg = detect_config or DetectConfig()
     normals, scale = corner_edge_normals(T_cam_target, p_target, intr)
-    return CORNER_INFO[target.kind_impl.info_model](target, normals, scale, effects, cfg)
-
-
-def circle_info(radius_px: np.ndarray, effects) -> np.ndarray:
-    """(K, 2, 2) Fisher information [1/px^2] of dot centres from their whole edge: a dot of radius R px
-    (mean over the two axes) is an edge of length 2 pi R whose normals cover all directions, so
-    F = I1 pi R I2 (I1 as for a tag side)."""
-    s, C = _edge_sigma_px(effects), _contrast(effects)
-    I1 = C**2 / (2 * np.sqrt(np.pi) * s) / pixel_variance(C / 2 + effects.black_level_grey, effects)
-    return np.einsum("k,ab->kab", I1 * np.pi * np.asarray(radius_px, float), np.eye(2))
-
-
-#: per corner image model (``TargetKind.info_model``): (target, normals (K, 2, 2), px per metre along the
-#: target axes (K, 2), effects, DetectConfig) -> Fisher blocks (K, 2, 2)
-CORNER_INFO = {
-    "saddle": lambda t, n, sc, eff, cfg: saddle_info(n, eff, cfg.subpix_win),
-    "tag_edge": lambda t, n, sc, eff, cfg: tag_edge_info(n, sc * t.tag_m, eff),
-    "circle": lambda t, n, sc, eff, cfg: circle_info(sc.mean(axis=1) * t.diameter_m / 2, eff),
-}
+    return target.kind_impl.corner_info(target, normals, scale, effects, cfg.subpix_win)
 
 
 def image_bound_pose_cov(target, intr: CameraIntrinsics, T_cam_target: np.ndarray, effects, n_frames: int = 1,

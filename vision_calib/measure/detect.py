@@ -20,7 +20,7 @@ import numpy as np
 
 from ..camera import CameraIntrinsics
 from ..errors import ConfigError
-from ..io.atomic import jsonable
+from ..serialize import jsonable
 
 
 def _kind(kind: str):
@@ -196,8 +196,9 @@ def _detector(target, config: DetectConfig):
 
 
 # ----------------------------------------------------------------------------- detection
-def _load_checked(image, intrinsics, frame_index):
-    """-> (grey image, size, source, None) or (None, size, source, invalid Detection)."""
+def load_checked(image, intrinsics, frame_index):
+    """A frame loaded grey and checked against the intrinsics' size: (grey image, size (w, h) px, source, None),
+    or (None, size, source, invalid Detection) naming why."""
     source = str(image) if isinstance(image, (str, Path)) else "array"
     img, why = load_gray(image)
     if img is None:
@@ -216,10 +217,10 @@ def detect(image, target, intrinsics: CameraIntrinsics | None = None, frame_inde
     images: returns ``Detection(valid=False, reason=...)``. intrinsics: when given, the image
     size must match (width, height)."""
     t0 = time.perf_counter()
-    img, size, source, bad = _load_checked(image, intrinsics, frame_index)
+    img, size, source, bad = load_checked(image, intrinsics, frame_index)
     if bad is not None:
         return bad
-    return _detect_gray(img, size, source, target, frame_index, config, t0, intrinsics=intrinsics)
+    return detect_gray(img, size, source, target, frame_index, config, t0, intrinsics=intrinsics)
 
 
 def _find_corners(img, target, config: DetectConfig, diag: dict, intrinsics=None):
@@ -228,14 +229,15 @@ def _find_corners(img, target, config: DetectConfig, diag: dict, intrinsics=None
     return target.kind_impl.find_corners(target, det, img, config, diag, intrinsics)
 
 
-def _subpix(img, uv, win):
+def subpix(img, uv, win):
+    """uv (K, 2) px refined by cv2.cornerSubPix on the grey image (window win x win px, eps 1e-4 px)."""
     crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 100, 1e-4)
     pts = uv.astype(np.float32).reshape(-1, 1, 2)
     cv2.cornerSubPix(img, pts, (int(win), int(win)), (-1, -1), crit)
     return pts.reshape(-1, 2).astype(np.float64)
 
 
-def _detect_gray(img, size, source, target, frame_index, config: DetectConfig, t0,
+def detect_gray(img, size, source, target, frame_index, config: DetectConfig, t0,
                  post=None, intrinsics=None) -> Detection:
     """Detection on a loaded grey image. post: optional (img, ids, uv) -> (ids, uv) refinement replacing
     the extra cornerSubPix pass (the seeded batch mode's per-frame estimator). intrinsics: passed to the
@@ -254,7 +256,7 @@ def _detect_gray(img, size, source, target, frame_index, config: DetectConfig, t
         if post is not None and len(ids):
             ids, uv = post(img, ids, uv)
         elif config.extra_subpix_for(target.kind) and len(ids):
-            uv = _subpix(img, uv, config.subpix_win)
+            uv = subpix(img, uv, config.subpix_win)
     except cv2.error as exc:
         return _invalid(f"OpenCV detection error: {exc}".splitlines()[0], frame_index, size, **diag)
     diag["n_corners"] = int(len(ids))
@@ -262,16 +264,3 @@ def _detect_gray(img, size, source, target, frame_index, config: DetectConfig, t
     if len(ids) < config.min_corners:
         return Detection(False, f"too few corners: {len(ids)} < {config.min_corners}", ids, uv, size, frame_index, diag)
     return Detection(True, "", ids, uv, size, frame_index, diag)
-
-
-def detect_batch(images, target, intrinsics: CameraIntrinsics | None = None,
-                 config: DetectConfig = DetectConfig()) -> list[Detection]:
-    """Detect in every frame of a pose: images is a (N, H, W) array or a sequence of paths/arrays.
-    Returns N Detections (frame_index = position); never raises on a bad frame. ``config.batch``:
-    "seeded" detects once and refines the other frames from those corners (:mod:`.seeded`),
-    "per_frame" runs :func:`detect` on every frame."""
-    if config.batch == "seeded":
-        from .seeded import detect_seeded
-
-        return detect_seeded(images, target, intrinsics, config)
-    return [detect(im, target, intrinsics, i, config) for i, im in enumerate(images)]

@@ -21,9 +21,10 @@ import numpy as np
 from .. import frames
 from ..camera import CameraIntrinsics
 from ..errors import ConfigError
-from ..io.atomic import jsonable
+from ..serialize import jsonable
 from .covariance import corner_estimator, pose_covariance
-from .detect import DetectConfig, Detection, detect_batch
+from .batch import detect_batch
+from .detect import DetectConfig, Detection
 from .pnp import (project_pinhole, solve_pnp_planar,
                   target_lookup, undistort_px)
 from .view_checks import check_view, hull_area
@@ -37,7 +38,7 @@ class MeasureConfig:
     a smooth per-pose corner error field (a lens-model residual) in the covariance (None:
     ``covariance.LENS_FIELD_STD``, zeros: none measured in simulation). phase_share: share of the systematic
     corner variance locked to the pixel phase (0, the default: independent corner errors; None: the target
-    kind's ``covariance.PHASE_LOCKED_SHARE``, 0.92 for ChArUco's cornerSubPix corners; the module docstring of
+    kind's ``TargetKind.phase_locked_share``, 0.92 for ChArUco's cornerSubPix corners; the module docstring of
     measure/covariance.py says where it helps and where it fails).
     min_view_corners, min_area_fraction, corner_noise_px: the per-view rule of
     :mod:`vision_calib.measure.view_checks` (>= 6 corners, or all of a smaller target; corner hull >= 10 %
@@ -131,8 +132,7 @@ def measure_pose(detections: Sequence[Detection], target, intrinsics: CameraIntr
     (invalid frames are skipped and recorded; an unusable pose gives valid=False + reason). ConfigError for a
     target whose poses are ambiguous (a 180-degree-symmetric board, ``allow_symmetric``).
     Longer than 80 lines: one pass over the frames' detections (validity, averaging, PnP, residuals, covariance, diagnostics) sharing the per-corner arrays."""
-    if hasattr(target, "check_pose_measurable"):
-        target.check_pose_measurable()  # ConfigError: a 180-degree-symmetric board gives ambiguous poses
+    target.check_pose_measurable()  # ConfigError: a 180-degree-symmetric board gives ambiguous poses
     lookup = target_lookup(target)
     need = max(config.min_corners, min(config.min_view_corners, len(lookup)))  # per-view rule: view_checks
     board_area = hull_area(np.array([p[:2] for p in lookup.values()]))

@@ -86,5 +86,6 @@ def reprojection_line(block: dict) -> str:
         other = "n/a" if cal.get("rms_px") is None else f"{cal['rms_px']:.3f} px"
         how = (f" with the intrinsics the fit ended at (calibrated + fitted shared error; {other} with the "
                "intrinsics calibrated before the fit)")
+    note = (block.get("noise_check") or {}).get("note")
     return (f"reprojection: RMS {block['rms_px']:.3f} px{how} over {block['n_corners']} corners of "
-            f"{block['n_poses']} poses; worst: {w}")
+            f"{block['n_poses']} poses; worst: {w}" + (f"\n  note: {note}" if note else ""))

@@ -9,9 +9,9 @@ names (``TargetKind.seeded_mode``; None -> every frame gets a full detection):
 - "tag_edges" (AprilTag grid): straight-edge fits of each tag's border (:func:`.tag_edges.refine_quads`); the seed
   frame and every fully detected frame are refined the same way (twice, from OpenCV's unrefined
   marker corners), so all frames of a pose share one estimator;
-- "saddle" (chessboard): the saddle-point fit of :mod:`.saddle` (:func:`.saddle.refine_saddles`, moves up to
+- "saddle" (chessboard): the saddle-point fit of :mod:`vision_calib.targets.kinds.saddle` (:func:`~vision_calib.targets.kinds.saddle.refine_saddles`, moves up to
   ``max_shift_px``, windows from the seed corners), the estimator the chessboard kind's full detection
-  ends with (:func:`.saddle.refine_detected`), so the seed frame shares it too.
+  ends with (:func:`~vision_calib.targets.kinds.saddle.refine_detected`), so the seed frame shares it too.
 Validity per frame: the frame's 1/8-scale image must correlate with the seed's (NCC >=
 ``min_view_ncc``), every corner must be refined and none may move more than ``max_shift_px`` from its
 seed; else the frame gets a full detection (diagnostics "fallback": why). A full detection replaces the
@@ -34,8 +34,8 @@ import cv2
 import numpy as np
 
 from ..camera import CameraIntrinsics
-from .detect import DetectConfig, Detection, _detect_gray, _load_checked, _subpix, detect
-from . import saddle
+from .detect import DetectConfig, Detection, detect, detect_gray, load_checked, subpix
+from ..targets.kinds import saddle
 from .tag_edges import read_mask, refine_quads
 
 #: downscale factor of the image used for the same-view check
@@ -77,7 +77,7 @@ class _Refiner:
         self.refine = {"subpix": self._subpix, "tag_edges": self._tag_edges, "saddle": self._saddle}[mode]
 
     def _subpix(self, img, ids, uv, passes=1):
-        out = _subpix(img, uv, self.win)
+        out = subpix(img, uv, self.win)
         return ids, out, np.all(np.isfinite(out), axis=1)
 
     def _saddle(self, img, ids, uv, passes=1):
@@ -154,7 +154,7 @@ def detect_seeded(images, target, intrinsics: CameraIntrinsics | None, config: D
     seed, out = None, []
     for i, im in enumerate(images):
         t0 = time.perf_counter()
-        img, size, source, bad = _load_checked(im, intrinsics, i)
+        img, size, source, bad = load_checked(im, intrinsics, i)
         if bad is not None:
             out.append(bad)
             continue
@@ -167,7 +167,7 @@ def detect_seeded(images, target, intrinsics: CameraIntrinsics | None, config: D
                 continue
             if focus is not None:  # a full detection reads the whole frame: draw all of it
                 img = images.frame(i, full=True)
-        d = _detect_gray(img, size, source, target, i, full_cfg, t0, post=post, intrinsics=intrinsics)
+        d = detect_gray(img, size, source, target, i, full_cfg, t0, post=post, intrinsics=intrinsics)
         d.diagnostics["batch"] = "full"
         if why:
             d.diagnostics["fallback"] = why

@@ -50,7 +50,7 @@ Conventions (proved in ``tests/render/test_renderer.py``):
   0.09 px at the top edge of the board), which biased solvePnP by 0.12 deg / 0.45 mm (tz) RMS.
 - Measured on Mesa 22.3 llvmpipe, 1024 x 768, cornerSubPix corner shift against a CPU reference
   (s = 8 homography warp of the same texture), mean (du, dv) / RMS / max [px], and single-thread speed
-  (``LP_NUM_THREADS=1 python -m vision_calib.render.bench``):
+  (``LP_NUM_THREADS=1 python -m vision_calib.sim.render_bench``):
   A5 board, 0.3-0.6 m: s = 1: (+0.000, +0.003) / 0.030 / 0.061, ~40 frames/s; s = 2: (0.000, 0.001)
   / 0.012 / 0.030, ~10 frames/s; s = 4: (0.000, 0.000) / 0.004 / 0.009, ~2.6 frames/s.
   H4 board, 0.6-0.76 m, f = 1013 px: s = 1: (0.000, 0.000) / 0.034 / 0.085; s = 2: (0.000, 0.000)

@@ -98,7 +98,7 @@ class MipWarp:
 
     def sampled_level(self, face: str, L: int) -> np.ndarray:
         """Level L as sampled by the warp: uint8 (rounded; 8-bit warps are ~1.3x faster, corners measured
-        unchanged: render.bench) when the background is an integer grey, else float32."""
+        unchanged: sim.render_bench) when the background is an integer grey, else float32."""
         key = (face + "_sampled", L)
         hit = self._levels.get(key)
         if hit is None:

@@ -12,7 +12,7 @@ when adding a robot kind).
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import ClassVar
+from typing import ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -128,6 +128,15 @@ class Evaluation:
             "n_poses": int(len(self.errors)),
             **{k: float(v) for k, v in self.criteria.items()},
         }
+
+
+@runtime_checkable
+class ChainMeasured(Protocol):
+    """Optional capability of a setup: a robot commanded by joint sets whose camera measures one transform of its
+    chain (serial, URDF); measured-pose files (``io.measured_poses``) need it.
+    ``chain_measurements(meas) -> Measurements``: the measurements in the chain's direction."""
+
+    def chain_measurements(self, meas: Measurements) -> Measurements: ...
 
 
 @dataclass(frozen=True)

@@ -20,7 +20,7 @@ from typing import ClassVar
 import numpy as np
 
 from ..errors import ConfigError, DataError, ParameterError
-from ..kinematics.h4 import TILT_NAMES
+from ..kinematics.h4 import TILT_NAMES, H4Robot
 from .base import Evaluation, Setup
 
 #: significance level at which a measured camera/target tilt replaces the nominal one (chi-square, 2 dof)
@@ -48,7 +48,7 @@ class H4Setup(Setup):
     joint-reading noise of the IGM problem (0: measurement noise only). ``robot_path``, ``model``,
     ``variant``: where the robot came from (for variants and the calibrated-model file)."""
 
-    robot: object = None
+    robot: H4Robot | None = None
     sigma_q_rad: float = 0.0
     robot_path: str = ""
     variant: str | None = None
@@ -181,7 +181,8 @@ class H4Setup(Setup):
         from the model-12 robot: E..H are model 31) and/or ``model`` "12"|"31"; the free mask follows the
         variant (or the model's default: D for 12, H for 31); names the current free mask fixes stay fixed.
         ConfigError if the variant/model pair is impossible."""
-        from ..kinematics.h4 import load_h4_robot
+        from ..kinematics import h4_variants
+        from ..kinematics.h4_io import load_h4_robot
 
         if variant is None and model is None:
             return self
@@ -191,7 +192,7 @@ class H4Setup(Setup):
             if model == "31" and variant in tuple("ABCD"):
                 raise ConfigError(f"{self.robot_path}: H4 variant {variant} is built on model 12, not model 31")
             try:
-                robot = robot.variant(variant)
+                robot = h4_variants.variant(robot, variant)
             except ParameterError as exc:
                 raise ConfigError(f"{self.robot_path}: variant: {exc}") from None
         fix = [n for n in self.meta.get("fix", ()) if n in robot.names]
@@ -320,7 +321,8 @@ class H4Setup(Setup):
 
     @classmethod
     def from_scene(cls, ctx) -> "H4Setup":
-        from ..kinematics.h4 import load_h4_robot
+        from ..kinematics import h4_variants
+        from ..kinematics.h4_io import load_h4_robot
 
         top = ctx.top
         model = str(top.get("model", str, "12", choices=("12", "31")))
@@ -328,7 +330,7 @@ class H4Setup(Setup):
         variant = top.get("variant", str, None)
         if variant is not None:
             try:
-                robot = robot.variant(variant)
+                robot = h4_variants.variant(robot, variant)
             except ParameterError as exc:
                 raise top.error("variant", str(exc)) from None
         params = ctx.apply_free(robot.params)
@@ -340,14 +342,15 @@ class H4Setup(Setup):
     @staticmethod
     def load_model(doc, robot_path: Path):
         """The robot of a calibrated-model file (``io.model_export``), nominal values still to set."""
-        from ..kinematics.h4 import load_h4_robot
+        from ..kinematics import h4_variants
+        from ..kinematics.h4_io import load_h4_robot
 
         robot = load_h4_robot(robot_path, model=str(doc.get("model", str, "12")))
         variant = doc.get("variant", str, None)
         if variant:
-            robot = robot.variant(variant)
+            robot = h4_variants.variant(robot, variant)
         elif doc.get("shared_L", bool, False) and not robot.shared_L:
-            robot = robot.variant("E")  # the only variant sharing one arm length
+            robot = h4_variants.variant(robot, "E")  # the only variant sharing one arm length
         tilts = doc.section("tilts", default={})
         if "R_BC0" in tilts:
             robot = replace(robot, R_BC0=np.asarray(tilts.get("R_BC0", list), float),

@@ -10,7 +10,8 @@ A robot kind is a :class:`~vision_calib.rig.base.Setup` subclass that also provi
 - ``load_model(doc, robot_path)``: rebuild the robot of a calibrated-model file.
 
 Adding a robot kind = writing that class and calling :func:`register` on it (for the shipped kinds:
-one line below). Nothing else in the package branches on the kind.
+one line below; from another package: an entry point of the group ``vision_calib.robots``,
+:mod:`vision_calib.plugins`). Nothing else in the package branches on the kind.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..errors import ConfigError
+from ..plugins import ROBOT_GROUP, load_entry_points
 
 KINDS: dict = {}
 
@@ -68,3 +70,4 @@ def _register_shipped() -> None:
 
 
 _register_shipped()
+PLUGINS = load_entry_points(ROBOT_GROUP, register)  #: names of the robot kinds registered by entry points

@@ -220,11 +220,17 @@ def load_scene(path) -> Scene:
     path = Path(path)
     if not path.exists() and not path.is_absolute() and (SCENES_DIR / path).exists():
         path = SCENES_DIR / path
-    top = Section(load_yaml(path), path)
+    return scene_from_section(Section(load_yaml(path), path))
+
+
+def scene_from_section(top: Section) -> Scene:
+    """The scene of a mapping (a scene file's top, or a scene written inside another file, e.g. a measured-pose
+    file's ``scene:``; paths relative to ``top.file``, errors naming its keys); ``Scene.path`` is ``top.file``."""
+    path = top.file
     robot_path = top.path_value("robot")
     kind = kind_of_robot_file(robot_path, where=top.where("robot"))
     top.check_known(TOP_KEYS + tuple(getattr(kind, "scene_keys", ())))
-    name = top.get("name", str, path.stem)
+    name = top.get("name", str, path.stem if not top.path else Path(robot_path).stem)
     Lf, Af = top.units(default_length="m", default_angle="deg")
     mount = top.get("mount", str, choices=kind.mounts)
     camera = _camera(top.section("camera") if "camera" in top else None)

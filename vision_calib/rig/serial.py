@@ -21,6 +21,7 @@ import numpy as np
 
 from .. import frames as F
 from ..errors import DataError
+from ..kinematics.protocols import ChainModel, Remountable
 from .base import Evaluation, Measurements, Setup
 
 #: mount names of each camera mount: (left, right) of the chain
@@ -31,8 +32,9 @@ MOUNT_KEYS = {"eye_in_hand": ("target_in_base", "camera_in_flange"), "fixed": ("
 
 def remount_chain(chain, left: str, right: str, T_left_base, T_flange_right):
     """Same arm, other mounting transforms (nominal (4, 4) each), keeping the arm's own parameter
-    values and free flags. ``chain`` must provide ``remounted`` (any chain kind) or be a SerialChain."""
-    if hasattr(chain, "remounted"):
+    values and free flags. ``chain``: a :class:`~vision_calib.kinematics.protocols.Remountable` chain (any
+    chain kind) or a SerialChain."""
+    if isinstance(chain, Remountable):
         return chain.remounted(left, right, T_left_base, T_flange_right)
     from ..kinematics.serial import SerialChain
 
@@ -62,7 +64,7 @@ class SerialSetup(Setup):
     and ``q_spread`` (n,) rad: random poses are drawn uniformly in q_center ± q_spread (within joint
     limits) and kept when the target (``target_outline`` (4, 3) m, target frame) is visible."""
 
-    chain: object = None
+    chain: ChainModel | None = None
     q_center: np.ndarray | None = None
     q_spread: np.ndarray | None = None
     target_outline: np.ndarray | None = None

@@ -3,8 +3,9 @@ offsets, reduced to a base set by the identifiability analysis), with the camera
 :mod:`.serial` (eye-in-hand or fixed camera). The calibrated robot is also written back as URDF
 (``calibrated_model.urdf``: only the movable joints' origins changed).
 
-Scene keys of this kind: ``urdf: {base_link, tip_link}`` (the chain, tip = flange), ``mounts`` and
-``poses.center`` / ``poses.spread`` as for serial robots.
+Scene keys of this kind: ``urdf: {base_link, tip_link}`` (the chain, tip = flange; both optional: default
+the URDF's root link and the one leaf link below the most movable joints, :func:`default_links`), ``mounts``
+and ``poses.center`` / ``poses.spread`` as for serial robots.
 """
 
 from __future__ import annotations
@@ -14,7 +15,46 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
 
+from ..errors import ConfigError
 from .serial import MOUNTS, SerialSetup
+
+
+def default_links(path) -> tuple[str, str]:
+    """(base_link, tip_link) of a URDF when the scene names none: its root link, and the leaf link with the most
+    movable (non-fixed) joints on its way up to the root, when exactly one leaf has that many. ConfigError naming
+    the candidates otherwise (a gripper's fingers, two arms: give ``urdf: {base_link, tip_link}``). Only names
+    are read here; the chain itself is checked by ``kinematics.urdf.load_urdf_robot``."""
+    import xml.etree.ElementTree as ET
+
+    try:
+        root = ET.parse(path).getroot()
+    except (ET.ParseError, OSError) as exc:
+        raise ConfigError(f"{path}: cannot be read as URDF ({exc})") from None
+    links = [el.get("name") for el in root.findall("link")]
+    parent = {}  # child link -> (parent link, movable)
+    for j in root.findall("joint"):
+        p, c = j.find("parent"), j.find("child")
+        if p is not None and c is not None:
+            parent[c.get("link")] = (p.get("link"), j.get("type") != "fixed")
+    roots = [lk for lk in links if lk not in parent]
+    if len(roots) != 1:
+        raise ConfigError(f"{path}: {len(roots)} root links ({', '.join(map(str, roots)) or 'none'}): give "
+                          "urdf: {base_link, tip_link} in the scene")
+    parents = {p for p, _ in parent.values()}
+    depth = {}
+    for leaf in (lk for lk in links if lk not in parents):
+        n, lk, seen = 0, leaf, set()
+        while lk in parent and lk not in seen:
+            seen.add(lk)
+            lk, movable = parent[lk]
+            n += movable
+        depth[leaf] = n
+    most = max(depth.values(), default=0)
+    tips = [lk for lk, n in depth.items() if n == most]
+    if most == 0 or len(tips) != 1:
+        raise ConfigError(f"{path}: no single tip link to calibrate up to ({len(tips)} leaf links below {most} movable "
+                          f"joints: {', '.join(tips)}): give urdf: {{base_link, tip_link}} in the scene")
+    return roots[0], tips[0]
 
 
 @dataclass(frozen=True)
@@ -30,9 +70,11 @@ class URDFSetup(SerialSetup):
     def load_chain(cls, ctx):
         from ..kinematics.urdf import load_urdf_robot
 
-        sec = ctx.top.section("urdf").check_known(("base_link", "tip_link"))
+        sec = ctx.top.section("urdf", default={}).check_known(("base_link", "tip_link"))
         left, right = MOUNTS[ctx.mount]
-        return load_urdf_robot(ctx.robot_path, sec.get("base_link", str), sec.get("tip_link", str), left, right)
+        base, tip = (None, None) if "base_link" in sec and "tip_link" in sec else default_links(ctx.robot_path)
+        return load_urdf_robot(ctx.robot_path, sec.get("base_link", str, base), sec.get("tip_link", str, tip), left,
+                               right)
 
     def model_dict(self) -> dict:
         m = self.chain.meta
@@ -48,7 +90,7 @@ class URDFSetup(SerialSetup):
 
     def export_model_files(self, out_dir, x) -> dict:
         """``calibrated_model.urdf``: the source URDF with the calibrated joint origins (atomic write)."""
-        from ..io.atomic import write_bytes_atomic
+        from ..serialize import write_bytes_atomic
         from ..kinematics.urdf import export_urdf
 
         with tempfile.TemporaryDirectory() as tmp:

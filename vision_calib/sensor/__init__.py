@@ -3,7 +3,9 @@
 Two implementations of one model: OpenCV/numpy on the CPU (:mod:`.cpu`, the default) and torch + kornia
 (:mod:`.effects`, batched, GPU-capable: pass ``device``). Importing this package, the settings
 (:class:`SensorEffects`) or the CPU path does NOT import torch; ``deterministic_image`` (torch) and
-``apply_effects(..., device=...)`` import it on first use.
+``apply_effects(..., device=...)`` import it on first use. torch and kornia are the optional extra
+``pip install 'vision_calib[gpu]'``: without it those two raise :class:`~vision_calib.errors.MissingExtraError`
+naming the extra.
 """
 
 from __future__ import annotations

@@ -29,10 +29,25 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
-import torch
 
 from ..camera import CameraIntrinsics
-from ..errors import ConfigError, DataError
+from ..errors import ConfigError, DataError, MissingExtraError
+
+#: what this module needs beyond the default install, and how to get it
+GPU_EXTRA = "pip install 'vision_calib[gpu]'"
+
+
+def _missing(module: str, exc: ImportError) -> MissingExtraError:
+    return MissingExtraError(
+        f"the torch/kornia sensor path (apply_effects(..., device=...), deterministic_image) needs {module}, which "
+        f"is not installed ({exc}): install the optional extra with `{GPU_EXTRA}` (the default OpenCV path, "
+        "device=None, needs neither)")
+
+
+try:
+    import torch
+except ImportError as _exc:  # torch is the optional extra [gpu], not a core dependency
+    raise _missing("torch", _exc) from _exc
 from .maps import disc_kernel, distortion_source_map, gaussian_ksize, vignetting_gain
 from .settings import SensorEffects
 
@@ -61,7 +76,10 @@ def deterministic_image(ideal: torch.Tensor, effects: SensorEffects, intr: Camer
     ideal: (H, W) or (B, H, W) float tensor [grey levels 0..255], pinhole render.
     Returns the expected *electrons* per pixel, same shape, float32, on ideal's device.
     """
-    import kornia
+    try:
+        import kornia
+    except ImportError as exc:
+        raise _missing("kornia", exc) from exc
 
     squeeze = ideal.ndim == 2
     x = ideal[None] if squeeze else ideal

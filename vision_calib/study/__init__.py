@@ -29,7 +29,7 @@ Spec file (YAML; paths relative to the spec file)::
 Sweep/settings keys: ``n_poses`` (int > 0: subset drawn at random from the scene's poses),
 ``sigma_mm``, ``sigma_deg`` (pose noise per component, >= 0), ``method`` (lse|ekf|igm; igm = H4
 only), ``residual`` (pose|position for serial scenes, joint for H4), ``variant`` (H4 paper table 2,
-A..H: the scene's robot is replaced by ``robot.variant(letter)`` of the model-12 robot, E..H
+A..H: the scene's robot is replaced by ``kinematics.h4_variants.variant(robot, letter)`` of the model-12 robot, E..H
 are model 31, the free mask follows), ``model`` ("12"|"31", H4), ``trial`` (serial scenes whose
 robot file has ``trials``, e.g. the thesis' chapter 3-4 experiments: the truth is the trial's
 deviation vector, and when the scene's poses are ``kind: configurations`` they become the trial's
@@ -109,9 +109,9 @@ Modules: :mod:`.spec` (the file, validated), :mod:`.cells` (the scene and one ru
 :mod:`.budget` (the target's budget table), :mod:`.plots`.
 """
 
-from .cells import run_cell, scene_with, scene_with_trial
+from .cells import run_cell
 from .run import run_study
-from .spec import StudySpec, cell_key, load_study, run_seed, study_cells
+from .spec import StudySpec, cell_key, load_study, run_seed, scene_with, scene_with_trial, study_cells
 from .tables import cell_summary, parameter_table, summary_rows
 
 __all__ = ["StudySpec", "load_study", "run_study", "run_cell", "study_cells", "run_seed", "cell_key", "scene_with",

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.atomic import write_text_atomic
+from ..serialize import write_text_atomic
 from .spec import StudySpec, format_value, run_seed
 
 #: axes that set the cost of an acquisition; every other axis is a condition the budget is given for

@@ -1,5 +1,5 @@
-"""One cell of a study: its scene (variant / model / trial applied), its poses, and one run
-(cell x repetition) in synthetic or images mode -> one table row."""
+"""One cell of a study: its poses and one run (cell x repetition) in synthetic or images mode -> one table row
+(the cell's scene, variant / model / trial applied: :func:`.spec.cell_scene`)."""
 
 from __future__ import annotations
 
@@ -9,57 +9,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..errors import ConfigError, VisionCalibError
+from ..errors import VisionCalibError
 from ..rig.base import ACCURACY_FIELDS
-from .spec import ACCURACY_KEYS, StudySpec, _axis_where, run_seed
-
-
-# ----------------------------------------------------------------------------- scenes
-def scene_with(scene, variant: str | None = None, model: str | None = None):
-    """The scene with its robot replaced by a model variant (``Setup.with_variant``: for H4,
-    ``variant`` A..H of paper table 2 and/or ``model`` "12"|"31"); truth deviations of names the new
-    model lacks are dropped. ConfigError if the kind has no variants or the pair is impossible."""
-    if variant is None and model is None:
-        return scene
-    try:
-        return scene.with_setup(scene.setup.with_variant(variant, model))
-    except ConfigError as exc:
-        raise ConfigError(f"{scene.path}: {exc}") from None
-
-
-def scene_with_trial(scene, trial: str | None):
-    """The scene with its truth replaced by the robot file's trial ``trial`` (its deviation vector);
-    when the scene's poses are ``kind: configurations``, they become the trial's own configuration
-    set (the thesis' experiment = a deviation vector on its configurations). ConfigError naming the
-    scene if the robot has no such trial."""
-    if trial is None:
-        return scene
-    trials = scene.setup.trials()
-    if trial not in trials:
-        raise ConfigError(f"{scene.path}: unknown trial {trial!r} (robot file has {sorted(trials) or 'no trials'})")
-    poses = scene.poses
-    conf = trials[trial].get("configurations")
-    if poses.kind == "configurations" and conf:
-        if conf not in scene.setup.configurations():
-            raise ConfigError(f"{scene.path}: trial {trial!r} names configurations {conf!r} that the robot file lacks")
-        poses = replace(poses, configurations=conf)
-    return replace(scene, truth=replace(scene.truth, trial=trial), poses=poses)
-
-
-def cell_scene(spec: StudySpec, cell: dict, base):
-    """The scene of a cell (errors name the spec's axis)."""
-    s = {**spec.settings, **cell}
-    scene = base
-    if s.get("variant") is not None or s.get("model") is not None:
-        try:
-            scene = scene_with(scene, s.get("variant"), s.get("model"))
-        except ConfigError as exc:
-            key = "variant" if s.get("variant") is not None else "model"
-            raise ConfigError(f"{_axis_where(spec, key)}: {exc}") from None
-    try:
-        return scene_with_trial(scene, s.get("trial"))
-    except ConfigError as exc:
-        raise ConfigError(f"{_axis_where(spec, 'trial')}: {exc}") from None
+from .spec import ACCURACY_KEYS, StudySpec, run_seed, scene_with, scene_with_trial
 
 
 @functools.lru_cache(maxsize=4)

@@ -7,9 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.atomic import write_bytes_atomic
-from .spec import MAIN_FIGURES, StudySpec, format_value
-from .tables import _value
+from ..serialize import write_bytes_atomic
+from .spec import MAIN_FIGURES, StudySpec, format_value, row_value
 
 def _save_fig(fig, path: Path) -> str:
     buf = io.BytesIO()
@@ -53,7 +52,7 @@ def write_plots(spec: StudySpec, table: list[dict], cols, out: Path) -> list[str
             for skey, rows in series.items():
                 med, lo, hi = [], [], []
                 for v in values:
-                    vals = np.array([_value(r, c) for r in rows if r[axis] == v]) * f
+                    vals = np.array([row_value(r, c) for r in rows if r[axis] == v]) * f
                     vals = vals[np.isfinite(vals)]
                     p = np.percentile(vals, [5, 50, 95]) if vals.size else [np.nan] * 3
                     lo.append(p[0]), med.append(p[1]), hi.append(p[2])
@@ -80,7 +79,7 @@ def write_plots(spec: StudySpec, table: list[dict], cols, out: Path) -> list[str
             for c in errs:
                 sd = []
                 for v in values:
-                    vals = np.array([_value(r, c) for r in rows if r[axis] == v])
+                    vals = np.array([row_value(r, c) for r in rows if r[axis] == v])
                     vals = vals[np.isfinite(vals)]
                     sd.append(vals.std(ddof=1) * 1e3 if vals.size > 1 else np.nan)
                 if not np.any(np.isfinite(sd)):

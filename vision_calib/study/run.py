@@ -1,5 +1,5 @@
 """Running a study: local processes or a Dask cluster, one file per finished run (atomic), resume
-of runs already computed with the same spec hash, then the tables and plots."""
+of runs already computed with the same spec hash, then the tables, the plots and the study page (index.html)."""
 
 from __future__ import annotations
 
@@ -9,8 +9,9 @@ import sys
 import time
 from pathlib import Path
 
-from ..io.atomic import write_json_atomic
+from ..serialize import write_json_atomic
 from .budget import budget_table, budget_text, write_budget
+from .page import write_index
 from .cells import run_cell
 from .spec import RUN_FORMAT, StudySpec, cell_key, load_study, study_cells
 from .tables import cell_summary, parameter_spread, parameter_table, summary_text, write_outputs, \
@@ -169,6 +170,7 @@ def run_study(spec, out_dir, workers: int | None = None, scheduler=None, progres
     if res["budget"]:
         files["budget_csv"] = write_budget(spec, res["budget"], out)
     res["summary_text"] = "\n".join([summary_text(spec, res), *budget_text(spec, res["budget"])])
+    files["index_html"] = str(write_index(spec, res, table, out))  # the study page: table and plots (study/page.py)
     return res
 
 

@@ -230,10 +230,57 @@ def _target(top: Section, outputs) -> dict | None:
     return out
 
 
+# ----------------------------------------------------------------------------- scenes
+def scene_with(scene, variant: str | None = None, model: str | None = None):
+    """The scene with its robot replaced by a model variant (``Setup.with_variant``: for H4,
+    ``variant`` A..H of paper table 2 and/or ``model`` "12"|"31"); truth deviations of names the new
+    model lacks are dropped. ConfigError if the kind has no variants or the pair is impossible."""
+    if variant is None and model is None:
+        return scene
+    try:
+        return scene.with_setup(scene.setup.with_variant(variant, model))
+    except ConfigError as exc:
+        raise ConfigError(f"{scene.path}: {exc}") from None
+
+
+def scene_with_trial(scene, trial: str | None):
+    """The scene with its truth replaced by the robot file's trial ``trial`` (its deviation vector);
+    when the scene's poses are ``kind: configurations``, they become the trial's own configuration
+    set (the thesis' experiment = a deviation vector on its configurations). ConfigError naming the
+    scene if the robot has no such trial."""
+    if trial is None:
+        return scene
+    trials = scene.setup.trials()
+    if trial not in trials:
+        raise ConfigError(f"{scene.path}: unknown trial {trial!r} (robot file has {sorted(trials) or 'no trials'})")
+    poses = scene.poses
+    conf = trials[trial].get("configurations")
+    if poses.kind == "configurations" and conf:
+        if conf not in scene.setup.configurations():
+            raise ConfigError(f"{scene.path}: trial {trial!r} names configurations {conf!r} that the robot file lacks")
+        poses = replace(poses, configurations=conf)
+    return replace(scene, truth=replace(scene.truth, trial=trial), poses=poses)
+
+
+def cell_scene(spec: StudySpec, cell: dict, base):
+    """The scene of a cell (errors name the spec's axis)."""
+    s = {**spec.settings, **cell}
+    scene = base
+    if s.get("variant") is not None or s.get("model") is not None:
+        try:
+            scene = scene_with(scene, s.get("variant"), s.get("model"))
+        except ConfigError as exc:
+            key = "variant" if s.get("variant") is not None else "model"
+            raise ConfigError(f"{_axis_where(spec, key)}: {exc}") from None
+    try:
+        return scene_with_trial(scene, s.get("trial"))
+    except ConfigError as exc:
+        raise ConfigError(f"{_axis_where(spec, 'trial')}: {exc}") from None
+
+
 def _check_cells(spec: StudySpec) -> None:
     """Build the scene of every cell once (cheap) so bad values fail before any run."""
     from ..rig import load_scene
-    from .cells import cell_scene, scene_with
 
     base = load_scene(spec.scene_path)
     if spec.truth_variant is not None:
@@ -303,6 +350,14 @@ def study_cells(spec: StudySpec) -> list[dict]:
 def run_seed(spec_seed: int, repetition: int) -> int:
     """Seed of repetition r: SeedSequence([spec_seed, r]) -> uint32 (same for every cell)."""
     return int(np.random.SeedSequence([int(spec_seed), int(repetition)]).generate_state(1)[0])
+
+
+def row_value(row: dict, c: str) -> float:
+    """Column ``c`` of a results row as a float (NaN when empty or missing)."""
+    v = row.get(c)
+    if v is None or v == "":
+        return float("nan")
+    return float(v)
 
 
 def format_value(v) -> str:

@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import VisionCalibError
-from ..io.atomic import write_bytes_atomic, write_text_atomic
+from ..serialize import write_bytes_atomic, write_text_atomic
 from .cells import cell_poses, scene_for
-from .spec import MAIN_FIGURES, StudySpec, format_value, run_seed, study_cells
+from .spec import MAIN_FIGURES, StudySpec, format_value, row_value, run_seed, study_cells
 
 PARAMETER_COLUMNS = ("parameter", "kind", "true_deviation", "identifiable", "noise_free", "identified_mean", "mc_std",
                      "predicted_std", "mc_rms_error", "n", "note", "thesis_reported")
@@ -64,8 +64,8 @@ def parameter_table(spec: StudySpec, table: list[dict]) -> list[dict]:
             names = [n for n in names if n in spec.parameters]
         for n in names:
             i = ps.index(n)
-            err = np.array([_value(r, f"err:{n}") for r in rows])
-            std = np.array([_value(r, f"std:{n}") for r in rows])
+            err = np.array([row_value(r, f"err:{n}") for r in rows])
+            std = np.array([row_value(r, f"std:{n}") for r in rows])
             err, std = err[np.isfinite(err)], std[np.isfinite(std)]
             ident = n in rep.base_parameters
             if n in couplings:
@@ -195,13 +195,6 @@ def _metric_columns(spec, cols):
     return [c for c in cols if c not in skip]
 
 
-def _value(row, c):
-    v = row.get(c)
-    if v is None or v == "":
-        return float("nan")
-    return float(v)
-
-
 def write_outputs(spec: StudySpec, table: list[dict], out: Path, plots: bool = True) -> dict:
     """results.csv/.parquet, summary.csv and plots from the run rows; returns {kind: path}."""
     cols = _columns(spec, table)
@@ -221,7 +214,7 @@ def write_outputs(spec: StudySpec, table: list[dict], out: Path, plots: bool = T
         for c in cols:
             vals = [row.get(c) for row in table]
             if c in numeric:
-                data[c] = pa.array([_value(row, c) for row in table], pa.float64())
+                data[c] = pa.array([row_value(row, c) for row in table], pa.float64())
             else:
                 data[c] = pa.array(vals)
         sink = io.BytesIO()
@@ -269,7 +262,7 @@ def summary_rows(spec: StudySpec, table: list[dict], cols=None) -> list[dict]:
     out = []
     for key, rows in _group(spec, table).items():
         for c in _metric_columns(spec, cols):
-            st = _stats(np.array([_value(r, c) for r in rows]))
+            st = _stats(np.array([row_value(r, c) for r in rows]))
             out.append({**dict(zip(spec.axes, key)), "metric": c, **st})
     return out
 
@@ -284,19 +277,18 @@ def cell_summary(spec: StudySpec, table: list[dict]) -> list[dict]:
         figs = {}
         for c, _, _ in MAIN_FIGURES:
             if any(c in r for r in rows):
-                st = _stats(np.array([_value(r, c) for r in rows]))
+                st = _stats(np.array([row_value(r, c) for r in rows]))
                 figs[c] = {k: st[k] for k in ("mean", "std", "p05", "p95")}
         d["figures"] = figs
         out.append(d)
     return out
 
 
-def summary_text(spec: StudySpec, res: dict) -> str:
-    """One screen: per cell mean ± std of the main figures."""
+def summary_table(spec: StudySpec, res: dict) -> tuple[list[str], list[list[str]]]:
+    """(head, body) of the per-cell table: the axes, runs that did not fail, converged fraction, and the mean ±
+    std of each main figure in its display unit (the text summary and the study page show it)."""
     figs = [(c, lab, f) for c, lab, f in MAIN_FIGURES if any(c in s["figures"] for s in res["summary"])]
     head = [*spec.axes, "runs", "conv"] + [lab for _, lab, _ in figs]
-    lines = [f"study {spec.name}: {res['n_runs']} runs ({res['n_computed']} computed, {res['n_reused']} reused, "
-             f"{res['n_failed']} failed) -> {res['out_dir']}"]
     body = []
     for s in res["summary"]:
         cells = [format_value(s[a]) for a in spec.axes] + [str(s["n_runs"] - s["n_failed"]), f"{s['converged']:.2f}"]
@@ -310,6 +302,14 @@ def summary_text(spec: StudySpec, res: dict) -> str:
                 sd = f" ± {v['std'] * f:.2g}" if math.isfinite(v["std"]) else ""
                 cells.append(f"{v['mean'] * f:.3g}{sd}")
         body.append(cells)
+    return head, body
+
+
+def summary_text(spec: StudySpec, res: dict) -> str:
+    """One screen: per cell mean ± std of the main figures."""
+    head, body = summary_table(spec, res)
+    lines = [f"study {spec.name}: {res['n_runs']} runs ({res['n_computed']} computed, {res['n_reused']} reused, "
+             f"{res['n_failed']} failed) -> {res['out_dir']}"]
     widths = [max(len(h), *(len(b[i]) for b in body)) if body else len(h) for i, h in enumerate(head)]
     lines.append("  ".join(h.rjust(w) for h, w in zip(head, widths)))
     lines.extend("  ".join(c.rjust(w) for c, w in zip(b, widths)) for b in body)

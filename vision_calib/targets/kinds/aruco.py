@@ -7,11 +7,14 @@ gap), first_id. Ids: see :mod:`vision_calib.targets.spec`.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import cv2
 import numpy as np
 
 from ...errors import ConfigError
-from . import TargetKind
+from .base import TargetKind, TargetSpec
+from .image_model import apriltag_terms, tag_edge_info
 from ._grid import SquareCorners
 
 _BORDER_BITS = 1  # OpenCV markers: one black border bit around the data bits
@@ -31,6 +34,29 @@ def dictionary_id(name: str) -> int:
     return int(getattr(cv2.aruco, name))
 
 
+@dataclass(frozen=True)
+class CharucoSpec(TargetSpec):
+    """ChArUco board: dictionary (cv2.aruco name, e.g. "DICT_5X5_100"), square_m and marker_m [m] (square and
+    marker sides), legacy_pattern (OpenCV < 4.6 layout), first_id (id of the first marker)."""
+
+    dictionary: str = ""
+    square_m: float = 0.0
+    marker_m: float = 0.0
+    legacy_pattern: bool = False
+    first_id: int = 0
+
+
+@dataclass(frozen=True)
+class AprilTagGridSpec(TargetSpec):
+    """AprilTag grid: dictionary (e.g. "DICT_APRILTAG_36h11"), tag_m [m] (outer edge of the black border),
+    spacing_m [m] (white gap between tags), first_id (id of the first tag)."""
+
+    dictionary: str = ""
+    tag_m: float = 0.0
+    spacing_m: float = 0.0
+    first_id: int = 0
+
+
 class _ArucoKind(TargetKind):
     """Common part: a marker dictionary, marker bits drawn as black rectangles."""
 
@@ -40,6 +66,8 @@ class _ArucoKind(TargetKind):
         raise NotImplementedError
 
     def validate(self, spec, where):
+        if spec.first_id < 0:
+            raise ConfigError(f"{where}: key 'first_id' must be >= 0, got {spec.first_id}")
         try:
             dictionary_id(spec.dictionary)
         except ConfigError as exc:
@@ -101,11 +129,12 @@ class CharucoKind(SquareCorners, _ArucoKind):
     """ChArUco board: rows x cols squares of square_m, markers of marker_m in the white squares."""
 
     name = "charuco"
-    keys = ("dictionary", "square_m", "marker_m", "legacy_pattern", "first_id")
+    spec_class = CharucoSpec
     required = ("dictionary", "square_m", "marker_m")
     auto_extra_subpix = True
-    info_model = "saddle"
-    phase_model = "subpix"  # corners from cv2.cornerSubPix: pixel-phase-locked errors (measure/covariance.py)
+    #: corners from cv2.cornerSubPix: pixel-phase-locked errors (measure/covariance.py; measured:
+    #: ``benchmarks/bench_measure.py --phase-terms``)
+    phase_locked_share = 0.92
 
     def n_markers(self, spec):
         return (spec.rows * spec.cols) // 2
@@ -164,11 +193,17 @@ class AprilTagGridKind(_ArucoKind):
     """Grid of rows x cols AprilTags of tag_m with white gaps spacing_m."""
 
     name = "apriltag_grid"
-    keys = ("dictionary", "tag_m", "spacing_m", "first_id")
+    spec_class = AprilTagGridSpec
     required = ("dictionary", "tag_m", "spacing_m")
     auto_refine = "apriltag"
-    info_model = "tag_edge"
-    bias_model = "apriltag"
+
+    def corner_info(self, spec, normals, scale_px_per_m, effects, half_win):
+        """Tag corners from two fitted sides of tag_m (:func:`.image_model.tag_edge_info`)."""
+        return tag_edge_info(normals, scale_px_per_m * spec.tag_m, effects)
+
+    def bias_columns(self, ids, uv_px, estimator):
+        """Common shift, tag growth and smooth field terms (:func:`.image_model.apriltag_terms`)."""
+        return apriltag_terms(ids, uv_px, estimator)
 
     def n_markers(self, spec):
         return spec.rows * spec.cols

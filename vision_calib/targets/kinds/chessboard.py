@@ -14,19 +14,21 @@ board can then only serve intrinsics calibration (measure_pose refuses it).
 Detection: the whole board (all inner corners must be visible) is found by ``cv2.findChessboardCorners``
 (flags :data:`CLASSIC_FLAGS`, a few ms), else by ``cv2.findChessboardCornersSB`` (flags :data:`SB_FLAGS`,
 ~0.1 s: it finds the far and steeply tilted boards FAST_CHECK misses); the corners are then located by
-the saddle-point fit of :mod:`vision_calib.measure.saddle` (corners it rejects are dropped). In the seeded
+the saddle-point fit of :mod:`.saddle` (corners it rejects are dropped). In the seeded
 batch mode (measure/seeded.py, mode "saddle") every other frame of a pose is refined by the same fit from
 the seed frame's corners. Measured figures: :data:`SB_FLAGS`.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import cv2
 import numpy as np
 
 from ...errors import ConfigError
-from ...measure.saddle import refine_detected
-from . import TargetKind
+from .saddle import refine_detected
+from .base import TargetKind, TargetSpec
 from ._grid import SquareCorners, apply_h, fit_homography, front_facing, sample_mean
 
 #: Detectors, measured on polygon-renderer images at the H4 geometry (1024 x 768, f 1013 px, chessboard_a4,
@@ -52,12 +54,20 @@ SB_FLAGS = 0
 MAX_MOVE_PX = 1.0
 
 
+@dataclass(frozen=True)
+class ChessboardSpec(TargetSpec):
+    """Chessboard: square_m [m]; allow_symmetric: accept a 180-degree-symmetric board (rows + cols even;
+    intrinsics calibration only)."""
+
+    square_m: float = 0.0
+    allow_symmetric: bool = False
+
+
 class ChessboardKind(SquareCorners, TargetKind):
     name = "chessboard"
-    keys = ("square_m", "allow_symmetric")
+    spec_class = ChessboardSpec
     required = ("square_m",)
     auto_extra_subpix = False
-    info_model = "saddle"
     sb_flags = SB_FLAGS
     classic_flags = CLASSIC_FLAGS
 
@@ -95,7 +105,7 @@ class ChessboardKind(SquareCorners, TargetKind):
         uv, ok = refine_detected(img, G.reshape(-1, 2), MAX_MOVE_PX)
         diag["saddle_rejected"] = int((~ok).sum())
         if not ok.any():
-            return None, "no chessboard corner passed the saddle-point fit (measure/saddle.py)"
+            return None, "no chessboard corner passed the saddle-point fit (targets/kinds/saddle.py)"
         return np.flatnonzero(ok), uv[ok]
 
     def orient(self, spec, img, G):

@@ -29,23 +29,83 @@ the blob centres measured worse (0.019 px, 0.012 px corrected) and is not used.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
 from ...errors import ConfigError
-from . import TargetKind
+from .base import TargetKind, TargetSpec, check_memory
 from ._grid import apply_h, fit_homography, front_facing, refine_grid
-from .dot_grid import MAX_OFF_GRID, candidate_grids, grid_consistency, not_found_message
+from .image_model import circle_info
+from .dot_grid import MAX_OFF_GRID, candidate_grids, check_blob_settings, grid_consistency, not_found_message
 
 N_VERTICES = 128  # polygon vertices per dot (area-preserving radius: exact area and centroid)
 
 
+def _blob_tuple(spec) -> None:
+    """A spec's blob_detector (a mapping in YAML) as a sorted tuple of (name, value) pairs (hashable)."""
+    bd = spec.blob_detector
+    if isinstance(bd, (list, tuple, dict)) and len(bd) == 0 or bd is None:
+        object.__setattr__(spec, "blob_detector", ())
+    else:
+        object.__setattr__(spec, "blob_detector", check_blob_settings(
+            [tuple(kv) for kv in bd] if isinstance(bd, list) else bd, f"target {spec.name!r}"))
+
+
+def _blob_dict(d: dict) -> dict:
+    """to_dict of a dot-grid spec: blob_detector as a mapping, left out when empty."""
+    if d["blob_detector"]:
+        d["blob_detector"] = dict(d["blob_detector"])
+    else:
+        del d["blob_detector"]
+    return d
+
+
+@dataclass(frozen=True)
+class CircleGridSpec(TargetSpec):
+    """Asymmetric circle grid: spacing_m, diameter_m [m]; allow_symmetric (an even number of rows; intrinsics
+    only); blob_detector: OpenCV SimpleBlobDetector parameters tried first on each image (:mod:`.dot_grid`)."""
+
+    spacing_m: float = 0.0
+    diameter_m: float = 0.0
+    allow_symmetric: bool = False
+    blob_detector: tuple = ()
+
+    def __post_init__(self):
+        _blob_tuple(self)
+        super().__post_init__()
+
+    def to_dict(self) -> dict:
+        return _blob_dict(super().to_dict())
+
+
+@dataclass(frozen=True)
+class ModifiedCircleGridSpec(TargetSpec):
+    """ROS-I modified circle grid: spacing_m, diameter_m (0: unknown), origin_diameter_m (0: twice diameter_m,
+    ROS-I's generator) [m]; blob_detector as :class:`CircleGridSpec`'s."""
+
+    spacing_m: float = 0.0
+    diameter_m: float = 0.0
+    origin_diameter_m: float = 0.0
+    blob_detector: tuple = ()
+
+    def __post_init__(self):
+        _blob_tuple(self)
+        super().__post_init__()
+
+    def to_dict(self) -> dict:
+        return _blob_dict(super().to_dict())
+
+
 class AsymmetricCirclesKind(TargetKind):
     name = "circles_asymmetric"
-    keys = ("spacing_m", "diameter_m", "allow_symmetric", "blob_detector")
+    spec_class = CircleGridSpec
     required = ("spacing_m", "diameter_m")
-    info_model = "circle"
+
+    def corner_info(self, spec, normals, scale_px_per_m, effects, half_win):
+        """Dot centres from their whole edge (:func:`.image_model.circle_info`)."""
+        return circle_info(scale_px_per_m.mean(axis=1) * spec.diameter_m / 2, effects)
     correct_ellipse = True
 
     def validate(self, spec, where):
@@ -174,8 +234,6 @@ def find_ordered(spec, img, diag, intrinsics, patterns, flags_list, order, what,
 def _check_polygon_memory(spec, n_dots: int) -> None:
     """ConfigError before drawing n_dots polygons would take more than half the available memory (the polygon
     array, its pixel copy and the coverage pass: about 4 x n_dots x N_VERTICES x 2 float64)."""
-    from ..spec import check_memory
-
     check_memory(4 * n_dots * N_VERTICES * 2 * 8, f"target {spec.name!r}: drawing {n_dots} dots")
 
 
@@ -237,9 +295,12 @@ class ModifiedCircleGridKind(TargetKind):
     circles_asymmetric (ellipse-centre correction when the diameters and intrinsics are known)."""
 
     name = "modified_circle_grid"
-    keys = ("spacing_m", "diameter_m", "origin_diameter_m", "blob_detector")
+    spec_class = ModifiedCircleGridSpec
     required = ("spacing_m",)
-    info_model = "circle"
+
+    def corner_info(self, spec, normals, scale_px_per_m, effects, half_win):
+        """Dot centres from their whole edge (:func:`.image_model.circle_info`)."""
+        return circle_info(scale_px_per_m.mean(axis=1) * spec.diameter_m / 2, effects)
 
     def validate(self, spec, where):
         if spec.rows < 2 or spec.cols < 2 or spec.rows * spec.cols < 6:

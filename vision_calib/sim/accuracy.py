@@ -20,10 +20,11 @@ import numpy as np
 
 from .. import frames
 from ..camera import CameraIntrinsics
-from .detect import DetectConfig, detect_batch
-from .covariance import image_bound_pose_cov
-from .pnp import pose_cov_from_jacobian, project_pinhole, reprojection_jacobian, target_lookup
-from .pose import MeasureConfig, measure_pose
+from ..measure.batch import detect_batch
+from ..measure.detect import DetectConfig
+from ..measure.covariance import image_bound_pose_cov
+from ..measure.pnp import pose_cov_from_jacobian, project_pinhole, reprojection_jacobian, target_lookup
+from ..measure.pose import MeasureConfig, measure_pose
 
 COMPONENTS = ("tx", "ty", "tz", "rx", "ry", "rz")
 

@@ -1,4 +1,4 @@
-"""Render speed and accuracy figures (prints; no assertions). ``python -m vision_calib.render.bench``.
+"""Render speed and accuracy figures (prints; no assertions). ``python -m vision_calib.sim.render_bench``.
 
 For each scene (``a5``: ``targets/charuco_a5.yaml`` at 0.3-0.6 m; ``h4``: the H4 9 x 6 ChArUco, whose
 texture is not a power of two, at 0.6-0.76 m, f = 1013 px), for the polygon backend and pyrender at each
@@ -21,7 +21,7 @@ import numpy as np
 
 from ..camera import CameraIntrinsics
 from ..targets import load_target
-from .renderer import TargetRenderer, look_at_target
+from ..render.renderer import TargetRenderer, look_at_target
 
 _CRIT = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-5)
 

@@ -1,10 +1,10 @@
-"""Saddle-point corner estimator (measure/saddle.py) on analytic X-corner images."""
+"""Saddle-point corner estimator (targets/kinds/saddle.py) on analytic X-corner images."""
 
 import numpy as np
 import pytest
 from scipy.special import erf
 
-from vision_calib.measure.saddle import read_mask, refine_detected, refine_saddles, window_radii
+from vision_calib.targets.kinds.saddle import read_mask, refine_detected, refine_saddles, window_radii
 
 
 def x_corner(shape, c, theta, skew, s=0.7, lo=30.0, hi=220.0):

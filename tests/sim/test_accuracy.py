@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from vision_calib.camera import CameraIntrinsics
-from vision_calib.measure.accuracy import accuracy_study, random_view_pose
+from vision_calib.sim.accuracy import accuracy_study, random_view_pose
 from vision_calib.sensor import SensorEffects
 from vision_calib.targets.spec import TargetSpec
 

@@ -1,4 +1,5 @@
-"""Atomic file output: write to a temporary file in the same folder, then rename.
+"""Serialisation on the bottom floor (any module may use it): JSON-ready copies of numpy data, and atomic
+file output (write to a temporary file in the same folder, then rename).
 
 A crash or Ctrl-C mid-write never leaves a truncated report; results already written stay.
 """

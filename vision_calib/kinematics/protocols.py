@@ -1,0 +1,39 @@
+"""What the identification and the rig ask of a joint-commanded chain, as explicit interfaces (``isinstance``
+checks, no attribute probing): :class:`ChainModel` (serial MDH ``SerialChain``, URDF ``URDFChain``) and the
+optional capability :class:`Remountable`. numpy only."""
+
+from __future__ import annotations
+
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from .params import ParameterSet
+
+
+@runtime_checkable
+class ChainModel(Protocol):
+    """A serial chain with mounts: name, ``params`` (ParameterSet: arm + mount parameters, SI units),
+    ``forward(q, x) -> (N, 4, 4)`` the measured transform (left mount . arm . right mount) for joints q (N, n)
+    rad, ``pose_jacobian(q, x) -> (N, 6, p)`` its parameter Jacobian in the ``frames.pose_error`` convention,
+    ``check_joints(q) -> (N, n)`` (DataError naming the bad value), ``redundant_pairs()`` the exactly redundant
+    parameter pairs (name, name, why)."""
+
+    name: str
+    params: ParameterSet
+
+    def forward(self, q, x=None) -> np.ndarray: ...
+
+    def pose_jacobian(self, q, x=None) -> np.ndarray: ...
+
+    def check_joints(self, q) -> np.ndarray: ...
+
+    def redundant_pairs(self) -> list[tuple[str, str, str]]: ...
+
+
+@runtime_checkable
+class Remountable(Protocol):
+    """Optional capability of a chain: the same arm with other mounting transforms (``URDFChain``); a chain
+    without it is rebuilt from its MDH table (``rig.serial.remount_chain``)."""
+
+    def remounted(self, left: str, right: str, T_left_base=None, T_flange_right=None): ...
