@@ -9,6 +9,8 @@ import math
 import cv2
 import numpy as np
 
+from vision_calib.targets.spec import TargetSpec
+
 W, H, F = 800, 600, 900.0  # image size [px] and focal length [px]
 K = np.array([[F, 0, W / 2], [0, F, H / 2], [0, 0, 1.0]])
 
@@ -76,3 +78,51 @@ def photo_view(spec, rng, dot_px: float, tilt_deg: float = 0.0, roll_deg: float 
     cu = corners[:, :2] / corners[:, 2:]
     whole = bool(np.all(corners[:, 2] > 0) and np.all(cu >= 1) and np.all(cu[:, 0] <= W - 2) and np.all(cu[:, 1] <= H - 2))
     return img, uv, whole
+
+
+def grid_for(dot_px: float) -> TargetSpec:
+    """A modified circle grid (d = 0.4 spacing) whose frontal view spans <= ~60 % of the image width."""
+    n = int(np.clip(0.6 * W / (dot_px / 0.4), 3, 10))
+    return TargetSpec(kind="modified_circle_grid", name="m", rows=max(n - 1, 3), cols=n, spacing_m=0.025,
+                      diameter_m=0.01, margin_m=0.015)
+
+
+def degradation(kind: str, rng) -> tuple[float, dict]:
+    """(dot diameter px, photo_view keyword arguments) of one view of a degradation kind (:data:`KINDS`), random
+    roll; dots log-uniform 12-40 px unless said. lighting: ramp 0.6; defocus: blur sigma 2 px; jpeg: quality 30;
+    perspective: tilt 60 deg; shadow: 0.5; sizes: dots 5-60 px, tilt 0-30 deg, ramp 0.2, blur min(0.8, dot / 8);
+    mixed: all at once at random strengths, tilt U(0, 60) deg, ramp U(0, 0.6), shadow U(0, 0.5), blur U(0, 2) px,
+    JPEG quality U(30, 95)."""
+    dot = float(np.exp(rng.uniform(np.log(12), np.log(40))))
+    roll = dict(roll_deg=rng.uniform(0, 360))
+    if kind == "lighting":
+        return dot, dict(light=0.6, **roll)
+    if kind == "defocus":
+        return dot, dict(blur_px=2.0, **roll)
+    if kind == "jpeg":
+        return dot, dict(jpeg=30, **roll)
+    if kind == "perspective":
+        return dot, dict(tilt_deg=60.0, **roll)
+    if kind == "shadow":
+        return dot, dict(shadow=0.5, **roll)
+    if kind == "sizes":
+        dot = float(np.exp(rng.uniform(np.log(5), np.log(60))))
+        return dot, dict(tilt_deg=rng.uniform(0, 30), light=0.2, blur_px=min(0.8, dot / 8), **roll)
+    if kind == "mixed":
+        return dot, dict(tilt_deg=rng.uniform(0, 60), light=rng.uniform(0, 0.6), shadow=rng.uniform(0, 0.5),
+                         blur_px=rng.uniform(0, 2.0), jpeg=int(rng.uniform(30, 95)), **roll)
+    raise ValueError(f"unknown degradation kind {kind!r}; known: {', '.join(KINDS)}")
+
+
+KINDS = ("lighting", "defocus", "jpeg", "perspective", "shadow", "sizes", "mixed")
+
+
+def degraded_view(kind: str, rng):
+    """(spec, image, true centres (K, 2) px, dot diameter px, photo_view kwargs) of one view of a degradation kind
+    (:func:`degradation`) where the whole board is inside the image."""
+    while True:
+        dot, kw = degradation(kind, rng)
+        spec = grid_for(dot)
+        img, uv, whole = photo_view(spec, rng, dot, **kw)
+        if whole:
+            return spec, img, uv, dot, kw

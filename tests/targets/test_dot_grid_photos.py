@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from photo_views import W, photo_view
+from photo_views import F, H, KINDS, W, degraded_view, grid_for, photo_view
 from vision_calib.errors import ConfigError
 from vision_calib.measure.detect import detect
 from vision_calib.targets.kinds.dot_grid import MAX_OFF_GRID, grid_consistency
@@ -18,13 +18,6 @@ REAL = Path(os.environ["VISION_CALIB_SHARED_DATA"]) / "real" / "rosi_noise_quali
 
 def rosi_10x10(**kw):
     return TargetSpec(kind="modified_circle_grid", name="rosi_10x10", rows=10, cols=10, spacing_m=0.0254, **kw)
-
-
-def grid_for(dot_px: float) -> TargetSpec:
-    """A modified circle grid (d = 0.4 spacing) whose frontal view spans <= ~60 % of the image width."""
-    n = int(np.clip(0.6 * W / (dot_px / 0.4), 3, 10))
-    return TargetSpec(kind="modified_circle_grid", name="m", rows=max(n - 1, 3), cols=n, spacing_m=0.025,
-                      diameter_m=0.01, margin_m=0.015)
 
 
 def found_right(spec, img, uv, dot_px) -> bool:
@@ -74,28 +67,46 @@ def test_real_rosi_photo_all_dots_and_origin(settings):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("family, kw", [
-    ("lighting", dict(light=0.6)),
-    ("defocus", dict(blur_px=2.0)),
-    ("jpeg", dict(jpeg=30)),
-    pytest.param("perspective", dict(tilt_deg=60.0), marks=pytest.mark.xfail(
-        strict=False, reason="open (issue 17): 60-deg tilt measured 2-3 of 8 (the large origin dot near the board edge "
-        "fails the dark-on-light ring test; strong size gradient)")),
-    ("shadow", dict(shadow=0.5)),
-])
-def test_degraded_views_detected(family, kw):
-    """Each degradation at its strongest, dots of 12-40 px, random roll: the whole grid, right ids, in >= 7 of 8
-    views where the whole board is visible."""
-    rng = np.random.default_rng(17)
-    n = ok = 0
-    while n < 8:
-        dot = float(np.exp(rng.uniform(np.log(12), np.log(40))))
-        spec = grid_for(dot)
-        img, uv, whole = photo_view(spec, rng, dot, roll_deg=rng.uniform(0, 360), **kw)
-        if whole:
-            n += 1
-            ok += found_right(spec, img, uv, dot)
-    assert ok >= 7, f"{family}: {ok} of {n}"
+@pytest.mark.parametrize("kind, n_views", [("lighting", 12), ("defocus", 12), ("jpeg", 12), ("perspective", 12),
+                                           ("shadow", 12), ("sizes", 12), ("mixed", 24)])
+def test_degraded_views_detected(kind, n_views):
+    """Each degradation at its strongest (dots of 12-40 px; 'sizes': dots of 5-60 px; 'mixed': all of them at
+    random strengths, photo_views.degradation), random roll: the whole grid with the right ids in >= 95 % of the
+    views where the whole board is visible (issue 17's goal)."""
+    rng = np.random.default_rng([17, KINDS.index(kind)])
+    ok, failed = 0, []
+    for _ in range(n_views):
+        spec, img, uv, dot, kw = degraded_view(kind, rng)
+        good = found_right(spec, img, uv, dot)
+        ok += good
+        if not good:
+            failed.append(f"dot {dot:.0f} px {kw}")
+    assert ok >= np.ceil(0.95 * n_views), f"{kind}: {ok} of {n_views}; failed: {failed}"
+
+
+@pytest.mark.slow
+def test_perspective_60_deg_centres():
+    """Tilt 60 deg: the detected centres are the image ellipses' centres, off the projected circle centres by the
+    offset ellipse_centre_offset predicts (up to ~1 px for the origin dot); with the intrinsics given (the offset
+    removed) every dot is within 0.15 px of its true projection, and without them the error is that offset."""
+    from vision_calib.camera import CameraIntrinsics
+    from vision_calib.targets.kinds.circles import ellipse_centre_offset
+
+    intr = CameraIntrinsics(W, H, F, F, W / 2, H / 2)
+    rng = np.random.default_rng(60)
+    biggest = 0.0
+    for _ in range(4):
+        spec, img, uv, dot, kw = degraded_view("perspective", rng)
+        d = detect(img, spec, intr)
+        assert d.valid, d.reason
+        err = np.linalg.norm(d.uv_px - uv[d.ids], axis=1)
+        assert err.max() < 0.15, (kw, err.max())
+        raw = detect(img, spec)
+        _, p = spec.corner_points()
+        off = ellipse_centre_offset(spec, p, raw.uv_px, intr, radii=spec.kind_impl.radii(spec))
+        biggest = max(biggest, float(np.abs(off).max()))
+        assert np.max(np.linalg.norm(raw.uv_px - off - uv, axis=1)) < 0.15  # the raw error is that offset
+    assert biggest > 0.3  # ... and it is real at 60 deg (0.38 px measured on these views)
 
 
 @pytest.mark.slow
@@ -177,3 +188,50 @@ def test_detection_failures_count_in_the_verdict():
     v = verdict(res, {"n_poses": 15, "n_rejected": 9})
     assert v["status"] == "warning" and "9 of 15 poses rejected" in v["message"]
     assert verdict(res, {"n_poses": 15, "n_rejected": 4})["status"] == "ok"
+
+
+def test_board_axes_undo_a_sheared_lattice_basis():
+    """A 7 x 5 grid whose cells are numbered in a sheared basis (as grow_lattice may pick from the image's shortest
+    neighbour vectors, e.g. a diagonal at 60 deg tilt): board_axes gives back a 7 x 5 (or 5 x 7) box holding
+    every cell once; the sheared numbering itself spans a larger box."""
+    from vision_calib.targets.kinds.dot_grid import board_axes
+
+    ij = np.stack(np.meshgrid(np.arange(7), np.arange(5)), -1).reshape(-1, 2)
+    sheared = ij @ np.array([[1, 1], [0, 1]]).T  # (i + j, j)
+    assert tuple(np.ptp(sheared, axis=0) + 1) == (11, 5)
+    back = board_axes(map(tuple, sheared))
+    assert sorted(tuple(np.ptp(back, axis=0) + 1)) == [5, 7]
+    assert len({tuple(c) for c in back.tolist()}) == 35
+
+
+def _disc_image(cx, cy, r, shade, blur):
+    """(60, 60) image of a dark disc (reflectance 0.08 of the board) at (cx, cy) px of radius r px, 8x supersampled,
+    lit by shade(x, y) (board grey level), blurred (sigma px), grey noise 1."""
+    ss = 8
+    yy, xx = (np.mgrid[0:60 * ss, 0:60 * ss] + 0.5) / ss - 0.5
+    refl = np.where(np.hypot(xx - cx, yy - cy) <= r, 0.08, 1.0)
+    img = (refl * shade(xx, yy)).reshape(60, ss, 60, ss).mean(axis=(1, 3))
+    import cv2
+
+    img = cv2.GaussianBlur(img, (0, 0), blur) + np.random.default_rng(0).normal(0, 1.0, img.shape)
+    return np.clip(np.rint(img), 0, 255).astype(np.uint8)
+
+
+@pytest.mark.parametrize("light", ["ramp", "shadow edge"])
+def test_refine_dot_centre_under_uneven_light(light):
+    """refine_dot on a blurred dot (radius 8 px, sigma 1.5 px) lit by a steep ramp, or cut by a shadow edge (half
+    the light) through the dot: the centre within 0.1 px (ramp) / 0.3 px (edge) of the disc's, the dark area within
+    10 % of pi r^2 (ramp)."""
+    from vision_calib.targets.kinds.dot_grid import refine_dot
+
+    cx, cy, r = 30.3, 29.6, 8.0
+    if light == "ramp":
+        shade = lambda x, y: 110 + 2.0 * x  # noqa: E731  (110-230 grey across the image)
+    else:
+        shade = lambda x, y: np.where(x - 0.5 * y < 17.0, 220.0, 110.0)  # noqa: E731
+    img = _disc_image(cx, cy, r, shade, 1.5)
+    c, area = refine_dot(img, (cx + 2.0, cy - 1.5), 25.0)
+    err = float(np.hypot(c[0] - cx, c[1] - cy))
+    assert err < (0.1 if light == "ramp" else 0.3), err
+    if light == "ramp":
+        assert abs(area / (np.pi * r * r) - 1) < 0.1

@@ -36,7 +36,7 @@ import numpy as np
 
 from ...errors import ConfigError
 from .base import TargetKind, TargetSpec, check_memory
-from ._grid import apply_h, fit_homography, front_facing
+from ._grid import apply_h, fit_homography, front_facing, refine_grid
 from .image_model import circle_info
 from .dot_grid import MAX_OFF_GRID, candidate_grids, check_blob_settings, grid_consistency, not_found_message
 
@@ -168,7 +168,7 @@ class AsymmetricCirclesKind(TargetKind):
         _, p = self.corner_points(spec)
         orderings = self._orderings(spec)
 
-        def order(D):
+        def order(D, pattern, areas):
             best = None
             for perm in orderings:
                 uv = np.empty_like(D)
@@ -196,15 +196,25 @@ class AsymmetricCirclesKind(TargetKind):
 
 def find_ordered(spec, img, diag, intrinsics, patterns, flags_list, order, what, big):
     """The first dot grid of :func:`.dot_grid.candidate_grids` that ``order`` (centres (K, 2) px in OpenCV's grid
-    order -> (uv (K, 2) by id, homography RMS px) or (None, why)) ties to the board and whose point order is
-    consistent (:func:`.dot_grid.grid_consistency`: no dot more than MAX_OFF_GRID x the dot spacing off the
-    board's homography, on undistorted points when intrinsics are given). Returns (ids, uv) or (None, reason
-    naming what was found and why each grid was refused)."""
+    order, its patternSize, dark areas (K,) px^2 or None -> (uv (K, 2) by id, homography RMS px) or (None, why))
+    ties to the board and whose point order is consistent (:func:`.dot_grid.grid_consistency`: no dot more than
+    MAX_OFF_GRID x the dot spacing off the board's homography, on undistorted points when intrinsics are given).
+    ``big`` (the modified grid): the lattice stage runs and every dot is re-measured (:func:`._grid.refine_grid`:
+    darkness-weighted centroid and dark area) before ``order``. Returns (ids, uv) or (None, reason naming what was
+    found and why each grid was refused)."""
     _, p = spec.corner_points()
     dr = spec.diameter_m / spec.spacing_m if spec.diameter_m > 0 else 0.0
     report, refused = {}, []
-    for stage, pattern, D in candidate_grids(img, len(p), patterns, flags_list, spec.blob_detector, dr, big, report):
-        uv, how = order(D)
+    for stage, pattern, D in candidate_grids(img, len(p), patterns, flags_list, spec.blob_detector, dr, big, report,
+                                             lattice=big):
+        areas = None
+        if big:
+            G, areas = refine_grid(img, D.reshape(pattern[1], pattern[0], 2))
+            if G is None:
+                refused.append(areas)
+                continue
+            D, areas = G.reshape(-1, 2), areas.reshape(-1)
+        uv, how = order(D, pattern, areas)
         if uv is None:
             refused.append(how)
             continue
@@ -366,15 +376,15 @@ class ModifiedCircleGridKind(TargetKind):
         origin = self.origin_id(spec)
         patterns = [(cols, rows), (rows, cols)] if rows != cols else [(cols, rows)]
 
-        def order(D, pattern):
+        def order(D, pattern, areas):
             shape = (pattern[1], pattern[0])  # OpenCV's patternSize (per row, rows) -> grid (rows, per row)
-            corners = dot_corner_ratios(img, D.reshape(*shape, 2))
+            corners = corner_area_ratios(D.reshape(*shape, 2), areas.reshape(shape))
             ranked = sorted(corners, key=corners.get, reverse=True)
             big, second = corners[ranked[0]], corners[ranked[1]]
             diag["origin_dot_ratio"] = float(big)
             if not (big >= ORIGIN_RATIO * second):
-                return None, (f"the origin (large) dot is not recognisable: dark-area ratios of the grid corners to "
-                              f"their neighbours {[round(v, 2) for v in sorted(corners.values(), reverse=True)]}")
+                return None, (f"the origin (large) dot is not recognisable: dark areas of the grid corners relative to "
+                              f"the grid's median dot {[round(float(v), 2) for v in sorted(corners.values(), reverse=True)]}")
             for g in self._grid_orderings(rows, cols, shape):
                 flat = g.reshape(-1)
                 if flat[origin] != ranked[0]:
@@ -387,12 +397,8 @@ class ModifiedCircleGridKind(TargetKind):
             return None, "grid order could not be tied to the board (no front-facing ordering with the origin dot)"
 
         flags = cv2.CALIB_CB_SYMMETRIC_GRID
-        found = None, ""
-        for pattern in patterns:  # the grid may be seen turned by 90 degrees
-            found = find_ordered(spec, img, diag, intrinsics, [pattern], [flags | cv2.CALIB_CB_CLUSTERING, flags],
-                                 lambda D, pattern=pattern: order(D, pattern), f"modified circle grid of {cols} x {rows} dots", big=True)
-            if found[0] is not None:
-                break
+        found = find_ordered(spec, img, diag, intrinsics, patterns, [flags | cv2.CALIB_CB_CLUSTERING, flags], order,
+                             f"modified circle grid of {cols} x {rows} dots", big=True)
         if found[0] is None:
             return found
         uv = found[1]
@@ -408,31 +414,19 @@ class ModifiedCircleGridKind(TargetKind):
 ORIGIN_RATIO = 1.5
 
 
-def dot_corner_ratios(img: np.ndarray, G: np.ndarray) -> dict:
-    """{flat index of a corner of the detected dot grid G (R, C, 2) px: its dark area / the mean dark area of
-    its two grid neighbours}. Dark area: pixels darker than the window's mid grey within half the distance to
-    the nearest grid neighbour."""
+def corner_area_ratios(G: np.ndarray, A: np.ndarray) -> dict:
+    """{flat index of a corner of the detected dot grid G (R, C, 2) px: its dark area / the median dark area of the
+    grid's dots}, with A (R, C) the dots' dark areas [px^2] (:func:`._grid.refine_grid`) each divided by the
+    local area scale of the perspective, |det J| = |det H| / w^3 of the homography H fitted from grid indices to
+    G (a dot's image area is its printed area times |det J|)."""
     R, C = G.shape[:2]
-    out = {}
-    for r, c in ((0, 0), (0, C - 1), (R - 1, 0), (R - 1, C - 1)):
-        nb = [(r + (1 if r == 0 else -1), c), (r, c + (1 if c == 0 else -1))]
-        a0 = _dark_area(img, G[r, c], G[nb[0]], G[nb[1]])
-        a1 = [_dark_area(img, G[q], G[r, c]) for q in nb]
-        out[r * C + c] = a0 / max(np.mean(a1), 1e-9)
-    return out
-
-
-def _dark_area(img: np.ndarray, centre, *neighbours) -> float:
-    """Pixels darker than mid grey (between the window's 2nd and 98th percentiles) within half the distance
-    from ``centre`` (px) to its nearest given neighbour."""
-    rad = 0.5 * min(float(np.linalg.norm(np.asarray(q) - centre)) for q in neighbours)
-    h, w = img.shape
-    x0, x1 = max(0, int(centre[0] - rad)), min(w, int(centre[0] + rad) + 2)
-    y0, y1 = max(0, int(centre[1] - rad)), min(h, int(centre[1] + rad) + 2)
-    win = img[y0:y1, x0:x1].astype(np.float64)
-    if win.size == 0:
-        return 0.0
-    yy, xx = np.mgrid[y0:y1, x0:x1]
-    inside = (xx - centre[0]) ** 2 + (yy - centre[1]) ** 2 <= rad * rad
-    lo, hi = np.percentile(win, [2, 98])
-    return float(np.sum(inside & (win < (lo + hi) / 2)))
+    ij = np.stack(np.meshgrid(np.arange(C, dtype=np.float64), np.arange(R, dtype=np.float64)), -1).reshape(-1, 2)
+    H = fit_homography(ij, G.reshape(-1, 2))
+    if H is None:
+        scale = np.ones(R * C)
+    else:
+        w = np.column_stack([ij, np.ones(len(ij))]) @ H[2]
+        scale = np.abs(np.linalg.det(H) / w ** 3)
+    a = A.reshape(-1) / np.maximum(scale, 1e-12)
+    med = float(np.median(a))
+    return {r * C + c: float(a[r * C + c] / max(med, 1e-12)) for r, c in ((0, 0), (0, C - 1), (R - 1, 0), (R - 1, C - 1))}

@@ -8,20 +8,35 @@ tried only when the ones before give no grid:
 1. ``given``: the recording's own blob-detector settings (OpenCV ``SimpleBlobDetector_Params`` names, the target's
    ``blob_detector`` mapping; ``import-rosi`` fills it from ROS-I's ``circle_detector_params``);
 2. ``default``: dark blobs of 6 px .. 5 % of the image (the settings used before photos were supported);
-3. ``sized``: a permissive detector (thresholds 10..245, areas 4 px .. 10 % of the image, no circularity
+3. ``lattice`` (symmetric grids: the modified circle grid): the dark ellipses of the image divided by its local
+   background (:func:`dark_ellipses`: connected components at 3 levels, filled-ellipse and dark-on-light tests,
+   which hold for dots seen at 60 deg and in a shadow), a point lattice grown from them with each next cell
+   predicted by the homography of the cells found (:func:`._grid.lattice_grids`: background specks beside the
+   board trimmed, a dot missing from the candidates or a whole missing edge line measured where the lattice
+   predicts it), the board's rows and columns told from a sheared lattice basis by the smallest bounding box;
+4. ``sized``: a permissive detector (thresholds 10..245, areas 4 px .. 10 % of the image, no circularity
    filter), its blobs kept when they are dark on a uniform lighter surround (:func:`dark_on_light`: dots on the
    board, not background texture) and in the size window that holds the expected number of dots with the fewest others
    (window: a factor ``SIZE_WINDOW`` in blob diameter; the modified grid's origin dot, twice as large, is kept
    beside it) and whose diameter / nearest-neighbour distance is within a factor 2 of the target's
    diameter / spacing (when the target gives its diameter);
-4. ``flattened``: stage 3 on the image divided by its local background (grey closing over ~6 dot diameters):
+5. ``flattened``: stage 4 on the image divided by its local background (grey closing over ~6 dot diameters):
    removes shadows and uneven lighting.
 
-The kept blobs are redrawn as clean discs on white (radius 0.3 x nearest-neighbour distance) and
-``findCirclesGrid`` runs on that drawing (it takes no point list from Python); its centres are snapped back to
-the photo's blob centres. Each grid is returned to the kind, which ties its order to the board and checks it
-(:func:`grid_consistency`); the first grid that passes wins. When none does, :func:`not_found_message` says
-what was found: the blobs of the best size window, their sizes, and the count needed.
+In stages 1, 2, 4 and 5 the kept blobs are redrawn as clean discs on white (radius 0.3 x nearest-neighbour
+distance) and ``findCirclesGrid`` runs on that drawing (it takes no point list from Python); its centres are
+snapped back to the photo's blob centres. Each grid is returned to the kind, which ties its order to the board
+and checks it (:func:`grid_consistency`); the first grid that passes wins. For the modified circle grid every
+dot of a grid is first re-measured (:func:`._grid.refine_dot`: darkness-weighted centroid over a local background
+plane, or an inpainted background across a shadow edge; the blob detector's centres were off by up to 9 px at
+60 deg) and the origin dot is the corner whose dark area, over the perspective's local area scale, is largest.
+When no grid passes, :func:`not_found_message` says what was found: the blobs of the best size window, their
+sizes, and the count needed.
+
+Centres are the centres of the dots' image ellipses, not the projections of the circle centres: at 60 deg tilt
+they differ by up to ~1 px (``benchmarks/bench_dot_photos.py``: 0.05 px mean, 0.83 px max over 40 views with
+dots of 12-40 px); the kinds remove that offset when intrinsics are given (``ellipse_centre_offset``: 0.010 px
+mean, 0.043 px max left on the same views).
 """
 
 from __future__ import annotations
@@ -30,6 +45,7 @@ import cv2
 import numpy as np
 
 from ...errors import ConfigError
+from ._grid import board_axes, lattice_grids, nearest_distance, refine_dot  # noqa: F401 (re-exported)
 
 #: OpenCV SimpleBlobDetector_Params fields a target's ``blob_detector`` mapping may set, with their types
 BLOB_KEYS = {"minThreshold": float, "maxThreshold": float, "thresholdStep": float, "minRepeatability": int,
@@ -107,6 +123,98 @@ def flatten(img: np.ndarray, dot_px: float) -> np.ndarray:
     return np.clip(255.0 * img / np.maximum(bg.astype(np.float64), 8.0), 0, 255).astype(np.uint8)
 
 
+#: levels (fraction of the local background) at which the flattened image is cut into dark components
+LEVELS = (0.35, 0.5, 0.65)
+
+
+def _components(flat: np.ndarray, level: float, max_area: float):
+    """Dark connected components of the flattened image below level x 255 that look like a filled ellipse:
+    (centres (M, 2) px, covariances (M, 2, 2) px^2 of their pixels, areas (M,) px). Kept: 4 px <= area <= max_area,
+    not touching the image border, area / area of the moment ellipse (4 pi sqrt(det cov)) in 0.8-1.2, axis ratio
+    < 4."""
+    n, lab, st, _ = cv2.connectedComponentsWithStats((flat < level * 255).astype(np.uint8), connectivity=8)
+    h, w = flat.shape
+    area = st[:, cv2.CC_STAT_AREA].astype(np.float64)
+    x0, y0 = st[:, cv2.CC_STAT_LEFT], st[:, cv2.CC_STAT_TOP]
+    ok = ((area >= 4) & (area <= max_area) & (x0 > 0) & (y0 > 0) & (x0 + st[:, cv2.CC_STAT_WIDTH] < w)
+          & (y0 + st[:, cv2.CC_STAT_HEIGHT] < h))
+    ok[0] = False
+    if not ok.any():
+        return np.zeros((0, 2)), np.zeros((0, 2, 2)), np.zeros(0)
+    yy, xx = np.nonzero(np.isin(lab, np.flatnonzero(ok)))
+    L = lab[yy, xx]
+    m = np.bincount(L, minlength=n).astype(np.float64)
+    sx, sy = np.bincount(L, xx, n), np.bincount(L, yy, n)
+    sxx, syy, sxy = np.bincount(L, xx * xx, n), np.bincount(L, yy * yy, n), np.bincount(L, xx * yy, n)
+    idx = np.flatnonzero(ok)
+    mm = m[idx]
+    cx, cy = sx[idx] / mm, sy[idx] / mm
+    # pixel covariance (+ 1/12: a pixel's own extent)
+    cxx, cyy, cxy = sxx[idx] / mm - cx * cx + 1 / 12, syy[idx] / mm - cy * cy + 1 / 12, sxy[idx] / mm - cx * cy
+    det = np.maximum(cxx * cyy - cxy * cxy, 1e-12)
+    fill = mm / (4 * np.pi * np.sqrt(det))
+    tr = cxx + cyy
+    disc = np.sqrt(np.maximum(tr * tr / 4 - det, 0))
+    ratio = np.sqrt((tr / 2 + disc) / np.maximum(tr / 2 - disc, 1e-12))
+    good = (fill > 0.8) & (fill < 1.2) & (ratio < 4)
+    cov = np.stack([np.stack([cxx, cxy], -1), np.stack([cxy, cyy], -1)], -2)
+    return np.column_stack([cx, cy])[good], cov[good], mm[good]
+
+
+def _on_board(img: np.ndarray, c: np.ndarray, cov: np.ndarray) -> bool:
+    """Whether the dark ellipse (centre c px, pixel covariance cov) lies on a uniform lighter surround (a dot on the
+    board, not background texture): as :func:`dark_on_light`, with the ellipse's own shape (inner: within 0.6 of
+    its boundary, ring: 1.5-2.1 times its size)."""
+    h, w = img.shape
+    R = int(np.ceil(2.2 * 2 * np.sqrt(np.linalg.eigvalsh(cov)[1]))) + 1
+    x0, x1, y0, y1 = int(c[0]) - R, int(c[0]) + R + 1, int(c[1]) - R, int(c[1]) + R + 1
+    if x0 < 0 or y0 < 0 or x1 > w or y1 > h:
+        return False
+    win = img[y0:y1, x0:x1].astype(np.float64)
+    yy, xx = np.mgrid[y0:y1, x0:x1]
+    d = np.stack([xx - c[0], yy - c[1]], -1)
+    rho = np.sqrt(np.einsum("...i,ij,...j->...", d, np.linalg.inv(cov), d)) / 2  # 1 on the ellipse's boundary
+    inner, ring = win[rho <= 0.6], win[(rho >= 1.5) & (rho <= 2.1)]
+    if inner.size == 0 or ring.size < 8:
+        return False
+    lo, med, hi = np.percentile(ring, [10, 50, 90])
+    con = med - inner.mean()
+    return bool(con > 15 and con > 1.2 * (hi - lo) and con > 0.5 * med)
+
+
+def dark_ellipses(img: np.ndarray, report: dict | None = None):
+    """Dot candidates of a photo: (centres (M, 2) px, pixel covariances (M, 2, 2) px^2, areas (M,) px) of the dark
+    ellipses on a lighter surround, at every level of :data:`LEVELS` of the image flattened by its local
+    background (:func:`flatten`; first with a kernel for dots of 1/36 of the image size, then again for the
+    median dot found when it differs by more than 1.5 x). A dot seen at several levels is kept once (the first
+    level at which it is seen, 0.5 first)."""
+    dot_px = max(img.shape) / 36
+    found = []
+    for attempt in range(2):
+        flat = flatten(img, dot_px)
+        for level in (LEVELS[1], LEVELS[0], LEVELS[2]):
+            c, cov, a = _components(flat, level, 0.05 * img.size)
+            for k in range(len(c)):
+                if _on_board(img, c[k], cov[k]):
+                    found.append((c[k], cov[k], a[k]))
+        if not found or attempt:
+            break
+        new = float(np.median([2 * np.sqrt(a / np.pi) for _, _, a in found]))
+        if max(new, dot_px) / min(new, dot_px) < 1.5:
+            break
+        dot_px = new
+    keep = []
+    for c, cov, a in found:
+        inv = np.linalg.inv(cov)
+        if not any(np.sqrt((c - k[0]) @ inv @ (c - k[0])) / 2 < 1.0 or np.linalg.norm(c - k[0]) < 1.0 for k in keep):
+            keep.append((c, cov, a))
+    if report is not None:
+        report["ellipses"] = len(keep)
+    if not keep:
+        return np.zeros((0, 2)), np.zeros((0, 2, 2)), np.zeros(0)
+    return np.array([k[0] for k in keep]), np.array([k[1] for k in keep]), np.array([k[2] for k in keep])
+
+
 def _blobs(img, settings) -> tuple[np.ndarray, np.ndarray]:
     """(centres (M, 2) px, diameters (M,) px) of the blobs; of two blobs whose centres are closer than half the
     larger one's diameter and of more than half its size (one dot split at some thresholds) the larger is kept."""
@@ -124,15 +232,6 @@ def _blobs(img, settings) -> tuple[np.ndarray, np.ndarray]:
                 keep[dup] = False
         pts, sizes = pts[keep], sizes[keep]
     return pts, sizes
-
-
-def _nn(pts: np.ndarray) -> np.ndarray:
-    """(M,) distance of each point to its nearest other point (inf for a single point)."""
-    if len(pts) < 2:
-        return np.full(len(pts), np.inf)
-    d = np.linalg.norm(pts[:, None] - pts[None], axis=2)
-    np.fill_diagonal(d, np.inf)
-    return d.min(axis=1)
 
 
 def dark_on_light(img, pts, sizes) -> np.ndarray:
@@ -166,7 +265,7 @@ def size_windows(pts, sizes, n_dots: int, dot_ratio: float = 0.0, big: bool = Fa
     unknown): blobs whose diameter / nearest-neighbour distance is off it by more than a factor 2 are left out."""
     keep = np.ones(len(sizes), bool)
     if dot_ratio > 0 and len(pts) > 1:
-        r = sizes / _nn(pts)
+        r = sizes / nearest_distance(pts)
         keep = (r > dot_ratio / 2) & (r < dot_ratio * 2 * (2.2 if big else 1.0))
     idx = np.flatnonzero(keep)
     out, seen = [], set()
@@ -204,7 +303,7 @@ def grid_from_points(pts, shape_img, pattern, flags) -> np.ndarray | None:
     pts (OpenCV's order) or None. pattern: (a, b) = OpenCV's patternSize."""
     if len(pts) < pattern[0] * pattern[1]:
         return None
-    nn = _nn(pts)
+    nn = nearest_distance(pts)
     rad = np.clip(0.3 * nn, 2.0, 200.0)
     canvas = np.full(shape_img, 255, np.uint8)
     for (x, y), r in zip(pts, rad):
@@ -224,16 +323,27 @@ def grid_from_points(pts, shape_img, pattern, flags) -> np.ndarray | None:
 
 
 def candidate_grids(img, n_dots: int, patterns, flags_list, given: tuple = (), dot_ratio: float = 0.0,
-                    big: bool = False, report: dict | None = None):
+                    big: bool = False, report: dict | None = None, lattice: bool = False):
     """Yield (stage, pattern, centres (n_dots, 2) px in OpenCV's grid order) for each grid found, stages as in the
-    module docstring. report: filled with {stage: (blobs found, best window count, min size, max size)}."""
+    module docstring (``lattice``: the lattice stage, symmetric grids only, after 'default'). report: filled with
+    {stage: (blobs found, best window count, min size, max size)}."""
     report = {} if report is None else report
     stages = []
     if given:
         stages.append(("given", img, dict(given), False))
-    stages += [("default", img, default_settings(img), False), ("sized", img, permissive_settings(img), True)]
+    stages.append(("default", img, default_settings(img), False))
+    if lattice:
+        stages.append(("lattice", None, None, False))
+    stages += [("sized", img, permissive_settings(img), True), ("flattened", None, permissive_settings(img), True)]
     dot_px = 0.0
-    for name, im, settings, windows in stages + [("flattened", None, permissive_settings(img), True)]:
+    for name, im, settings, windows in stages:
+        if name == "lattice":
+            pts, _, areas = dark_ellipses(img)
+            sizes = 2 * np.sqrt(areas / np.pi)
+            report[name] = (len(pts), len(pts), float(sizes.min()) if len(sizes) else 0.0, float(sizes.max(initial=0)))
+            for pattern, G in lattice_grids(img, pts, areas, patterns):
+                yield name, pattern, G.reshape(-1, 2)
+            continue
         if im is None:
             im = flatten(img, dot_px or max(img.shape) / 50)
         pts, sizes = _blobs(im, settings)
