@@ -14,6 +14,7 @@ import numpy as np
 from ..identify import model_adequacy
 from ..io.report import misfit_message, parameters_table, verdict
 from ..rig import Evaluation, Measurements, Scene, load_scene, scene_poses
+from .prepare import prepare_setup
 from .steps import (analyze_setup, base_problem, check_method, lack_of_fit_of, rngs, scene_truth, shared_truth, solve,
                     unmodelled_truth)
 
@@ -41,8 +42,8 @@ class SyntheticRun:
     residual: str
     base: np.ndarray
     truth: object = None  #: the truth setup when it is not the identified model (x_true is then its vector)
-    setup: object = None  #: the setup identified (after ``Setup.prepare`` when asked; its params match result)
-    prepared: dict = None  #: what ``Setup.prepare`` determined from the data (report's ``prepared`` block)
+    setup: object = None  #: the setup identified (after :func:`.prepare.prepare_setup` when asked; params match result)
+    prepared: dict = None  #: what :func:`.prepare.prepare_setup` determined from the data (report's ``prepared`` block)
 
 
 def identifiability_json(scene, residual=None, n_poses=None, seed=None, all_params=False) -> dict:
@@ -65,8 +66,8 @@ def run_synthetic(scene, method=None, residual=None, n_poses=None, sigma_t_m=Non
     base: identifiable mask (n,) from a previous analysis (saves one SVD in Monte Carlo loops).
     truth: the setup that produces the measurements (default the scene's; another model, e.g. an H4
     model-31 robot identified as model 12, to study model error), with parameters x_true.
-    prepare (default): run ``Setup.prepare`` on the measurements first, as measured data do (H4: camera axis and
-    tilt parameters; the base mask is then re-analysed when prepare frees parameters; the result then has
+    prepare (default): run :func:`.prepare.prepare_setup` on the measurements first, as measured data do (H4: camera
+    axis and tilt parameters; the base mask is then re-analysed when prepare frees parameters; the result then has
     the prepared setup's parameters, H4: 4 tilt parameters appended). Without it an H4 truth with mount
     tilts ends ~10 mm off after calibration (the kinematic parameters absorb the camera tilt, README);
     False only to study exactly that.
@@ -106,7 +107,7 @@ def run_synthetic(scene, method=None, residual=None, n_poses=None, sigma_t_m=Non
     prepared = {}
     if prepare:
         free0 = setup.params.free_names
-        setup, prepared = setup.prepare(meas)
+        setup, prepared = prepare_setup(setup, meas)
         if setup.params.free_names != free0:
             from ..identify import analyze
             from .steps import BASE_SELECTION
@@ -134,7 +135,7 @@ def identify_synthetic_json(scene, method=None, residual=None, n_poses=None, sig
     out = run_synthetic(scene, method=method, residual=residual, n_poses=n_poses, sigma_t_m=st, sigma_r_rad=sr,
                         seed=seed, prepare=True)  # as measured data (simulate, process) do
     res = out.result
-    ps = out.setup.params  # after Setup.prepare (H4: the tilt parameters)
+    ps = out.setup.params  # after prepare_setup (H4: the tilt parameters)
     adequacy = model_adequacy(res)
     warnings = list(res.warnings) + ([out.prepared["warning"]] if out.prepared.get("warning") else [])
     if adequacy["verdict"] == "too large":

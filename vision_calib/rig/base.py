@@ -139,6 +139,28 @@ class ChainMeasured(Protocol):
     def chain_measurements(self, meas: Measurements) -> Measurements: ...
 
 
+@runtime_checkable
+class TiltsFromAxis(Protocol):
+    """Optional capability of a setup: camera and target mounts with small tilts that the rotation axis of the
+    moving part measures before identification (H4, paper §4.1); ``experiment.prepare.prepare_setup`` runs that
+    step and decides what to do with the estimate. The kind only describes what it needs:
+
+    - ``tilt_mode``: "identify" (the axis estimate as a prior of identified tilt parameters), "axis" (tilts fixed
+      at the estimate) or "off" (nominal tilts kept);
+    - ``tilt_names``: the names of the 4 tilt parameters (camera x/y, target x/y) [rad];
+    - ``tilt_reference() -> (R_BC0, R_ME0)`` (3, 3) each: the nominal mount rotations the tilts are relative to
+      (what ``identify.camera_axis.estimate_camera_axis`` measures against);
+    - ``with_tilts(tilts_rad (4,), prior_std_rad (4,) | None) -> Setup``: the setup with the tilt parameters at
+      ``tilts_rad``, free with that prior std, or fixed (None)."""
+
+    tilt_mode: str
+    tilt_names: tuple[str, ...]
+
+    def tilt_reference(self) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def with_tilts(self, tilts_rad, prior_std_rad=None) -> "Setup": ...
+
+
 @dataclass(frozen=True)
 class Setup:
     """Common interface of every robot kind (see the module docstring). ``params`` is the full
@@ -203,11 +225,6 @@ class Setup:
         raise NotImplementedError
 
     # ------------------------------------------------------------------ optional, with defaults
-    def prepare(self, meas: Measurements) -> tuple["Setup", dict]:
-        """Steps the data determine before identification (e.g. the H4 camera axis, paper §4.1): the setup
-        to identify with and a JSON-ready record for the report. Default: nothing to do."""
-        return self, {}
-
     def truth_model(self, spec: dict, rng: np.random.Generator, where: str = "truth") -> "Setup":
         """The setup of a true robot with errors this model does not share (``spec``: the scene's
         ``truth`` entries of :attr:`truth_keys`); its parameters are drawn by the caller. Default: none."""
