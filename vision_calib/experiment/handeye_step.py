@@ -21,8 +21,9 @@ import numpy as np
 
 from ..errors import IdentifiabilityError
 from ..identify import fit_rejecting_outliers, model_adequacy
-from ..identify.handeye_fit import closed_form_comparison, fit_handeye
+from ..identify.handeye_fit import HandeyeFit, closed_form_comparison, fit_handeye
 from ..identify.handeye_problem import transforms_from_x
+from ..identify.problem import IdentificationProblem, IdentificationResult
 from ..measure.handeye import closed_forms
 from .steps import NUISANCE_PREFIX, OUTLIER_LEVEL, OUTLIER_MIN_RATIO, misfit_warning
 
@@ -34,14 +35,14 @@ class HandeyeIdentified:
     variance_factor, fit (``HandeyeFit`` of the kept poses: robot std, closed-form comparison), nuisance
     (the shared error's block or None). Has the fields ``io.report.build_report(identified=)`` reads."""
 
-    result: object
+    result: IdentificationResult
     A: np.ndarray
     B: np.ndarray
-    problem: object
+    problem: IdentificationProblem
     rejected: tuple
     adequacy: dict
     variance_factor: float
-    fit: object
+    fit: HandeyeFit
     nuisance: dict | None = None
     prepared: dict | None = None
 

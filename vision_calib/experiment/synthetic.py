@@ -12,8 +12,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..identify import model_adequacy
+from ..identify.problem import IdentificationProblem, IdentificationResult
 from ..io.report import misfit_message, parameters_table, verdict
-from ..rig import Evaluation, Measurements, Scene, load_scene, scene_poses
+from ..rig import Evaluation, Measurements, Scene, Setup, load_scene, scene_poses
 from .prepare import prepare_setup
 from .steps import (analyze_setup, base_problem, check_method, lack_of_fit_of, rngs, scene_truth, shared_truth, solve,
                     unmodelled_truth)
@@ -29,21 +30,21 @@ class SyntheticRun:
     measurements and problem, accuracy before (nominal) / after (identified) on the validation poses."""
 
     scene: Scene
-    result: object
+    result: IdentificationResult
     x_true: np.ndarray
     poses: np.ndarray
     validation: np.ndarray
     measurements: Measurements
-    problem: object
+    problem: IdentificationProblem
     before: Evaluation
     after: Evaluation
     seconds: float
     method: str
     residual: str
     base: np.ndarray
-    truth: object = None  #: the truth setup when it is not the identified model (x_true is then its vector)
-    setup: object = None  #: the setup identified (after :func:`.prepare.prepare_setup` when asked; params match result)
-    prepared: dict = None  #: what :func:`.prepare.prepare_setup` determined from the data (report's ``prepared`` block)
+    truth: Setup | None = None  #: the truth setup when it is not the identified model (x_true is then its vector)
+    setup: Setup | None = None  #: the setup identified (after :func:`.prepare.prepare_setup` when asked; params match result)
+    prepared: dict | None = None  #: what :func:`.prepare.prepare_setup` determined from the data (report's ``prepared`` block)
 
 
 def identifiability_json(scene, residual=None, n_poses=None, seed=None, all_params=False) -> dict:

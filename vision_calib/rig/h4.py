@@ -152,8 +152,9 @@ class H4Setup(Setup):
         return random_workspace_poses(n, rng, center=self.robot.center, size=self.robot.size)
 
     def pose_grid(self, name: str) -> np.ndarray:
+        """The commanded poses (81, 4) of the grid "grid81" (``rig.base.PoseGrids``)."""
         if name != "grid81":
-            return super().pose_grid(name)
+            raise ConfigError(f"{self.name}: this {self.kind} setup has no pose grid {name!r} (it has grid81)")
         return self.robot.pose_grid()
 
     def with_params(self, params):
