@@ -33,8 +33,8 @@ import numpy as np
 from vision_calib import frames
 from vision_calib.experiment.handeye_sim import PNP_SCALE, simulate_handeye
 from vision_calib.experiment.handeye_step import identify_handeye
-from vision_calib.identify.handeye_fit import CLOSED_FORM_METHODS, closed_forms
 from vision_calib.identify.handeye_problem import solve_handeye, x_from_transforms
+from vision_calib.measure.handeye import CLOSED_FORM_METHODS, closed_forms
 
 SCENES = {"rx90 eye-in-hand": "scenes/rx90_eye_in_hand.yaml", "tripod (fixed)": "scenes/thesis_arm_tripod_probe.yaml"}
 

@@ -30,8 +30,4 @@ LIGHT = ("identify", "kinematics")
 
 #: known exceptions to the contract, each with its reason (module, imported module): the test fails when one
 #: is no longer needed, so the list only shrinks
-EXCEPTIONS: dict[tuple[str, str], str] = {
-    ("vision_calib.identify.handeye_problem", "cv2"):
-        "handeye_initial_guess: OpenCV's closed-form hand-eye solutions (imported inside the function only); "
-        "to move to measure/handeye.py with identify.handeye_fit taking the closed forms as input",
-}
+EXCEPTIONS: dict[tuple[str, str], str] = {}

@@ -10,8 +10,9 @@ from vision_calib import frames
 from vision_calib.errors import ConfigError
 from vision_calib.experiment.handeye_sim import simulate_handeye
 from vision_calib.experiment.handeye_step import handeye_blocks, identify_handeye
-from vision_calib.identify.handeye_fit import closed_forms, fit_handeye
+from vision_calib.identify.handeye_fit import fit_handeye
 from vision_calib.identify.handeye_problem import x_from_transforms
+from vision_calib.measure.handeye import closed_forms
 
 RX90 = "scenes/rx90_eye_in_hand.yaml"
 TRIPOD = "scenes/thesis_arm_tripod_probe.yaml"
@@ -63,7 +64,8 @@ def test_never_worse_than_the_best_closed_form(scene):
     closer to the truth than every closed form, in translation and rotation of both mounts, on every seed."""
     for seed in (1, 2, 3):
         d = simulate_handeye(scene, 12, seed)
-        fit = fit_handeye(d.T_base_flange, d.T_cam_target, d.mount, d.pose_cov, d.labels)
+        fit = fit_handeye(d.T_base_flange, d.T_cam_target, d.mount, d.pose_cov, d.labels,
+                          candidates=closed_forms(d.T_base_flange, d.T_cam_target, d.mount))
         cmp_ = fit.closed_forms
         assert cmp_["ours"] == pytest.approx(fit.result.cost_final, rel=1e-9)
         costs = {m: v["cost"] for m, v in cmp_["methods"].items()}
@@ -96,10 +98,13 @@ def test_restarts_from_a_closed_form_when_it_is_cheaper(monkeypatch):
         return solve_lse(pb, x_bad, max_nfev=2), pb, theta, None, 1
 
     monkeypatch.setattr(hf, "_irls", planted_irls)
-    fit = hf.fit_handeye(d.T_base_flange, d.T_cam_target, d.mount, d.pose_cov, d.labels, (d.robot_std_m, d.robot_std_rad))
+    cands = closed_forms(d.T_base_flange, d.T_cam_target, d.mount)
+    fit = hf.fit_handeye(d.T_base_flange, d.T_cam_target, d.mount, d.pose_cov, d.labels, (d.robot_std_m, d.robot_std_rad),
+                         candidates=cands)
     assert len(calls) == 2
     assert all(v["cost_minus_ours"] >= 0 for v in fit.closed_forms["methods"].values())
-    ref = hf.fit_handeye(d.T_base_flange, d.T_cam_target, d.mount, d.pose_cov, d.labels, (d.robot_std_m, d.robot_std_rad))
+    ref = hf.fit_handeye(d.T_base_flange, d.T_cam_target, d.mount, d.pose_cov, d.labels, (d.robot_std_m, d.robot_std_rad),
+                         candidates=cands)
     assert fit.result.cost_final == pytest.approx(ref.result.cost_final, rel=1e-6)
 
 

@@ -13,6 +13,7 @@ import numpy as np
 from vision_calib import cli
 from vision_calib import frames as F
 from vision_calib.experiment.poses import process_poses
+from vision_calib.experiment.prepare import prepare_setup
 from vision_calib.experiment.steps import scene_truth
 from vision_calib.experiment.synthetic import identify_synthetic_json, run_synthetic
 from vision_calib.io.measured_poses import write_measured_poses
@@ -120,18 +121,18 @@ def _wobbling(meas, setup, amp_rad):
 def test_prepare_refuses_tilts_when_the_rotation_axis_is_not_fixed():
     sc = load_scene(VISION)
     out = run_synthetic(sc, seed=1, prepare=True)  # 0.2 mm / 0.03 deg noise, truth tilts 0.5 deg
-    ok_setup, ok = sc.setup.prepare(out.measurements)
+    ok_setup, ok = prepare_setup(sc.setup, out.measurements)
     assert ok["applied"] and ok["axis_fixed"] and "warning" not in ok
     # noise only: the axis fit's chi2/dof is inside the central 99.9 % interval of chi2(dof)/dof
     assert 0.6 < ok["axis_test"]["chi2_dof"] < 1.5
     bad_meas = _wobbling(out.measurements, sc.setup, np.radians(0.3))
-    setup, info = sc.setup.prepare(bad_meas)
+    setup, info = prepare_setup(sc.setup, bad_meas)
     assert not info["axis_fixed"] and not info["applied"] and info["identified"] == []
     assert info["axis_test"]["chi2_dof"] > 4 and "do not share one fixed rotation axis" in info["warning"]
     assert np.allclose([setup.params.nominal[setup.params.index(n)] for n in
                         ("B_T_C.tilt_x", "B_T_C.tilt_y")], 0.0)
     # a wobble under the noise (0.005 deg) is not refused
-    _, small = sc.setup.prepare(_wobbling(out.measurements, sc.setup, np.radians(0.005)))
+    _, small = prepare_setup(sc.setup, _wobbling(out.measurements, sc.setup, np.radians(0.005)))
     assert small["axis_fixed"] and small["applied"]
 
 

@@ -44,12 +44,12 @@ def test_import_and_process_visp_eye_to_hand(tmp_path, capsys):
     assert 0.5 < rp["rms_px"] < 20 and rp["worst_poses"][0]["rms_px"] == per.max()
     assert "reprojection: RMS" in rep["summary_text"]
     # agreement with OpenCV's closed-form hand-eye (Shah) within 4 std per translation component
-    from vision_calib.identify.handeye_problem import handeye_initial_guess
+    from vision_calib.measure.handeye import opencv_closed_form
     from vision_calib.io.recording import read_recording
     from vision_calib import frames as F
 
     r = read_recording(rec)
     T = np.array([p["T_cam_target"] for p in json.loads((tmp_path / "out" / "measurements.json").read_text())["poses"]])
-    A0, _ = handeye_initial_guess(r.poses, T, "fixed")
+    A0, _ = opencv_closed_form(r.poses, T, "fixed", "shah")
     d = np.abs(F.inv_T(A0)[:3, 3] - np.array(cam["xyz_m"])) / np.array(cam["std_xyz_m"])
     assert d.max() < 4, d

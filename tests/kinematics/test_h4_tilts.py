@@ -1,6 +1,7 @@
 """H4 tilt parameters (camera and target mount tilts, kinematics.h4 TILT_NAMES): analytic Jacobian
-columns vs finite differences, folding into the fixed tilts, variants, and the prepare() step that
-measures them from the rotation axis and identifies what the IGM determines (rig.h4.H4Setup)."""
+columns vs finite differences, folding into the fixed tilts, variants, and the preparation step that
+measures them from the rotation axis and identifies what the IGM determines (experiment.prepare on the
+rig.base.TiltsFromAxis capability of rig.h4.H4Setup)."""
 
 from dataclasses import replace
 from pathlib import Path
@@ -8,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from vision_calib.experiment.prepare import prepare_setup
 from vision_calib.experiment.synthetic import run_synthetic
 from vision_calib.frames import perturb_pose
 from vision_calib.identify.camera_axis import estimate_camera_axis
@@ -119,7 +121,7 @@ def test_tilt_prior_enters_as_prior_rows_without_taking_degrees_of_freedom():
     fixed = solve_lse(prob.with_params(prob.params.fix(list(TILT_NAMES))))
     assert free.dof == fixed.dof
     # "axis" mode: fixed at the axis value, the info says their std is not carried
-    _, info = replace(sc.setup, tilt_mode="axis").prepare(o.measurements)
+    _, info = prepare_setup(replace(sc.setup, tilt_mode="axis"), o.measurements)
     assert info["identified"] == [] and "not carried" in info["note"]
 
 
@@ -131,4 +133,4 @@ def test_prepare_off_and_bad_mode():
 
     bad = replace(sc.setup, tilt_mode="sometimes")
     with pytest.raises(ConfigError, match="tilt_mode"):
-        bad.prepare(o.measurements)
+        prepare_setup(bad, o.measurements)

@@ -4,13 +4,14 @@ probes: which shipped setups and chains have them, and the errors that name a mi
 import numpy as np
 import pytest
 
-from vision_calib.errors import ParameterError
+from vision_calib.errors import ConfigError, ParameterError
 from vision_calib.identify.serial_problem import serial_problem
 from vision_calib.kinematics.protocols import ChainModel, Remountable
 from vision_calib.kinematics.serial import SerialChain
 from vision_calib.kinematics.urdf import URDFChain
 from vision_calib.rig import SCENES_DIR, load_scene
-from vision_calib.rig.base import ChainMeasured
+from vision_calib.rig.base import (ChainMeasured, ModelVariants, NamedConfigurations, NamedTrials, PoseGrids, Setup,
+                                   TiltsFromAxis)
 from vision_calib.rig.serial import remount_chain
 
 
@@ -22,6 +23,35 @@ def test_shipped_setups_declare_their_capabilities(scene, chain_measured):
     if chain_measured:
         assert isinstance(setup.chain, ChainModel)
         assert isinstance(setup.chain, Remountable) is isinstance(setup.chain, URDFChain)
+
+
+#: each optional interface and its members (none of them on the base Setup)
+CAPS = {ModelVariants: ("with_variant",), NamedConfigurations: ("configurations",), NamedTrials: ("trials",),
+        PoseGrids: ("pose_grids", "pose_grid"), TiltsFromAxis: ("tilt_mode", "tilt_names", "tilt_reference", "with_tilts")}
+
+
+@pytest.mark.parametrize("scene, caps", [("h4_vision.yaml", {ModelVariants, PoseGrids, TiltsFromAxis}),
+                                         ("rx90_eye_in_hand.yaml", {NamedConfigurations, NamedTrials}),
+                                         ("ur5e_eye_in_hand.yaml", {NamedConfigurations, NamedTrials})])
+def test_kind_hooks_are_optional_interfaces(scene, caps):
+    """The base Setup has none of the kind-specific hooks; each shipped kind has exactly its own."""
+    for cap, members in CAPS.items():
+        assert not any(hasattr(Setup, m) for m in members), (cap, members)
+    setup = load_scene(SCENES_DIR / scene).setup
+    assert {c for c in CAPS if isinstance(setup, c)} == caps
+
+
+def test_a_missing_capability_is_named_where_it_is_asked_for():
+    from vision_calib.study.spec import scene_with, scene_with_trial
+
+    serial = load_scene(SCENES_DIR / "rx90_eye_in_hand.yaml")
+    with pytest.raises(ConfigError, match="variant/model choices need a robot kind that has them .*serial"):
+        scene_with(serial, variant="D")
+    h4 = load_scene(SCENES_DIR / "h4_vision.yaml")
+    with pytest.raises(ConfigError, match="unknown trial 'x' .*no trials"):
+        scene_with_trial(h4, "x")
+    with pytest.raises(ConfigError, match="no pose grid 'grid9'"):
+        h4.setup.pose_grid("grid9")
 
 
 def test_remount_keeps_the_arm_for_both_chain_kinds():

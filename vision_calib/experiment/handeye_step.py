@@ -2,7 +2,7 @@
 (:func:`.steps.identify_measurements`) on :func:`vision_calib.identify.handeye_fit.fit_handeye`:
 
 1. the fit with the robot's pose error in the weights (given std, or estimated), started from the best of
-   OpenCV's closed forms;
+   OpenCV's closed forms (``measure.handeye.closed_forms``, passed to ``fit_handeye`` as its candidates);
 2. with redundancy (at least twice as many equations as parameters), the outlier test of
    ``identify.fit_rejecting_outliers`` (robust fit, chi-square test per pose at the family-wise level
    ``steps.OUTLIER_LEVEL``, also ``steps.OUTLIER_MIN_RATIO`` x the median pose), and the fit redone on the
@@ -21,8 +21,10 @@ import numpy as np
 
 from ..errors import IdentifiabilityError
 from ..identify import fit_rejecting_outliers, model_adequacy
-from ..identify.handeye_fit import closed_form_comparison, fit_handeye
+from ..identify.handeye_fit import HandeyeFit, closed_form_comparison, fit_handeye
 from ..identify.handeye_problem import transforms_from_x
+from ..identify.problem import IdentificationProblem, IdentificationResult
+from ..measure.handeye import closed_forms
 from .steps import NUISANCE_PREFIX, OUTLIER_LEVEL, OUTLIER_MIN_RATIO, misfit_warning
 
 
@@ -33,14 +35,14 @@ class HandeyeIdentified:
     variance_factor, fit (``HandeyeFit`` of the kept poses: robot std, closed-form comparison), nuisance
     (the shared error's block or None). Has the fields ``io.report.build_report(identified=)`` reads."""
 
-    result: object
+    result: IdentificationResult
     A: np.ndarray
     B: np.ndarray
-    problem: object
+    problem: IdentificationProblem
     rejected: tuple
     adequacy: dict
     variance_factor: float
-    fit: object
+    fit: HandeyeFit
     nuisance: dict | None = None
     prepared: dict | None = None
 
@@ -53,7 +55,7 @@ def identify_handeye(T_base_flange, T_cam_target, mount: str, pose_cov, labels, 
     residual to one std of each direction of a shared error (``experiment.camera_step.residual_response``)."""
     F, M, C = (np.asarray(a, float) for a in (T_base_flange, T_cam_target, pose_cov))
     labels = list(labels)
-    fit = fit_handeye(F, M, mount, C, labels, robot_std)
+    fit = fit_handeye(F, M, mount, C, labels, robot_std, candidates=closed_forms(F, M, mount))
     rejected = []
     pb = fit.problem
     if robust and pb.n_obs * pb.m >= 2 * int(np.sum(fit.result.free)):
@@ -64,7 +66,8 @@ def identify_handeye(T_base_flange, T_cam_target, mount: str, pose_cov, labels, 
             if len(keep) < 3:
                 raise IdentifiabilityError(f"{where}: only {len(keep)} poses left after rejecting outliers")
             rejected = list(out)
-            fit = fit_handeye(F[keep], M[keep], mount, C[keep], [labels[k] for k in keep], robot_std)
+            fit = fit_handeye(F[keep], M[keep], mount, C[keep], [labels[k] for k in keep], robot_std,
+                              candidates=closed_forms(F[keep], M[keep], mount))
     result, pb, nz = fit.result, fit.problem, None
     if nuisance is not None:
         result, nz = _with_shared_error(fit, nuisance)

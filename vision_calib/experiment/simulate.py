@@ -264,7 +264,7 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
         ident = identify_measurements(setup, meas_used, method, residual, None,
                                       context=rejection_summary(pms), where=str(scene.path),
                                       fix_unidentifiable=fix_unidentifiable, rejected=inconsistent)
-        result, problem, setup = ident.result, ident.problem, ident.setup  # setup: after Setup.prepare (H4 axis)
+        result, problem, setup = ident.result, ident.problem, ident.setup  # setup: after prepare_setup (H4 axis)
         sens = _intrinsics_sensitivity(scene, ident, meas_used)
         timings["identify"] = time.perf_counter() - t
         if val_job is not None:
@@ -286,7 +286,7 @@ def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, me
 
     t = time.perf_counter()
     meas_acc = _measurement_accuracy(T_true[ok], meas)
-    # before: the nominal model; after: the identified one (with what prepare() determined); truth: tsetup.
+    # before: the nominal model; after: the identified one (with what prepare_setup determined); truth: tsetup.
     # V1/V2 (H4) from the image-measured validation poses, never used in the identification
     if val_meas is not None and not len(val_idx):  # no validation pose measurable: criteria left out, not NaN
         val_meas = None

@@ -21,6 +21,7 @@ from ..identify.problem import IdentificationProblem, IdentificationResult
 from ..kinematics.params import ParameterSet
 from ..io.report import method_check_line
 from ..rig import Measurements, Scene, Setup, scene_poses, true_parameters
+from .prepare import prepare_setup
 
 STREAM_POSES, STREAM_NOISE, STREAM_VALIDATION, STREAM_TRUTH = 1, 2, 3, 4
 #: base-parameter choice: keep earlier parameter names first (robot file order: left mount, joints,
@@ -162,8 +163,8 @@ class Identified:
     rejected: tuple
     adequacy: dict
     variance_factor: float
-    setup: Setup | None = None  #: the setup identified (after ``Setup.prepare``): evaluate and export with it
-    prepared: dict = None  #: what ``Setup.prepare`` determined from the data (e.g. the H4 camera axis)
+    setup: Setup | None = None  #: the setup identified (after :func:`.prepare.prepare_setup`): evaluate and export with it
+    prepared: dict = None  #: what :func:`.prepare.prepare_setup` determined from the data (e.g. the H4 camera axis)
     #: shared measurement error fitted as nuisance coefficients (``identify.nuisance``): {n_directions,
     #: coefficients (d,) and their std (posterior, in prior std units), std_inflation {name: std / std without
     #: it}}; None without
@@ -196,8 +197,8 @@ def identify_measurements(setup: Setup, meas: Measurements, method, residual, an
 
     where = where or setup.name
     before = setup.params.free_names
-    setup, prepared = setup.prepare(meas)
-    rep = analysis if setup.params.free_names == before else None  # prepare() freed parameters: analyse again
+    setup, prepared = prepare_setup(setup, meas)
+    rep = analysis if setup.params.free_names == before else None  # the preparation freed parameters: analyse again
     if rep is None:
         if len(meas.T_cam_target) == 0:
             raise IdentifiabilityError(f"{where}: no usable poses" + (f" ({context})" if context else ""))

@@ -12,8 +12,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..identify import model_adequacy
+from ..identify.problem import IdentificationProblem, IdentificationResult
 from ..io.report import misfit_message, parameters_table, verdict
-from ..rig import Evaluation, Measurements, Scene, load_scene, scene_poses
+from ..rig import Evaluation, Measurements, Scene, Setup, load_scene, scene_poses
+from .prepare import prepare_setup
 from .steps import (analyze_setup, base_problem, check_method, lack_of_fit_of, rngs, scene_truth, shared_truth, solve,
                     unmodelled_truth)
 
@@ -28,21 +30,21 @@ class SyntheticRun:
     measurements and problem, accuracy before (nominal) / after (identified) on the validation poses."""
 
     scene: Scene
-    result: object
+    result: IdentificationResult
     x_true: np.ndarray
     poses: np.ndarray
     validation: np.ndarray
     measurements: Measurements
-    problem: object
+    problem: IdentificationProblem
     before: Evaluation
     after: Evaluation
     seconds: float
     method: str
     residual: str
     base: np.ndarray
-    truth: object = None  #: the truth setup when it is not the identified model (x_true is then its vector)
-    setup: object = None  #: the setup identified (after ``Setup.prepare`` when asked; its params match result)
-    prepared: dict = None  #: what ``Setup.prepare`` determined from the data (report's ``prepared`` block)
+    truth: Setup | None = None  #: the truth setup when it is not the identified model (x_true is then its vector)
+    setup: Setup | None = None  #: the setup identified (after :func:`.prepare.prepare_setup` when asked; params match result)
+    prepared: dict | None = None  #: what :func:`.prepare.prepare_setup` determined from the data (report's ``prepared`` block)
 
 
 def identifiability_json(scene, residual=None, n_poses=None, seed=None, all_params=False) -> dict:
@@ -65,8 +67,8 @@ def run_synthetic(scene, method=None, residual=None, n_poses=None, sigma_t_m=Non
     base: identifiable mask (n,) from a previous analysis (saves one SVD in Monte Carlo loops).
     truth: the setup that produces the measurements (default the scene's; another model, e.g. an H4
     model-31 robot identified as model 12, to study model error), with parameters x_true.
-    prepare (default): run ``Setup.prepare`` on the measurements first, as measured data do (H4: camera axis and
-    tilt parameters; the base mask is then re-analysed when prepare frees parameters; the result then has
+    prepare (default): run :func:`.prepare.prepare_setup` on the measurements first, as measured data do (H4: camera
+    axis and tilt parameters; the base mask is then re-analysed when prepare frees parameters; the result then has
     the prepared setup's parameters, H4: 4 tilt parameters appended). Without it an H4 truth with mount
     tilts ends ~10 mm off after calibration (the kinematic parameters absorb the camera tilt, README);
     False only to study exactly that.
@@ -106,7 +108,7 @@ def run_synthetic(scene, method=None, residual=None, n_poses=None, sigma_t_m=Non
     prepared = {}
     if prepare:
         free0 = setup.params.free_names
-        setup, prepared = setup.prepare(meas)
+        setup, prepared = prepare_setup(setup, meas)
         if setup.params.free_names != free0:
             from ..identify import analyze
             from .steps import BASE_SELECTION
@@ -134,7 +136,7 @@ def identify_synthetic_json(scene, method=None, residual=None, n_poses=None, sig
     out = run_synthetic(scene, method=method, residual=residual, n_poses=n_poses, sigma_t_m=st, sigma_r_rad=sr,
                         seed=seed, prepare=True)  # as measured data (simulate, process) do
     res = out.result
-    ps = out.setup.params  # after Setup.prepare (H4: the tilt parameters)
+    ps = out.setup.params  # after prepare_setup (H4: the tilt parameters)
     adequacy = model_adequacy(res)
     warnings = list(res.warnings) + ([out.prepared["warning"]] if out.prepared.get("warning") else [])
     if adequacy["verdict"] == "too large":

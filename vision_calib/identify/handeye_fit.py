@@ -5,9 +5,10 @@ each pose's residual covariance is ``C_k = camera_cov_k + D_k robot_cov D_k^T`` 
 response to the flange pose error at the current estimate, ``robot_cov = diag(s_t^2 I3, s_r^2 I3)``.
 :func:`fit_handeye`:
 
-1. every OpenCV closed form (:data:`CLOSED_FORM_METHODS`: ``cv2.calibrateHandEye``'s 5 methods and
-   ``cv2.calibrateRobotWorldHandEye``'s 2, via :func:`.handeye_problem.handeye_initial_guess`);
-2. the start: the closed form of least weighted cost (weights at that closed form);
+1. the candidate starts: closed forms given by the caller (the pipeline passes OpenCV's 7,
+   :func:`vision_calib.measure.handeye.closed_forms`), else the numpy closed form of
+   :func:`.handeye_problem.handeye_initial_guess` (:data:`DEFAULT_CANDIDATE`);
+2. the start: the candidate of least weighted cost (weights at that closed form);
 3. iteratively reweighted least squares: LSE with the weights at x, weights recomputed at the new x, until x
    moves by less than 1e-3 of its std. When the robot's std are not given, the two variances
    ``theta = (s_t^2, s_r^2)`` are estimated at each step with the camera covariance known: REML of the
@@ -15,12 +16,12 @@ response to the flange pose error at the current estimate, ``robot_cov = diag(s_
    r^T W V_i W r - tr(P V_i P V_cam)``, ``V_t = D_t D_t^T``, ``V_r = D_r D_r^T`` the blocks of the
    translation and rotation columns of D, ``W = C^-1``, ``P = W - W J (J^T W J)^-1 J^T W``; a negative value
    is set to 0); their covariance ``2 (tr(P V_i P V_j))^-1``;
-4. never worse than a closed form: every closed form's cost under the final weights; when one is below
+4. never worse than a candidate: every candidate's cost under the final weights; when one is below
    ours (another local minimum), the iteration restarts from it and the lower cost is kept.
 
 The result's covariance is the GLS one with the final weights (no variance factor here: the pipeline,
 ``experiment.handeye_step``, applies the adequacy test, the outlier test and the variance factor).
-numpy/scipy only (cv2 inside :func:`.handeye_problem.handeye_initial_guess`, imported lazily).
+numpy/scipy only.
 """
 
 from __future__ import annotations
@@ -36,8 +37,8 @@ from .handeye_problem import (handeye_initial_guess, handeye_problem, reweighted
 from .lse import solve_lse
 from .problem import IdentificationProblem, IdentificationResult
 
-#: OpenCV's closed forms: cv2.calibrateHandEye (5) and cv2.calibrateRobotWorldHandEye (2)
-CLOSED_FORM_METHODS = ("tsai", "park", "horaud", "andreff", "daniilidis", "shah", "li")
+#: name of the candidate start when the caller gives none (:func:`.handeye_problem.handeye_initial_guess`)
+DEFAULT_CANDIDATE = "shah_numpy"
 #: IRLS stops when no parameter moves by more than this fraction of its std
 X_TOL_STD = 1e-3
 #: ... and no estimated variance by more than this fraction of its std
@@ -50,7 +51,7 @@ class HandeyeFit:
     robot: {source "given" | "estimated" | "none", translation_mm, rotation_deg (std per axis of the flange
     pose error), std_translation_mm, std_rotation_deg (of the estimate; None when given)}; closed_forms:
     the report's ``closed_form_comparison`` block (:func:`closed_form_comparison`); iterations: IRLS steps;
-    candidates: :func:`closed_forms` of the poses."""
+    candidates: the closed forms it started from (``fit_handeye``'s argument)."""
 
     result: IdentificationResult
     A: np.ndarray
@@ -62,16 +63,12 @@ class HandeyeFit:
     candidates: dict
 
 
-def closed_forms(T_base_flange, T_cam_target, mount: str) -> dict:
-    """{method: (A, B) (4, 4) each, or the error message (str) when OpenCV fails} for every
-    :data:`CLOSED_FORM_METHODS`."""
-    out = {}
-    for m in CLOSED_FORM_METHODS:
-        try:
-            out[m] = handeye_initial_guess(T_base_flange, T_cam_target, mount, m)
-        except DataError as exc:
-            out[m] = str(exc)
-    return out
+def default_candidates(T_base_flange, T_cam_target, mount: str) -> dict:
+    """{:data:`DEFAULT_CANDIDATE`: (A, B) (4, 4) each, or the error message (str)}: the numpy closed form."""
+    try:
+        return {DEFAULT_CANDIDATE: handeye_initial_guess(T_base_flange, T_cam_target, mount)}
+    except DataError as exc:
+        return {DEFAULT_CANDIDATE: str(exc)}
 
 
 def weighted_cost(problem: IdentificationProblem, x) -> float:
@@ -175,17 +172,19 @@ def closed_form_comparison(problem: IdentificationProblem, x, candidates: dict, 
 
 
 def fit_handeye(T_base_flange, T_cam_target, mount: str, pose_cov, labels=None, robot_std=None,
-                estimate_robot: bool = True) -> HandeyeFit:
+                estimate_robot: bool = True, candidates: dict | None = None) -> HandeyeFit:
     """Hand-eye fit with the robot's pose error (module docstring).
 
     T_base_flange (N, 4, 4) reported flange poses [m]; T_cam_target (N, 4, 4) measured; pose_cov (N, 6, 6)
     their covariance [m, rad] (``PoseMeasurement.cov``); labels (N,). robot_std: (translation m, rotation
     rad) std per axis of the flange pose error, given (e.g. recording.yaml ``robot_pose_std``); None ->
     estimated from the data when ``estimate_robot`` (REML, camera covariance known), else 0 (exact flange
-    poses). DataError when no closed form succeeds (degenerate motions)."""
+    poses). candidates: {name: (A, B) (4, 4) each, or an error message (str)}, the closed forms of these poses
+    to start from and compare with (e.g. ``measure.handeye.closed_forms``); None -> :func:`default_candidates`.
+    DataError when no candidate is a solution (degenerate motions)."""
     F = np.asarray(T_base_flange, float)
     M = np.asarray(T_cam_target, float)
-    cands = closed_forms(F, M, mount)
+    cands = default_candidates(F, M, mount) if candidates is None else dict(candidates)
     ok = {m: v for m, v in cands.items() if not isinstance(v, str)}
     if not ok:
         raise DataError("no closed-form hand-eye solution (" + "; ".join(f"{m}: {v}" for m, v in cands.items())
@@ -223,5 +222,5 @@ def fit_handeye(T_base_flange, T_cam_target, mount: str, pose_cov, labels=None, 
                       cands)
 
 
-__all__ = ["HandeyeFit", "CLOSED_FORM_METHODS", "closed_forms", "closed_form_comparison", "fit_handeye",
+__all__ = ["HandeyeFit", "DEFAULT_CANDIDATE", "default_candidates", "closed_form_comparison", "fit_handeye",
            "weighted_cost"]

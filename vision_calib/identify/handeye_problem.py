@@ -41,7 +41,7 @@ covariance ``robot_cov`` (6, 6). It moves the model pose by ``delta = L_k d_k`` 
 ``obs_cov_k = camera_cov_k + D_k robot_cov D_k^T`` (D_k = d r_k / d d_k at the current x: the weights depend
 on A and B, :func:`reweighted` recomputes them), the linearised Gauss-Helmert (errors-in-variables) model.
 
-This module imports cv2 lazily (only :func:`handeye_initial_guess` needs it).
+numpy only; OpenCV's closed forms are in :mod:`vision_calib.measure.handeye`.
 """
 
 from __future__ import annotations
@@ -71,13 +71,14 @@ _POSE_COMPONENTS = ("dx", "dy", "dz", "drx", "dry", "drz")
 
 
 # ----------------------------------------------------------------------------- input checks
-def _check_mount(mount: str) -> str:
+def check_mount(mount: str) -> str:
+    """The mount name, checked ("fixed" | "eye_in_hand"), else ConfigError."""
     if mount not in MOUNT_NAMES:
         raise ConfigError(f"hand-eye mount must be 'fixed' or 'eye_in_hand', got {mount!r}")
     return mount
 
 
-def _check_poses(name: str, T, N: int | None = None) -> np.ndarray:
+def check_poses(name: str, T, N: int | None = None) -> np.ndarray:
     """(N, 4, 4) finite rigid transforms, else DataError naming the pose index."""
     T = np.asarray(T, dtype=float)
     if T.ndim != 3 or T.shape[1:] != (4, 4):
@@ -96,7 +97,8 @@ def _check_poses(name: str, T, N: int | None = None) -> np.ndarray:
     return T
 
 
-def _G_of(T_base_flange: np.ndarray, mount: str) -> np.ndarray:
+def mount_G(T_base_flange: np.ndarray, mount: str) -> np.ndarray:
+    """(N, 4, 4) the known G_k of ``M_k = A G_k B`` (module docstring): the flange poses, or their inverses."""
     return T_base_flange if mount == "fixed" else frames.inv_T(T_base_flange)
 
 
@@ -106,57 +108,57 @@ def _inv_right_jacobian(e: np.ndarray) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- closed form
-def handeye_initial_guess(T_base_flange, T_cam_target_meas, mount: str = "fixed",
-                          method: str = "shah") -> tuple[np.ndarray, np.ndarray]:
-    """Closed-form (A, B), each (4, 4), from N >= 3 pose pairs.
+#: relative gap below which the two largest singular values of the rotation system count as equal (no unique
+#: rotation: rotations about one axis only), and relative smallest singular value of the translation system
+DEGENERATE_RTOL = 1e-10
 
-    T_base_flange: (N, 4, 4) flange poses in the robot base [m]; T_cam_target_meas: (N, 4, 4)
-    measured target poses in the camera. Returns (T_cam_base, T_flange_target) for "fixed",
-    (T_cam_flange, T_base_target) for "eye_in_hand".
 
-    method "shah" | "li": ``cv2.calibrateRobotWorldHandEye`` on ``M_k = A G_k B``, which is
-    OpenCV's ``cTw_k = cTg . gTb_k . inv(wTb)`` with world = our target side: R_world2cam = M_k,
-    R_base2gripper = G_k, outputs R_gripper2cam = A and R_base2world = inv(B).
-    method "tsai" | "park" | "horaud" | "andreff" | "daniilidis": ``cv2.calibrateHandEye`` (AX = XB)
-    for the left/right unknown that it solves, then the other as the SE(3) mean over the poses.
+def nearest_rotation(X) -> np.ndarray:
+    """(3, 3) rotation nearest to X (3, 3) in the Frobenius norm (SVD, determinant +1)."""
+    U, _, Vt = np.linalg.svd(np.asarray(X, float))
+    return U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
+
+
+def handeye_initial_guess(T_base_flange, T_cam_target_meas, mount: str = "fixed") -> tuple[np.ndarray, np.ndarray]:
+    """Closed-form (A, B), each (4, 4), from N >= 3 pose pairs, numpy only: Shah's Kronecker-product solution of
+    the robot-world / hand-eye problem ``M_k = A G_k B`` (M. Shah, J. Mechanisms Robotics 5, 031007, 2013).
+
+    T_base_flange: (N, 4, 4) flange poses in the robot base [m]; T_cam_target_meas: (N, 4, 4) measured target
+    poses in the camera. Returns (T_cam_base, T_flange_target) for "fixed", (T_cam_flange, T_base_target) for
+    "eye_in_hand" (module docstring). The default start of :func:`handeye_problem`; OpenCV's 7 closed forms
+    (the fit's candidates in the pipeline) are :func:`vision_calib.measure.handeye.closed_forms`.
+
+    Rotations: ``sum_k tr(R_Mk^T R_A R_Gk R_B) = vec(R_A)^T K vec(R_B^T)`` with ``K = sum_k R_Gk (x) R_Mk``
+    (9, 9, column-major vec); every term is orthogonal, so ``|K| <= N``, reached on exact data at
+    ``vec(R_A), vec(R_B^T)``: the top singular pair of K, each projected on SO(3) (:func:`nearest_rotation`).
+    Translations: ``t_Mk - R_A t_Gk = t_A + R_A R_Gk t_B``, linear least squares (3N, 6).
+    DataError when the top singular value is not unique or the translations are not determined (rotations
+    about one axis only).
     """
-    import cv2
-
-    mount = _check_mount(mount)
-    F = _check_poses("T_base_flange", T_base_flange)
-    M = _check_poses("T_cam_target_meas", T_cam_target_meas, F.shape[0])
-    if F.shape[0] < 3:
-        raise DataError(f"hand-eye calibration needs at least 3 poses, got {F.shape[0]}")
-    G = _G_of(F, mount)
-    rw = {"shah": cv2.CALIB_ROBOT_WORLD_HAND_EYE_SHAH, "li": cv2.CALIB_ROBOT_WORLD_HAND_EYE_LI}
-    he = {"tsai": cv2.CALIB_HAND_EYE_TSAI, "park": cv2.CALIB_HAND_EYE_PARK, "horaud": cv2.CALIB_HAND_EYE_HORAUD,
-          "andreff": cv2.CALIB_HAND_EYE_ANDREFF, "daniilidis": cv2.CALIB_HAND_EYE_DANIILIDIS}
-    try:
-        if method in rw:
-            R_bw, t_bw, R_gc, t_gc = cv2.calibrateRobotWorldHandEye(
-                list(M[:, :3, :3]), list(M[:, :3, 3]), list(G[:, :3, :3]), list(G[:, :3, 3]), method=rw[method])
-            A = frames.make_T(R_gc, np.ravel(t_gc))
-            B = frames.inv_T(frames.make_T(R_bw, np.ravel(t_bw)))
-        elif method in he:
-            # OpenCV finds X with H_k X M_k = const ("gripper2base" H_k, "target2cam" M_k); ours:
-            # inv(G_k) inv(A) M_k = B, so H_k = inv(G_k), X = inv(A), const = B
-            Ginv = frames.inv_T(G)
-            R_x, t_x = cv2.calibrateHandEye(list(Ginv[:, :3, :3]), list(Ginv[:, :3, 3]),
-                                            list(M[:, :3, :3]), list(M[:, :3, 3]), method=he[method])
-            X = frames.make_T(R_x, np.ravel(t_x))  # H_k X M_k = inv(G_k) inv(A) M_k = B for every k
-            A = frames.inv_T(X)
-            B = frames.mean_pose(Ginv @ X @ M)
-        else:
-            raise ConfigError(f"handeye_initial_guess: unknown method {method!r}; expected one of "
-                              f"{sorted(rw) + sorted(he)}")
-    except cv2.error as exc:
-        raise DataError(f"closed-form hand-eye calibration failed ({str(exc).splitlines()[0]}): the poses need "
-                        f"rotations about at least two non-parallel axes; or give A0 and B0") from None
-    A, B = np.asarray(A, float), np.asarray(B, float)
-    if not (np.all(np.isfinite(A)) and np.all(np.isfinite(B))):
-        raise DataError("closed-form hand-eye calibration returned a non-finite result (degenerate motions? "
-                        "the poses need rotations about at least two non-parallel axes)")
-    return A, B
+    mount = check_mount(mount)
+    F = check_poses("T_base_flange", T_base_flange)
+    M = check_poses("T_cam_target_meas", T_cam_target_meas, F.shape[0])
+    N = F.shape[0]
+    if N < 3:
+        raise DataError(f"hand-eye calibration needs at least 3 poses, got {N}")
+    G = mount_G(F, mount)
+    RG, RM = G[:, :3, :3], M[:, :3, :3]
+    K = np.einsum("kij,kab->iajb", RG, RM).reshape(9, 9)  # sum_k kron(RG_k, RM_k)
+    U, s, Vt = np.linalg.svd(K)
+    if s[0] - s[1] <= DEGENERATE_RTOL * s[0]:
+        raise DataError("closed-form hand-eye calibration failed (the rotations do not determine the mounts): "
+                        "the poses need rotations about at least two non-parallel axes; or give A0 and B0")
+    XA, XBt = U[:, 0].reshape(3, 3, order="F"), Vt[0].reshape(3, 3, order="F")
+    if np.linalg.det(XA) < 0:  # the pair's common sign
+        XA, XBt = -XA, -XBt
+    RA, RB = nearest_rotation(XA), nearest_rotation(XBt).T
+    J = np.concatenate([np.broadcast_to(np.eye(3), (N, 3, 3)), RA @ RG], axis=2).reshape(3 * N, 6)
+    b = (M[:, :3, 3] - np.einsum("ij,kj->ki", RA, G[:, :3, 3])).reshape(-1)
+    t, _, _, sv = np.linalg.lstsq(J, b, rcond=None)
+    if sv[-1] <= DEGENERATE_RTOL * sv[0]:
+        raise DataError("closed-form hand-eye calibration failed (the translations are not determined): the poses "
+                        "need rotations about at least two non-parallel axes; or give A0 and B0")
+    return frames.make_T(RA, t[:3]), frames.make_T(RB, t[3:])
 
 
 # ----------------------------------------------------------------------------- the problem
@@ -238,10 +240,10 @@ def handeye_problem(T_base_flange, T_cam_target_meas, mount: str = "fixed", A0=N
     :func:`transforms_from_x`, camera_cov (N, 6, 6) (obs_cov without the robot part) and robot_cov.
     Longer than 80 lines: input checks, initial guess, covariance and the two closures share one scope.
     """
-    mount = _check_mount(mount)
-    F = _check_poses("T_base_flange", T_base_flange)
+    mount = check_mount(mount)
+    F = check_poses("T_base_flange", T_base_flange)
     N = F.shape[0]
-    M = _check_poses("T_cam_target_meas", T_cam_target_meas, N)
+    M = check_poses("T_cam_target_meas", T_cam_target_meas, N)
     if N < 3:
         raise DataError(f"hand-eye identification needs at least 3 poses (12 parameters, 6 equations each, "
                         f"and two rotation axes), got {N}")
@@ -249,8 +251,8 @@ def handeye_problem(T_base_flange, T_cam_target_meas, mount: str = "fixed", A0=N
         raise ConfigError("handeye_problem: give both A0 and B0, or neither (closed-form start)")
     if A0 is None:
         A0, B0 = handeye_initial_guess(F, M, mount)
-    A0 = _check_poses("A0", np.asarray(A0, float)[None])[0]
-    B0 = _check_poses("B0", np.asarray(B0, float)[None])[0]
+    A0 = check_poses("A0", np.asarray(A0, float)[None])[0]
+    B0 = check_poses("B0", np.asarray(B0, float)[None])[0]
     labels = tuple(range(N)) if labels is None else tuple(labels)
     if len(labels) != N:
         raise DataError(f"{len(labels)} labels for {N} poses")
@@ -267,7 +269,7 @@ def handeye_problem(T_base_flange, T_cam_target_meas, mount: str = "fixed", A0=N
     nb, vb, kb = _mount_params(nB, B0)
     kinds = ka + kb
     params = ParameterSet.from_lists(na + nb, va + vb, kinds, None, [DEFAULT_SCALE[k] for k in kinds])
-    G = _G_of(F, mount)
+    G = mount_G(F, mount)
     RA0, RB0 = A0[:3, :3].copy(), B0[:3, :3].copy()
 
     def model_parts(x, idx):

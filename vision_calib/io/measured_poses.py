@@ -37,12 +37,16 @@ import io
 import re
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .. import frames as F
 from ..config import ANGLE_UNITS, LENGTH_UNITS, Section, angle_key, length_key, load_yaml, read_text
 from ..errors import DataError
+
+if TYPE_CHECKING:  # annotations only
+    from ..rig import Measurements, Scene
 
 FORMAT = "vision_calib.measured_poses/1"
 YAML_KEYS = ("format", "scene", "csv", "units", "measured", "default_sigma", "folds", "seed")
@@ -68,14 +72,14 @@ class MeasuredPoses:
 
     path: Path
     csv_path: Path
-    scene: object
+    scene: Scene
     measured: str
     residual: str
     ids: tuple
     q: np.ndarray
     T_meas: np.ndarray
     cov: np.ndarray
-    measurements: object
+    measurements: Measurements
     sigma_source: str
     units: dict
     folds: int

@@ -47,6 +47,7 @@ import csv
 import io
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import yaml
@@ -56,6 +57,9 @@ from ..config import Section, load_yaml
 from ..errors import DataError
 from ..serialize import write_text_atomic
 from .images import IMAGE_EXT, check_image_sizes  # IMAGE_EXT: the formats accepted in images/<pose_id>/
+
+if TYPE_CHECKING:  # annotations only
+    from ..targets.kinds.base import TargetSpec
 
 FORMAT = "vision_calib.recording/1"
 
@@ -71,7 +75,7 @@ class Recording:
     folder: Path
     camera: CameraIntrinsics
     camera_mount: str
-    target: object
+    target: TargetSpec
     scene_path: Path | None
     pose_kind: str
     pose_ids: tuple[str, ...]

@@ -1,6 +1,11 @@
-"""Rigid-consistency check of measured target poses against robot flange poses (cv2.calibrateHandEye).
+"""OpenCV's hand-eye closed forms: the candidates of the hand-eye fit, and a rigid-consistency check.
 
-Eye-to-hand (fixed camera, target on the flange): T_base_cam @ T_cam_target_i = T_base_flange_i @ T_flange_target.
+:func:`closed_forms` (:data:`CLOSED_FORM_METHODS`: ``cv2.calibrateHandEye``'s 5 methods and
+``cv2.calibrateRobotWorldHandEye``'s 2) gives the starting candidates that ``experiment.handeye_step`` passes to
+:func:`vision_calib.identify.handeye_fit.fit_handeye` (identify imports no cv2: its own default start is the
+numpy :func:`vision_calib.identify.handeye_problem.handeye_initial_guess`).
+
+:func:`hand_eye_consistency`: eye-to-hand (fixed camera, target on the flange): T_base_cam @ T_cam_target_i = T_base_flange_i @ T_flange_target.
 Eye-in-hand (camera on the flange, fixed target): T_base_flange_i @ T_flange_cam @ T_cam_target_i = T_base_target.
 Used to validate pose measurements on real data; identification proper lives in identify/.
 """
@@ -11,7 +16,77 @@ import cv2
 import numpy as np
 
 from .. import frames
-from ..errors import DataError
+from ..errors import ConfigError, DataError
+from ..identify.handeye_problem import check_mount, check_poses, mount_G
+
+#: OpenCV's closed forms: cv2.calibrateHandEye (5) and cv2.calibrateRobotWorldHandEye (2)
+CLOSED_FORM_METHODS = ("tsai", "park", "horaud", "andreff", "daniilidis", "shah", "li")
+_ROBOT_WORLD = {"shah": cv2.CALIB_ROBOT_WORLD_HAND_EYE_SHAH, "li": cv2.CALIB_ROBOT_WORLD_HAND_EYE_LI}
+_HAND_EYE = {"tsai": cv2.CALIB_HAND_EYE_TSAI, "park": cv2.CALIB_HAND_EYE_PARK, "horaud": cv2.CALIB_HAND_EYE_HORAUD,
+             "andreff": cv2.CALIB_HAND_EYE_ANDREFF, "daniilidis": cv2.CALIB_HAND_EYE_DANIILIDIS}
+
+
+def opencv_closed_form(T_base_flange, T_cam_target_meas, mount: str = "fixed",
+                       method: str = "shah") -> tuple[np.ndarray, np.ndarray]:
+    """Closed-form (A, B), each (4, 4), from N >= 3 pose pairs with one of OpenCV's methods.
+
+    T_base_flange: (N, 4, 4) flange poses in the robot base [m]; T_cam_target_meas: (N, 4, 4)
+    measured target poses in the camera. Returns (T_cam_base, T_flange_target) for "fixed",
+    (T_cam_flange, T_base_target) for "eye_in_hand" (the model ``M_k = A G_k B`` of
+    :mod:`vision_calib.identify.handeye_problem`).
+
+    method "shah" | "li": ``cv2.calibrateRobotWorldHandEye`` on ``M_k = A G_k B``, which is
+    OpenCV's ``cTw_k = cTg . gTb_k . inv(wTb)`` with world = our target side: R_world2cam = M_k,
+    R_base2gripper = G_k, outputs R_gripper2cam = A and R_base2world = inv(B).
+    method "tsai" | "park" | "horaud" | "andreff" | "daniilidis": ``cv2.calibrateHandEye`` (AX = XB)
+    for the left/right unknown that it solves, then the other as the SE(3) mean over the poses.
+    ConfigError for an unknown method; DataError when OpenCV fails or returns a non-finite result.
+    """
+    mount = check_mount(mount)
+    F = check_poses("T_base_flange", T_base_flange)
+    M = check_poses("T_cam_target_meas", T_cam_target_meas, F.shape[0])
+    if F.shape[0] < 3:
+        raise DataError(f"hand-eye calibration needs at least 3 poses, got {F.shape[0]}")
+    G = mount_G(F, mount)
+    try:
+        if method in _ROBOT_WORLD:
+            R_bw, t_bw, R_gc, t_gc = cv2.calibrateRobotWorldHandEye(
+                list(M[:, :3, :3]), list(M[:, :3, 3]), list(G[:, :3, :3]), list(G[:, :3, 3]),
+                method=_ROBOT_WORLD[method])
+            A = frames.make_T(R_gc, np.ravel(t_gc))
+            B = frames.inv_T(frames.make_T(R_bw, np.ravel(t_bw)))
+        elif method in _HAND_EYE:
+            # OpenCV finds X with H_k X M_k = const ("gripper2base" H_k, "target2cam" M_k); ours:
+            # inv(G_k) inv(A) M_k = B, so H_k = inv(G_k), X = inv(A), const = B
+            Ginv = frames.inv_T(G)
+            R_x, t_x = cv2.calibrateHandEye(list(Ginv[:, :3, :3]), list(Ginv[:, :3, 3]),
+                                            list(M[:, :3, :3]), list(M[:, :3, 3]), method=_HAND_EYE[method])
+            X = frames.make_T(R_x, np.ravel(t_x))  # H_k X M_k = inv(G_k) inv(A) M_k = B for every k
+            A = frames.inv_T(X)
+            B = frames.mean_pose(Ginv @ X @ M)
+        else:
+            raise ConfigError(f"opencv_closed_form: unknown method {method!r}; expected one of "
+                              f"{sorted(_ROBOT_WORLD) + sorted(_HAND_EYE)}")
+    except cv2.error as exc:
+        raise DataError(f"closed-form hand-eye calibration failed ({str(exc).splitlines()[0]}): the poses need "
+                        f"rotations about at least two non-parallel axes; or give A0 and B0") from None
+    A, B = np.asarray(A, float), np.asarray(B, float)
+    if not (np.all(np.isfinite(A)) and np.all(np.isfinite(B))):
+        raise DataError("closed-form hand-eye calibration returned a non-finite result (degenerate motions? "
+                        "the poses need rotations about at least two non-parallel axes)")
+    return A, B
+
+
+def closed_forms(T_base_flange, T_cam_target, mount: str) -> dict:
+    """{method: (A, B) (4, 4) each, or the error message (str) when OpenCV fails} for every
+    :data:`CLOSED_FORM_METHODS` (the ``candidates`` of ``identify.handeye_fit.fit_handeye``)."""
+    out = {}
+    for m in CLOSED_FORM_METHODS:
+        try:
+            out[m] = opencv_closed_form(T_base_flange, T_cam_target, mount, m)
+        except DataError as exc:
+            out[m] = str(exc)
+    return out
 
 
 def hand_eye_consistency(T_base_flange: np.ndarray, T_cam_target: np.ndarray, setup: str = "eye_to_hand",

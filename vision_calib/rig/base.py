@@ -6,7 +6,9 @@ joint sets q (N, n) rad; H4: nacelle poses X (N, 4) = x, y, z [m], theta [rad]).
 commanded poses into the camera's view ``T_cam_target`` (for rendering), builds the identification
 problem from :class:`Measurements`, and evaluates a parameter vector on validation poses into one
 :class:`Evaluation`. Kinds are registered in :mod:`vision_calib.rig.registry` (the one place to touch
-when adding a robot kind).
+when adding a robot kind). Kind-specific capabilities are optional interfaces (``Protocol`` classes checked
+with ``isinstance`` where they are used): :class:`ChainMeasured`, :class:`ModelVariants`,
+:class:`NamedConfigurations`, :class:`NamedTrials`, :class:`PoseGrids`, :class:`TiltsFromAxis`.
 """
 
 from __future__ import annotations
@@ -139,6 +141,70 @@ class ChainMeasured(Protocol):
     def chain_measurements(self, meas: Measurements) -> Measurements: ...
 
 
+@runtime_checkable
+class ModelVariants(Protocol):
+    """Optional capability of a setup: model variants rebuilt from the robot file (H4: paper table 2, model
+    "12" | "31"); study cells (``variant``, ``model``) and unmodelled truths ask for them.
+    ``with_variant(variant, model) -> Setup``; ConfigError when the pair is impossible."""
+
+    def with_variant(self, variant: str | None = None, model: str | None = None) -> "Setup": ...
+
+
+@runtime_checkable
+class NamedConfigurations(Protocol):
+    """Optional capability of a setup: named joint sets of the robot file (scene ``poses.kind: configurations``).
+    ``configurations() -> {name: {"q": (N, n_joints) rad, ...}}``."""
+
+    def configurations(self) -> dict: ...
+
+
+@runtime_checkable
+class NamedTrials(Protocol):
+    """Optional capability of a setup: named deviation vectors of the robot file (scene ``truth.trial``, study
+    ``trial`` axis). ``trials() -> {name: {"deviation": {param: value (SI)}, "configurations": name (optional),
+    "reported": {...} (optional)}}``."""
+
+    def trials(self) -> dict: ...
+
+
+@runtime_checkable
+class PoseGrids(Protocol):
+    """Optional capability of a setup: named grids of commanded poses (scene ``poses.kind``), e.g. the H4 81-pose
+    grid. ``pose_grids``: their names; ``pose_grid(name) -> (N, .)`` commanded poses (ConfigError for another
+    name)."""
+
+    pose_grids: tuple[str, ...]
+
+    def pose_grid(self, name: str) -> np.ndarray: ...
+
+
+def pose_grid_names(setup: "Setup") -> tuple[str, ...]:
+    """The names of the setup's pose grids (:class:`PoseGrids`), () without the capability."""
+    return tuple(setup.pose_grids) if isinstance(setup, PoseGrids) else ()
+
+
+@runtime_checkable
+class TiltsFromAxis(Protocol):
+    """Optional capability of a setup: camera and target mounts with small tilts that the rotation axis of the
+    moving part measures before identification (H4, paper §4.1); ``experiment.prepare.prepare_setup`` runs that
+    step and decides what to do with the estimate. The kind only describes what it needs:
+
+    - ``tilt_mode``: "identify" (the axis estimate as a prior of identified tilt parameters), "axis" (tilts fixed
+      at the estimate) or "off" (nominal tilts kept);
+    - ``tilt_names``: the names of the 4 tilt parameters (camera x/y, target x/y) [rad];
+    - ``tilt_reference() -> (R_BC0, R_ME0)`` (3, 3) each: the nominal mount rotations the tilts are relative to
+      (what ``identify.camera_axis.estimate_camera_axis`` measures against);
+    - ``with_tilts(tilts_rad (4,), prior_std_rad (4,) | None) -> Setup``: the setup with the tilt parameters at
+      ``tilts_rad``, free with that prior std, or fixed (None)."""
+
+    tilt_mode: str
+    tilt_names: tuple[str, ...]
+
+    def tilt_reference(self) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def with_tilts(self, tilts_rad, prior_std_rad=None) -> "Setup": ...
+
+
 @dataclass(frozen=True)
 class Setup:
     """Common interface of every robot kind (see the module docstring). ``params`` is the full
@@ -160,8 +226,9 @@ class Setup:
     #: (``experiment.steps.identify_measurements`` runs both and compares them, ``identify.method_check``;
     #: needs :meth:`noise_response`). Empty: methods of one residual, no check.
     cross_methods: ClassVar[dict] = {}
-    #: pose-set kinds of ``poses.kind`` besides ``random`` and ``configurations``
-    pose_grids: ClassVar[tuple[str, ...]] = ()
+    #: top-level scene keys of this kind (besides ``rig.scene.TOP_KEYS``) and ``poses`` keys of its random poses
+    scene_keys: ClassVar[tuple[str, ...]] = ()
+    pose_keys: ClassVar[tuple[str, ...]] = ()
     #: scene ``truth`` keys describing errors the model does not share (see :meth:`truth_model`)
     truth_keys: ClassVar[tuple[str, ...]] = ()
     #: criteria of :meth:`evaluate` computed from validation measurements (H4: V1_rad, V2_rad); none: the
@@ -203,11 +270,6 @@ class Setup:
         raise NotImplementedError
 
     # ------------------------------------------------------------------ optional, with defaults
-    def prepare(self, meas: Measurements) -> tuple["Setup", dict]:
-        """Steps the data determine before identification (e.g. the H4 camera axis, paper §4.1): the setup
-        to identify with and a JSON-ready record for the report. Default: nothing to do."""
-        return self, {}
-
     def truth_model(self, spec: dict, rng: np.random.Generator, where: str = "truth") -> "Setup":
         """The setup of a true robot with errors this model does not share (``spec``: the scene's
         ``truth`` entries of :attr:`truth_keys`); its parameters are drawn by the caller. Default: none."""
@@ -229,18 +291,6 @@ class Setup:
         returns {file kind: file name}. Default: none (``calibrated_model.yaml`` is written for every kind)."""
         return {}
 
-    def pose_grid(self, name: str) -> np.ndarray:
-        """The commanded poses of a named grid (``poses.kind``), e.g. the H4 81-pose grid."""
-        raise ConfigError(f"{self.name}: this {self.kind} setup has no pose grid {name!r}")
-
-    def configurations(self) -> dict:
-        """Named joint sets {name: {"q": (N, n) rad, ...}} of the robot file."""
-        return {}
-
-    def trials(self) -> dict:
-        """Named deviation vectors {name: {"deviation": {param: value}, ...}} of the robot file."""
-        return {}
-
     def check_joints(self, q, where: str, ids=None) -> None:
         """DataError naming ``where``, the pose id and the joint when joint readings q (N, n) rad have the
         wrong width or a non-finite value (kinds add their own range checks)."""
@@ -257,12 +307,6 @@ class Setup:
     def fixed_note(self, name: str) -> str:
         """Why parameter ``name`` is fixed (for tables)."""
         return "fixed (not free in the scene)"
-
-    def with_variant(self, variant: str | None = None, model: str | None = None) -> "Setup":
-        """The setup with another model variant (H4: paper table 2). Default: no variants."""
-        if variant is None and model is None:
-            return self
-        raise ConfigError(f"{self.name}: variant/model choices need a robot kind that has them (this one is {self.kind})")
 
     def with_params(self, params: ParameterSet) -> "Setup":
         """Same setup, other parameter set (free mask / nominal values)."""

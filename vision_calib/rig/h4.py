@@ -19,28 +19,9 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..errors import ConfigError, DataError, ParameterError
+from ..errors import ConfigError, ParameterError
 from ..kinematics.h4 import TILT_NAMES, H4Robot
 from .base import Evaluation, Setup
-
-#: significance level at which a measured camera/target tilt replaces the nominal one (chi-square, 2 dof)
-AXIS_LEVEL = 1e-3
-#: an axis estimate whose std is below this [rad] is exact (noise-free rotations): the tilts are fixed at it
-EXACT_AXIS_STD_RAD = 1e-9
-#: the rotation axis is "not fixed" (tilts not applied) when the axis fit's residuals fail the chi-square test
-#: against the measurements' rotation covariance (level AXIS_LEVEL) AND their variance exceeds the predicted by
-#: this factor (residual std twice the predicted, as steps.UNEXPLAINED_CHI2_DOF): image rotations carry a
-#: systematic part (detector bias) the covariances only partly model
-AXIS_MAX_VARIANCE_RATIO = 4.0
-
-
-def _chi2_2(w, c) -> float:
-    """w^T c^-1 w for a 2-vector w and its covariance c (2, 2); inf when c is singular (exact data) and w != 0."""
-    try:
-        return float(w @ np.linalg.solve(c, w))
-    except np.linalg.LinAlgError:
-        return float("inf") if np.any(w != 0) else 0.0
-
 
 @dataclass(frozen=True)
 class H4Setup(Setup):
@@ -52,12 +33,14 @@ class H4Setup(Setup):
     sigma_q_rad: float = 0.0
     robot_path: str = ""
     variant: str | None = None
-    #: what :meth:`prepare` does with the camera/target tilts: "identify" (measure, then identify what the IGM
-    #: determines better), "axis" (measure only, paper §4.1), "off" (keep the scene's nominal tilts)
+    #: what the preparation step (``experiment.prepare``, capability ``rig.base.TiltsFromAxis``) does with the
+    #: camera/target tilts: "identify" (measure, then identify what the IGM determines better), "axis" (measure
+    #: only, paper §4.1), "off" (keep the scene's nominal tilts)
     tilt_mode: str = "identify"
     #: (4,) rad std of the prior on the tilt parameters TILT_NAMES (their nominal = the rotation-axis estimate),
-    #: set by :meth:`prepare`; empty: no prior (tilts fixed, or identified from the joints alone)
-    tilt_prior_std_rad: tuple = ()
+    #: set by :meth:`with_tilts`; empty: no prior (tilts fixed, or identified from the joints alone)
+    tilt_prior_std_rad: tuple[float, ...] = ()
+    tilt_names: ClassVar[tuple[str, ...]] = TILT_NAMES
 
     kind: ClassVar[str] = "h4"
     residuals: ClassVar[tuple[str, ...]] = ("joint", "pose")
@@ -116,7 +99,7 @@ class H4Setup(Setup):
 
 
     def with_tilt_prior(self, prob):
-        """``prob`` with the rotation-axis prior of the tilts (:meth:`prepare`) as prior rows, when set."""
+        """``prob`` with the rotation-axis prior of the tilts (:meth:`with_tilts`) as prior rows, when set."""
         if not self.tilt_prior_std_rad or not self.robot.tilt_params:
             return prob
         ps = prob.params
@@ -169,8 +152,9 @@ class H4Setup(Setup):
         return random_workspace_poses(n, rng, center=self.robot.center, size=self.robot.size)
 
     def pose_grid(self, name: str) -> np.ndarray:
+        """The commanded poses (81, 4) of the grid "grid81" (``rig.base.PoseGrids``)."""
         if name != "grid81":
-            return super().pose_grid(name)
+            raise ConfigError(f"{self.name}: this {self.kind} setup has no pose grid {name!r} (it has grid81)")
         return self.robot.pose_grid()
 
     def with_params(self, params):
@@ -199,85 +183,25 @@ class H4Setup(Setup):
         params = robot.params.fix(fix) if fix else robot.params
         return replace(self, params=params, robot=replace(robot, params=params), variant=variant)
 
-    def prepare(self, meas) -> tuple["H4Setup", dict]:
-        """Camera and target tilts (paper §4.1): measured from the rotation axis of the nacelle
-        (``identify.camera_axis``), then carried by the four tilt parameters TILT_NAMES
-        (``kinematics.h4_variants.with_tilt_params``). With ``tilt_mode`` "identify" (default) all four are
-        identified with the other parameters, the axis estimate entering the fit as a prior N(axis value,
-        axis std^2) (one prior row each, ``IdentificationProblem.prior_rows``; the estimate's x/y
-        correlation is below 1e-3 on the demo scene, so the prior is diagonal): the IGM refines what it
-        determines (the camera tilts, through the camera distance), the target tilts (second order in the
-        joints) keep about the axis value and its std, and the std and the verdict of the fit carry the
-        axis' uncertainty. No rule decides whether to free them: the prior leaves the degrees of freedom of
-        the adequacy test unchanged. "axis": the paper's step alone (tilts fixed at the axis value: their
-        uncertainty is then NOT carried, the info says so); "off": nominal tilts kept.
-        Nothing is applied when the rotations contradict a fixed axis (``CameraAxisEstimate.consistency``
-        against the measured rotation covariance: p < AXIS_LEVEL and chi2/dof > AXIS_MAX_VARIANCE_RATIO);
-        the info dict (report's ``prepared`` block) has the estimates, the axis test, and then a ``warning``."""
-        from ..identify.camera_axis import estimate_camera_axis
+    # ------------------------------------------------------------------ rig.base.TiltsFromAxis
+    def tilt_reference(self) -> tuple[np.ndarray, np.ndarray]:
+        """(R_BC0, R_ME0) (3, 3) of the robot without its tilt parameters (their values folded in): what the
+        rotation-axis estimate's tilts are relative to."""
+        from ..kinematics.h4_variants import without_tilt_params
+
+        base = without_tilt_params(self.robot)
+        return base.R_BC0, base.R_ME0
+
+    def with_tilts(self, tilts_rad, prior_std_rad=None) -> "H4Setup":
+        """The setup with the four tilt parameters TILT_NAMES (``kinematics.h4_variants.with_tilt_params``,
+        relative to :meth:`tilt_reference`) at tilts_rad (4,): free, with the prior N(tilts_rad, prior_std_rad^2)
+        in :meth:`problem` (:meth:`with_tilt_prior`), or fixed when prior_std_rad is None."""
         from ..kinematics.h4_variants import with_tilt_params, without_tilt_params
 
-        from scipy.stats import chi2
-
-        if self.tilt_mode not in ("identify", "axis", "off"):
-            raise ConfigError(f"H4Setup.tilt_mode: expected 'identify', 'axis' or 'off', got {self.tilt_mode!r}")
-        if self.tilt_mode == "off":
-            return self, {"applied": False, "reason": "tilt_mode off"}
-        base = without_tilt_params(self.robot)
-        # rotation noise from the residuals of the axis fit, not from the per-pose covariances: the measured
-        # rotations carry a systematic part (detector bias) that the covariances miss
-        try:
-            est = estimate_camera_axis(meas.T_cam_target, R_BC0=base.R_BC0, R_ME0=base.R_ME0)
-        except DataError as exc:  # e.g. all poses at one theta: the axis is not determined, keep the nominal
-            return self, {"applied": False, "reason": str(exc)}
-        q = [_chi2_2(w, c) for w, c in ((est.tilt_cam_rad, est.cov_tilt_cam),
-                                       (est.tilt_target_rad, est.cov_tilt_target))]
-        axis_test = est.consistency(meas.cov[:, 3:, 3:])
-        fixed = not (axis_test["chi2"] is not None and axis_test["p_value"] < AXIS_LEVEL
-                     and axis_test["chi2_dof"] > AXIS_MAX_VARIANCE_RATIO)
-        vals = np.concatenate([est.tilt_cam_rad, est.tilt_target_rad])
-        axis_std = np.concatenate([est.tilt_cam_std_rad, est.tilt_target_std_rad])
-        usable = bool(fixed and np.all(np.isfinite(vals)) and np.all(np.isfinite(axis_std)))
-        # exact rotations (noise-free synthetic data) give an exact axis: fixed at it, with its zero std
-        exact = bool(usable and np.max(axis_std) < EXACT_AXIS_STD_RAD)
-        identify = usable and self.tilt_mode == "identify" and not exact
-        if usable:
-            robot = with_tilt_params(base, vals, [identify] * 4)
-        else:
-            robot = with_tilt_params(base, np.zeros(4))
-        out = replace(self, params=robot.params, robot=robot,
-                      tilt_prior_std_rad=tuple(float(v) for v in axis_std) if identify else ())
-        sd_c, sd_t = np.sqrt(np.diag(est.cov_tilt_cam)), np.sqrt(np.diag(est.cov_tilt_target))
-        info = {"camera_tilt_deg": np.degrees(est.tilt_cam_rad).tolist(), "camera_tilt_std_deg": np.degrees(sd_c).tolist(),
-                "target_tilt_deg": np.degrees(est.tilt_target_rad).tolist(),
-                "target_tilt_std_deg": np.degrees(sd_t).tolist(), "rms_residual_deg": float(np.degrees(est.rms_residual_rad)),
-                "applied": bool(usable), "chi2_camera_target": q,
-                "identified": list(TILT_NAMES) if identify else [],
-                "prior": ({n: {"mean_deg": float(np.degrees(v)), "std_deg": float(np.degrees(s))}
-                           for n, v, s in zip(TILT_NAMES, vals, axis_std)} if identify else None),
-                "axis_fixed": bool(fixed), "axis_test": axis_test,
-                "method": "rotation axis of the nacelle (paper 4.1); tilts relative to the nominal, about the camera "
-                          "x/y and target x/y axes; "
-                          + ("the four tilts are identified with the other parameters, the axis estimate entering "
-                             "the fit as a prior (mean and std above, one prior row each): the parameter table's "
-                             "tilt std carry it" if identify else
-                             "tilts fixed at the axis value (tilt_mode 'axis', the paper's step): their std is not "
-                             "carried into the other parameters' std")
-                          + "; none applied when the rotations do not share one fixed axis within the noise (axis_test: "
-                          f"chi2 of the axis fit's residuals against the rotation covariance, level {AXIS_LEVEL}, "
-                          f"chi2/dof > {AXIS_MAX_VARIANCE_RATIO})"}
-        if not fixed:
-            info["warning"] = (
-                f"the measured rotations do not share one fixed rotation axis within the noise (axis fit chi2/dof "
-                f"{axis_test['chi2_dof']:.3g}, p {axis_test['p_value']:.2g}, rotation residual RMS "
-                f"{np.degrees(est.rms_residual_rad):.3g} deg): the camera/target tilts are not measured from it and "
-                "stay nominal (the nacelle or a mount moves with the pose: the model does not hold)")
-        elif not usable:
-            info["warning"] = "the rotation axis estimate is not finite: the camera/target tilts stay nominal"
-        elif self.tilt_mode == "axis":
-            info["note"] = ("tilt_mode 'axis': camera/target tilts fixed at the rotation-axis estimate (std "
-                            f"{', '.join(f'{np.degrees(s):.3g}' for s in axis_std)} deg), not carried into the std")
-        return out, info
+        free = prior_std_rad is not None
+        robot = with_tilt_params(without_tilt_params(self.robot), np.asarray(tilts_rad, float), [free] * 4)
+        return replace(self, params=robot.params, robot=robot,
+                       tilt_prior_std_rad=tuple(float(v) for v in prior_std_rad) if free else ())
 
     def truth_model(self, spec: dict, rng: np.random.Generator, where: str = "truth") -> "H4Setup":
         """A true H4 the identified model does not share: ``model: "31"`` (per-chain geometry, free mask H:
@@ -285,7 +209,7 @@ class H4Setup(Setup):
         ``tilt_deg``: std [deg] of random tilts of the camera (about the camera x/y axes) and of the target
         mount (about the target x/y axes), not represented by the 4-parameter external transforms: the truth
         carries them as its (fixed) tilt parameters TILT_NAMES, the identified model measures them from the
-        rotation axis (§4.1, :meth:`prepare`)."""
+        rotation axis (§4.1, ``experiment.prepare``)."""
         bad = set(spec) - set(self.truth_keys)
         if bad:
             raise ConfigError(f"{where}: unknown unmodelled-truth keys {sorted(bad)} (known: {self.truth_keys})")

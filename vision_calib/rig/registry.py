@@ -3,11 +3,14 @@
 A robot kind is a :class:`~vision_calib.rig.base.Setup` subclass that also provides:
 
 - ``kind`` (its name, e.g. ``"serial"``), ``mounts`` (camera mounts it supports), ``residuals`` and
-  ``methods`` (first = default), ``pose_grids`` (named pose grids);
+  ``methods`` (first = default);
 - ``claims(robot_path, doc) -> bool``: whether a robot file is of this kind (``doc`` is the parsed
   YAML mapping, or None for a non-YAML file such as a URDF);
 - ``from_scene(ctx) -> Setup``: build the setup of a scene (:class:`vision_calib.rig.scene.SceneContext`);
-- ``load_model(doc, robot_path)``: rebuild the robot of a calibrated-model file.
+- ``load_model(doc, robot_path)``: rebuild the robot of a calibrated-model file;
+- optionally, the capabilities of :mod:`vision_calib.rig.base` it has (``PoseGrids``, ``NamedConfigurations``,
+  ``NamedTrials``, ``ModelVariants``, ``TiltsFromAxis``, ``ChainMeasured``): plain methods and attributes, checked
+  with ``isinstance`` where they are used.
 
 Adding a robot kind = writing that class and calling :func:`register` on it (for the shipped kinds:
 one line below; from another package: an entry point of the group ``vision_calib.robots``,

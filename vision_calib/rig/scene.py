@@ -28,14 +28,19 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..camera import CameraIntrinsics
 from ..config import Section, load_yaml, transform_from
 from ..errors import ConfigError, ParameterError
-from .base import Setup
+from .base import NamedConfigurations, NamedTrials, PoseGrids, Setup, pose_grid_names
 from .registry import kind_of_robot_file
+
+if TYPE_CHECKING:  # annotations only
+    from ..sensor.settings import SensorEffects
+    from ..targets.kinds.base import TargetSpec
 
 SCENES_DIR = Path(__file__).resolve().parents[2] / "scenes"
 TOP_KEYS = ("name", "robot", "mount", "units", "camera", "target", "effects", "render", "truth", "poses",
@@ -97,7 +102,7 @@ class SceneContext:
     mount: str
     robot_path: Path
     camera: CameraIntrinsics | None
-    target: object
+    target: TargetSpec | None
     Lf: float
     Af: float
     sigma_q_rad: float
@@ -137,7 +142,7 @@ class Scene:
     name: str
     setup: Setup
     target_path: Path | None
-    effects: object
+    effects: SensorEffects
     truth: TruthSettings
     poses: PoseSettings
     validation: PoseSettings
@@ -207,8 +212,9 @@ def _truth(sec: Section, setup: Setup, Lf: float, Af: float) -> TruthSettings:
             raise dsec.error(str(k), str(exc)) from None
         devs[str(k)] = dsec.get(k, float) * (Lf if setup.params.kinds[i] == "length" else Af)
     trial = sec.get("trial", str, None)
-    if trial is not None and trial not in setup.trials():
-        raise sec.error("trial", f"unknown trial {trial!r} (robot file has {sorted(setup.trials()) or 'no trials'})")
+    trials = setup.trials() if isinstance(setup, NamedTrials) else {}
+    if trial is not None and trial not in trials:
+        raise sec.error("trial", f"unknown trial {trial!r} (robot file has {sorted(trials) or 'no trials'})")
     return TruthSettings(seed=sec.nonnegative("seed", int, 0),
                          sigma_length_m=sec.nonnegative("sigma_length_mm", float, 0.5) * 1e-3,
                          sigma_angle_rad=float(np.radians(sec.nonnegative("sigma_angle_deg", float, 0.05))),
@@ -229,7 +235,7 @@ def scene_from_section(top: Section) -> Scene:
     path = top.file
     robot_path = top.path_value("robot")
     kind = kind_of_robot_file(robot_path, where=top.where("robot"))
-    top.check_known(TOP_KEYS + tuple(getattr(kind, "scene_keys", ())))
+    top.check_known(TOP_KEYS + tuple(kind.scene_keys))
     name = top.get("name", str, path.stem if not top.path else Path(robot_path).stem)
     Lf, Af = top.units(default_length="m", default_angle="deg")
     mount = top.get("mount", str, choices=kind.mounts)
@@ -252,12 +258,12 @@ def scene_from_section(top: Section) -> Scene:
             raise ident.error("residual", f"method {method!r} minimises {setup.residual_for(method, residual)!r} "
                                           f"residuals, not {residual!r} (leave residual out)")
         residual = setup.residual_for(method, residual)
-    pose_kinds = ("random", "configurations") + tuple(kind.pose_grids)
+    pose_kinds = ("random", "configurations") + pose_grid_names(setup)
     return Scene(
         path=path, name=name, setup=setup, target_path=target_path,
         effects=_effects(top.section("effects", default={})),
         truth=_truth(top.section("truth", default={}), setup, Lf, Af),
-        poses=_pose_settings(top.section("poses", default={}), pose_kinds, getattr(kind, "pose_keys", ())),
+        poses=_pose_settings(top.section("poses", default={}), pose_kinds, kind.pose_keys),
         validation=_pose_settings(top.section("validation", default={}), ("random", "configurations")),
         measurement=measurement, identification=IdentificationSettings(method, residual),
         supersample=rs.positive("supersample", int, 2), raw=top.data,
@@ -271,7 +277,7 @@ def scene_poses(scene: Scene, rng: np.random.Generator, n: int | None = None, wh
     if n is not None and int(n) < 1:
         raise ConfigError(f"{scene.path}: asked for {n} {which}: need at least 1")
     n = n or spec.count
-    if spec.kind in setup.pose_grids:
+    if isinstance(setup, PoseGrids) and spec.kind in setup.pose_grids:
         X = setup.pose_grid(spec.kind)
         if n is not None and n > len(X):
             raise ConfigError(f"{scene.path}: {which}: {n} poses asked, the grid has {len(X)}")
@@ -279,7 +285,7 @@ def scene_poses(scene: Scene, rng: np.random.Generator, n: int | None = None, wh
             X = X[np.sort(rng.choice(len(X), size=n, replace=False))]
         return X
     if spec.kind == "configurations":
-        confs = setup.configurations()
+        confs = setup.configurations() if isinstance(setup, NamedConfigurations) else {}
         if spec.configurations not in confs:
             raise ConfigError(f"{scene.path}: {which}.configurations: unknown set {spec.configurations!r} "
                               f"(robot file has {sorted(confs)})")
@@ -304,7 +310,7 @@ def true_parameters(scene: Scene, rng: np.random.Generator, base_free=None) -> n
     x[mask] += rng.normal(size=int(mask.sum())) * sig[mask]
     devs = dict(scene.truth.deviations)
     if scene.truth.trial:
-        devs.update(scene.setup.trials()[scene.truth.trial].get("deviation", {}))
+        devs.update(scene.setup.trials()[scene.truth.trial].get("deviation", {}))  # checked NamedTrials on load
         x = ps.nominal.copy()  # a given deviation vector replaces the random draw
     for k, v in devs.items():
         x[ps.index(k)] = ps.nominal[ps.index(k)] + v

@@ -15,6 +15,7 @@ import numpy as np
 
 from ..config import Section, confine, load_yaml
 from ..errors import ConfigError
+from ..rig.base import ModelVariants, NamedConfigurations, NamedTrials, PoseGrids
 
 RUN_FORMAT = "study-run-1"
 MODES = ("synthetic", "images")
@@ -232,11 +233,14 @@ def _target(top: Section, outputs) -> dict | None:
 
 # ----------------------------------------------------------------------------- scenes
 def scene_with(scene, variant: str | None = None, model: str | None = None):
-    """The scene with its robot replaced by a model variant (``Setup.with_variant``: for H4,
+    """The scene with its robot replaced by a model variant (``rig.base.ModelVariants``: for H4,
     ``variant`` A..H of paper table 2 and/or ``model`` "12"|"31"); truth deviations of names the new
     model lacks are dropped. ConfigError if the kind has no variants or the pair is impossible."""
     if variant is None and model is None:
         return scene
+    if not isinstance(scene.setup, ModelVariants):
+        raise ConfigError(f"{scene.path}: {scene.setup.name}: variant/model choices need a robot kind that has them "
+                          f"(this one is {scene.setup.kind})")
     try:
         return scene.with_setup(scene.setup.with_variant(variant, model))
     except ConfigError as exc:
@@ -250,13 +254,13 @@ def scene_with_trial(scene, trial: str | None):
     scene if the robot has no such trial."""
     if trial is None:
         return scene
-    trials = scene.setup.trials()
+    trials = scene.setup.trials() if isinstance(scene.setup, NamedTrials) else {}
     if trial not in trials:
         raise ConfigError(f"{scene.path}: unknown trial {trial!r} (robot file has {sorted(trials) or 'no trials'})")
     poses = scene.poses
     conf = trials[trial].get("configurations")
     if poses.kind == "configurations" and conf:
-        if conf not in scene.setup.configurations():
+        if not isinstance(scene.setup, NamedConfigurations) or conf not in scene.setup.configurations():
             raise ConfigError(f"{scene.path}: trial {trial!r} names configurations {conf!r} that the robot file lacks")
         poses = replace(poses, configurations=conf)
     return replace(scene, truth=replace(scene.truth, trial=trial), poses=poses)
@@ -307,7 +311,8 @@ def _check_cells(spec: StudySpec) -> None:
             raise ConfigError(f"{_axis_where(spec, 'method')}: method {s['method']!r} does not apply to the "
                               f"{sc.kind} scene {base.path.name} (use {' or '.join(setup.methods)})")
         n = s.get("n_poses")
-        if n is not None and base.poses.kind in setup.pose_grids and n > len(setup.pose_grid(base.poses.kind)):
+        if (n is not None and isinstance(setup, PoseGrids) and base.poses.kind in setup.pose_grids
+                and n > len(setup.pose_grid(base.poses.kind))):
             raise ConfigError(f"{_axis_where(spec, 'n_poses')}: {n} poses asked, the scene's grid has "
                               f"{len(setup.pose_grid(base.poses.kind))}")
         m = {"joint": 4, "pose": 6, "position": 3}[setup.residual_for(method, res or sc.identification.residual)
