@@ -246,6 +246,7 @@ def test_apriltag_growth_term_by_corner_estimator(aprilgrid, intr):
         e = frames.pose_error(T, m.T_cam_target)
         z_with.append(e[2] / m.std[2])
         class _Plain:  # the same target without a kind: no detector terms
+            kind = None
             corner_points = aprilgrid.corner_points
             check_pose_measurable = aprilgrid.check_pose_measurable
         z_without.append(e[2] / measure_pose(dets, _Plain(), intr).std[2])

@@ -4,9 +4,9 @@ probes: which shipped setups and chains have them, and the errors that name a mi
 import numpy as np
 import pytest
 
-from vision_calib.errors import ConfigError, ParameterError
+from vision_calib.errors import ConfigError, DataError, ParameterError
 from vision_calib.identify.serial_problem import serial_problem
-from vision_calib.kinematics.protocols import ChainModel, Remountable
+from vision_calib.kinematics.protocols import ChainModel, PrismaticJoints, Remountable
 from vision_calib.kinematics.serial import SerialChain
 from vision_calib.kinematics.urdf import URDFChain
 from vision_calib.rig import SCENES_DIR, load_scene
@@ -23,6 +23,7 @@ def test_shipped_setups_declare_their_capabilities(scene, chain_measured):
     if chain_measured:
         assert isinstance(setup.chain, ChainModel)
         assert isinstance(setup.chain, Remountable) is isinstance(setup.chain, URDFChain)
+        assert isinstance(setup.chain, PrismaticJoints) is isinstance(setup.chain, URDFChain)
 
 
 #: each optional interface and its members (none of them on the base Setup)
@@ -73,3 +74,20 @@ def test_serial_problem_names_the_interface_a_chain_lacks():
 
     with pytest.raises(ParameterError, match="ChainModel interface"):
         serial_problem(NotAChain(), np.zeros((3, 2)), np.tile(np.eye(4), (3, 1, 1)))
+
+
+def test_only_revolute_joints_without_limits_are_held_to_a_turn():
+    """A chain with the PrismaticJoints capability: a prismatic joint's value is a length, not refused beyond
+    2 pi; the revolute joints of the same chain still are (degrees read as radians)."""
+    from dataclasses import replace
+
+    setup = load_scene(SCENES_DIR / "ur5e_eye_in_hand.yaml").setup
+    n = setup.chain.n_joints
+    chain = replace(setup.chain, prismatic=np.arange(n) == n - 1, joint_limits=None)
+    free = replace(setup, chain=chain)
+    q = np.full((2, n), 0.5)
+    q[1, n - 1] = 7.0
+    free.check_joints(q, "poses.csv", ["a", "b"])  # the prismatic joint: accepted
+    q[1, 0] = 7.0
+    with pytest.raises(DataError, match=r"poses.csv: pose 'b' joint q1 = 7 rad is more than a turn"):
+        free.check_joints(q, "poses.csv", ["a", "b"])

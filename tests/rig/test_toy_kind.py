@@ -170,3 +170,18 @@ def test_unknown_robot_kind_is_named(tmp_path):
 
     with pytest.raises(ConfigError, match="no robot kind reads this file"):
         load_scene(tmp_path / "s.yaml")
+
+
+def test_register_names_what_a_robot_kind_lacks():
+    """register takes a Setup subclass of the rig.registry.RobotKind interface; TypeError naming the rest."""
+
+    class NotASetup:
+        kind, mounts = "x", ("fixed",)
+
+    with pytest.raises(TypeError, match="must be a Setup subclass"):
+        register(NotASetup)
+    with pytest.raises(TypeError, match=r"robot kind Planar2Setup lacks 'mounts'"):
+        register(type("Planar2Setup", (Setup,), {"claims": Planar2Setup.claims, "from_scene": Planar2Setup.from_scene,
+                                                 "load_model": Planar2Setup.load_model}))
+    assert register(Planar2Setup) is Planar2Setup
+    unregister("planar2")

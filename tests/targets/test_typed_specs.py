@@ -8,7 +8,7 @@ import pytest
 
 from vision_calib.errors import ConfigError
 from vision_calib.targets import TargetSpec, target_from_dict
-from vision_calib.targets.kinds import KINDS, TargetKind, register, unregister
+from vision_calib.targets.kinds import KINDS, MarkerKind, TargetKind, register, unregister
 from vision_calib.targets.kinds.base import COMMON_KEYS
 
 SPECS = {
@@ -105,3 +105,18 @@ def test_a_new_kind_is_one_class_pair_and_one_registry_line():
         target_from_dict({"kind": "toy_squares", "rows": 2, "cols": 3})
     with pytest.raises(ConfigError, match="side_m: unknown key"):  # its key went with it
         target_from_dict({"kind": "charuco", "rows": 2, "cols": 3, "side_m": 0.01})
+
+
+@pytest.mark.parametrize("kind", sorted(SPECS))
+def test_markers_are_an_optional_interface_of_a_kind(kind):
+    """The marker boards (charuco, apriltag_grid) are the MarkerKind kinds; asking another kind for markers is a
+    ConfigError naming the target and what was asked; registering a non-TargetKind is refused."""
+    s = _spec(kind)
+    assert isinstance(KINDS[kind], MarkerKind) is (kind in ("charuco", "apriltag_grid"))
+    if isinstance(KINDS[kind], MarkerKind):
+        assert s.marker_corners().shape == (len(s.marker_ids()), 4, 3)
+    else:
+        with pytest.raises(ConfigError, match=r"target 't': kind '\w+' has no markers \(marker_ids\)"):
+            s.marker_ids()
+    with pytest.raises(TypeError, match="must be a TargetKind instance, got type"):
+        register(type(KINDS[kind]))

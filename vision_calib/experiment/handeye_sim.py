@@ -20,12 +20,13 @@ identification poses (target in view):
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from .. import frames
 from ..errors import ConfigError
-from ..rig import load_scene
+from ..rig import Scene, load_scene
 from .steps import rngs, scene_truth
 
 #: factor on the image-model bound that gives the image chain's total PnP error (module docstring)
@@ -50,14 +51,15 @@ class HandeyeData:
     robot_std_rad: float
 
 
-def simulate_handeye(scene, n_poses: int, seed: int, robot_std_mm: float = 0.2, robot_std_deg: float = 0.02,
+def simulate_handeye(scene: Scene | str | Path, n_poses: int, seed: int, robot_std_mm: float = 0.2,
+                     robot_std_deg: float = 0.02,
                      pnp_scale: float = PNP_SCALE, n_frames: int | None = None) -> HandeyeData:
     """Hand-eye data of a serial ``scene`` (path or Scene) with ``n_poses`` poses; seed: the run seed
     (poses and noise streams of :func:`.steps.rngs`; the truth from the scene's truth seed)."""
     from ..measure.covariance import image_bound_pose_cov
     from ..targets import load_target
 
-    scene = load_scene(scene) if not hasattr(scene, "setup") else scene
+    scene = scene if isinstance(scene, Scene) else load_scene(scene)
     setup = scene.setup
     if setup.kind != "serial" or setup.mount not in ("eye_in_hand", "fixed"):
         raise ConfigError(f"{scene.path}: hand-eye simulation needs a serial robot with mount eye_in_hand or fixed")

@@ -33,7 +33,8 @@ class HandeyeIdentified:
     """Hand-eye identification: result (std scaled by the variance factor when > 1), A, B (4, 4), problem
     (kept poses, final weights), rejected [(label, reason)], adequacy (``model_adequacy`` before scaling),
     variance_factor, fit (``HandeyeFit`` of the kept poses: robot std, closed-form comparison), nuisance
-    (the shared error's block or None). Has the fields ``io.report.build_report(identified=)`` reads."""
+    (the shared error's block or None); no lack-of-fit test or method check (None). The report's
+    ``io.report.IdentifiedFit``."""
 
     result: IdentificationResult
     A: np.ndarray
@@ -45,6 +46,8 @@ class HandeyeIdentified:
     fit: HandeyeFit
     nuisance: dict | None = None
     prepared: dict | None = None
+    lack_of_fit: dict | None = None
+    method_check: dict | None = None
 
 
 def identify_handeye(T_base_flange, T_cam_target, mount: str, pose_cov, labels, robot_std=None, robust: bool = True,

@@ -138,7 +138,7 @@ def serial_problem(
     if check_limits:
         from ..kinematics.serial import check_joint_limits
 
-        check_joint_limits(q, getattr(chain, "joint_limits", None), f"{chain.name}: joint values",
+        check_joint_limits(q, chain.joint_limits, f"{chain.name}: joint values",
                            labels if labels is not None and len(labels) == n else None)
     lab = labels if labels is not None and len(labels) == n else None
     T_meas = _check_poses(T_meas, n, labels=lab)

@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
@@ -57,6 +58,19 @@ from .report_text import KIND_UNITS, lack_of_fit_line, method_check_line
 REPORT_VERSION = "2.0"
 #: JSON Schema (draft 2020-12) of report.json, shipped as package data
 SCHEMA_PATH = Path(__file__).with_name("report_schema.json")
+
+
+class IdentifiedFit(Protocol):
+    """What the report reads of a measured-data fit (``experiment.steps.Identified``,
+    ``experiment.handeye_step.HandeyeIdentified``): rejected [(label, reason)], adequacy
+    (``identify.model_adequacy``), variance_factor, prepared, lack_of_fit and method_check (dicts or None)."""
+
+    rejected: tuple
+    adequacy: dict
+    variance_factor: float
+    prepared: dict | None
+    lack_of_fit: dict | None
+    method_check: dict | None
 
 
 def parameters_table(names, nominal, x_true, result, kinds=None) -> list[dict]:
@@ -188,7 +202,7 @@ def result_is_finite(result) -> bool:
 MAX_REJECTED_FRACTION = 0.3
 
 
-def verdict(result, measurements: dict | None = None, identified=None, warnings=(), adequacy: dict | None = None,
+def verdict(result, measurements: dict | None = None, identified: IdentifiedFit | None = None, warnings=(), adequacy: dict | None = None,
             lack_of_fit: dict | None = None, failure: dict | None = None) -> dict:
     """What to read first. status: "failed" (not converged or not finite: no calibrated model is written),
     "warning" (the chi-square model-adequacy test says the model does not explain the data: chi2/dof above
@@ -205,7 +219,7 @@ def verdict(result, measurements: dict | None = None, identified=None, warnings=
     if adequacy is None and identified is not None:
         adequacy = identified.adequacy
     if lack_of_fit is None and identified is not None:
-        lack_of_fit = getattr(identified, "lack_of_fit", None)
+        lack_of_fit = identified.lack_of_fit
     usable = bool(result.converged and finite) and failure is None
     adq = (adequacy or {}).get("verdict")
     lof = bool((lack_of_fit or {}).get("significant"))
@@ -246,11 +260,11 @@ def misfit_message(adequacy: dict) -> str:
 def build_report(kind: str, *, source: dict, settings: dict, result, measurements: dict | None = None,
                  identifiability=None, parameters: list | None = None, accuracy: dict | None = None,
                  residuals: dict | None = None, warnings=(), extra: dict | None = None, timings: dict | None = None,
-                 seed: int | None = None, identified=None, motion: dict | None = None,
+                 seed: int | None = None, identified: IdentifiedFit | None = None, motion: dict | None = None,
                  failure: dict | None = None) -> dict:
     """report.json content (see the module docstring) with its ``summary_text``. identifiability: an
     IdentifiabilityReport (or None); accuracy: {"before": Evaluation, "after": Evaluation}; identified:
-    ``experiment.steps.Identified`` of a measured-data fit (outliers, adequacy, variance factor);
+    the :class:`IdentifiedFit` of a measured-data fit (outliers, adequacy, variance factor);
     motion: the motion-consistency check (``experiment.checks``); failure: a gross input error
     (``experiment.gross``), kept as ``failure`` and read by the verdict."""
     warnings = list(dict.fromkeys(warnings))  # each once, in order
@@ -276,11 +290,11 @@ def build_report(kind: str, *, source: dict, settings: dict, result, measurement
         report["outliers"] = [{"pose_id": lab, "reason": why} for lab, why in identified.rejected]
         report["adequacy"] = identified.adequacy
         report["variance_factor"] = identified.variance_factor
-        if getattr(identified, "lack_of_fit", None) is not None:
+        if identified.lack_of_fit is not None:
             report["lack_of_fit"] = identified.lack_of_fit
         if identified.prepared:
             report["prepared"] = identified.prepared
-        if getattr(identified, "method_check", None):
+        if identified.method_check:
             report["method_check"] = identified.method_check
     if motion:
         report["motion_check"] = motion

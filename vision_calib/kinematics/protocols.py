@@ -1,6 +1,6 @@
 """What the identification and the rig ask of a joint-commanded chain, as explicit interfaces (``isinstance``
 checks, no attribute probing): :class:`ChainModel` (serial MDH ``SerialChain``, URDF ``URDFChain``) and the
-optional capability :class:`Remountable`. numpy only."""
+optional capabilities :class:`Remountable` and :class:`PrismaticJoints`. numpy only."""
 
 from __future__ import annotations
 
@@ -17,10 +17,13 @@ class ChainModel(Protocol):
     ``forward(q, x) -> (N, 4, 4)`` the measured transform (left mount . arm . right mount) for joints q (N, n)
     rad, ``pose_jacobian(q, x) -> (N, 6, p)`` its parameter Jacobian in the ``frames.pose_error`` convention,
     ``check_joints(q) -> (N, n)`` (DataError naming the bad value), ``redundant_pairs()`` the exactly redundant
-    parameter pairs (name, name, why)."""
+    parameter pairs (name, name, why). ``n_joints``: n; ``joint_limits``: (n, 2) [min, max] (rad, or m for a
+    prismatic joint) or None (no limits)."""
 
     name: str
     params: ParameterSet
+    n_joints: int
+    joint_limits: np.ndarray | None
 
     def forward(self, q, x=None) -> np.ndarray: ...
 
@@ -37,3 +40,11 @@ class Remountable(Protocol):
     without it is rebuilt from its MDH table (``rig.serial.remount_chain``)."""
 
     def remounted(self, left: str, right: str, T_left_base=None, T_flange_right=None): ...
+
+
+@runtime_checkable
+class PrismaticJoints(Protocol):
+    """Optional capability of a chain: some joints translate (``URDFChain``). ``prismatic``: (n,) bool, True for
+    a joint whose value is a length (m); a chain without it has revolute joints only (rad)."""
+
+    prismatic: np.ndarray

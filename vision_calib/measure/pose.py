@@ -22,6 +22,7 @@ from .. import frames
 from ..camera import CameraIntrinsics
 from ..errors import ConfigError
 from ..serialize import jsonable
+from ..targets import TargetSpec
 from .covariance import corner_estimator, pose_covariance
 from .batch import detect_batch
 from .detect import DetectConfig, Detection
@@ -126,9 +127,10 @@ def _rms(res: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum(res**2, axis=1)))) if len(res) else float("nan")
 
 
-def measure_pose(detections: Sequence[Detection], target, intrinsics: CameraIntrinsics, pose_id=0,
+def measure_pose(detections: Sequence[Detection], target: TargetSpec, intrinsics: CameraIntrinsics, pose_id=0,
                  config: MeasureConfig = MeasureConfig()) -> PoseMeasurement:
-    """Average the frames of one pose into a PoseMeasurement; never raises on bad frames
+    """Average the frames of one pose into a PoseMeasurement (``target.kind`` picks the kind's corner-error
+    terms, measure/covariance.py); never raises on bad frames
     (invalid frames are skipped and recorded; an unusable pose gives valid=False + reason). ConfigError for a
     target whose poses are ambiguous (a 180-degree-symmetric board, ``allow_symmetric``).
     Longer than 80 lines: one pass over the frames' detections (validity, averaging, PnP, residuals, covariance, diagnostics) sharing the per-corner arrays."""
@@ -228,7 +230,7 @@ def measure_pose(detections: Sequence[Detection], target, intrinsics: CameraIntr
         sigma = float(np.sqrt(np.sum(all_res**2) / max(n_res - 6, 1)))
     used = cnt > 0  # random (frame scatter / n) + systematic per-corner (phase-locked) + lens field: covariance.py
     cov = pose_covariance(T, p_all[used], mean_uv[used], cnt[used], sigma if len(obs) >= 2 else float("nan"),
-                          intrinsics, config.lens_field_std, getattr(target, "kind", None), all_ids[used],
+                          intrinsics, config.lens_field_std, target.kind, all_ids[used],
                           corner_estimator(detections), config.phase_share).cov
     if not rms <= config.max_rms_px:
         return PoseMeasurement(pose_id, False, f"reprojection RMS {rms:.3f} px > {config.max_rms_px} px",
@@ -239,7 +241,7 @@ def measure_pose(detections: Sequence[Detection], target, intrinsics: CameraIntr
     return PoseMeasurement(pose_id, True, "", T, cov, len(obs), len(all_ids), rms, sigma, config.mode, tuple(fdiag))
 
 
-def measure_images(images, target, intrinsics: CameraIntrinsics, pose_id=0,
+def measure_images(images, target: TargetSpec, intrinsics: CameraIntrinsics, pose_id=0,
                    detect_config: DetectConfig = DetectConfig(),
                    config: MeasureConfig = MeasureConfig()) -> tuple[PoseMeasurement, list[Detection]]:
     """Detect + measure one pose from its frames ((N, H, W) uint8 array or paths)."""

@@ -20,18 +20,37 @@ one line below; from another package: an entry point of the group ``vision_calib
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Protocol, runtime_checkable
 
 from ..errors import ConfigError
 from ..plugins import ROBOT_GROUP, load_entry_points
+from .base import Setup
 
 KINDS: dict = {}
 
 
-def register(cls):
-    """Register a Setup subclass as a robot kind (returns it, usable as a decorator)."""
-    for attr in ("kind", "mounts", "residuals", "methods", "claims", "from_scene", "load_model"):
-        if not hasattr(cls, attr):
-            raise TypeError(f"robot kind {cls.__name__} lacks {attr!r}")
+@runtime_checkable
+class RobotKind(Protocol):
+    """What a robot kind class has besides the members of :class:`~vision_calib.rig.base.Setup` (``kind``,
+    ``residuals``, ``methods``): see the module docstring. ``isinstance(cls, RobotKind)`` on the class."""
+
+    mounts: tuple[str, ...]
+
+    def claims(self, robot_path, doc) -> bool: ...
+
+    def from_scene(self, ctx) -> Setup: ...
+
+    def load_model(self, doc, robot_path) -> Setup: ...
+
+
+def register(cls: type[Setup]) -> type[Setup]:
+    """Register a Setup subclass of the :class:`RobotKind` interface as a robot kind (returns it, usable as a
+    decorator); TypeError naming what it lacks."""
+    if not (isinstance(cls, type) and issubclass(cls, Setup)):
+        raise TypeError(f"a robot kind must be a Setup subclass, got {cls!r}")
+    if not isinstance(cls, RobotKind):
+        missing = [m for m in ("mounts", "claims", "from_scene", "load_model") if m not in dir(cls)]
+        raise TypeError(f"robot kind {cls.__name__} lacks {', '.join(map(repr, missing))} (rig.registry.RobotKind)")
     KINDS[cls.kind] = cls
     return cls
 

@@ -21,7 +21,7 @@ import numpy as np
 
 from .. import frames as F
 from ..errors import DataError
-from ..kinematics.protocols import ChainModel, Remountable
+from ..kinematics.protocols import ChainModel, PrismaticJoints, Remountable
 from .base import Evaluation, Measurements, Setup
 
 #: mount names of each camera mount: (left, right) of the chain
@@ -157,7 +157,8 @@ class SerialSetup(Setup):
         q = np.asarray(q, float)
         ids = list(ids) if ids is not None else list(range(len(q)))
         # revolute joints without finite limits: |q| > 2 pi + margin is degrees read as radians
-        revolute = ~np.asarray(getattr(self.chain, "prismatic", np.zeros(q.shape[1], bool)), bool)
+        prismatic = self.chain.prismatic if isinstance(self.chain, PrismaticJoints) else np.zeros(q.shape[1], bool)
+        revolute = ~np.asarray(prismatic, bool)
         lim = self.chain.joint_limits
         free = revolute & (np.ones(q.shape[1], bool) if lim is None else ~np.all(np.isfinite(lim), axis=1))
         big = np.argwhere((np.abs(q) > MAX_FREE_REVOLUTE_RAD) & free)

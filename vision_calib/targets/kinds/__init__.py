@@ -16,7 +16,7 @@ the lines at the end; from another package: an entry point of the group ``vision
 from __future__ import annotations
 
 from ...plugins import TARGET_GROUP, load_entry_points
-from .base import KINDS, TargetKind, TargetSpec, get_kind, register, unregister
+from .base import KINDS, MarkerKind, TargetKind, TargetSpec, get_kind, register, unregister
 
 
 def _register_shipped() -> None:
@@ -36,4 +36,4 @@ def _register_plugin(obj) -> None:
 _register_shipped()
 PLUGINS = load_entry_points(TARGET_GROUP, _register_plugin)  #: names of the target kinds registered by entry points
 
-__all__ = ["KINDS", "PLUGINS", "TargetKind", "TargetSpec", "get_kind", "register", "unregister"]
+__all__ = ["KINDS", "MarkerKind", "PLUGINS", "TargetKind", "TargetSpec", "get_kind", "register", "unregister"]

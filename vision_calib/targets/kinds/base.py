@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass, fields
-from typing import ClassVar
+from typing import ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -19,9 +19,11 @@ KINDS: dict = {}
 
 
 def register(kind: "TargetKind") -> "TargetKind":
-    """Register a target kind instance under ``kind.name``; its ``spec_class`` (a :class:`TargetSpec`
-    subclass) gets ``kind_impl = kind``."""
-    spec_class = getattr(kind, "spec_class", None)
+    """Register a target kind instance (of a :class:`TargetKind` subclass) under ``kind.name``; its
+    ``spec_class`` (a :class:`TargetSpec` subclass) gets ``kind_impl = kind``."""
+    if not isinstance(kind, TargetKind):
+        raise TypeError(f"a target kind must be a TargetKind instance, got {type(kind).__name__}")
+    spec_class = kind.spec_class
     if not (isinstance(spec_class, type) and issubclass(spec_class, TargetSpec)):
         raise TypeError(f"target kind {kind.name!r}: spec_class must be a TargetSpec subclass, got {spec_class!r}")
     spec_class.kind_impl = kind
@@ -142,6 +144,19 @@ class TargetKind:
         return None
 
 
+@runtime_checkable
+class MarkerKind(Protocol):
+    """Optional capability of a target kind: a board of coded markers (the ArUco kinds ``charuco``,
+    ``apriltag_grid``). ``spec``: the kind's TargetSpec. :meth:`TargetSpec.marker_ids` & co. name a kind
+    without it."""
+
+    def cv_dictionary(self, spec): ...
+
+    def marker_ids(self, spec) -> np.ndarray: ...
+
+    def marker_corners(self, spec) -> np.ndarray: ...
+
+
 #: upper bound of rows x cols (squares, tags or dots) of a board: a 50 MP image holds ~5e7 px, a feature needs
 #: ~10 x 10 px to be found; each dot of a circle grid is also a 128-vertex polygon (2 kB) when it is drawn
 MAX_FEATURES = 1_000_000
@@ -244,14 +259,14 @@ class TargetSpec:
 
     def marker_ids(self) -> np.ndarray:
         """(M,) int ids of the board's markers/tags, in the order of :meth:`marker_corners` (ArUco kinds)."""
-        return self._aruco("marker_ids")
+        return self._markers("marker_ids").marker_ids(self)
 
     def marker_corners(self) -> np.ndarray:
         """(M, 4, 3) float64 [m, target frame] marker corners in OpenCV order (TL, TR, BR, BL) (ArUco kinds).
 
         Computed in float64 (OpenCV stores float32); which squares hold markers comes from OpenCV's board.
         """
-        return self._aruco("marker_corners")
+        return self._markers("marker_corners").marker_corners(self)
 
     def corner_points(self) -> tuple[np.ndarray, np.ndarray]:
         """Corner ids (K,) int and their 3-D positions p_target (K, 3) float64 [m], z = 0, sorted by id."""
@@ -263,15 +278,16 @@ class TargetSpec:
         return self.kind_impl.n_corners(self)
 
     # ------------------------------------------------------------------ OpenCV objects
-    def _aruco(self, method):
-        fn = getattr(self.kind_impl, method, None)
-        if fn is None:
+    def _markers(self, method: str) -> "MarkerKind":
+        """This target's kind as a :class:`MarkerKind`; ConfigError naming the target and ``method`` if it has
+        no markers."""
+        if not isinstance(self.kind_impl, MarkerKind):
             raise ConfigError(f"target {self.name!r}: kind {self.kind!r} has no markers ({method})")
-        return fn(self)
+        return self.kind_impl
 
     def cv_dictionary(self):
         """cv2.aruco.Dictionary of this target (ArUco kinds)."""
-        return self._aruco("cv_dictionary")
+        return self._markers("cv_dictionary").cv_dictionary(self)
 
     def cv_board(self):
         """A fresh cv2.aruco.CharucoBoard (charuco) or cv2.aruco.GridBoard (apriltag_grid)."""
