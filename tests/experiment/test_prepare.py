@@ -9,6 +9,7 @@ import pytest
 
 from vision_calib.errors import ConfigError
 from vision_calib.experiment.prepare import prepare_setup
+from vision_calib.experiment.steps import identify_measurements, prepare_measured
 from vision_calib.experiment.synthetic import run_synthetic
 from vision_calib.identify.camera_axis import estimate_camera_axis
 from vision_calib.rig import load_scene
@@ -23,6 +24,7 @@ def test_a_setup_without_the_capability_is_returned_as_is():
     meas = run_synthetic(sc, seed=0, n_poses=12, prepare=False).measurements
     setup, info = prepare_setup(sc.setup, meas)
     assert setup is sc.setup and info == {}
+    assert prepare_measured(sc.setup, meas, "pose") == (sc.setup, {}, None)  # nothing freed: no new analysis
 
 
 @dataclass(frozen=True)
@@ -68,3 +70,19 @@ def test_the_step_goes_through_the_capability_only(h4_run):
     assert prepare_setup(off, out.measurements) == (off, {"applied": False, "reason": "tilt_mode off"})
     with pytest.raises(ConfigError, match="_Toy.tilt_mode"):
         prepare_setup(_Toy("sometimes", R_BC0, R_ME0), out.measurements)
+
+
+def test_measured_and_synthetic_paths_analyse_the_prepared_setup_alike(h4_run):
+    """The H4 preparation frees the 4 tilt parameters: prepare_measured analyses the prepared setup again, and
+    both the measured-data identification and run_synthetic identify that analysis' base set."""
+    sc, out = h4_run
+    residual = sc.identification.residual
+    setup, info, rep = prepare_measured(sc.setup, out.measurements, residual)
+    assert info["applied"] and rep is not None and set(setup.tilt_names) <= set(setup.params.free_names)
+    assert set(setup.tilt_names) <= set(rep.base_parameters)
+    ident = identify_measurements(sc.setup, out.measurements, sc.identification.method, residual, robust=False,
+                                  cross_check=False)
+    assert ident.analysis.base_parameters == rep.base_parameters
+    assert ident.setup.params.free_names == setup.params.free_names
+    syn = run_synthetic(sc, seed=1, n_poses=30, prepare=True)
+    np.testing.assert_array_equal(syn.base, setup.params.mask(rep.base_parameters))

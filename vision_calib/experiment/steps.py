@@ -176,6 +176,34 @@ class Identified:
     method_check: dict = None
 
 
+def analyse_measurements(setup: Setup, meas: Measurements, residual: str | None, where: str = "",
+                         context: str = "") -> IdentifiabilityReport:
+    """Identifiability of the setup's problem on measured data ``meas`` (rows whitened by the measurement
+    covariances, base parameters chosen by BASE_SELECTION); IdentifiabilityError naming ``where`` (default:
+    the setup's name) and ``context`` when there is no pose or the analysis fails."""
+    where, ctx = where or setup.name, f" ({context})" if context else ""
+    if len(meas.T_cam_target) == 0:
+        raise IdentifiabilityError(f"{where}: no usable poses{ctx}")
+    try:
+        return analyze(setup.problem(meas, residual), selection=BASE_SELECTION)
+    except IdentifiabilityError as exc:
+        raise IdentifiabilityError(f"{where}: {exc}{ctx}") from None
+
+
+def prepare_measured(setup: Setup, meas: Measurements, residual: str | None, where: str = "",
+                     context: str = "") -> tuple[Setup, dict, IdentifiabilityReport | None]:
+    """The preparation step before an identification (:func:`.prepare.prepare_setup`: H4 camera axis and tilts)
+    and what it does to the identifiability: (prepared setup, the report's ``prepared`` record, the
+    :func:`analyse_measurements` of the prepared setup when the preparation changed the free parameters, else
+    None: an analysis of the same poses made before still holds). Used by measured data
+    (:func:`identify_measurements`) and synthetic runs (``synthetic.run_synthetic``)."""
+    before = setup.params.free_names
+    setup, prepared = prepare_setup(setup, meas)
+    if setup.params.free_names == before:
+        return setup, prepared, None
+    return setup, prepared, analyse_measurements(setup, meas, residual, where, context)
+
+
 def identify_measurements(setup: Setup, meas: Measurements, method, residual, analysis=None, context: str = "",
                           robust: bool = True, where: str = "", fix_unidentifiable: bool = False,
                           rejected=(), nuisance=None, cross_check: bool = True) -> Identified:
@@ -196,16 +224,10 @@ def identify_measurements(setup: Setup, meas: Measurements, method, residual, an
     from ..identify import fit_rejecting_outliers, model_adequacy
 
     where = where or setup.name
-    before = setup.params.free_names
-    setup, prepared = prepare_setup(setup, meas)
-    rep = analysis if setup.params.free_names == before else None  # the preparation freed parameters: analyse again
+    setup, prepared, reanalysis = prepare_measured(setup, meas, residual, where, context)
+    rep = reanalysis if reanalysis is not None else analysis
     if rep is None:
-        if len(meas.T_cam_target) == 0:
-            raise IdentifiabilityError(f"{where}: no usable poses" + (f" ({context})" if context else ""))
-        try:
-            rep = analyze(setup.problem(meas, residual), selection=BASE_SELECTION)
-        except IdentifiabilityError as exc:
-            raise IdentifiabilityError(f"{where}: {exc}" + (f" ({context})" if context else "")) from None
+        rep = analyse_measurements(setup, meas, residual, where, context)
     structural_rank_check(setup, rep, residual, where, accept=fix_unidentifiable)
     base = setup.params.mask(rep.base_parameters)
     problem, params = base_problem(setup, meas, residual, base, context)

@@ -15,9 +15,8 @@ from ..identify import model_adequacy
 from ..identify.problem import IdentificationProblem, IdentificationResult
 from ..io.report import misfit_message, parameters_table, verdict
 from ..rig import Evaluation, Measurements, Scene, Setup, load_scene, scene_poses
-from .prepare import prepare_setup
-from .steps import (analyze_setup, base_problem, check_method, lack_of_fit_of, rngs, scene_truth, shared_truth, solve,
-                    unmodelled_truth)
+from .steps import (analyze_setup, base_problem, check_method, lack_of_fit_of, prepare_measured, rngs, scene_truth,
+                    shared_truth, solve, unmodelled_truth)
 
 
 def _scene(scene) -> Scene:
@@ -67,7 +66,7 @@ def run_synthetic(scene, method=None, residual=None, n_poses=None, sigma_t_m=Non
     base: identifiable mask (n,) from a previous analysis (saves one SVD in Monte Carlo loops).
     truth: the setup that produces the measurements (default the scene's; another model, e.g. an H4
     model-31 robot identified as model 12, to study model error), with parameters x_true.
-    prepare (default): run :func:`.prepare.prepare_setup` on the measurements first, as measured data do (H4: camera
+    prepare (default): run :func:`.steps.prepare_measured` on the measurements first, as measured data do (H4: camera
     axis and tilt parameters; the base mask is then re-analysed when prepare frees parameters; the result then has
     the prepared setup's parameters, H4: 4 tilt parameters appended). Without it an H4 truth with mount
     tilts ends ~10 mm off after calibration (the kinematic parameters absorb the camera tilt, README);
@@ -107,13 +106,9 @@ def run_synthetic(scene, method=None, residual=None, n_poses=None, sigma_t_m=Non
     meas = truth_setup.synthetic_measurements(poses, x_true, rn, st, sr, sq, pose_cov=pose_cov)
     prepared = {}
     if prepare:
-        free0 = setup.params.free_names
-        setup, prepared = prepare_setup(setup, meas)
-        if setup.params.free_names != free0:
-            from ..identify import analyze
-            from .steps import BASE_SELECTION
-
-            base = setup.params.mask(analyze(setup.problem(meas, residual), selection=BASE_SELECTION).base_parameters)
+        setup, prepared, reanalysis = prepare_measured(setup, meas, residual, scene.name)
+        if reanalysis is not None:  # the preparation freed parameters: the base mask of the prepared setup
+            base = setup.params.mask(reanalysis.base_parameters)
     problem, _ = base_problem(setup, meas, residual, base)
     result = solve(problem, method)
     seconds = time.perf_counter() - t0
