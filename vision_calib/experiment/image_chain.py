@@ -19,10 +19,14 @@ import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..camera import CameraIntrinsics
+
+if TYPE_CHECKING:  # the sensor package is imported by the workers (PRELOAD), not by this module on load
+    from ..sensor import SensorEffects
 
 _W = {}  # per-process worker state
 #: modules the fork server imports once; every worker is forked from it with them loaded
@@ -51,7 +55,7 @@ class ImageChain:
 
     target_path: str
     camera: CameraIntrinsics
-    effects: object
+    effects: SensorEffects
     supersample: int = 2
     averaging: str = "corners"
 

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import yaml
@@ -40,6 +41,9 @@ from ..measure.noise_qualification import (LEVEL, POSE_AXES, PixelAccumulator, S
                                            corner_scatter, flat_mask, photon_transfer, pose_scatter,
                                            sensor_noise_settings)
 
+if TYPE_CHECKING:  # the target kinds are imported where a target is loaded (read_noise_input)
+    from ..targets import TargetSpec
+
 FORMAT = "vision_calib.noise/1"
 DEFAULT_SIM_FRAMES = 30
 _CI = f"ci{int(LEVEL * 100)}"
@@ -51,7 +55,7 @@ class NoiseInput:
 
     images: tuple
     camera: CameraIntrinsics
-    target: object
+    target: TargetSpec
     source: str
 
 

@@ -9,9 +9,13 @@ frames rendered again for those poses only)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
+
+if TYPE_CHECKING:  # annotations only: the module imports neither the target kinds nor OpenCV on load
+    from ..camera import CameraIntrinsics
+    from ..targets import TargetSpec
 
 #: overlay width limit [px] (the image is downscaled, never enlarged)
 MAX_WIDTH_PX = 640
@@ -36,8 +40,8 @@ class OverlaySource:
     T_cam_target (4, 4) m the calibrated model predicts for that pose, or None (no usable model)."""
 
     frames: Callable
-    target: object
-    intrinsics: object
+    target: TargetSpec
+    intrinsics: CameraIntrinsics
     model_pose: Callable | None = None
 
 
