@@ -213,6 +213,47 @@ def test_no_private_name_imported_from_another_module():
     assert not bad, "private names imported from another module:\n" + "\n".join(bad)
 
 
+def private_names_used_by(path: Path) -> list[str]:
+    """Private (_name) objects or submodules of the package that a module outside it (a test) imports, or reaches
+    as ``module._name`` through a package module it imported, as "name (line L)". A private function the same file
+    replaces to plant a fault (``monkeypatch.setattr(module, "_name", ...)``) may be read there (the original it
+    wraps). Test-local helpers (names from other test modules) are not the package's and are not looked at."""
+    tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
+    private = lambda name: name.startswith("_") and not name.startswith("__")  # noqa: E731
+    bad, modules = [], {}  # modules: local name -> package module bound by an import
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name.split(".")[0] == PKG:
+                    modules[a.asname or a.name.split(".")[0]] = a.name if a.asname else PKG
+                    if any(map(private, a.name.split("."))):
+                        bad.append(f"{a.name} (line {node.lineno})")
+        elif isinstance(node, ast.ImportFrom) and not node.level and (node.module or "").split(".")[0] == PKG:
+            if any(map(private, node.module.split("."))):
+                bad.append(f"{node.module} (line {node.lineno})")
+            for a in node.names:
+                if private(a.name):
+                    bad.append(f"{node.module}.{a.name} (line {node.lineno})")
+                modules[a.asname or a.name] = f"{node.module}.{a.name}"
+    planted = {(n.args[0].id, n.args[1].value) for n in ast.walk(tree)
+               if isinstance(n, ast.Call) and isinstance(n.func, ast.Attribute) and n.func.attr == "setattr"
+               and isinstance(n.func.value, ast.Name) and n.func.value.id == "monkeypatch" and len(n.args) >= 2
+               and isinstance(n.args[0], ast.Name) and isinstance(n.args[1], ast.Constant)}
+    for node in ast.walk(tree):
+        if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id in modules
+                and private(node.attr) and (node.value.id, node.attr) not in planted):
+            bad.append(f"{modules[node.value.id]}.{node.attr} (line {node.lineno})")
+    return sorted(set(bad))
+
+
+def test_tests_use_no_private_name_of_the_package():
+    """The tests exercise the package through its public names, as a user would (a helper a test needs is public
+    and documented)."""
+    tests = Path(__file__).resolve().parent
+    bad = [f"{p.relative_to(tests.parent)}: {b}" for p in sorted(tests.rglob("*.py")) for b in private_names_used_by(p)]
+    assert not bad, "tests import private names of vision_calib:\n" + "\n".join(bad)
+
+
 def test_identify_and_kinematics_reach_no_cv2_torch_opengl():
     bad = heavy_imports(IMPORTS, exceptions=EXCEPTIONS)
     assert not bad, "\n".join(bad)
@@ -306,6 +347,23 @@ def test_a_heavy_import_reached_from_identify_is_named():
     bad = heavy_imports(_fake(*GOOD, ("identify.handeye_problem", "measure.reprojection", None),
                               ("measure.reprojection", "cv2", None)))
     assert bad == [f"{PKG}.identify.handeye_problem -> {PKG}.measure.reprojection imports cv2 (line 1)"]
+
+
+def test_a_private_name_used_by_a_test_is_named(tmp_path):
+    f = tmp_path / "test_x.py"
+    f.write_text("from vision_calib.measure.intrinsics import PARAM_NAMES, _jac\n"
+                 "from vision_calib.targets.kinds import _grid\n"
+                 "import vision_calib.measure.seeded as seeded\n"
+                 "from vision_calib.experiment import image_chain\n"
+                 "from helpers import _local\n"
+                 "seeded._Refiner(image_chain.worker_pid, image_chain._W, _local)\n"
+                 "def test_fault(monkeypatch):\n"
+                 "    real = seeded._from_seed\n"
+                 "    monkeypatch.setattr(seeded, '_from_seed', lambda *a: None or real(*a))\n")
+    assert private_names_used_by(f) == [f"{PKG}.experiment.image_chain._W (line 6)",
+                                        f"{PKG}.measure.intrinsics._jac (line 1)",
+                                        f"{PKG}.measure.seeded._Refiner (line 6)",
+                                        f"{PKG}.targets.kinds._grid (line 2)"]
 
 
 @pytest.mark.parametrize("floor", [n for f in LAYERS for n in f])

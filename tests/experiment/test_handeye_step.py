@@ -11,7 +11,7 @@ from vision_calib.errors import ConfigError
 from vision_calib.experiment.handeye_sim import simulate_handeye
 from vision_calib.experiment.handeye_step import handeye_blocks, identify_handeye
 from vision_calib.identify.handeye_fit import fit_handeye
-from vision_calib.identify.handeye_problem import x_from_transforms
+from vision_calib.identify.handeye_problem import robot_pose_cov, x_from_transforms
 from vision_calib.measure.handeye import closed_forms
 
 RX90 = "scenes/rx90_eye_in_hand.yaml"
@@ -94,7 +94,7 @@ def test_restarts_from_a_closed_form_when_it_is_cheaper(monkeypatch):
         if len(calls) > 1:
             return real_irls(base, x0, theta, estimate, max_iter)
         x_bad = x0 + np.r_[0.03, 0, 0, 0.1, 0, 0, 0, 0, 0, 0, 0, 0]
-        pb = hf.reweighted(base, x_bad, hf._robot_cov(theta))
+        pb = hf.reweighted(base, x_bad, robot_pose_cov(*np.sqrt(np.maximum(theta, 0.0))))  # theta: variances
         return solve_lse(pb, x_bad, max_nfev=2), pb, theta, None, 1
 
     monkeypatch.setattr(hf, "_irls", planted_irls)

@@ -14,13 +14,13 @@ ROOT = Path(__file__).resolve().parents[2]
 
 _CHILD = r"""
 import sys, time
-from vision_calib.experiment.image_chain import ImageChain, ImagePool, _worker_pid
+from vision_calib.experiment.image_chain import ImageChain, ImagePool, worker_pid
 from vision_calib.rig import load_scene
 from vision_calib.experiment.simulate import image_chain_of
 scene = load_scene("scenes/h4_vision.yaml")
 chain = image_chain_of(scene)
 pool = ImagePool(chain, workers=2)
-pids = set(pool.map(_worker_pid, range(8)))
+pids = set(pool.map(worker_pid, range(8)))
 print(" ".join(map(str, sorted(pids))), flush=True)
 print("torch" in sys.modules, flush=True)
 time.sleep(600)

@@ -162,10 +162,10 @@ def test_seeded_config_validation():
 
 @pytest.mark.parametrize("name", ["charuco", "aprilgrid", "chessboard"])
 def test_refinement_reads_only_its_read_mask(name, request):
-    """The per-frame estimator started from the seed reads only the pixels of _Refiner.read_mask: the same
+    """The per-frame estimator started from the seed reads only the pixels of Refiner.read_mask: the same
     frame with every other pixel set to 0 gives bit-identical corners (what lets the simulated chain draw
     the noise of the frames after the first only there: sensor.cpu.PoseFrames.focus)."""
-    from vision_calib.measure.seeded import _Refiner
+    from vision_calib.measure.seeded import Refiner
 
     target = request.getfixturevalue(name)
     rng = np.random.default_rng(11)
@@ -174,7 +174,7 @@ def test_refinement_reads_only_its_read_mask(name, request):
         imgs = _frames(target, random_pose(rng, target), 4, 40 + k, read_noise=6.0)
         d0 = detect_batch(imgs[:1], target, DIST_INTR, SEEDED)[0]
         assert d0.valid
-        ref = _Refiner(target, DIST_INTR, SEEDED, target.kind_impl.seeded_mode(SEEDED))
+        ref = Refiner(target, DIST_INTR, SEEDED, target.kind_impl.seeded_mode(SEEDED))
         mask = ref.read_mask(d0.uv_px, imgs[0].shape, SEEDED.max_shift_px)
         assert 0 < mask.mean() < 0.15
         for img in imgs[1:]:

@@ -162,7 +162,7 @@ def test_calibrate_camera_cli_writes_camera_yaml(charuco, tmp_path, capsys):
 
 
 def test_distortion_displacement_matches_opencv_and_its_jacobian_finite_differences():
-    from vision_calib.measure.intrinsics import _displacement_jacobian
+    from vision_calib.measure.intrinsics import displacement_jacobian
 
     cam = CameraIntrinsics(1024, 768, 1100.0, 1090.0, 515.3, 380.7, (-0.1, 0.05, 5e-4, -5e-4, 0.01))
     xy = np.array([[-0.4, -0.3], [0.45, 0.33], [0.1, -0.2]])
@@ -179,7 +179,7 @@ def test_distortion_displacement_matches_opencv_and_its_jacobian_finite_differen
         da = distortion_displacement(CameraIntrinsics(1024, 768, *a[:4], tuple(a[4:])), xy)
         db = distortion_displacement(CameraIntrinsics(1024, 768, *b[:4], tuple(b[4:])), xy)
         J[:, :, j] = (da - db) / (2 * h)
-    assert np.allclose(_displacement_jacobian(cam, xy), J, atol=1e-6)
+    assert np.allclose(displacement_jacobian(cam, xy), J, atol=1e-6)
 
 
 def test_distortion_std_in_px_matches_the_white_noise_spread_at_the_image_corners(charuco):

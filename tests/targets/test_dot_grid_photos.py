@@ -194,7 +194,7 @@ def test_board_axes_undo_a_sheared_lattice_basis():
     """A 7 x 5 grid whose cells are numbered in a sheared basis (as grow_lattice may pick from the image's shortest
     neighbour vectors, e.g. a diagonal at 60 deg tilt): board_axes gives back a 7 x 5 (or 5 x 7) box holding
     every cell once; the sheared numbering itself spans a larger box."""
-    from vision_calib.targets.kinds.dot_grid import board_axes
+    from vision_calib.targets.kinds.dot_lattice import board_axes
 
     ij = np.stack(np.meshgrid(np.arange(7), np.arange(5)), -1).reshape(-1, 2)
     sheared = ij @ np.array([[1, 1], [0, 1]]).T  # (i + j, j)
@@ -222,7 +222,7 @@ def test_refine_dot_centre_under_uneven_light(light):
     """refine_dot on a blurred dot (radius 8 px, sigma 1.5 px) lit by a steep ramp, or cut by a shadow edge (half
     the light) through the dot: the centre within 0.1 px (ramp) / 0.3 px (edge) of the disc's, the dark area within
     10 % of pi r^2 (ramp)."""
-    from vision_calib.targets.kinds.dot_grid import refine_dot
+    from vision_calib.targets.kinds.dot_lattice import refine_dot
 
     cx, cy, r = 30.3, 29.6, 8.0
     if light == "ramp":

@@ -209,8 +209,9 @@ def pose_job(state: dict, job):
                    "rss_mib": rss_mib}
 
 
-def _worker_pid(_=None) -> int:
-    """This worker's process id (tests: workers die with the main process)."""
+def worker_pid(_=None) -> int:
+    """This process's id: ``pool.map(worker_pid, ...)`` names the worker processes of an ImagePool (tests: workers
+    die with the main process)."""
     return os.getpid()
 
 

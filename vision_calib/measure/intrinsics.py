@@ -243,8 +243,9 @@ def distortion_displacement(cam: CameraIntrinsics, xy: np.ndarray) -> np.ndarray
     return np.column_stack([cam.fx * dx, cam.fy * dy])
 
 
-def _displacement_jacobian(cam: CameraIntrinsics, xy: np.ndarray) -> np.ndarray:
-    """(N, 2, 9) d displacement [px] / d PARAM_NAMES at fixed normalised points xy (N, 2)."""
+def displacement_jacobian(cam: CameraIntrinsics, xy: np.ndarray) -> np.ndarray:
+    """(N, 2, 9) d displacement [px] (:func:`distortion_displacement`) / d PARAM_NAMES (fx, fy, cx, cy, k1, k2, p1,
+    p2, k3) at fixed normalised points xy (N, 2)."""
     x, y = np.asarray(xy, float).T
     r2 = x * x + y * y
     d = distortion_displacement(cam, xy)
@@ -271,7 +272,7 @@ def distortion_uncertainty(cam: CameraIntrinsics, cov: np.ndarray, uv_far) -> di
                   + ([list(uv_far)] if uv_far is not None else []), float)
     crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-14)
     xy = cv2.undistortPointsIter(uv.reshape(-1, 1, 2), cam.K, cam.dist_array, None, None, crit).reshape(-1, 2)
-    J = _displacement_jacobian(cam, xy)
+    J = displacement_jacobian(cam, xy)
     if np.isfinite(cov).all():
         std = np.sqrt(np.maximum(np.linalg.eigvalsh(np.einsum("nai,ij,nbj->nab", J, cov, J))[:, -1], 0.0))
     else:
@@ -401,8 +402,8 @@ def calibrate_from_images(paths, target, image_size=None, names=None, config: Ca
 
 
 __all__ = ["CalibrationConfig", "IntrinsicsResult", "ViewInfo", "calibrate_intrinsics", "calibrate_from_images",
-           "intrinsics_covariance", "summary_text", "distortion_displacement", "distortion_uncertainty",
-           "distortion_summary",
+           "intrinsics_covariance", "summary_text", "displacement_jacobian", "distortion_displacement",
+           "distortion_uncertainty", "distortion_summary",
            "coverage", "find_images", "PARAM_NAMES", "IMAGE_SUFFIXES"]
 
 

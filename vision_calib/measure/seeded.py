@@ -18,7 +18,7 @@ seed; else the frame gets a full detection (diagnostics "fallback": why). A full
 seed while the seed has not yet been confirmed by a refined frame (so a first frame from another view
 costs one extra detection, not N).
 Frames drawn on demand (``sensor.pose_frames``, the simulated image chain): once a seed is set, the
-later frames are asked for noise only on the pixels the per-frame estimator reads (``_Refiner.read_mask``);
+later frames are asked for noise only on the pixels the per-frame estimator reads (``Refiner.read_mask``);
 the other pixels hold the noise-free mean; such frames are one view by construction (``same_view``), so the
 1/8-scale view check is skipped ("view_ncc" None); a frame that falls back to a full detection is drawn in full.
 Diagnostics per frame: "batch" ("seeded" | "full"); seeded frames add "seed_frame", "view_ncc",
@@ -65,8 +65,10 @@ class _Seed:
     confirmed: bool = False
 
 
-class _Refiner:
-    """Per-frame corner estimator of a target kind: refine(img, ids, uv, passes) -> (ids, uv, ok (K,) bool)."""
+class Refiner:
+    """Per-frame corner estimator of a target kind started from a seed: refine(img, ids, uv, passes) -> (ids, uv,
+    ok (K,) bool) [px]; ``mode``: the kind's ``seeded_mode`` ("subpix" | "tag_edges" | "saddle"); read_mask: the
+    pixels it reads."""
 
     def __init__(self, target, intrinsics: CameraIntrinsics | None, config: DetectConfig, mode: str):
         self.mode = mode
@@ -117,7 +119,7 @@ class _Refiner:
         return ids[ok], uv[ok]
 
 
-def _from_seed(img, size, source, i, seed: _Seed, ref: _Refiner, config: DetectConfig, t0):
+def _from_seed(img, size, source, i, seed: _Seed, ref: Refiner, config: DetectConfig, t0):
     """A Detection refined from the seed, or (None, why the frame needs a full detection). A seed without its
     small image (frames of one view by construction, ``same_view``) skips the view check."""
     ncc = None if seed.small is None else _ncc(_small(img), seed.small)
@@ -146,7 +148,7 @@ def detect_seeded(images, target, intrinsics: CameraIntrinsics | None, config: D
     mode = target.kind_impl.seeded_mode(config)
     if mode is None:  # no per-frame estimator to seed: per-frame path
         return [detect(im, target, intrinsics, i, config) for i, im in enumerate(images)]
-    ref = _Refiner(target, intrinsics, config, mode)
+    ref = Refiner(target, intrinsics, config, mode)
     full_cfg = config.seed_config()
     post = ref.full_post if mode == "tag_edges" else None
     focus = getattr(images, "focus", None)  # frames drawn on demand (sensor.pose_frames): noise where we read

@@ -36,7 +36,8 @@ import numpy as np
 
 from ...errors import ConfigError
 from .base import TargetKind, TargetSpec, check_memory
-from ._grid import apply_h, fit_homography, front_facing, refine_grid
+from ._grid import apply_h, fit_homography, front_facing
+from .dot_lattice import refine_grid
 from .image_model import circle_info
 from .dot_grid import MAX_OFF_GRID, candidate_grids, check_blob_settings, grid_consistency, not_found_message
 
@@ -199,7 +200,7 @@ def find_ordered(spec, img, diag, intrinsics, patterns, flags_list, order, what,
     order, its patternSize, dark areas (K,) px^2 or None -> (uv (K, 2) by id, homography RMS px) or (None, why))
     ties to the board and whose point order is consistent (:func:`.dot_grid.grid_consistency`: no dot more than
     MAX_OFF_GRID x the dot spacing off the board's homography, on undistorted points when intrinsics are given).
-    ``big`` (the modified grid): the lattice stage runs and every dot is re-measured (:func:`._grid.refine_grid`:
+    ``big`` (the modified grid): the lattice stage runs and every dot is re-measured (:func:`.dot_lattice.refine_grid`:
     darkness-weighted centroid and dark area) before ``order``. Returns (ids, uv) or (None, reason naming what was
     found and why each grid was refused)."""
     _, p = spec.corner_points()
@@ -416,7 +417,7 @@ ORIGIN_RATIO = 1.5
 
 def corner_area_ratios(G: np.ndarray, A: np.ndarray) -> dict:
     """{flat index of a corner of the detected dot grid G (R, C, 2) px: its dark area / the median dark area of the
-    grid's dots}, with A (R, C) the dots' dark areas [px^2] (:func:`._grid.refine_grid`) each divided by the
+    grid's dots}, with A (R, C) the dots' dark areas [px^2] (:func:`.dot_lattice.refine_grid`) each divided by the
     local area scale of the perspective, |det J| = |det H| / w^3 of the homography H fitted from grid indices to
     G (a dot's image area is its printed area times |det J|)."""
     R, C = G.shape[:2]

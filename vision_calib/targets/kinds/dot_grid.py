@@ -11,7 +11,7 @@ tried only when the ones before give no grid:
 3. ``lattice`` (symmetric grids: the modified circle grid): the dark ellipses of the image divided by its local
    background (:func:`dark_ellipses`: connected components at 3 levels, filled-ellipse and dark-on-light tests,
    which hold for dots seen at 60 deg and in a shadow), a point lattice grown from them with each next cell
-   predicted by the homography of the cells found (:func:`._grid.lattice_grids`: background specks beside the
+   predicted by the homography of the cells found (:func:`.dot_lattice.lattice_grids`: background specks beside the
    board trimmed, a dot missing from the candidates or a whole missing edge line measured where the lattice
    predicts it), the board's rows and columns told from a sheared lattice basis by the smallest bounding box;
 4. ``sized``: a permissive detector (thresholds 10..245, areas 4 px .. 10 % of the image, no circularity
@@ -27,7 +27,7 @@ In stages 1, 2, 4 and 5 the kept blobs are redrawn as clean discs on white (radi
 distance) and ``findCirclesGrid`` runs on that drawing (it takes no point list from Python); its centres are
 snapped back to the photo's blob centres. Each grid is returned to the kind, which ties its order to the board
 and checks it (:func:`grid_consistency`); the first grid that passes wins. For the modified circle grid every
-dot of a grid is first re-measured (:func:`._grid.refine_dot`: darkness-weighted centroid over a local background
+dot of a grid is first re-measured (:func:`.dot_lattice.refine_dot`: darkness-weighted centroid over a local background
 plane, or an inpainted background across a shadow edge; the blob detector's centres were off by up to 9 px at
 60 deg) and the origin dot is the corner whose dark area, over the perspective's local area scale, is largest.
 When no grid passes, :func:`not_found_message` says what was found: the blobs of the best size window, their
@@ -45,7 +45,7 @@ import cv2
 import numpy as np
 
 from ...errors import ConfigError
-from ._grid import board_axes, lattice_grids, nearest_distance, refine_dot  # noqa: F401 (re-exported)
+from .dot_lattice import lattice_grids, nearest_distance
 
 #: OpenCV SimpleBlobDetector_Params fields a target's ``blob_detector`` mapping may set, with their types
 BLOB_KEYS = {"minThreshold": float, "maxThreshold": float, "thresholdStep": float, "minRepeatability": int,
