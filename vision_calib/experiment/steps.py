@@ -10,8 +10,10 @@ from __future__ import annotations
 
 from collections import Counter
 from dataclasses import dataclass, replace
+from typing import Callable, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import ConfigError, IdentifiabilityError
 from ..identify import analyze, solve_ekf, solve_lse
@@ -36,7 +38,7 @@ OUTLIER_LEVEL = 1e-4
 OUTLIER_MIN_RATIO = 5.0
 
 
-def rngs(seed: int):
+def rngs(seed: int) -> tuple[np.random.Generator, np.random.Generator, np.random.Generator]:
     """Independent generators (poses, noise, validation) of a run seed."""
     seed = int(seed)
     return (np.random.default_rng([seed, STREAM_POSES]), np.random.default_rng([seed, STREAM_NOISE]),
@@ -47,7 +49,8 @@ def rngs(seed: int):
 PLANNING_WEIGHTING = "unweighted (no noise model: 1 mm and 1 mrad of residual weigh alike)"
 
 
-def analyze_setup(setup: Setup, poses, residual: str | None = None, all_params: bool = False):
+def analyze_setup(setup: Setup, poses: ArrayLike, residual: str | None = None,
+                  all_params: bool = False) -> tuple[IdentifiabilityReport, IdentificationProblem]:
     """Identifiability of the setup's free parameters (every model parameter with ``all_params``)
     over commanded ``poses`` at the nominal geometry with exact measurements:
     (IdentifiabilityReport, problem). Its condition number weighs every pose's components alike
@@ -59,7 +62,8 @@ def analyze_setup(setup: Setup, poses, residual: str | None = None, all_params: 
     return analyze(problem, selection=BASE_SELECTION, weighting=PLANNING_WEIGHTING), problem
 
 
-def structural_rank_check(setup: Setup, rep, residual: str, where: str, accept: bool = False,
+def structural_rank_check(setup: Setup, rep: IdentifiabilityReport, residual: str | None, where: str,
+                          accept: bool = False,
                           n_generic: int = 200) -> list[str]:
     """IdentifiabilityError naming the parameters the user's pose set loses compared with generic poses
     (``rep``: IdentifiabilityReport of the user's poses), unless ``accept``; returns those names."""
@@ -78,7 +82,7 @@ def truth_poses(scene: Scene) -> np.ndarray:
     return scene_poses(scene, np.random.default_rng([scene.truth.seed, 0]))
 
 
-def scene_truth(scene: Scene, analysis=None) -> np.ndarray:
+def scene_truth(scene: Scene, analysis: IdentifiabilityReport | None = None) -> np.ndarray:
     """The scene's true parameters x_true (n,): a function of the scene (truth seed) only, whatever
     the run's poses. Random deviations go on the parameters identifiable from :func:`truth_poses`
     (``analysis``: that pose set's IdentifiabilityReport when the caller already has it)."""
@@ -88,7 +92,7 @@ def scene_truth(scene: Scene, analysis=None) -> np.ndarray:
     return true_parameters(scene, rng, scene.setup.params.mask(analysis.base_parameters))
 
 
-def unmodelled_truth(scene: Scene):
+def unmodelled_truth(scene: Scene) -> tuple[Setup | None, np.ndarray | None]:
     """(truth setup, x_true (n_truth,)) when the scene's truth has errors the model does not share
     (``truth.unmodelled``), else (None, None). The truth's free parameters get random deviations with the
     scene's sigmas, then the scene's explicit deviations on the names both models share."""
@@ -105,13 +109,14 @@ def unmodelled_truth(scene: Scene):
     return tsetup, x
 
 
-def shared_truth(setup: Setup, truth: Setup, x_true) -> np.ndarray:
+def shared_truth(setup: Setup, truth: Setup, x_true: ArrayLike) -> np.ndarray:
     """(n,) true values of the identified setup's parameters that the truth model shares (NaN elsewhere)."""
     tv = truth.params.values(x_true)
     return np.array([tv.get(n, np.nan) for n in setup.params.names])
 
 
-def run_analysis_and_truth(scene: Scene, poses, residual: str):
+def run_analysis_and_truth(scene: Scene, poses: ArrayLike,
+                           residual: str | None) -> tuple[IdentifiabilityReport, np.ndarray]:
     """(IdentifiabilityReport of ``poses``, x_true): one analysis when the run's poses are the truth's."""
     rep, _ = analyze_setup(scene.setup, poses, residual)
     tp = truth_poses(scene)
@@ -119,7 +124,8 @@ def run_analysis_and_truth(scene: Scene, poses, residual: str):
     return rep, scene_truth(scene, rep if same else None)
 
 
-def base_problem(setup: Setup, meas: Measurements, residual: str, base, context: str = ""):
+def base_problem(setup: Setup, meas: Measurements, residual: str | None, base: ArrayLike,
+                 context: str = "") -> tuple[IdentificationProblem, ParameterSet]:
     """(problem, params) identifying only the parameters of the ``base`` mask (n,) bool from
     measurements; IdentifiabilityError when the usable poses give fewer equations than that."""
     params = setup.params.only_free([n for n, b in zip(setup.params.names, base) if b])
@@ -132,7 +138,8 @@ def base_problem(setup: Setup, meas: Measurements, residual: str, base, context:
     return problem, params
 
 
-def solve(problem, method: str, fix_unidentifiable: bool = True, x0=None):
+def solve(problem: IdentificationProblem, method: str, fix_unidentifiable: bool = True,
+          x0: ArrayLike | None = None) -> IdentificationResult:
     """One identification method on a problem ("ekf" = extended Kalman filter, passes until converged; any
     other = least squares on the problem's residuals: which residual a method means is
     ``Setup.residual_for``); the result carries the method's name."""
@@ -204,9 +211,10 @@ def prepare_measured(setup: Setup, meas: Measurements, residual: str | None, whe
     return setup, prepared, analyse_measurements(setup, meas, residual, where, context)
 
 
-def identify_measurements(setup: Setup, meas: Measurements, method, residual, analysis=None, context: str = "",
-                          robust: bool = True, where: str = "", fix_unidentifiable: bool = False,
-                          rejected=(), nuisance=None, cross_check: bool = True) -> Identified:
+def identify_measurements(setup: Setup, meas: Measurements, method: str, residual: str | None,
+                          analysis: IdentifiabilityReport | None = None, context: str = "", robust: bool = True,
+                          where: str = "", fix_unidentifiable: bool = False, rejected: Sequence[tuple[str, str]] = (),
+                          nuisance: Callable | None = None, cross_check: bool = True) -> Identified:
     """Identification of the setup's identifiable free parameters from measured data ``meas`` (``rejected``:
     [(label, reason)] of poses the caller removed before; ``analysis``: the
     IdentifiabilityReport of these poses when the caller has it; a pose set that loses parameters generic
@@ -280,7 +288,8 @@ def identify_measurements(setup: Setup, meas: Measurements, method, residual, an
 JOINT_STEP_RAD = 1e-6
 
 
-def lack_of_fit_of(setup: Setup, meas: Measurements, problem, result, level: float | None = None) -> dict:
+def lack_of_fit_of(setup: Setup, meas: Measurements, problem: IdentificationProblem, result: IdentificationResult,
+                   level: float | None = None) -> dict:
     """``identify.lack_of_fit`` of ``result`` (fit of ``problem``, whose labels pick the poses of ``meas``): the
     joint groups use the measured joints with each pose's residual response to a true joint error (central
     difference of ``setup.problem`` in the reported joints), the image groups the target origin's normalised
@@ -307,7 +316,8 @@ def lack_of_fit_of(setup: Setup, meas: Measurements, problem, result, level: flo
         return {"significant": False, "error": f"lack-of-fit tests not computed: {exc}"}
 
 
-def method_check(setup: Setup, meas: Measurements, method: str, problem, result, U=None, nuisance=None,
+def method_check(setup: Setup, meas: Measurements, method: str, problem: IdentificationProblem,
+                 result: IdentificationResult, U: np.ndarray | None = None, nuisance: Callable | None = None,
                  noise_scale: float = 1.0) -> dict:
     """The setup's other method (``setup.cross_methods[method]``) on the poses ``problem`` kept, with its
     parameter set (base set, prepared setup), started from ``result``'s solution (and with the same shared
@@ -390,8 +400,8 @@ MOVE_SIGMAS = 3.0
 UNEXPLAINED_CHI2_DOF = 4.0
 
 
-def plausibility_warnings(params, result, rel: float = 0.2, length_floor_m: float = 0.05,
-                          angle_limit_rad: float = 0.2) -> list[str]:
+def plausibility_warnings(params: ParameterSet, result: IdentificationResult, rel: float = 0.2,
+                          length_floor_m: float = 0.05, angle_limit_rad: float = 0.2) -> list[str]:
     """Warnings for identified deviations too large to be calibration corrections that the data do not
     explain: a length moved by more than ``rel`` of max(|nominal|, length_floor_m), an angle by more than
     angle_limit_rad, AND either the move is not determined by the data (|move| < MOVE_SIGMAS x its std:
@@ -400,7 +410,7 @@ def plausibility_warnings(params, result, rel: float = 0.2, length_floor_m: floa
     level (a roughly known mount) is a correction, not warned. Typical causes of a warning: wrong units in
     a file, a wrong target size, a wrong robot model, a parameter the poses do not excite."""
     out = []
-    chi2 = float(getattr(result, "chi2_dof", np.nan))
+    chi2 = float(result.chi2_dof)
     bad_fit = np.isfinite(chi2) and chi2 > UNEXPLAINED_CHI2_DOF
     for i in np.flatnonzero(result.free):
         dev = result.identified[i] - params.nominal[i]
@@ -423,7 +433,7 @@ def plausibility_warnings(params, result, rel: float = 0.2, length_floor_m: floa
     return out
 
 
-def rejection_summary(pms) -> str:
+def rejection_summary(pms: Sequence) -> str:
     """'k of n poses rejected: reason (count); ...' for a list of PoseMeasurement."""
     bad = [pm.reason for pm in pms if not pm.valid]
     if not bad:

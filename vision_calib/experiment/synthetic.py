@@ -8,8 +8,10 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..identify import model_adequacy
 from ..identify.problem import IdentificationProblem, IdentificationResult
@@ -19,7 +21,7 @@ from .steps import (analyze_setup, base_problem, check_method, lack_of_fit_of, p
                     shared_truth, solve, unmodelled_truth)
 
 
-def _scene(scene) -> Scene:
+def _scene(scene: Scene | str | Path) -> Scene:
     return scene if isinstance(scene, Scene) else load_scene(scene)
 
 
@@ -46,7 +48,8 @@ class SyntheticRun:
     prepared: dict | None = None  #: what :func:`.prepare.prepare_setup` determined from the data (report's ``prepared`` block)
 
 
-def identifiability_json(scene, residual=None, n_poses=None, seed=None, all_params=False) -> dict:
+def identifiability_json(scene: Scene | str | Path, residual: str | None = None, n_poses: int | None = None,
+                         seed: int | None = None, all_params: bool = False) -> dict:
     """The CLI's ``identifiability`` output (one JSON object). all_params: analyse every model
     parameter, including those the model fixes by default (e.g. Hayati d, M_T_E.z)."""
     scene = _scene(scene)
@@ -57,9 +60,13 @@ def identifiability_json(scene, residual=None, n_poses=None, seed=None, all_para
             "all_params": bool(all_params), **rep.to_dict()}
 
 
-def run_synthetic(scene, method=None, residual=None, n_poses=None, sigma_t_m=None, sigma_r_rad=None, seed=0,
-                  poses=None, validation=None, base=None, x_true=None, truth=None, prepare=True, pose_cov=None,
-                  validation_cov=None, validation_measured=None, sigma_q_rad=None, noise_rngs=None) -> SyntheticRun:
+def run_synthetic(scene: Scene | str | Path, method: str | None = None, residual: str | None = None,
+                  n_poses: int | None = None, sigma_t_m: float | None = None, sigma_r_rad: float | None = None,
+                  seed: int = 0, poses: ArrayLike | None = None, validation: ArrayLike | None = None,
+                  base: ArrayLike | None = None, x_true: ArrayLike | None = None, truth: Setup | None = None,
+                  prepare: bool = True, pose_cov: ArrayLike | None = None, validation_cov: ArrayLike | None = None,
+                  validation_measured: ArrayLike | None = None, sigma_q_rad: float | None = None,
+                  noise_rngs: tuple[np.random.Generator, np.random.Generator] | None = None) -> SyntheticRun:
     """One synthetic identification (see :class:`SyntheticRun`).
 
     poses / validation: commanded poses (default: drawn from the scene with the run seed).
@@ -121,8 +128,9 @@ def run_synthetic(scene, method=None, residual=None, n_poses=None, sigma_t_m=Non
                         residual, base, truth, setup, prepared)
 
 
-def identify_synthetic_json(scene, method=None, residual=None, n_poses=None, sigma_mm=None, sigma_deg=None,
-                            seed=None) -> dict:
+def identify_synthetic_json(scene: Scene | str | Path, method: str | None = None, residual: str | None = None,
+                            n_poses: int | None = None, sigma_mm: float | None = None, sigma_deg: float | None = None,
+                            seed: int | None = None) -> dict:
     """The CLI's ``identify-synthetic`` output."""
     scene = _scene(scene)
     seed = 0 if seed is None else seed

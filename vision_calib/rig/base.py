@@ -14,9 +14,11 @@ with ``isinstance`` where they are used): :class:`ChainMeasured`, :class:`ModelV
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import ClassVar, Protocol, runtime_checkable
+from pathlib import Path
+from typing import ClassVar, Protocol, Sequence, runtime_checkable
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .. import frames as F
 from ..camera import CameraIntrinsics
@@ -45,13 +47,13 @@ class Measurements:
     labels: tuple = ()
     cov_scale: tuple = (1.0, 1.0)
 
-    def subset(self, idx) -> "Measurements":
+    def subset(self, idx: ArrayLike) -> "Measurements":
         idx = np.asarray(idx, dtype=int)
         labels = tuple(self.labels[i] for i in idx) if self.labels else ()
         return Measurements(self.poses[idx], self.joints[idx], self.T_cam_target[idx], self.cov[idx], labels,
                             self.cov_scale)
 
-    def select(self, labels) -> "Measurements":
+    def select(self, labels: Sequence[str]) -> "Measurements":
         """The poses with these ``labels`` (e.g. a problem's kept poses), in that order; self when either side
         carries no labels. KeyError naming the label when one is not here."""
         if not labels or not self.labels:
@@ -60,7 +62,8 @@ class Measurements:
         return self.subset([pos[lab] for lab in labels])
 
     @classmethod
-    def from_pose_measurements(cls, poses, joints, pms) -> tuple["Measurements", list[int]]:
+    def from_pose_measurements(cls, poses: ArrayLike, joints: ArrayLike,
+                               pms: Sequence) -> tuple["Measurements", list[int]]:
         """Measurements of the valid ``measure.PoseMeasurement`` of ``pms`` (one per commanded pose of
         ``poses`` (N, .) and ``joints`` (N, n_joints) rad), and the indices of those poses."""
         ok = [i for i, pm in enumerate(pms) if pm.valid]
@@ -79,7 +82,7 @@ def pose_cov_from_sigmas(n: int, sigma_t_m: float, sigma_r_rad: float) -> np.nda
     return np.broadcast_to(np.diag([st**2] * 3 + [sr**2] * 3), (n, 6, 6)).copy()
 
 
-def pose_noise(rng: np.random.Generator, cov) -> np.ndarray:
+def pose_noise(rng: np.random.Generator, cov: ArrayLike) -> np.ndarray:
     """(N, 6) pose errors d_k ~ N(0, cov[k]) for covariances cov (N, 6, 6) in the ``frames.pose_error``
     convention (translation m, rotation vector rad, camera frame; apply with ``frames.perturb_pose``).
     Symmetric square root by eigen-decomposition (a semi-definite covariance is fine; negative rounding
@@ -202,7 +205,7 @@ class TiltsFromAxis(Protocol):
 
     def tilt_reference(self) -> tuple[np.ndarray, np.ndarray]: ...
 
-    def with_tilts(self, tilts_rad, prior_std_rad=None) -> "Setup": ...
+    def with_tilts(self, tilts_rad: ArrayLike, prior_std_rad: ArrayLike | None = None) -> "Setup": ...
 
 
 @dataclass(frozen=True)
@@ -240,11 +243,11 @@ class Setup:
     def n_joints(self) -> int:
         raise NotImplementedError
 
-    def T_cam_target(self, poses, x) -> np.ndarray:
+    def T_cam_target(self, poses: ArrayLike, x: ArrayLike) -> np.ndarray:
         """(N, 4, 4) camera pose of the target for commanded poses under parameters x (n,)."""
         raise NotImplementedError
 
-    def joints(self, poses, x) -> np.ndarray:
+    def joints(self, poses: ArrayLike, x: ArrayLike) -> np.ndarray:
         """(N, n_joints) rad: the joint readings of commanded poses under parameters x."""
         raise NotImplementedError
 
@@ -253,7 +256,7 @@ class Setup:
         """Identification problem of measurements (free mask of ``params``, default the setup's)."""
         raise NotImplementedError
 
-    def evaluate(self, x, x_true, validation, measurements: Measurements | None = None,
+    def evaluate(self, x: ArrayLike, x_true: ArrayLike, validation: ArrayLike, measurements: Measurements | None = None,
                  truth: "Setup | None" = None) -> Evaluation:
         """Accuracy of parameters x (n,) on validation poses against the true robot (``truth`` setup with
         parameters x_true; default this setup). measurements: validation measurements, for criteria
@@ -277,7 +280,7 @@ class Setup:
             raise ConfigError(f"{where}: {', '.join(spec)}: this {self.kind} setup has no unmodelled truth options")
         return self
 
-    def predict_from_joints(self, joints, x) -> np.ndarray:
+    def predict_from_joints(self, joints: ArrayLike, x: ArrayLike) -> np.ndarray:
         """(N, 4, 4) T_cam_target the model with parameters x predicts from joint readings (N, n_joints)
         rad. Default: commanded poses are joint sets (serial kinds)."""
         return self.T_cam_target(joints, x)
@@ -286,12 +289,12 @@ class Setup:
         """n varied commanded poses for the structural identifiability of the kind (no view check)."""
         return self.sample_poses(rng, n, check_view=False)
 
-    def export_model_files(self, out_dir, x) -> dict:
+    def export_model_files(self, out_dir: str | Path, x: ArrayLike) -> dict:
         """Write kind-specific calibrated-model files (e.g. a URDF) into out_dir for parameters x (n,);
         returns {file kind: file name}. Default: none (``calibrated_model.yaml`` is written for every kind)."""
         return {}
 
-    def check_joints(self, q, where: str, ids=None) -> None:
+    def check_joints(self, q: ArrayLike, where: str, ids: Sequence | None = None) -> None:
         """DataError naming ``where``, the pose id and the joint when joint readings q (N, n) rad have the
         wrong width or a non-finite value (kinds add their own range checks)."""
         q = np.asarray(q, float)
@@ -316,8 +319,9 @@ class Setup:
         return replace(self, camera=camera)
 
     # ------------------------------------------------------------------ shared
-    def synthetic_measurements(self, poses, x_true, rng, sigma_t_m=0.0, sigma_r_rad=0.0, sigma_q_rad=0.0,
-                               labels=None, pose_cov=None) -> Measurements:
+    def synthetic_measurements(self, poses: ArrayLike, x_true: ArrayLike, rng: np.random.Generator,
+                               sigma_t_m: float = 0.0, sigma_r_rad: float = 0.0, sigma_q_rad: float = 0.0,
+                               labels: Sequence[str] | None = None, pose_cov: ArrayLike | None = None) -> Measurements:
         """Noise-free T_cam_target of the true robot ⊕ Gaussian noise (camera frame): independent per
         component (sigma_t_m, sigma_r_rad), or, with ``pose_cov`` (N, 6, 6), drawn from each pose's own
         covariance (``pose_noise``; the measurements then carry that covariance)."""
@@ -339,7 +343,8 @@ class Setup:
         labels = tuple(labels) if labels is not None else tuple(f"p{i:03d}" for i in range(n))
         return Measurements(poses, q, F.perturb_pose(T, d), cov, labels)
 
-    def visible(self, T_cam_target, target_outline_m, margin_px=10.0, max_tilt_deg=60.0) -> np.ndarray:
+    def visible(self, T_cam_target: np.ndarray, target_outline_m: ArrayLike, margin_px: float = 10.0,
+                max_tilt_deg: float = 60.0) -> np.ndarray:
         """(N,) bool: the whole target outline (K, 3) [m, target frame] projects inside the image
         with ``margin_px``, in front of the camera, and the board normal is within max_tilt_deg of
         the viewing ray."""
@@ -365,7 +370,7 @@ class Setup:
         kinds whose methods differ by their residual, e.g. H4, override it)."""
         return self.check_residual(residual)
 
-    def noise_response(self, meas: Measurements, residual: str, params: ParameterSet, x) -> tuple:
+    def noise_response(self, meas: Measurements, residual: str, params: ParameterSet, x: ArrayLike) -> tuple:
         """(B (N, m, K), cov_e (N, K, K)): first-order response d r / d e at parameters x (n,) of the
         ``residual`` of :meth:`problem` (``params``) to the raw measurement errors e of each pose, and their
         covariance; what ``identify.method_check`` needs for :attr:`cross_methods`."""

@@ -18,10 +18,14 @@ from pathlib import Path
 from typing import ClassVar
 
 import numpy as np
+from numpy.typing import ArrayLike
 
+from ..config import Section
 from ..errors import ConfigError, ParameterError
+from ..identify.problem import IdentificationProblem
 from ..kinematics.h4 import TILT_NAMES, H4Robot
-from .base import Evaluation, Setup
+from ..kinematics.params import ParameterSet
+from .base import Evaluation, Measurements, Setup
 
 @dataclass(frozen=True)
 class H4Setup(Setup):
@@ -63,17 +67,18 @@ class H4Setup(Setup):
     def model(self) -> str:
         return self.robot.model
 
-    def T_cam_target(self, poses, x) -> np.ndarray:
+    def T_cam_target(self, poses: ArrayLike, x: ArrayLike) -> np.ndarray:
         return self.robot.camera_measurement(poses, x)
 
-    def joints(self, poses, x) -> np.ndarray:
+    def joints(self, poses: ArrayLike, x: ArrayLike) -> np.ndarray:
         return self.robot.igm(poses, x)
 
-    def predict_from_joints(self, joints, x) -> np.ndarray:
+    def predict_from_joints(self, joints: ArrayLike, x: ArrayLike) -> np.ndarray:
         """Camera view of the nacelle poses the forward model (Newton on the IGM) gives for joints (N, 4)."""
         return self.robot.camera_measurement(self.robot.fgm(joints, x), x)
 
-    def problem(self, meas, residual=None, params=None):
+    def problem(self, meas: Measurements, residual: str | None = None,
+                params: ParameterSet | None = None) -> IdentificationProblem:
         """The IGM problem (``residual`` "joint", default) or the forward-model pose problem ("pose")."""
         from ..identify.h4_problem import h4_igm_problem, h4_pose_problem
 
@@ -87,7 +92,7 @@ class H4Setup(Setup):
         """The method decides the H4 residual (:attr:`method_residuals`); the scene's ``residual`` is not used."""
         return self.method_residuals.get(method) or self.check_residual(residual)
 
-    def noise_response(self, meas, residual, params, x) -> tuple:
+    def noise_response(self, meas: Measurements, residual: str, params: ParameterSet, x: ArrayLike) -> tuple:
         """(B (N, m, 10), cov_e (N, 10, 10)): ``identify.h4_problem.h4_noise_response`` at x of the residual
         kind, raw errors [measured-pose error (6), joint-reading error (4)] of covariance
         blockdiag(meas.cov, sigma_q_rad^2 I4)."""
@@ -98,7 +103,7 @@ class H4Setup(Setup):
                 h4_raw_noise_cov(meas.cov, self.sigma_q_rad))
 
 
-    def with_tilt_prior(self, prob):
+    def with_tilt_prior(self, prob: IdentificationProblem) -> IdentificationProblem:
         """``prob`` with the rotation-axis prior of the tilts (:meth:`with_tilts`) as prior rows, when set."""
         if not self.tilt_prior_std_rad or not self.robot.tilt_params:
             return prob
@@ -110,7 +115,8 @@ class H4Setup(Setup):
         return replace(prob, prior_std=prior, prior_rows=rows,
                        meta=dict(prob.meta, tilt_prior={n: float(s) for n, s in zip(TILT_NAMES, self.tilt_prior_std_rad)}))
 
-    def evaluate(self, x, x_true, validation, measurements=None, truth=None) -> Evaluation:
+    def evaluate(self, x: ArrayLike, x_true: ArrayLike, validation: ArrayLike, measurements: Measurements | None = None,
+                 truth: Setup | None = None) -> Evaluation:
         """Nacelle pose error of the forward model (Newton on the IGM) with parameters x, from the joints
         the TRUE robot (``truth``, default this setup, with x_true) needs for validation poses X (N, 4);
         V1/V2 from validation measurements (joints - IGM of the measured camera poses under x), V3 from
@@ -146,7 +152,7 @@ class H4Setup(Setup):
         u = np.linalg.svd(P, full_matrices=False)[2][0]
         return float(np.sqrt(np.mean(np.sum((P - np.outer(P @ u, u)) ** 2, axis=1))))
 
-    def sample_poses(self, rng, n, check_view=True) -> np.ndarray:
+    def sample_poses(self, rng: np.random.Generator, n: int, check_view: bool = True) -> np.ndarray:
         from ..kinematics.h4 import random_workspace_poses
 
         return random_workspace_poses(n, rng, center=self.robot.center, size=self.robot.size)
@@ -157,7 +163,7 @@ class H4Setup(Setup):
             raise ConfigError(f"{self.name}: this {self.kind} setup has no pose grid {name!r} (it has grid81)")
         return self.robot.pose_grid()
 
-    def with_params(self, params):
+    def with_params(self, params: ParameterSet) -> "H4Setup":
         return replace(self, params=params, robot=replace(self.robot, params=params))
 
     def with_variant(self, variant: str | None = None, model: str | None = None) -> "H4Setup":
@@ -192,7 +198,7 @@ class H4Setup(Setup):
         base = without_tilt_params(self.robot)
         return base.R_BC0, base.R_ME0
 
-    def with_tilts(self, tilts_rad, prior_std_rad=None) -> "H4Setup":
+    def with_tilts(self, tilts_rad: ArrayLike, prior_std_rad: ArrayLike | None = None) -> "H4Setup":
         """The setup with the four tilt parameters TILT_NAMES (``kinematics.h4_variants.with_tilt_params``,
         relative to :meth:`tilt_reference`) at tilts_rad (4,): free, with the prior N(tilts_rad, prior_std_rad^2)
         in :meth:`problem` (:meth:`with_tilt_prior`), or fixed when prior_std_rad is None."""
@@ -264,7 +270,7 @@ class H4Setup(Setup):
                    robot_path=str(ctx.robot_path), variant=variant)
 
     @staticmethod
-    def load_model(doc, robot_path: Path):
+    def load_model(doc: Section, robot_path: Path) -> H4Robot:
         """The robot of a calibrated-model file (``io.model_export``), nominal values still to set."""
         from ..kinematics import h4_variants
         from ..kinematics.h4_io import load_h4_robot

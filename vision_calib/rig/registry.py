@@ -22,6 +22,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Protocol, runtime_checkable
 
+from ..config import Section
 from ..errors import ConfigError
 from ..plugins import ROBOT_GROUP, load_entry_points
 from .base import Setup
@@ -36,11 +37,11 @@ class RobotKind(Protocol):
 
     mounts: tuple[str, ...]
 
-    def claims(self, robot_path, doc) -> bool: ...
+    def claims(self, robot_path: Path, doc: dict | None) -> bool: ...
 
     def from_scene(self, ctx) -> Setup: ...
 
-    def load_model(self, doc, robot_path) -> Setup: ...
+    def load_model(self, doc: Section, robot_path: Path): ...
 
 
 def register(cls: type[Setup]) -> type[Setup]:
@@ -60,7 +61,7 @@ def unregister(kind: str) -> None:
     KINDS.pop(kind, None)
 
 
-def get_kind(name: str, where: str = "kind"):
+def get_kind(name: str, where: str = "kind") -> type[Setup]:
     """The Setup class of a kind name; ConfigError naming ``where`` and the known kinds."""
     try:
         return KINDS[name]
@@ -68,7 +69,7 @@ def get_kind(name: str, where: str = "kind"):
         raise ConfigError(f"{where}: unknown robot kind {name!r} (known: {', '.join(sorted(KINDS))})") from None
 
 
-def kind_of_robot_file(path: Path, where: str = "robot"):
+def kind_of_robot_file(path: str | Path, where: str = "robot") -> type[Setup]:
     """The Setup class whose ``claims`` accepts the robot file at ``path``."""
     path = Path(path)
     doc = None

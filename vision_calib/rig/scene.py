@@ -31,10 +31,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..camera import CameraIntrinsics
 from ..config import Section, load_yaml, transform_from
 from ..errors import ConfigError, ParameterError
+from ..kinematics.params import ParameterSet
 from .base import NamedConfigurations, NamedTrials, PoseGrids, Setup, pose_grid_names
 from .registry import kind_of_robot_file
 
@@ -115,7 +117,7 @@ class SceneContext:
     def fixed_names(self) -> list[str]:
         return [str(n) for n in self.ident.get("fix", list, [])]
 
-    def apply_free(self, params):
+    def apply_free(self, params: ParameterSet) -> ParameterSet:
         """params with the scene's ``identification.free`` (only these) then ``fix`` applied."""
         free = self.ident.get("free", list, None)
         try:
@@ -221,7 +223,7 @@ def _truth(sec: Section, setup: Setup, Lf: float, Af: float) -> TruthSettings:
                          deviations=devs, trial=trial, unmodelled=unmodelled)
 
 
-def load_scene(path) -> Scene:
+def load_scene(path: str | Path) -> Scene:
     """Load and validate a scene file; ConfigError naming the file and key on bad input."""
     path = Path(path)
     if not path.exists() and not path.is_absolute() and (SCENES_DIR / path).exists():
@@ -298,7 +300,7 @@ def scene_poses(scene: Scene, rng: np.random.Generator, n: int | None = None, wh
     return setup.sample_poses(rng, n or 30, check_view=(which == "poses"))
 
 
-def true_parameters(scene: Scene, rng: np.random.Generator, base_free=None) -> np.ndarray:
+def true_parameters(scene: Scene, rng: np.random.Generator, base_free: ArrayLike | None = None) -> np.ndarray:
     """Truth x_true (n,) = nominal + deviations. Seeded random deviations (sigma by kind) on the
     parameters that are free and identifiable (``base_free`` mask; default the scene's free mask),
     unless the scene names a robot-file trial (its deviation vector replaces the random draw);

@@ -15,12 +15,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import ClassVar
+from typing import ClassVar, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .. import frames as F
+from ..config import Section
 from ..errors import DataError
+from ..identify.problem import IdentificationProblem
+from ..kinematics.params import ParameterSet
 from ..kinematics.protocols import ChainModel, PrismaticJoints, Remountable
 from .base import Evaluation, Measurements, Setup
 
@@ -30,7 +34,8 @@ MOUNTS = {"eye_in_hand": ("T_target_base", "T_flange_cam"), "fixed": ("T_cam_bas
 MOUNT_KEYS = {"eye_in_hand": ("target_in_base", "camera_in_flange"), "fixed": ("camera_in_base", "target_in_flange")}
 
 
-def remount_chain(chain, left: str, right: str, T_left_base, T_flange_right):
+def remount_chain(chain: ChainModel, left: str, right: str, T_left_base: ArrayLike,
+                  T_flange_right: ArrayLike) -> ChainModel:
     """Same arm, other mounting transforms (nominal (4, 4) each), keeping the arm's own parameter
     values and free flags. ``chain``: a :class:`~vision_calib.kinematics.protocols.Remountable` chain (any
     chain kind) or a SerialChain."""
@@ -81,21 +86,22 @@ class SerialSetup(Setup):
     def n_joints(self) -> int:
         return self.chain.n_joints
 
-    def T_cam_target(self, poses, x) -> np.ndarray:
+    def T_cam_target(self, poses: ArrayLike, x: ArrayLike) -> np.ndarray:
         T = self.chain.forward(poses, x)
         return F.inv_T(T) if self.mount == "eye_in_hand" else T
 
-    def joints(self, poses, x) -> np.ndarray:
+    def joints(self, poses: ArrayLike, x: ArrayLike) -> np.ndarray:
         return np.asarray(poses, float).copy()
 
-    def chain_measurements(self, meas: Measurements):
+    def chain_measurements(self, meas: Measurements) -> tuple[np.ndarray, np.ndarray]:
         """Measured chain poses T_left_right (N, 4, 4) and their covariances (N, 6, 6)."""
         if self.mount == "eye_in_hand":
             G = F.inverse_error_map(meas.T_cam_target)
             return F.inv_T(meas.T_cam_target), G @ meas.cov @ np.swapaxes(G, -1, -2)
         return meas.T_cam_target, meas.cov
 
-    def problem(self, meas, residual=None, params=None):
+    def problem(self, meas: Measurements, residual: str | None = None,
+                params: ParameterSet | None = None) -> IdentificationProblem:
         from ..identify.serial_problem import serial_problem
 
         residual = self.check_residual(residual)
@@ -105,13 +111,15 @@ class SerialSetup(Setup):
         chain = self.chain.with_params(params or self.params)
         return serial_problem(chain, meas.joints, T, residual=residual, obs_cov=cov, labels=meas.labels)
 
-    def evaluate(self, x, x_true, validation, measurements=None, truth=None) -> Evaluation:
+    def evaluate(self, x: ArrayLike, x_true: ArrayLike, validation: ArrayLike, measurements: Measurements | None = None,
+                 truth: Setup | None = None) -> Evaluation:
         """Errors of the predicted chain pose (end frame in the left frame) vs truth on validation joints."""
         truth = truth or self
         T_true = truth.chain.forward(validation, x_true)
         return Evaluation(T_true[:, :3, 3], F.pose_error(T_true, self.chain.forward(validation, x)))
 
-    def sample_poses(self, rng, n, check_view=True, max_tries=200) -> np.ndarray:
+    def sample_poses(self, rng: np.random.Generator, n: int, check_view: bool = True,
+                     max_tries: int = 200) -> np.ndarray:
         """n joint sets uniform in q_center ± q_spread within the joint limits; with check_view, only
         those where the whole target is in view (identification poses must see it)."""
         c = np.asarray(self.q_center, float)
@@ -129,7 +137,7 @@ class SerialSetup(Setup):
             f"{self.name}: could not draw {n} joint sets with the target in view around q_center ± q_spread "
             f"(found {len(out)}); widen poses.spread_deg or check the mounts")
 
-    def generic_poses(self, rng, n) -> np.ndarray:
+    def generic_poses(self, rng: np.random.Generator, n: int) -> np.ndarray:
         """Joint sets uniform within the joint limits (+-180 deg where the robot has none)."""
         lim = self.chain.joint_limits
         lo, hi = (np.full(self.n_joints, -np.pi), np.full(self.n_joints, np.pi)) if lim is None else \
@@ -141,7 +149,7 @@ class SerialSetup(Setup):
         return {"mounts": {"left": ch.left, "right": ch.right, "left_R_nominal": ch.left_R_nominal.tolist(),
                            "right_R_nominal": ch.right_R_nominal.tolist()}}
 
-    def with_params(self, params):
+    def with_params(self, params: ParameterSet) -> "SerialSetup":
         return replace(self, params=params, chain=self.chain.with_params(params))
 
     def configurations(self) -> dict:
@@ -150,7 +158,7 @@ class SerialSetup(Setup):
     def trials(self) -> dict:
         return self.chain.meta.get("trials", {})
 
-    def check_joints(self, q, where: str, ids=None) -> None:
+    def check_joints(self, q: ArrayLike, where: str, ids: Sequence | None = None) -> None:
         """:meth:`Setup.check_joints`, and DataError for a value outside the robot's joint limits, or, for a
         revolute joint without finite limits, beyond +-(2 pi + 0.1) rad (both: likely an angle unit error)."""
         super().check_joints(q, where, ids)
@@ -223,7 +231,7 @@ class SerialSetup(Setup):
         return chain
 
     @classmethod
-    def load_model(cls, doc, robot_path: Path):
+    def load_model(cls, doc: Section, robot_path: Path) -> ChainModel:
         """The robot of a calibrated-model file (``io.model_export``), nominal values still to set."""
         from ..kinematics.serial import load_serial_robot
 

@@ -15,11 +15,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
 
+from numpy.typing import ArrayLike
+
+from ..config import Section
 from ..errors import ConfigError
+from ..kinematics.urdf import URDFChain
 from .serial import MOUNTS, SerialSetup
 
 
-def default_links(path) -> tuple[str, str]:
+def default_links(path: str | Path) -> tuple[str, str]:
     """(base_link, tip_link) of a URDF when the scene names none: its root link, and the leaf link with the most
     movable (non-fixed) joints on its way up to the root, when exactly one leaf has that many. ConfigError naming
     the candidates otherwise (a gripper's fingers, two arms: give ``urdf: {base_link, tip_link}``). Only names
@@ -81,14 +85,14 @@ class URDFSetup(SerialSetup):
         return {**super().model_dict(), "urdf": {"base_link": m["base_link"], "tip_link": m["tip_link"]}}
 
     @classmethod
-    def load_model(cls, doc, robot_path: Path):
+    def load_model(cls, doc: Section, robot_path: Path) -> URDFChain:
         from ..kinematics.urdf import load_urdf_robot
 
         links = doc.section("urdf").check_known(("base_link", "tip_link"))
         return cls._model_mounts(load_urdf_robot(robot_path, links.get("base_link", str), links.get("tip_link", str)),
                                  doc)
 
-    def export_model_files(self, out_dir, x) -> dict:
+    def export_model_files(self, out_dir: str | Path, x: ArrayLike) -> dict:
         """``calibrated_model.urdf``: the source URDF with the calibrated joint origins (atomic write)."""
         from ..serialize import write_bytes_atomic
         from ..kinematics.urdf import export_urdf
