@@ -25,6 +25,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import ConfigError, DataError
 from .lse import pose_chi2, solve_lse
@@ -55,7 +56,7 @@ IMAGE_COV_SCALE = (0.55, 1.3)
 
 
 def model_adequacy(result: IdentificationResult, level: float = DEFAULT_LEVEL, n_worst: int = 5,
-                   cov_scale=(1.0, 1.0)) -> dict:
+                   cov_scale: tuple[float, float] = (1.0, 1.0)) -> dict:
     """Chi-square adequacy verdict of ``result`` (JSON-ready dict).
 
     A two-sided test at ``level``: under a right model, chi2 = 2 cost_final follows k chi2(dof), with k the
@@ -138,10 +139,10 @@ def _robust_scale(problem: IdentificationProblem, res: IdentificationResult) -> 
 
 def fit_rejecting_outliers(
     problem: IdentificationProblem,
-    x0=None,
+    x0: ArrayLike | None = None,
     level: float = DEFAULT_LEVEL,
     loss: str = "soft_l1",
-    scale="auto",
+    scale: float | str = "auto",
     max_reject_fraction: float = 0.3,
     min_ratio: float = 0.0,
     **lse_kwargs,

@@ -30,6 +30,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import DataError
 from ..frames import skew, so3_exp
@@ -69,7 +70,7 @@ class CameraAxisEstimate:
     theta_span_rad: float
     residuals_rad: np.ndarray = None  #: (N, 3) rotation residuals delta_k at the solution, camera frame
 
-    def consistency(self, rot_cov) -> dict:
+    def consistency(self, rot_cov: ArrayLike) -> dict:
         """Is the nacelle's rotation axis fixed within the noise? Chi-square of the residuals against
         ``rot_cov`` (N, 3, 3) or (3, 3) rad^2 (camera frame, the measurements' predicted rotation noise):
         {chi2, dof (= 2N - 3), chi2_dof, p_value}; chi2 None (not tested) when rot_cov is not positive
@@ -153,8 +154,9 @@ def _check_input(T_cam_target, rot_cov):
     return T[:, :3, :3], rot_cov
 
 
-def estimate_camera_axis(T_cam_target, rot_cov=None, R_BC0=None, R_ME0=None, min_theta_span_deg=2.0,
-                         max_iter=20) -> CameraAxisEstimate:
+def estimate_camera_axis(T_cam_target: ArrayLike, rot_cov: ArrayLike | None = None, R_BC0: ArrayLike | None = None,
+                         R_ME0: ArrayLike | None = None, min_theta_span_deg: float = 2.0,
+                         max_iter: int = 20) -> CameraAxisEstimate:
     """Rotation axis of the nacelle in the camera and in the target frame from measured poses.
 
     T_cam_target: (N, 4, 4) measured target poses (only the rotations are used). rot_cov:

@@ -61,6 +61,7 @@ import time
 from typing import Iterable
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import ConfigError, DataError, UnreachablePoseError
 from .identifiability import pose_labels
@@ -246,14 +247,14 @@ def _prior_cov(problem: IdentificationProblem, s) -> np.ndarray:
 @single_threaded_blas
 def solve_ekf(
     problem: IdentificationProblem,
-    x0=None,
+    x0: ArrayLike | None = None,
     passes: int | None = None,
     iterations_per_update: int = 5,
     q_process: float = 0.0,
     fix_unidentifiable: bool = True,
     free: Iterable[str] | None = None,
     fix: Iterable[str] = (),
-    order=None,
+    order: ArrayLike | None = None,
     max_passes: int = DEFAULT_MAX_PASSES,
     tol: float = DEFAULT_TOL,
     selection: str = "order",

@@ -32,7 +32,10 @@ this is what lets ``identify.method_check`` compare the two estimates from the s
 
 from __future__ import annotations
 
+from typing import Sequence
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import DataError
 from ..frames import perturb_pose, pose_error, so3_right_jacobian_inv
@@ -58,7 +61,7 @@ def _check(name, a, shape_tail):
     return a
 
 
-def h4_raw_noise_cov(pose_cov, sigma_q_rad: float) -> np.ndarray:
+def h4_raw_noise_cov(pose_cov: ArrayLike, sigma_q_rad: float) -> np.ndarray:
     """(N, 10, 10) covariance of the raw errors e = [delta (6): measured-pose error, dq (4): joint-reading
     error (rad)] of each pose: blockdiag(pose_cov[k], sigma_q^2 I4). pose_cov: (N, 6, 6)."""
     S = np.asarray(pose_cov, float)
@@ -68,7 +71,8 @@ def h4_raw_noise_cov(pose_cov, sigma_q_rad: float) -> np.ndarray:
     return out
 
 
-def h4_noise_response(robot: H4Robot, q_meas, T_cam_target_meas, x, residual_kind: str) -> np.ndarray:
+def h4_noise_response(robot: H4Robot, q_meas: ArrayLike, T_cam_target_meas: ArrayLike, x: ArrayLike,
+                      residual_kind: str) -> np.ndarray:
     """B (N, m, 10) = d r / d e at parameters x (n,): how the raw errors e = [delta (6), dq (4)] (see
     :func:`h4_raw_noise_cov`) enter the residual of ``residual_kind`` "joint" (m = 4: [-dq/d delta, I4])
     or "pose" (m = 6: [I6, -d delta/dX (dIGM/dX)^-1]); first order."""
@@ -121,11 +125,11 @@ def _problem(robot, residual, jacobian, cov, kind, labels, names, sigma_q_rad, e
 
 def h4_igm_problem(
     robot: H4Robot,
-    q_meas,
-    T_cam_target_meas,
+    q_meas: ArrayLike,
+    T_cam_target_meas: ArrayLike,
     sigma_q_rad: float | None = None,
-    pose_cov=None,
-    labels=None,
+    pose_cov: ArrayLike | None = None,
+    labels: Sequence[str] | None = None,
 ) -> IdentificationProblem:
     """Build the IGM identification problem (residual_kind "joint", m = 4).
 
@@ -170,11 +174,11 @@ def _forward_pose(robot: H4Robot, q, T, x) -> np.ndarray:
 
 def h4_pose_problem(
     robot: H4Robot,
-    q_meas,
-    T_cam_target_meas,
+    q_meas: ArrayLike,
+    T_cam_target_meas: ArrayLike,
     sigma_q_rad: float | None = None,
-    pose_cov=None,
-    labels=None,
+    pose_cov: ArrayLike | None = None,
+    labels: Sequence[str] | None = None,
 ) -> IdentificationProblem:
     """Build the pose-residual problem (residual_kind "pose", m = 6; module doc): the measured camera pose
     against the one the forward model predicts from the measured joints.
@@ -216,7 +220,9 @@ def h4_pose_problem(
     return _problem(robot, residual, jacobian, cov, "pose", labels, POSE_COMPONENTS, sigma_q_rad, estimated)
 
 
-def synthetic_h4_measurements(robot: H4Robot, X, x_true, rng, sigma_q_rad=0.0, sigma_t_m=0.0, sigma_r_rad=0.0):
+def synthetic_h4_measurements(robot: H4Robot, X: ArrayLike, x_true: ArrayLike, rng: np.random.Generator,
+                              sigma_q_rad: float = 0.0, sigma_t_m: float = 0.0,
+                              sigma_r_rad: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Simulated measurements of commanded poses X (N, 4) on the robot with true parameters
     x_true (n,): q = IGM(X, x_true) + N(0, sigma_q^2) (N, 4) rad and T_cam_target (N, 4, 4) =
     true camera measurement perturbed by delta = [N(0, sigma_t^2 I3) m, N(0, sigma_r^2 I3) rad]

@@ -27,8 +27,10 @@ numpy/scipy only.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .. import frames
 from ..errors import DataError
@@ -63,7 +65,7 @@ class HandeyeFit:
     candidates: dict
 
 
-def default_candidates(T_base_flange, T_cam_target, mount: str) -> dict:
+def default_candidates(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: str) -> dict:
     """{:data:`DEFAULT_CANDIDATE`: (A, B) (4, 4) each, or the error message (str)}: the numpy closed form."""
     try:
         return {DEFAULT_CANDIDATE: handeye_initial_guess(T_base_flange, T_cam_target, mount)}
@@ -71,7 +73,7 @@ def default_candidates(T_base_flange, T_cam_target, mount: str) -> dict:
         return {DEFAULT_CANDIDATE: str(exc)}
 
 
-def weighted_cost(problem: IdentificationProblem, x) -> float:
+def weighted_cost(problem: IdentificationProblem, x: ArrayLike) -> float:
     """0.5 sum_k |W_k r_k(x)|^2 with the problem's obs_cov (the LSE cost)."""
     rw = np.einsum("kij,kj->ki", problem.whitening(), np.asarray(problem.residual(np.asarray(x, float)), float))
     return 0.5 * float(np.sum(rw**2))
@@ -147,7 +149,7 @@ def _irls(base: IdentificationProblem, x0, theta, estimate: bool, max_iter: int 
     return res, pb, theta, tcov, it
 
 
-def closed_form_comparison(problem: IdentificationProblem, x, candidates: dict, start: str | None) -> dict:
+def closed_form_comparison(problem: IdentificationProblem, x: ArrayLike, candidates: dict, start: str | None) -> dict:
     """The report block: for each closed form its weighted cost under ``problem``'s weights (the final
     ones), that cost minus ours, and its distance to our solution (translation mm, rotation deg of A and B,
     ``frames.pose_error`` from ours to it); ``start``: the method the iteration started from."""
@@ -171,7 +173,8 @@ def closed_form_comparison(problem: IdentificationProblem, x, candidates: dict, 
             "ours": ours, "start": start, "methods": methods}
 
 
-def fit_handeye(T_base_flange, T_cam_target, mount: str, pose_cov, labels=None, robot_std=None,
+def fit_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: str, pose_cov: ArrayLike,
+                labels: Sequence[str] | None = None, robot_std: tuple[float, float] | None = None,
                 estimate_robot: bool = True, candidates: dict | None = None) -> HandeyeFit:
     """Hand-eye fit with the robot's pose error (module docstring).
 

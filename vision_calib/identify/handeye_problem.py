@@ -47,15 +47,17 @@ numpy only; OpenCV's closed forms are in :mod:`vision_calib.measure.handeye`.
 from __future__ import annotations
 
 import dataclasses
+from typing import Iterable, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .. import frames
 from ..errors import ConfigError, DataError
 from ..kinematics.params import DEFAULT_SCALE, ParameterSet
 from ..frames import so3_exp, so3_right_jacobian
 from ..kinematics.serial import MOUNT_SUFFIXES
-from .problem import NOISE_ESTIMATED, IdentificationProblem
+from .problem import NOISE_ESTIMATED, IdentificationProblem, IdentificationResult
 
 #: unknown transforms (A, B) named after the frames, per mount
 MOUNT_NAMES = {"fixed": ("T_cam_base", "T_flange_target"), "eye_in_hand": ("T_cam_flange", "T_base_target")}
@@ -78,7 +80,7 @@ def check_mount(mount: str) -> str:
     return mount
 
 
-def check_poses(name: str, T, N: int | None = None) -> np.ndarray:
+def check_poses(name: str, T: ArrayLike, N: int | None = None) -> np.ndarray:
     """(N, 4, 4) finite rigid transforms, else DataError naming the pose index."""
     T = np.asarray(T, dtype=float)
     if T.ndim != 3 or T.shape[1:] != (4, 4):
@@ -113,13 +115,14 @@ def _inv_right_jacobian(e: np.ndarray) -> np.ndarray:
 DEGENERATE_RTOL = 1e-10
 
 
-def nearest_rotation(X) -> np.ndarray:
+def nearest_rotation(X: ArrayLike) -> np.ndarray:
     """(3, 3) rotation nearest to X (3, 3) in the Frobenius norm (SVD, determinant +1)."""
     U, _, Vt = np.linalg.svd(np.asarray(X, float))
     return U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
 
 
-def handeye_initial_guess(T_base_flange, T_cam_target_meas, mount: str = "fixed") -> tuple[np.ndarray, np.ndarray]:
+def handeye_initial_guess(T_base_flange: ArrayLike, T_cam_target_meas: ArrayLike,
+                          mount: str = "fixed") -> tuple[np.ndarray, np.ndarray]:
     """Closed-form (A, B), each (4, 4), from N >= 3 pose pairs, numpy only: Shah's Kronecker-product solution of
     the robot-world / hand-eye problem ``M_k = A G_k B`` (M. Shah, J. Mechanisms Robotics 5, 031007, 2013).
 
@@ -169,7 +172,7 @@ def _mount_params(name: str, T: np.ndarray):
     return names, nominal, kinds
 
 
-def transforms_from_x(problem: IdentificationProblem, x) -> tuple[np.ndarray, np.ndarray]:
+def transforms_from_x(problem: IdentificationProblem, x: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """(A, B) (4, 4) for the full parameter vector x (12,) of a :func:`handeye_problem`."""
     x = np.asarray(x, dtype=float).reshape(-1)
     RA0, RB0 = problem.meta["R_A_nominal"], problem.meta["R_B_nominal"]
@@ -218,9 +221,10 @@ def robot_pose_cov(sigma_t_m: float, sigma_rot_rad: float) -> np.ndarray:
     return np.diag([float(sigma_t_m) ** 2] * 3 + [float(sigma_rot_rad) ** 2] * 3)
 
 
-def handeye_problem(T_base_flange, T_cam_target_meas, mount: str = "fixed", A0=None, B0=None, pose_cov=None,
+def handeye_problem(T_base_flange: ArrayLike, T_cam_target_meas: ArrayLike, mount: str = "fixed",
+                    A0: ArrayLike | None = None, B0: ArrayLike | None = None, pose_cov: ArrayLike | None = None,
                     sigma_t_m: float | None = None, sigma_rot_rad: float | None = None,
-                    labels=None, robot_cov=None) -> IdentificationProblem:
+                    labels: Sequence[str] | None = None, robot_cov: ArrayLike | None = None) -> IdentificationProblem:
     """Hand-eye identification problem (residual_kind "pose", m = 6, 12 parameters).
 
     T_base_flange: (N, 4, 4) known flange poses in the robot base [m] (the problem builds
@@ -314,7 +318,7 @@ def handeye_problem(T_base_flange, T_cam_target_meas, mount: str = "fixed", A0=N
     return problem if robot_cov is None else reweighted(problem, params.nominal)
 
 
-def flange_error_map(problem: IdentificationProblem, x) -> np.ndarray:
+def flange_error_map(problem: IdentificationProblem, x: ArrayLike) -> np.ndarray:
     """(N, 6, 6) d r_k / d d_k at x (12,): the residual's response to the flange pose error d_k [m, rad]
     (``perturb_pose`` on T_base_flange,k; module docstring), for all N poses of the problem."""
     A, B = transforms_from_x(problem, x)
@@ -332,7 +336,8 @@ def flange_error_map(problem: IdentificationProblem, x) -> np.ndarray:
     return D
 
 
-def reweighted(problem: IdentificationProblem, x, robot_cov=None) -> IdentificationProblem:
+def reweighted(problem: IdentificationProblem, x: ArrayLike,
+               robot_cov: ArrayLike | None = None) -> IdentificationProblem:
     """The problem with obs_cov = camera_cov + D_k robot_cov D_k^T at x (12,) (:func:`flange_error_map`);
     robot_cov (6, 6) replaces the problem's own (None: keep it; a problem without one is returned as is)."""
     rc = problem.meta.get("robot_cov") if robot_cov is None else np.asarray(robot_cov, float)
@@ -344,7 +349,7 @@ def reweighted(problem: IdentificationProblem, x, robot_cov=None) -> Identificat
                                meta={**problem.meta, "robot_cov": rc})
 
 
-def x_from_transforms(problem: IdentificationProblem, A, B) -> np.ndarray:
+def x_from_transforms(problem: IdentificationProblem, A: ArrayLike, B: ArrayLike) -> np.ndarray:
     """(12,) parameter vector of the transforms A, B (4, 4) (inverse of :func:`transforms_from_x`)."""
     RA0, RB0 = problem.meta["R_A_nominal"], problem.meta["R_B_nominal"]
     rA = frames.xyz_rotvec_from_T(frames.make_T(RA0.T @ np.asarray(A, float)[:3, :3]))[3:]
@@ -352,9 +357,11 @@ def x_from_transforms(problem: IdentificationProblem, A, B) -> np.ndarray:
     return np.r_[np.asarray(A, float)[:3, 3], rA, np.asarray(B, float)[:3, 3], rB]
 
 
-def solve_handeye(T_base_flange, T_cam_target_meas, mount: str = "fixed", pose_cov=None,
-                  sigma_t_m: float | None = None, sigma_rot_rad: float | None = None, labels=None,
-                  A0=None, B0=None, robot_cov=None, **lse_kwargs):
+def solve_handeye(T_base_flange: ArrayLike, T_cam_target_meas: ArrayLike, mount: str = "fixed",
+                  pose_cov: ArrayLike | None = None, sigma_t_m: float | None = None, sigma_rot_rad: float | None = None,
+                  labels: Sequence[str] | None = None, A0: ArrayLike | None = None, B0: ArrayLike | None = None,
+                  robot_cov: ArrayLike | None = None,
+                  **lse_kwargs) -> tuple[IdentificationResult, np.ndarray, np.ndarray, IdentificationProblem]:
     """Closed-form start + weighted least squares. Returns (result, A (4, 4), B (4, 4), problem).
 
     One fit with the weights at the start (A0, B0) (see :func:`vision_calib.identify.handeye_fit.fit_handeye`
@@ -371,7 +378,8 @@ def solve_handeye(T_base_flange, T_cam_target_meas, mount: str = "fixed", pose_c
     return result, A, B, problem
 
 
-def stack_measurements(measurements, pool_sigma: bool = False):
+def stack_measurements(measurements: Iterable,
+                       pool_sigma: bool = False) -> tuple[np.ndarray, np.ndarray, tuple, np.ndarray]:
     """Arrays from PoseMeasurement-like objects (``T_cam_target``, ``cov``, ``valid``, ``pose_id``,
     ``sigma_px``): (T (N, 4, 4), cov (N, 6, 6), labels (N,) tuple, valid (N,) bool).
 

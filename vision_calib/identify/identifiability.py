@@ -46,8 +46,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.linalg
+from numpy.typing import ArrayLike
 
 from ..errors import DataError, IdentifiabilityError, ParameterError
+from ..kinematics.params import ParameterSet
 from .problem import IdentificationProblem
 from .threads import single_threaded_blas
 
@@ -147,12 +149,12 @@ class IdentifiabilityReport:
 
 
 # ----------------------------------------------------------------------------- helpers
-def pose_labels(problem: IdentificationProblem, idx) -> list[str]:
+def pose_labels(problem: IdentificationProblem, idx: ArrayLike) -> list[str]:
     """Labels of observations ``idx`` (k,) ("#k" when the problem has none)."""
     return [str(problem.labels[i]) if problem.labels else f"#{int(i)}" for i in idx]
 
 
-def check_problem(problem: IdentificationProblem, x=None) -> tuple[np.ndarray, np.ndarray]:
+def check_problem(problem: IdentificationProblem, x: ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Validate data at ``x`` (n,) (default nominal); return (residual (n_obs, m), jacobian (n_obs, m, n)).
 
     Raises DataError naming the poses (labels) whose residual, Jacobian or covariance is not
@@ -240,7 +242,7 @@ def _select_base(A: np.ndarray, rank: int, tol_abs: float, selection: str) -> np
 
 
 # ----------------------------------------------------------------------------- main API
-def condition_description(params, base_idx, problem: IdentificationProblem, at_nominal: bool,
+def condition_description(params: ParameterSet, base_idx: ArrayLike, problem: IdentificationProblem, at_nominal: bool,
                           normalize: bool = False, weighting: str | None = None) -> str:
     """What :func:`analyze`'s condition number is computed on, in words: the base columns (their count), the
     point of linearisation, the poses and equations, the weighting and the column scales (per parameter kind)."""
@@ -263,7 +265,7 @@ def condition_description(params, base_idx, problem: IdentificationProblem, at_n
 @single_threaded_blas
 def analyze(
     problem: IdentificationProblem,
-    x=None,
+    x: ArrayLike | None = None,
     tol: float | None = None,
     normalize: bool = False,
     selection: str = "order",
@@ -369,8 +371,9 @@ def analyze(
     )
 
 
-def base_problem(problem: IdentificationProblem, report: IdentifiabilityReport | None = None, x=None,
-                 selection: str = "order"):
+def base_problem(problem: IdentificationProblem, report: IdentifiabilityReport | None = None,
+                 x: ArrayLike | None = None,
+                 selection: str = "order") -> tuple[IdentificationProblem, IdentifiabilityReport, tuple[str, ...]]:
     """Fix the non-identifiable parameters at their current value (``params.nominal``).
 
     Returns (problem with those parameters fixed, report, warnings) where warnings is a tuple of
@@ -390,7 +393,8 @@ def base_problem(problem: IdentificationProblem, report: IdentifiabilityReport |
     return problem.with_params(problem.params.fix(report.non_identifiable)), report, tuple(warnings)
 
 
-def equivalent_base_values(problem: IdentificationProblem, report: IdentifiabilityReport, x_true, x_fixed=None) -> np.ndarray:
+def equivalent_base_values(problem: IdentificationProblem, report: IdentifiabilityReport, x_true: ArrayLike,
+                           x_fixed: ArrayLike | None = None) -> np.ndarray:
     """Full vector (n,) that a solver fixing ``report.non_identifiable`` at ``x_fixed`` should find when the
     data come from ``x_true`` (simulation): each base parameter gets the deviation of the dropped ones it is
     confounded with, to first order (exact when the coupling is linear, e.g. two offsets about one axis).

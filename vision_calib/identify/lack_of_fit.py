@@ -43,7 +43,10 @@ residual changes by dR (e.g. the poses re-measured with other camera intrinsics)
 
 from __future__ import annotations
 
+from typing import Sequence
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import ConfigError, DataError
 from .identifiability import whitened_free_jacobian
@@ -154,9 +157,10 @@ def _per_component(f: np.ndarray, m: int) -> np.ndarray:
     return X
 
 
-def lack_of_fit(problem: IdentificationProblem, result: IdentificationResult, joints=None, joint_response=None,
-                image_xy=None, depth=None, level: float = DEFAULT_LEVEL, harmonics=DEFAULT_HARMONICS,
-                test: str = "F") -> dict:
+def lack_of_fit(problem: IdentificationProblem, result: IdentificationResult, joints: ArrayLike | None = None,
+                joint_response: ArrayLike | None = None, image_xy: ArrayLike | None = None,
+                depth: ArrayLike | None = None, level: float = DEFAULT_LEVEL,
+                harmonics: Sequence[int] = DEFAULT_HARMONICS, test: str = "F") -> dict:
     """Lack-of-fit tests of ``result`` (fit of ``problem``, same poses in the same order; module docstring).
 
     joints: (n_obs, n_joints) rad, the reported joint values of each pose. joint_response: (n_obs, m,
@@ -322,7 +326,7 @@ def lack_of_fit_message(lof: dict) -> str:
     return "residuals depend on " + "; ".join(parts) + ": an error the model lacks"
 
 
-def parameter_shift(problem: IdentificationProblem, result: IdentificationResult, dR) -> np.ndarray:
+def parameter_shift(problem: IdentificationProblem, result: IdentificationResult, dR: ArrayLike) -> np.ndarray:
     """(n, d) first-order change of the parameters (SI; 0 for fixed ones) when every pose's residual changes by
     dR (n_obs, m, d) at the solution (d cases): the Gauss-Newton step -(A^T A)^+ A^T (W dR), A the whitened
     free Jacobian (prior rows included, their residuals unchanged)."""

@@ -19,13 +19,15 @@ variance factor ``2 cost / (N - n_free)``.
 from __future__ import annotations
 
 import time
-from typing import Iterable
+from typing import Iterable, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.optimize import least_squares
 
 from ..errors import ConfigError, DataError, ParameterError, VisionCalibError
-from .identifiability import analyze, base_problem, check_problem, pose_labels, whitened_free_jacobian
+from .identifiability import (IdentifiabilityReport, analyze, base_problem, check_problem, pose_labels,
+                              whitened_free_jacobian)
 from .problem import NOISE_ESTIMATED, STATUS_CONVERGED, STATUS_NOT_FINITE, IdentificationProblem, IdentificationResult
 from .threads import single_threaded_blas
 
@@ -36,12 +38,12 @@ CORRELATION_WARN = 0.95
 # ----------------------------------------------------------------------------- shared with ekf.py
 def prepare(
     problem: IdentificationProblem,
-    x0=None,
+    x0: ArrayLike | None = None,
     free: Iterable[str] | None = None,
     fix: Iterable[str] = (),
     fix_unidentifiable: bool = True,
     selection: str = "order",
-):
+) -> tuple[IdentificationProblem, np.ndarray, IdentifiabilityReport, tuple[str, ...]]:
     """Common set-up of the solvers.
 
     Returns (problem with the final free set, x0 (n,), report, warnings). ``free``: names that
@@ -97,7 +99,8 @@ def pose_chi2(problem: IdentificationProblem, r: np.ndarray, W: np.ndarray | Non
     return np.sum(np.einsum("kij,kj->ki", W, np.asarray(r, float)) ** 2, axis=1)
 
 
-def final_check(problem, x, cov, W, J=None) -> tuple[np.ndarray | None, str]:
+def final_check(problem: IdentificationProblem, x: np.ndarray, cov: np.ndarray, W: np.ndarray,
+                J: np.ndarray | None = None) -> tuple[np.ndarray | None, str]:
     """Residuals (n_obs, m) at the solution x (n,) (None if they cannot be evaluated) and "" when x, the
     residuals, the cost, J (n_obs, m, n) (if given) and cov are all finite; else the cause, naming the
     parameters or poses (pose labels)."""
@@ -135,7 +138,7 @@ def covariance_from_jacobian(Jw_free: np.ndarray, scale_free: np.ndarray) -> tup
     return cov_z * np.outer(scale_free, scale_free), full
 
 
-def correlation_warnings(names, cov: np.ndarray, threshold: float = CORRELATION_WARN) -> tuple[str, ...]:
+def correlation_warnings(names: Sequence[str], cov: np.ndarray, threshold: float = CORRELATION_WARN) -> tuple[str, ...]:
     """Strings ``"corr(a, b) = +0.973"`` for every pair with |corr| > threshold."""
     d = np.sqrt(np.clip(np.diag(cov), 0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -149,7 +152,7 @@ def correlation_warnings(names, cov: np.ndarray, threshold: float = CORRELATION_
     return tuple(out)
 
 
-def whitened_cost(problem: IdentificationProblem, x, W=None) -> float:
+def whitened_cost(problem: IdentificationProblem, x: ArrayLike, W: np.ndarray | None = None) -> float:
     """0.5 * sum of squared whitened residuals at x (n,), prior rows included."""
     W = problem.whitening() if W is None else W
     rw = np.einsum("kij,kj->ki", W, problem.residual(x))
@@ -222,7 +225,7 @@ def finish_result(method, original, problem, x0, x, cov, cost0, iterations, conv
 @single_threaded_blas
 def solve_lse(
     problem: IdentificationProblem,
-    x0=None,
+    x0: ArrayLike | None = None,
     method: str = "auto",
     loss: str = "linear",
     f_scale: float = 1.0,
@@ -353,6 +356,7 @@ def _jacobian_or_nan(problem: IdentificationProblem, x) -> np.ndarray:
         return np.full(shape, np.nan)
 
 
-def solve_lse_fd(problem: IdentificationProblem, x0=None, jac: str = "2-point", **kwargs) -> IdentificationResult:
+def solve_lse_fd(problem: IdentificationProblem, x0: ArrayLike | None = None, jac: str = "2-point",
+                 **kwargs) -> IdentificationResult:
     """Same as :func:`solve_lse` with a finite-difference Jacobian (the benchmark's baseline)."""
     return solve_lse(problem, x0, jac=jac, **kwargs)

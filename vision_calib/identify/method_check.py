@@ -20,6 +20,7 @@ data alike and second-order effects the linearisation leaves out would dominate.
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .problem import IdentificationProblem
 
@@ -56,8 +57,9 @@ def _linear_maps(problem: IdentificationProblem, x, B, U):
     return M, Mu
 
 
-def method_difference(problem_a: IdentificationProblem, x_a, B_a, problem_b: IdentificationProblem, x_b, B_b,
-                      cov_e, U_a=None, U_b=None, level: float = LEVEL) -> dict:
+def method_difference(problem_a: IdentificationProblem, x_a: ArrayLike, B_a: np.ndarray,
+                      problem_b: IdentificationProblem, x_b: ArrayLike, B_b: np.ndarray, cov_e: np.ndarray,
+                      U_a: np.ndarray | None = None, U_b: np.ndarray | None = None, level: float = LEVEL) -> dict:
     """Difference x_a - x_b of two estimates of the same free parameters from the same poses, with its
     first-order covariance (module doc) and a chi-square test.
 

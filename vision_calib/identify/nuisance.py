@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import DataError
 from ..kinematics.params import ParameterSet
@@ -31,7 +32,7 @@ def nuisance_names(prefix: str, d: int) -> tuple[str, ...]:
     return tuple(f"{prefix}.c{i}" for i in range(d))
 
 
-def with_nuisance(problem: IdentificationProblem, U, prefix: str = "nuisance") -> IdentificationProblem:
+def with_nuisance(problem: IdentificationProblem, U: ArrayLike, prefix: str = "nuisance") -> IdentificationProblem:
     """``problem`` augmented with d nuisance coefficients c ~ N(0, 1) (module docstring).
 
     U: (n_obs, m, d) response of each pose's residual (measured - model, SI) to one std of each direction.

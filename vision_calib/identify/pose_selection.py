@@ -47,6 +47,7 @@ exact measurements at the nominal geometry it does not look at any truth or nois
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import DataError, IdentifiabilityError, ParameterError
 from .identifiability import check_problem
@@ -67,7 +68,7 @@ def _check_criterion(criterion: str) -> str:
     return c
 
 
-def information_blocks(problem: IdentificationProblem, x=None) -> np.ndarray:
+def information_blocks(problem: IdentificationProblem, x: ArrayLike | None = None) -> np.ndarray:
     """Scaled whitened Jacobian of the free parameters per observation, (n_obs, m, n_free), at ``x``
     (default nominal); rows are in units of noise std, columns in units of ``params.scale``."""
     p = problem.params
@@ -93,7 +94,8 @@ def _lam_min(M: np.ndarray) -> float:
     return float(np.linalg.eigvalsh(M)[0])
 
 
-def design_criterion(problem_or_blocks, idx, criterion: str = "D", x=None) -> float:
+def design_criterion(problem_or_blocks: IdentificationProblem | np.ndarray, idx: ArrayLike, criterion: str = "D",
+                     x: ArrayLike | None = None) -> float:
     """Criterion of the design ``idx`` (k,) int: "D" -> log det M (-inf if singular), "O1" -> Borm-Menq
     O1 = det(M)^(1/2L) / sqrt(k), "E" -> s_min = sqrt(lambda_min(M)) (0 if singular). Scaled units.
     ``problem_or_blocks``: an IdentificationProblem or the (n_obs, m, L) array of :func:`information_blocks`."""
@@ -190,8 +192,9 @@ def _value(A, sel, c) -> float:
 
 
 @single_threaded_blas
-def select_poses(problem: IdentificationProblem, n: int, criterion: str = "D", x=None, start=None,
-                 exchange: bool = True, max_exchanges: int | None = None, restarts: int = 4) -> np.ndarray:
+def select_poses(problem: IdentificationProblem, n: int, criterion: str = "D", x: ArrayLike | None = None,
+                 start: ArrayLike | None = None, exchange: bool = True, max_exchanges: int | None = None,
+                 restarts: int = 4) -> np.ndarray:
     """Choose ``n`` of the problem's observations maximising an observability criterion (module doc).
 
     n: number of poses to select (1 <= n <= n_obs). criterion: "D" (log det, = O1 ranking), "O1" or

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..kinematics.params import ParameterSet
 
@@ -80,7 +81,7 @@ class IdentificationProblem:
         """Same observations, another parameter set (e.g. other free mask / starting point)."""
         return replace(self, params=params)
 
-    def subset(self, idx) -> "IdentificationProblem":
+    def subset(self, idx: ArrayLike) -> "IdentificationProblem":
         """Problem restricted to observations ``idx`` (k,) int."""
         idx = np.asarray(idx, dtype=int)
         res, jac = self.residual, self.jacobian
@@ -108,7 +109,7 @@ class IdentificationProblem:
         """Number of prior rows in the cost (free parameters of ``prior_rows``)."""
         return int(self._prior_index()[0].size)
 
-    def prior_residual(self, x) -> np.ndarray:
+    def prior_residual(self, x: ArrayLike) -> np.ndarray:
         """(p,) whitened prior rows (nominal - x) / prior_std of the free ``prior_rows`` at x (n,)."""
         _, full = self._prior_index()
         if not full.size:

@@ -17,14 +17,14 @@ residual; it is the identity at rho = 0, so near convergence this is the plain `
 
 from __future__ import annotations
 
-from typing import Mapping
+from typing import Iterable, Mapping, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import DataError, ParameterError
 from ..frames import inv_T, inverse_error_map, perturb_pose, pose_error, so3_right_jacobian_inv  # noqa: F401
 from ..kinematics.protocols import ChainModel
-from ..kinematics.serial import SerialChain
 from .problem import NOISE_ESTIMATED, IdentificationProblem
 
 POSE_COMPONENTS = ("dt_x", "dt_y", "dt_z", "dtheta_x", "dtheta_y", "dtheta_z")
@@ -94,15 +94,15 @@ def _obs_cov(n, m, obs_cov, sigma_t_m, sigma_r_rad, labels=None) -> tuple[np.nda
 
 
 def serial_problem(
-    chain: SerialChain,
-    q,
-    T_meas,
+    chain: ChainModel,
+    q: ArrayLike,
+    T_meas: ArrayLike,
     residual: str = "pose",
-    obs_cov=None,
+    obs_cov: ArrayLike | None = None,
     sigma_t_m: float | None = None,
     sigma_r_rad: float | None = None,
-    labels=None,
-    free=None,
+    labels: Sequence[str] | None = None,
+    free: Iterable[str] | None = None,
     check_limits: bool = True,
     measured: str | None = None,
 ) -> IdentificationProblem:
@@ -216,8 +216,8 @@ def serial_problem(
     )
 
 
-def synthetic_pose_measurements(chain: SerialChain, q, x_true, sigma_t_m: float, sigma_r_rad: float,
-                                rng: np.random.Generator) -> np.ndarray:
+def synthetic_pose_measurements(chain: ChainModel, q: ArrayLike, x_true: ArrayLike, sigma_t_m: float,
+                                sigma_r_rad: float, rng: np.random.Generator) -> np.ndarray:
     """Noisy measured poses T_left_right (N, 4, 4): the true pose ``chain.forward(q, x_true)`` perturbed
     by Gaussian noise ``d ~ N(0, diag(sigma_t^2 I3, sigma_r^2 I3))`` with :func:`frames.perturb_pose`,
     so that ``pose_error(T_true, T_meas) == d`` (the residual convention of :func:`serial_problem`).

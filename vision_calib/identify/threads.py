@@ -21,6 +21,9 @@ from __future__ import annotations
 import contextlib
 import functools
 import threading
+from typing import Callable, Iterator
+
+from .problem import IdentificationProblem
 
 #: largest whitened-Jacobian size (rows x free parameters) treated as "small": 2e6 entries = 16 MB
 SMALL_MAX_ENTRIES = 2_000_000
@@ -46,7 +49,7 @@ def _get_controller():
 
 
 @contextlib.contextmanager
-def small_blas(n_entries: int | None = None):
+def small_blas(n_entries: int | None = None) -> Iterator[None]:
     """Context: BLAS limited to one thread when ``n_entries`` (rows x columns of the largest matrix,
     None = unknown/small) is at most :data:`SMALL_MAX_ENTRIES`; re-entrant; restores on exit."""
     global _depth, _limiter
@@ -68,7 +71,7 @@ def small_blas(n_entries: int | None = None):
                 _limiter = None
 
 
-def problem_size(problem) -> int:
+def problem_size(problem: IdentificationProblem) -> int:
     """Rows x free columns of ``problem``'s whitened Jacobian (the size :func:`small_blas` looks at)."""
     try:
         return int(problem.n_obs * problem.m * max(1, problem.params.n_free))
@@ -76,7 +79,7 @@ def problem_size(problem) -> int:
         return 0
 
 
-def single_threaded_blas(fn):
+def single_threaded_blas(fn: Callable) -> Callable:
     """Decorator for ``fn(problem, ...)``: run it inside :func:`small_blas` sized by ``problem``."""
 
     @functools.wraps(fn)
