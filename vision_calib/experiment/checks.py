@@ -151,7 +151,8 @@ def drop_degenerate(meas: Measurements) -> tuple[Measurements, list]:
                                            "(identical images, e.g. duplicated or linked files)") for k in bad]
 
 
-def drop_inconsistent(meas: Measurements, motion: dict, where: str, max_fraction: float = 0.3):
+def drop_inconsistent(meas: Measurements, motion: dict, where: str,
+                      max_fraction: float = 0.3) -> tuple[Measurements, list[tuple[str, str]]]:
     """(measurements without the poses :func:`motion_consistency` found inconsistent, [(label, reason)]).
     DataError when more than ``max_fraction`` of the poses are (then the data or the model is wrong)."""
     bad = {p["pose_id"]: p["angle_mismatch_deg"] for p in motion.get("inconsistent_poses", [])}
@@ -167,7 +168,8 @@ def drop_inconsistent(meas: Measurements, motion: dict, where: str, max_fraction
                                      "pose, or a wrong joint reading") for lab, a in bad.items()]
 
 
-def screen_measurements(setup: Setup, meas: Measurements, where: str, scale_hint: str):
+def screen_measurements(setup: Setup, meas: Measurements, where: str,
+                        scale_hint: str) -> tuple[Measurements, list[tuple[str, str]], dict]:
     """The checks before identifying measured data, in order: poses without a noise estimate dropped
     (:func:`drop_degenerate`), the motion consistency refused or accepted (:func:`check_motion`), poses whose
     motion does not follow their joints dropped (:func:`drop_inconsistent`).

@@ -16,8 +16,10 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Callable, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import IdentifiabilityError
 from ..identify import fit_rejecting_outliers, model_adequacy
@@ -50,8 +52,9 @@ class HandeyeIdentified:
     method_check: dict | None = None
 
 
-def identify_handeye(T_base_flange, T_cam_target, mount: str, pose_cov, labels, robot_std=None, robust: bool = True,
-                     nuisance=None, where: str = "") -> HandeyeIdentified:
+def identify_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: str, pose_cov: ArrayLike,
+                     labels: Sequence[str], robot_std: tuple[float, float] | None = None, robust: bool = True,
+                     nuisance: Callable | None = None, where: str = "") -> HandeyeIdentified:
     """Steps of the module docstring. T_base_flange, T_cam_target (N, 4, 4) [m]; pose_cov (N, 6, 6) [m, rad];
     labels (N,); robot_std: (translation m, rotation rad) per axis of the flange pose error, or None
     (estimated); nuisance: callable (problem, x) -> U (n_obs, 6, d) or None, the response of every pose's

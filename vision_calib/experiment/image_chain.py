@@ -19,13 +19,15 @@ import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable, Iterable, Iterator, Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..camera import CameraIntrinsics
 
 if TYPE_CHECKING:  # the sensor package is imported by the workers (PRELOAD), not by this module on load
+    from ..measure import PoseMeasurement
     from ..sensor import SensorEffects
 
 _W = {}  # per-process worker state
@@ -99,7 +101,7 @@ def die_with_parent(main_pid: int) -> None:
     threading.Thread(target=watch, name="die-with-main", daemon=True).start()
 
 
-def chain_state(target_path, intrinsics, supersample) -> dict:
+def chain_state(target_path: str | Path, intrinsics: CameraIntrinsics, supersample: int) -> dict:
     """What the image chain of one camera/target/supersampling needs and only the setup determines, built once:
     {"target": TargetSpec, "intr": CameraIntrinsics, "renderer": render.TargetRenderer} (the renderer holds the
     target's geometry and the polygon backend's distortion tables)."""
@@ -172,7 +174,7 @@ def _worker_pose(job):
     return pose_job(_W, job)
 
 
-def pose_job(state: dict, job):
+def pose_job(state: dict, job: tuple) -> tuple[int, PoseMeasurement, dict]:
     """Render, add effects, (optionally) write PNGs, measure one pose with a :func:`chain_state` ->
     (index, PoseMeasurement, timings): only the small measurement goes back to the caller, never the frames;
     timings are CPU seconds of this thread."""
@@ -209,7 +211,7 @@ def pose_job(state: dict, job):
                    "rss_mib": rss_mib}
 
 
-def worker_pid(_=None) -> int:
+def worker_pid(_: object = None) -> int:
     """This process's id: ``pool.map(worker_pid, ...)`` names the worker processes of an ImagePool (tests: workers
     die with the main process)."""
     return os.getpid()
@@ -222,7 +224,7 @@ class ImagePool:
     chain: ImageChain (its target_path, camera and supersample fix the workers); workers: process count
     (default: CPU count)."""
 
-    def __init__(self, chain: ImageChain, workers: int | None = None):
+    def __init__(self, chain: ImageChain, workers: int | None = None) -> None:
         from concurrent.futures import ProcessPoolExecutor
         import multiprocessing as mp
 
@@ -239,10 +241,10 @@ class ImagePool:
     #: the chain runs in child processes (see :class:`InlineImagePool`)
     inline = False
 
-    def map(self, fn, jobs):
+    def map(self, fn: Callable, jobs: Iterable) -> Iterator:
         return self._ex.map(fn, jobs, chunksize=1)
 
-    def run(self, jobs):
+    def run(self, jobs: Iterable[tuple]) -> Iterator[tuple[int, PoseMeasurement, dict]]:
         """(index, PoseMeasurement, timings) of each pose job, in order (:func:`pose_job` in the workers)."""
         if self._ex is None:
             raise RuntimeError("ImagePool: closed")
@@ -258,7 +260,7 @@ class ImagePool:
     def __enter__(self) -> "ImagePool":
         return self
 
-    def __exit__(self, exc_type, *exc) -> None:
+    def __exit__(self, exc_type: type | None, *exc) -> None:
         self.close(cancel=exc_type is not None)
 
 
@@ -274,11 +276,11 @@ class InlineImagePool:
     inline = True
     workers = 1
 
-    def __init__(self, chain: ImageChain):
+    def __init__(self, chain: ImageChain) -> None:
         self.key = (str(chain.target_path), chain.camera, int(chain.supersample))
         self._state = chain_state(*self.key)
 
-    def run(self, jobs):
+    def run(self, jobs: Iterable[tuple]) -> Iterator[tuple[int, PoseMeasurement, dict]]:
         """(index, PoseMeasurement, timings) of each pose job, in order, computed here one after the other."""
         if self._state is None:
             raise RuntimeError("InlineImagePool: closed")
@@ -297,8 +299,8 @@ class InlineImagePool:
         self.close()
 
 
-def overlay_frames(chain: ImageChain, T_cam_targets, labels, seed: int, frames: int, wanted,
-                   stream: int = None) -> dict:
+def overlay_frames(chain: ImageChain, T_cam_targets: ArrayLike, labels: Sequence[str], seed: int, frames: int,
+                   wanted: Iterable[str], stream: int | None = None) -> dict:
     """The first frame of the poses ``wanted`` (labels) rendered again exactly as :func:`measure_poses` drew them
     (same per-pose seed), in this thread, with its detection: {label: (frame (H, W) uint8, Detection, "")}
     (report.html's overlays: a few poses, rather than keeping every frame of the run). T_cam_targets (N, 4, 4) m
@@ -331,9 +333,10 @@ def overlay_frames(chain: ImageChain, T_cam_targets, labels, seed: int, frames: 
 STREAM_IMAGES = 5
 
 
-def measure_poses(chain: ImageChain, T_cam_targets, labels, seed: int, frames: int, workers: int | None = None,
-                  image_dir=None, progress: bool = False, pool: ImagePool | None = None, stream: int = STREAM_IMAGES,
-                  desc: str = "render+measure"):
+def measure_poses(chain: ImageChain, T_cam_targets: ArrayLike, labels: Sequence[str], seed: int, frames: int,
+                  workers: int | None = None, image_dir: str | Path | None = None, progress: bool = False,
+                  pool: ImagePool | InlineImagePool | None = None, stream: int = STREAM_IMAGES,
+                  desc: str = "render+measure") -> tuple[list[PoseMeasurement], dict]:
     """Render + effects + measure every pose T_cam_targets (N, 4, 4) [m, OpenCV camera frame].
     pool: an open :class:`ImagePool` or :class:`InlineImagePool` for this chain's camera/target/supersampling
     (reused, not closed);

@@ -59,7 +59,8 @@ class NoiseInput:
     source: str
 
 
-def read_noise_input(folder, target=None, camera=None, allow_symlinks: bool = False) -> NoiseInput:
+def read_noise_input(folder: str | Path, target: str | Path | None = None, camera: str | Path | None = None,
+                     allow_symlinks: bool = False) -> NoiseInput:
     """The frames, camera and target of a noise set (module docstring). target / camera: paths of a target YAML /
     camera.yaml (calibrate-camera's) overriding the ROS-I file's, required for a plain image folder."""
     from ..io.camera_file import load_camera_for_images
@@ -158,7 +159,8 @@ def _one_frame_fit(inp: NoiseInput, det, img) -> dict | None:
         return None
 
 
-def measure_noise(folder, out_dir, target=None, camera=None, sim_frames: int = DEFAULT_SIM_FRAMES, seed: int = 0,
+def measure_noise(folder: str | Path, out_dir: str | Path, target: str | Path | None = None,
+                  camera: str | Path | None = None, sim_frames: int = DEFAULT_SIM_FRAMES, seed: int = 0,
                   allow_symlinks: bool = False, detect_config: DetectConfig = DetectConfig()) -> dict:
     """Measure the noise of a folder of repeated frames of a static target and fit the simulator settings that
     reproduce it (module docstring). Writes noise.json, sensor.yaml, summary.txt in out_dir; returns the

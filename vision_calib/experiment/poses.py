@@ -14,12 +14,15 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 
 from ..errors import ConfigError, DataError
+from ..identify.identifiability import IdentifiabilityReport
 from ..io.measured_poses import chain_direction, misreadings, read_measured_poses
 from ..io.report import build_report, parameters_table, residual_stats, write_report
+from ..rig import Measurements, Setup
 from .checks import drop_inconsistent, duplicate_poses, motion_verdict
 from .gross import gross_failure
 from .steps import check_method, identify_measurements
@@ -44,8 +47,9 @@ def fold_indices(n: int, folds: int, seed: int) -> list[np.ndarray]:
     return [np.sort(p) for p in np.array_split(perm, folds)]
 
 
-def kfold_validation(setup, meas, method: str, residual: str, analysis, folds: int, seed: int,
-                     outliers=()) -> dict:
+def kfold_validation(setup: Setup, meas: Measurements, method: str, residual: str,
+                     analysis: IdentifiabilityReport | None, folds: int, seed: int,
+                     outliers: Sequence[tuple[str, str]] = ()) -> dict:
     """Held-out residuals before (nominal) / after (identified on the other folds with the base parameter
     set of ``analysis``, the whole data's IdentifiabilityReport) of EVERY pose of ``meas``, per fold and
     overall. ``outliers``: labels of the poses the whole-data fit flagged; they are left out of every
@@ -149,7 +153,8 @@ def screen_motions(setup, mp):
     return kept, inconsistent, motion, None, check
 
 
-def process_poses(path, out_dir, method=None, folds=None, plots=True, fix_unidentifiable=False) -> dict:
+def process_poses(path: str | Path, out_dir: str | Path | None, method: str | None = None, folds: int | None = None,
+                  plots: bool = True, fix_unidentifiable: bool = False) -> dict:
     """Identify a robot from a measured-pose file (YAML + CSV); writes DIR/report.json, summary.txt,
     calibrated_model.yaml (+ plots). folds: k of the held-out validation (default: the file's)."""
     t0 = time.perf_counter()

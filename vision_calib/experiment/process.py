@@ -11,19 +11,23 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import ConfigError, DataError, IdentifiabilityError
 from ..serialize import write_json_atomic
 from ..io.portable import relative_ref
-from ..io.recording import read_recording
+from ..io.recording import Recording, read_recording
 from ..io.report import (REPORT_VERSION, build_report, measurements_block, parameters_table, residual_stats,
                          write_report)
 from ..rig import Measurements, load_scene
 from .checks import duplicate_poses, screen_measurements
 from .gross import gross_failure
 from .steps import check_method, identify_measurements, rejection_summary
+
+if TYPE_CHECKING:  # the measure package is imported where poses are measured
+    from ..measure import PoseMeasurement
 
 
 #: the report's intrinsics.propagated.how when the intrinsics' uncertainty is a term of the fit
@@ -32,7 +36,7 @@ IN_FIT = ("included in the fit: one nuisance coefficient (prior N(0, 1)) per eig
           "measurement covariance of the poses plus that of the intrinsics' shared error")
 
 
-def measure_recording(rec, progress=False, detections=None):
+def measure_recording(rec: Recording, progress: bool = False, detections: dict | None = None) -> list[PoseMeasurement]:
     """PoseMeasurement per pose id of a Recording (invalid ones carry a reason). detections: a dict to
     fill with {pose id: [Detection per frame]} (for the reprojection error of the calibrated chain)."""
     from ..measure import PoseMeasurement, measure_images
@@ -73,8 +77,9 @@ def _recording_setup(rec):
     return scene, setup.with_camera(rec.camera)
 
 
-def process_folder(folder, out_dir, method=None, progress=False, plots=True, fix_unidentifiable=False,
-                   allow_symlinks=False, refine_intrinsics=False, camera_file=None) -> dict:
+def process_folder(folder: str | Path, out_dir: str | Path | None, method: str | None = None, progress: bool = False,
+                   plots: bool = True, fix_unidentifiable: bool = False, allow_symlinks: bool = False,
+                   refine_intrinsics: bool = False, camera_file: str | Path | None = None) -> dict:
     """Process a recorded folder; writes DIR/measurements.json, DIR/report.json (+ plots, model).
     refine_intrinsics: calibrate the camera from the recording's images even when recording.yaml gives
     intrinsics (always done when it gives none); camera_file: a camera.yaml (``calibrate-camera``) used

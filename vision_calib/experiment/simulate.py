@@ -24,7 +24,7 @@ from ..errors import DataError
 from ..serialize import write_json_atomic
 from ..io.report import REPORT_VERSION, build_report, measurements_block, parameters_table, write_report
 from ..rig import Measurements, Scene, SCENES_DIR, load_scene, scene_poses
-from .image_chain import ImageChain, ImagePool, measure_poses, start_fork_server
+from .image_chain import ImageChain, ImagePool, InlineImagePool, measure_poses, start_fork_server
 from .checks import screen_measurements
 from .steps import (check_method, identify_measurements, rejection_summary, rngs, run_analysis_and_truth,
                     shared_truth, unmodelled_truth)
@@ -200,9 +200,11 @@ def _intrinsics_sensitivity(scene, ident, meas) -> dict:
     return intrinsics_sensitivity(ident, meas, cam, again, given_std=None)
 
 
-def run_simulation(scene, out_dir=None, seed=None, n_poses=None, frames=None, method=None, export_recording=None,
-                   workers=None, progress=False, overrides=None, plots=True, pool=None,
-                   fix_unidentifiable=False, reference=True) -> dict:
+def run_simulation(scene: Scene | str | Path, out_dir: str | Path | None = None, seed: int | None = None,
+                   n_poses: int | None = None, frames: int | None = None, method: str | None = None,
+                   export_recording: str | Path | None = None, workers: int | None = None, progress: bool = False,
+                   overrides: dict | None = None, plots: bool = True, pool: ImagePool | InlineImagePool | None = None,
+                   fix_unidentifiable: bool = False, reference: bool = True) -> dict:
     """The whole simulated experiment; writes ``out_dir/report.json`` (+ plots, calibrated model)
     when out_dir is given and returns the report dict (with ``summary_text``). pool: an image pool to reuse
     (``image_chain.ImagePool``, or ``InlineImagePool``: the chain in this thread, the validation poses measured
