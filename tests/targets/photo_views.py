@@ -1,6 +1,9 @@
-"""Photograph-like views of a planar target for detection tests: perspective, uneven lighting, a shadow across
-part of the board, defocus, sensor noise and JPEG, on a textured background (no renderer needed: the board's
-texture warped by the homography of a pinhole camera, 3x supersampled)."""
+"""Photograph-like views of a planar target of any kind for detection tests: perspective, uneven lighting, a shadow
+across part of the board, defocus, sensor noise and JPEG, on a textured background (no renderer needed: the board's
+printable texture, ``TargetSpec.texture``, warped by the homography of a pinhole camera, 3x supersampled).
+
+Boards (:func:`board_for`): a modified circle grid, a chessboard or a ChArUco board sized to the feature size in
+px (dot diameter or square side); :func:`degraded_view` draws one view of a degradation kind (:data:`KINDS`)."""
 
 from __future__ import annotations
 
@@ -26,13 +29,20 @@ def _rot(tilt_deg: float, roll_deg: float, tilt_axis_deg: float) -> np.ndarray:
     return R_tilt @ rz(math.radians(roll_deg))
 
 
-def photo_view(spec, rng, dot_px: float, tilt_deg: float = 0.0, roll_deg: float = 0.0, light: float = 0.0,
+def feature_m(spec) -> float:
+    """The size [m] that :func:`photo_view`'s feature_px refers to: the dot diameter (circle grids), else the
+    square side (chessboard, ChArUco)."""
+    return float(spec.diameter_m if hasattr(spec, "diameter_m") else spec.square_m)
+
+
+def photo_view(spec, rng, feature_px: float, tilt_deg: float = 0.0, roll_deg: float = 0.0, light: float = 0.0,
                shadow: float = 0.0, blur_px: float = 0.0, jpeg: int = 0, noise: float = 2.0, ss: int = 3):
-    """(uint8 (H, W) image, true dot centres (K, 2) px by id, whole board inside the image) for a view where a dot
-    of diameter spec.diameter_m appears dot_px across (at the board centre, frontal). light: relative brightness
+    """(uint8 (H, W) image, true corners / dot centres (K, 2) px in the order of spec.corner_points(), whole board
+    inside the image) for a view where a feature (:func:`feature_m`: dot diameter or square side) appears
+    feature_px across (at the board centre, frontal). light: relative brightness
     change across the image (linear ramp, 0..0.8); shadow: darkening of a half-plane across the board (0..0.7);
     blur_px: Gaussian defocus sigma; jpeg: JPEG quality (0: none); noise: grey-level std."""
-    z = F * spec.diameter_m / dot_px
+    z = F * feature_m(spec) / feature_px
     R = _rot(tilt_deg, roll_deg, rng.uniform(0, 180))
     x0, y0, x1, y1 = spec.texture_extent_m()
     c = np.array([(x0 + x1) / 2, (y0 + y1) / 2, 0.0])
@@ -87,13 +97,43 @@ def grid_for(dot_px: float) -> TargetSpec:
                       diameter_m=0.01, margin_m=0.015)
 
 
-def degradation(kind: str, rng) -> tuple[float, dict]:
+#: target kinds :func:`board_for` draws
+TARGETS = ("modified_circle_grid", "chessboard", "charuco")
+
+
+def board_for(target: str, feature_px: float) -> TargetSpec:
+    """A board of a target kind (:data:`TARGETS`) whose frontal view at feature_px per dot / square spans <= ~60 %
+    of the image width: the circle grid of :func:`grid_for`; a chessboard of n x (n - 1) squares of 20 mm
+    (n <= 11, rows + cols odd: not symmetric); a ChArUco board of n x (n - 1) squares of 20 mm (n <= 10),
+    DICT_4X4_50 markers of 15 mm; margins of half a square."""
+    if target == "modified_circle_grid":
+        return grid_for(feature_px)
+    if target == "chessboard":
+        n = int(np.clip(0.6 * W / feature_px, 3, 11))
+        return TargetSpec(kind="chessboard", name="c", rows=n - 1, cols=n, square_m=0.02, margin_m=0.01)
+    if target == "charuco":
+        n = int(np.clip(0.6 * W / feature_px, 3, 10))
+        return TargetSpec(kind="charuco", name="a", rows=n - 1, cols=n, square_m=0.02, marker_m=0.015,
+                          dictionary="DICT_4X4_50", margin_m=0.01)
+    raise ValueError(f"unknown target {target!r}; known: {', '.join(TARGETS)}")
+
+
+#: (degradation kinds' size range, 'sizes' range) [px] per target kind: dot diameter or square side. ChArUco: the
+#: markers' bits (square / 8 for DICT_4X4 markers of 0.75 square) must stay >= ~2.5 px and >= 2.5 blur sigmas to
+#: be decoded (measured, benchmarks/bench_target_photos.py: squares of 32 px decode at sigma 1.5 px, not at 2 px;
+#: 40 px at 2 px), so its degradations use squares of 40-80 px and its sizes 20-80 px.
+SIZE_RANGES = {"modified_circle_grid": ((12, 40), (5, 60)), "chessboard": ((12, 40), (5, 60)),
+               "charuco": ((40, 80), (20, 80))}
+
+
+def degradation(kind: str, rng, ranges=((12, 40), (5, 60))) -> tuple[float, dict]:
     """(dot diameter px, photo_view keyword arguments) of one view of a degradation kind (:data:`KINDS`), random
-    roll; dots log-uniform 12-40 px unless said. lighting: ramp 0.6; defocus: blur sigma 2 px; jpeg: quality 30;
+    roll; dots log-uniform 12-40 px unless said (ranges: the (degradations, sizes) ranges [px]). lighting: ramp 0.6; defocus: blur sigma 2 px; jpeg: quality 30;
     perspective: tilt 60 deg; shadow: 0.5; sizes: dots 5-60 px, tilt 0-30 deg, ramp 0.2, blur min(0.8, dot / 8);
     mixed: all at once at random strengths, tilt U(0, 60) deg, ramp U(0, 0.6), shadow U(0, 0.5), blur U(0, 2) px,
     JPEG quality U(30, 95)."""
-    dot = float(np.exp(rng.uniform(np.log(12), np.log(40))))
+    (lo, hi), (slo, shi) = ranges
+    dot = float(np.exp(rng.uniform(np.log(lo), np.log(hi))))
     roll = dict(roll_deg=rng.uniform(0, 360))
     if kind == "lighting":
         return dot, dict(light=0.6, **roll)
@@ -106,7 +146,7 @@ def degradation(kind: str, rng) -> tuple[float, dict]:
     if kind == "shadow":
         return dot, dict(shadow=0.5, **roll)
     if kind == "sizes":
-        dot = float(np.exp(rng.uniform(np.log(5), np.log(60))))
+        dot = float(np.exp(rng.uniform(np.log(slo), np.log(shi))))
         return dot, dict(tilt_deg=rng.uniform(0, 30), light=0.2, blur_px=min(0.8, dot / 8), **roll)
     if kind == "mixed":
         return dot, dict(tilt_deg=rng.uniform(0, 60), light=rng.uniform(0, 0.6), shadow=rng.uniform(0, 0.5),
@@ -117,12 +157,14 @@ def degradation(kind: str, rng) -> tuple[float, dict]:
 KINDS = ("lighting", "defocus", "jpeg", "perspective", "shadow", "sizes", "mixed")
 
 
-def degraded_view(kind: str, rng):
-    """(spec, image, true centres (K, 2) px, dot diameter px, photo_view kwargs) of one view of a degradation kind
-    (:func:`degradation`) where the whole board is inside the image."""
+def degraded_view(kind: str, rng, target: str = "modified_circle_grid"):
+    """(spec, image, true corners / centres (K, 2) px by id, feature size px, photo_view kwargs) of one view of a
+    degradation kind (:func:`degradation`; the dot sizes there are the squares' sides of a chessboard or ChArUco
+    board, in the target's :data:`SIZE_RANGES`) of a target kind (:func:`board_for`) where the whole board is inside
+    the image."""
     while True:
-        dot, kw = degradation(kind, rng)
-        spec = grid_for(dot)
+        dot, kw = degradation(kind, rng, SIZE_RANGES[target])
+        spec = board_for(target, dot)
         img, uv, whole = photo_view(spec, rng, dot, **kw)
         if whole:
             return spec, img, uv, dot, kw

@@ -125,6 +125,66 @@ class _ArucoKind(TargetKind):
         return params
 
 
+#: marker decoding (ChArUco): each bit read in the central 40 % of its cell (IgnoredMarginPerCell 0.3, 8 px per
+#: cell): on defocused or tilted markers the cell borders mix the neighbours' grey; measured on
+#: benchmarks/bench_target_photos.py views (see :data:`FALLBACKS`).
+DECODE = {"perspectiveRemovePixelPerCell": 8, "perspectiveRemoveIgnoredMarginPerCell": 0.3}
+
+
+def unsharp(img, sigma_px: float = 2.0, amount: float = 2.0):
+    """img + amount (img - Gaussian(img, sigma_px)), clipped to uint8: restores the contrast of marker bits
+    blurred by a defocus of about sigma_px."""
+    f = img.astype(np.float32)
+    return np.clip(f + amount * (f - cv2.GaussianBlur(f, (0, 0), sigma_px)), 0, 255).astype(np.uint8)
+
+
+#: fallback marker passes (name, img -> (scale, image)): a sharpened image (defocus), then the image upsampled
+#: 2x (bicubic: small or steeply tilted markers, whose contours are too coarse at 1 px per step). Measured
+#: (bench_target_photos.py, ChArUco 20-45 px squares, 12 views per kind): 'sizes' 6 -> 12 / 12, perspective 60 deg
+#: 5 -> 10 / 12, the other kinds unchanged or better; ~10 ms per pass at 800 x 600.
+FALLBACKS = (("sharpened", lambda img: (1.0, unsharp(img))),
+             ("upsampled 2x", lambda img: (2.0, cv2.resize(img, None, fx=2, fy=2, interpolation=cv2.INTER_CUBIC))))
+
+
+def merge_markers(corners, ids, corners2, ids2):
+    """The union of two marker sets ((M,) tuples of (1, 4, 2) float32 corners, (M, 1) int32 ids), the first set's
+    corners kept for ids in both."""
+    have = {} if ids is None else {int(i): c for c, i in zip(corners, ids.ravel())}
+    for c, i in zip(corners2, ids2.ravel()):
+        have.setdefault(int(i), np.asarray(c, dtype=np.float32).reshape(1, 4, 2))
+    keys = sorted(have)
+    return tuple(have[k] for k in keys), np.array(keys, dtype=np.int32).reshape(-1, 1)
+
+
+def missing_in_view(spec, corners, ids, shape, border_px: float = 2.0) -> bool:
+    """Whether a marker of the board is missing from a detection (corners, ids as cv2.aruco returns them) although
+    it should lie inside the image (H, W) by border_px: predicted by the homography of the detected markers'
+    corners (>= 2 markers), else True when any marker is missing."""
+    board_ids = spec.marker_ids()
+    found = set() if ids is None else {int(i) for i in ids.ravel()}
+    missing = [k for k, i in enumerate(board_ids) if int(i) not in found]
+    if not missing:
+        return False
+    if len(found) < 2:
+        return True
+    pos = {int(i): k for k, i in enumerate(board_ids)}
+    obj = spec.marker_corners()[:, :, :2]
+    mine = [(obj[pos[int(i)]], np.asarray(c, dtype=np.float64).reshape(4, 2)) for c, i in zip(corners, ids.ravel())
+            if int(i) in pos]
+    if len(mine) < 2:
+        return True
+    src, dst = (np.concatenate(x) for x in zip(*mine))
+    H, _ = cv2.findHomography(src, dst)
+    if H is None:
+        return True
+    q = obj[missing].reshape(-1, 2) @ H[:, :2].T + H[:, 2]
+    uv = (q[:, :2] / q[:, 2:]).reshape(len(missing), 4, 2)
+    h, w = shape[:2]
+    inside = np.all((uv >= border_px) & (uv <= np.array([w - 1, h - 1]) - border_px), axis=(1, 2)) & np.all(
+        q[:, 2].reshape(len(missing), 4) > 0, axis=1)
+    return bool(inside.any())
+
+
 class CharucoKind(SquareCorners, _ArucoKind):
     """ChArUco board: rows x cols squares of square_m, markers of marker_m in the white squares."""
 
@@ -172,10 +232,32 @@ class CharucoKind(SquareCorners, _ArucoKind):
         return rects
 
     def make_detector(self, spec, config):
-        return cv2.aruco.CharucoDetector(self.cv_board(spec), cv2.aruco.CharucoParameters(), self._params(spec, config))
+        """(CharucoDetector, ArucoDetector) with the decoding settings of :data:`DECODE` (:meth:`find_corners`)."""
+        params = self._params(spec, config)
+        for key, value in DECODE.items():
+            setattr(params, key, value)
+        return (cv2.aruco.CharucoDetector(self.cv_board(spec), cv2.aruco.CharucoParameters(), params),
+                cv2.aruco.ArucoDetector(self.cv_dictionary(spec), params))
 
     def find_corners(self, spec, det, img, config, diag, intrinsics=None):
-        ch_corners, ch_ids, m_corners, m_ids = det.detectBoard(img)
+        """Markers on the image, then, when markers of the board that should be in view are missing
+        (:func:`missing_in_view`), on the fallback images of :data:`FALLBACKS` (marker sets merged, the first
+        pass's corners kept); the ChArUco corners are interpolated and refined on the original image."""
+        board_det, marker_det = det
+        m_corners, m_ids, _ = marker_det.detectMarkers(img)
+        diag["marker_passes"] = ["image"]
+        for name, make in FALLBACKS:
+            if not missing_in_view(spec, m_corners, m_ids, img.shape):
+                break
+            scale, alt = make(img)
+            c2, i2, _ = marker_det.detectMarkers(alt)
+            if i2 is not None and len(i2):
+                m_corners, m_ids = merge_markers(m_corners, m_ids, [(c + 0.5) / scale - 0.5 for c in c2], i2)
+            diag["marker_passes"].append(name)
+        if m_ids is None or not len(m_ids):
+            diag["n_markers"], diag["marker_ids"] = 0, []
+            return None, "target not visible: no marker of the target dictionary detected"
+        ch_corners, ch_ids, m_corners, m_ids = board_det.detectBoard(img, markerCorners=m_corners, markerIds=m_ids)
         n_markers = 0 if m_ids is None else len(m_ids)
         diag["n_markers"] = n_markers
         diag["marker_ids"] = [] if m_ids is None else sorted(int(i) for i in m_ids.ravel())

@@ -13,8 +13,11 @@ board can then only serve intrinsics calibration (measure_pose refuses it).
 
 Detection: the whole board (all inner corners must be visible) is found by ``cv2.findChessboardCorners``
 (flags :data:`CLASSIC_FLAGS`, a few ms), else by ``cv2.findChessboardCornersSB`` (flags :data:`SB_FLAGS`,
-~0.1 s: it finds the far and steeply tilted boards FAST_CHECK misses); the corners are then located by
-the saddle-point fit of :mod:`.saddle` (corners it rejects are dropped). In the seeded
+~0.1 s: it finds the far and steeply tilted boards FAST_CHECK misses), else by the same on the image upsampled
+2x (~0.3 s at 800 x 600: squares of ~6-12 px, tilted and blurred); the corners are then located by
+the saddle-point fit of :mod:`.saddle`; corners it rejects are recaptured from farther (defocus: the detector's
+corners 1-3 px off) where the image is point-symmetric about them, the others are dropped (a shadow edge
+through the corner: no point-symmetric X-corner to locate). In the seeded
 batch mode (measure/seeded.py, mode "saddle") every other frame of a pose is refined by the same fit from
 the seed frame's corners. Measured figures: :data:`SB_FLAGS`.
 """
@@ -27,7 +30,7 @@ import cv2
 import numpy as np
 
 from ...errors import ConfigError
-from .saddle import refine_detected
+from .saddle import recapture, refine_detected
 from .base import TargetKind, TargetSpec
 from ._grid import SquareCorners, apply_h, fit_homography, front_facing, sample_mean
 
@@ -52,6 +55,12 @@ CLASSIC_FLAGS = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE | cv
 SB_FLAGS = 0
 #: largest move of a detector corner in the saddle-point fit [px] (the raw corners are within ~0.3 px)
 MAX_MOVE_PX = 1.0
+#: corners the fit rejects are recaptured (:func:`.saddle.recapture`) from up to RECAPTURE_SHARE of the corner
+#: spacing, at most RECAPTURE_MAX_PX, where the image is point-symmetric about the result (asymmetry below
+#: MAX_ASYM). Measured (benchmarks/bench_target_photos.py, 12-40 px squares): with a defocus of sigma 2 px the
+#: detector's corners are up to 1-3 px off and the fit from there lands within 0.04 px of the truth; a shadow
+#: edge through a corner's window biases the fit by 1-2 px (asymmetry 0.16-0.6: rejected).
+RECAPTURE_SHARE, RECAPTURE_MAX_PX, MAX_ASYM = 0.2, 4.0, 0.15
 
 
 @dataclass(frozen=True)
@@ -96,6 +105,11 @@ class ChessboardKind(SquareCorners, TargetKind):
         if not ok or corners is None:
             ok, corners = cv2.findChessboardCornersSB(img, (nc, nr), flags=self.sb_flags)
             diag["chessboard_detector"] = "sb"
+        if not ok or corners is None:  # small squares, tilted and blurred: SB on the image upsampled 2x (bicubic)
+            big = cv2.resize(img, None, fx=2, fy=2, interpolation=cv2.INTER_CUBIC)
+            ok, corners = cv2.findChessboardCornersSB(big, (nc, nr), flags=self.sb_flags)
+            corners = None if corners is None else (corners + 0.5) / 2 - 0.5
+            diag["chessboard_detector"] = "sb upsampled 2x"
         if not ok or corners is None:
             return None, f"chessboard of {nc} x {nr} inner corners not found (the whole board must be visible)"
         G = corners.reshape(nr, nc, 2).astype(np.float64)
@@ -103,6 +117,14 @@ class ChessboardKind(SquareCorners, TargetKind):
         if G is None:
             return None, why
         uv, ok = refine_detected(img, G.reshape(-1, 2), MAX_MOVE_PX)
+        if not ok.all():  # a defocused board: the detector's corners can be beyond MAX_MOVE_PX
+            step = np.linalg.norm(np.diff(G, axis=1), axis=2).min() if nc > 1 else np.inf
+            step = min(step, np.linalg.norm(np.diff(G, axis=0), axis=2).min() if nr > 1 else np.inf)
+            move = float(np.clip(RECAPTURE_SHARE * step, MAX_MOVE_PX, RECAPTURE_MAX_PX))
+            start, got = recapture(img, G.reshape(-1, 2), ok, move, MAX_ASYM)
+            if got.any():
+                uv, ok = refine_detected(img, start, MAX_MOVE_PX)
+            diag["saddle_recaptured"] = int((got & ok).sum())
         diag["saddle_rejected"] = int((~ok).sum())
         if not ok.any():
             return None, "no chessboard corner passed the saddle-point fit (targets/kinds/saddle.py)"
