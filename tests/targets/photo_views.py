@@ -36,17 +36,20 @@ def feature_m(spec) -> float:
 
 
 def photo_view(spec, rng, feature_px: float, tilt_deg: float = 0.0, roll_deg: float = 0.0, light: float = 0.0,
-               shadow: float = 0.0, blur_px: float = 0.0, jpeg: int = 0, noise: float = 2.0, ss: int = 3):
+               shadow: float = 0.0, blur_px: float = 0.0, jpeg: int = 0, noise: float = 2.0, ss: int = 3,
+               shift: float = 0.1):
     """(uint8 (H, W) image, true corners / dot centres (K, 2) px in the order of spec.corner_points(), whole board
     inside the image) for a view where a feature (:func:`feature_m`: dot diameter or square side) appears
     feature_px across (at the board centre, frontal). light: relative brightness
     change across the image (linear ramp, 0..0.8); shadow: darkening of a half-plane across the board (0..0.7);
-    blur_px: Gaussian defocus sigma; jpeg: JPEG quality (0: none); noise: grey-level std."""
+    blur_px: Gaussian defocus sigma; jpeg: JPEG quality (0: none); noise: grey-level std; shift: largest offset of
+    the board centre from the image centre, as a fraction of the image size (a board that nearly fills the image
+    needs a small one to be whole in view)."""
     z = F * feature_m(spec) / feature_px
     R = _rot(tilt_deg, roll_deg, rng.uniform(0, 180))
     x0, y0, x1, y1 = spec.texture_extent_m()
     c = np.array([(x0 + x1) / 2, (y0 + y1) / 2, 0.0])
-    t = np.array([rng.uniform(-0.1, 0.1) * W / F * z, rng.uniform(-0.1, 0.1) * H / F * z, z]) - R @ c
+    t = np.array([rng.uniform(-shift, shift) * W / F * z, rng.uniform(-shift, shift) * H / F * z, z]) - R @ c
     Hm = K @ np.column_stack([R[:, 0], R[:, 1], t])  # target (x, y, 1) [m] -> image px
     # texture at ~2 texture px per image px at the nearest point
     ppm = 2.0 * ss * F / max(z - 0.5 * max(x1 - x0, y1 - y0), 0.2 * z)

@@ -118,7 +118,8 @@ def test_dot_sizes(dot_px):
     n = ok = 0
     while n < 3:
         img, uv, whole = photo_view(spec, rng, dot_px, tilt_deg=rng.uniform(0, 30), roll_deg=rng.uniform(0, 360),
-                                    light=0.2, blur_px=min(0.8, dot_px / 8))
+                                    light=0.2, blur_px=min(0.8, dot_px / 8),
+                                    shift=0.1 if dot_px < 40 else 0.02)  # a 3 x 3 grid of 60 px dots fills the view
         if whole:
             n += 1
             ok += found_right(spec, img, uv, dot_px)
