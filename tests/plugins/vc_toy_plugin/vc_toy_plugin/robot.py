@@ -97,9 +97,9 @@ class Planar2Setup(Setup):
     def with_params(self, params):
         return replace(self, params=params, robot=replace(self.robot, params=params))
 
-    @staticmethod
-    def claims(robot_path, doc):
-        return doc is not None and doc.get("kind") == "plugin_planar2"
+    @classmethod
+    def claims(cls, robot_path, doc):
+        return doc is not None and doc.get("kind") == cls.kind
 
     @classmethod
     def from_scene(cls, ctx):
