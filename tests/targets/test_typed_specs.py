@@ -1,14 +1,16 @@
 """One typed spec per target kind: each kind's dataclass holds, writes and reads only its own keys; files written
 before (every kind's keys, the others at zero) still read; a new kind is one module + one registry line."""
 
-from dataclasses import dataclass, fields
+import sys
+from dataclasses import fields
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from vision_calib.errors import ConfigError
 from vision_calib.targets import TargetSpec, target_from_dict
-from vision_calib.targets.kinds import KINDS, MarkerKind, TargetKind, register, unregister
+from vision_calib.targets.kinds import KINDS, MarkerKind, register, unregister
 from vision_calib.targets.kinds.base import COMMON_KEYS
 
 SPECS = {
@@ -60,32 +62,14 @@ def test_spec_fields_of_other_kinds_do_not_exist():
         s.tag_m  # noqa: B018
 
 
-@dataclass(frozen=True)
-class SquaresSpec(TargetSpec):
-    """Toy kind: rows x cols black squares of side_m, one square apart (a checker of isolated squares)."""
+# the toy kind of the plugin example (tests/plugins/vc_toy_plugin: one spec dataclass + one kind class), here
+# registered by hand under its own name
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "plugins" / "vc_toy_plugin"))
+from vc_toy_plugin.target import SquaresKind as PluginSquaresKind, SquaresSpec  # noqa: E402
 
-    side_m: float = 0.0
 
-
-class SquaresKind(TargetKind):
+class SquaresKind(PluginSquaresKind):
     name = "toy_squares"
-    spec_class = SquaresSpec
-    required = ("side_m",)
-
-    def validate(self, spec, where):
-        self.positive(spec, where, "side_m")
-
-    def pattern_size_m(self, spec):
-        return (2 * spec.cols - 1) * spec.side_m, (2 * spec.rows - 1) * spec.side_m
-
-    def corner_points(self, spec):
-        r, c = np.divmod(np.arange(spec.rows * spec.cols), spec.cols)
-        p = np.column_stack([2 * c * spec.side_m, 2 * r * spec.side_m, np.zeros(r.size)])
-        return np.arange(len(p)), p
-
-    def black_rects(self, spec):
-        _, p = self.corner_points(spec)
-        return [(x, y, x + spec.side_m, y + spec.side_m) for x, y, _ in p]
 
 
 def test_a_new_kind_is_one_class_pair_and_one_registry_line():
