@@ -69,3 +69,19 @@ def assert_mounts_within_std(transforms: dict, truth: dict, k: float = 4.0):
         assert np.all(np.abs(z) < k), (name, z, e, s)
         zmax = max(zmax, float(np.abs(z).max()))
     return zmax
+
+
+def measured_pose_file(path, scene_path, n: int = 30, seed: int = 8, folds: int = 3):
+    """Write a ``process-poses`` file at ``path`` for the scene ``scene_path``: n random joint sets and their
+    true T_cam_target perturbed by 0.1 mm / 0.3 mrad per axis (declared as the file's default sigma), seeded."""
+    from vision_calib.experiment.steps import rngs
+    from vision_calib.io.measured_poses import write_measured_poses
+    from vision_calib.rig import scene_poses
+
+    scene = load_scene(scene_path)
+    rp, rn, _ = rngs(seed)
+    q = scene_poses(scene, rp, n)
+    noise = np.concatenate([rn.normal(scale=1e-4, size=(n, 3)), rn.normal(scale=3e-4, size=(n, 3))], axis=1)
+    T = F.perturb_pose(scene.setup.T_cam_target(q, scene_truth(scene)), noise)
+    return write_measured_poses(path, scene_path, [f"p{i:02d}" for i in range(n)], q, T, "T_cam_target",
+                                default_sigma=(1e-4, 3e-4), folds=folds)

@@ -6,17 +6,13 @@ import copy
 import json
 
 import jsonschema
-import numpy as np
 import pytest
 
-from vision_calib import frames as F
 from vision_calib.cli import main
-from vision_calib.experiment.steps import rngs, scene_truth
-from vision_calib.io.measured_poses import write_measured_poses
 from vision_calib.io.report import SCHEMA_PATH
-from vision_calib.rig import SCENES_DIR, load_scene, scene_poses
+from vision_calib.rig import SCENES_DIR
 
-from flange_folder import flange_pose_folder  # noqa: E402 (tests/experiment helper)
+from flange_folder import flange_pose_folder, measured_pose_file  # noqa: E402 (tests/experiment helper)
 
 RX90 = str(SCENES_DIR / "rx90_eye_in_hand.yaml")
 
@@ -37,13 +33,7 @@ def reports(tmp_path_factory):
     assert main(["process", str(d / "rec"), "--out", str(d / "proc"), "--json"]) == 0  # with its plots
     flange, _, _ = flange_pose_folder(d / "rec", d / "flange", robot_std_mm=0.2, robot_std_deg=0.02)
     assert main(["process", str(flange), "--out", str(d / "handeye"), "--json", "--no-plots"]) == 0
-    scene = load_scene(RX90)
-    rp, rn, _ = rngs(8)
-    q = scene_poses(scene, rp, 30)
-    noise = np.concatenate([rn.normal(scale=1e-4, size=(30, 3)), rn.normal(scale=3e-4, size=(30, 3))], axis=1)
-    T = F.perturb_pose(scene.setup.T_cam_target(q, scene_truth(scene)), noise)
-    mp = write_measured_poses(d / "mp.yaml", RX90, [f"p{i:02d}" for i in range(30)], q, T, "T_cam_target",
-                              default_sigma=(1e-4, 3e-4), folds=3)
+    mp = measured_pose_file(d / "mp.yaml", RX90)
     assert main(["process-poses", str(mp), "--out", str(d / "poses"), "--json", "--no-plots"]) == 0
     return {name: json.loads((d / name / "report.json").read_text()) for name in ("sim", "proc", "handeye", "poses")}
 

@@ -13,17 +13,14 @@ import cv2
 import numpy as np
 import pytest
 
-from vision_calib import frames as F
 from vision_calib.cli import main
-from vision_calib.experiment.steps import rngs, scene_truth
-from vision_calib.io.measured_poses import write_measured_poses
 from vision_calib.io.overlay import MAX_WIDTH_PX
-from vision_calib.rig import SCENES_DIR, load_scene, scene_poses
+from vision_calib.rig import SCENES_DIR
 
 from headless import browser_probe, console_errors, need_chromium, network_references, screenshot  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiment"))
-from flange_folder import flange_pose_folder  # noqa: E402
+from flange_folder import flange_pose_folder, measured_pose_file  # noqa: E402
 
 RX90 = str(SCENES_DIR / "rx90_eye_in_hand.yaml")
 #: verdict box background of each status (io/report_html.py CSS), RGB
@@ -55,13 +52,7 @@ def runs(tmp_path_factory):
     assert main(["process", str(d / "bad"), "--out", str(d / "proc"), "--json"]) == 0
     flange, _, _ = flange_pose_folder(d / "rec", d / "flange", robot_std_mm=0.2, robot_std_deg=0.02)
     assert main(["process", str(flange), "--out", str(d / "handeye"), "--json"]) == 0
-    scene = load_scene(RX90)
-    rp, rn, _ = rngs(8)
-    q = scene_poses(scene, rp, 30)
-    noise = np.concatenate([rn.normal(scale=1e-4, size=(30, 3)), rn.normal(scale=3e-4, size=(30, 3))], axis=1)
-    T = F.perturb_pose(scene.setup.T_cam_target(q, scene_truth(scene)), noise)
-    mp = write_measured_poses(d / "mp.yaml", RX90, [f"p{i:02d}" for i in range(30)], q, T, "T_cam_target",
-                              default_sigma=(1e-4, 3e-4), folds=3)
+    mp = measured_pose_file(d / "mp.yaml", RX90)
     assert main(["process-poses", str(mp), "--out", str(d / "poses"), "--json"]) == 0
     return {name: d / name for name in ("sim", "proc", "handeye", "poses")}
 
