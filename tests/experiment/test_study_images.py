@@ -29,6 +29,19 @@ def _env():
     return {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
 
 
+def _run_in_own_group(args: list) -> tuple:
+    """(Popen, stdout, stderr) of ``python ARGS`` run to its end in a new process group (killed whole on a hang)."""
+    p = subprocess.Popen([sys.executable, *args], cwd=ROOT, env=_env(), stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        out, err = p.communicate(timeout=HANG_GUARD_S)
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+    return p, out, err
+
+
 def write_spec(tmp_path, repetitions=2, name="img"):
     """2 noise levels x ``repetitions`` images-mode runs of 8 poses x 2 frames (+ the scene's validation poses)."""
     p = tmp_path / f"{name}_r{repetitions}.yaml"
@@ -92,15 +105,8 @@ def reference(tmp_path_factory):
 def test_local_two_workers_subprocess(reference, tmp_path):
     """``vision-calib study --workers 2``: exits, same rows, no leaked semaphore, no process left in its group."""
     spec, ref = reference
-    p = subprocess.Popen([sys.executable, "-m", "vision_calib.cli", "study", str(spec), "--out", str(tmp_path / "w2"),
-                          "--workers", "2", "--no-plots", "--json"], cwd=ROOT, env=_env(), stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, text=True, start_new_session=True)
-    try:
-        out, err = p.communicate(timeout=HANG_GUARD_S)
-    finally:
-        if p.poll() is None:
-            os.killpg(p.pid, signal.SIGKILL)
-            p.wait()
+    p, out, err = _run_in_own_group(["-m", "vision_calib.cli", "study", str(spec), "--out", str(tmp_path / "w2"),
+                                     "--workers", "2", "--no-plots", "--json"])
     assert p.returncode == 0, err
     assert json.loads(out)["n_computed"] == 4
     assert "leaked" not in err, err
@@ -164,14 +170,7 @@ def test_dask_local_cluster_processes(reference, tmp_path):
     """A LocalCluster of 2 worker processes (daemonic, may not have children): same rows, workers without
     children after the study, nothing left in the process group once the client and cluster are closed."""
     spec, ref = reference
-    p = subprocess.Popen([sys.executable, "-c", _DASK, str(spec), str(tmp_path / "dask")], cwd=ROOT, env=_env(),
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
-    try:
-        out, err = p.communicate(timeout=HANG_GUARD_S)
-    finally:
-        if p.poll() is None:
-            os.killpg(p.pid, signal.SIGKILL)
-            p.wait()
+    p, out, err = _run_in_own_group(["-c", _DASK, str(spec), str(tmp_path / "dask")])
     assert p.returncode == 0, err
     info = json.loads(out.strip().splitlines()[-1])
     assert info == {"daemonic": [True, True], "n_computed": 4, "children": [0, 0]}, info

@@ -126,9 +126,8 @@ def verdict_section(report: dict) -> str:
         items.append(f"gross input error ({report['failure'].get('kind')}): {report['failure'].get('message', '')}")
     if v.get("note"):
         items.append("note: " + v["note"])
-    warn = list(dict.fromkeys(list(report.get("warnings") or [])
-                              + list((report.get("identification") or {}).get("warnings") or [])))  # each once
-    items += [f"warning: {w}" for w in dict.fromkeys(warn)]
+    warn = list(report.get("warnings") or []) + list((report.get("identification") or {}).get("warnings") or [])
+    items += [f"warning: {w}" for w in dict.fromkeys(warn)]  # each once
     use = ("a calibrated model was written (calibrated_model.yaml)" if v.get("usable") and
            (report.get("files") or {}).get("model") else
            "no calibrated model was written" if not v.get("usable") else "")
