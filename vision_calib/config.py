@@ -34,9 +34,8 @@ from typing import Any
 import yaml
 
 from .errors import ConfigError
+from .shipped import data_dir, shipped_tree_of
 
-#: the shipped data (scenes, robots, targets): a path a file names may lead there from anywhere
-SHIPPED_DIRS = tuple((Path(__file__).resolve().parents[1] / d) for d in ("scenes", "targets"))
 #: folders the user allowed explicitly (``--allow-path DIR`` of every command sets it; os.pathsep-separated)
 ALLOW_ENV = "VISION_CALIB_ALLOW_PATHS"
 
@@ -86,10 +85,11 @@ def check_keys(sec: "Section", tree) -> None:
 
 
 def allowed_dirs() -> tuple[Path, ...]:
-    """The folders outside a file's own folder that the paths it names may lead into: the shipped data and the
-    folders the user allowed (:data:`ALLOW_ENV`, set by ``--allow-path``), resolved."""
+    """The folders outside a file's own folder that the paths it names may lead into: the installed package's
+    shipped data (:func:`vision_calib.shipped.data_dir`) and the folders the user allowed (:data:`ALLOW_ENV`,
+    set by ``--allow-path``), resolved."""
     extra = tuple(Path(p).resolve() for p in os.environ.get(ALLOW_ENV, "").split(os.pathsep) if p)
-    return tuple(d.resolve() for d in SHIPPED_DIRS) + extra
+    return (data_dir().resolve(),) + extra
 
 
 @contextmanager
@@ -115,15 +115,17 @@ def _inside(p: Path, root: Path) -> bool:
 
 def confine(path, root, where: str, error=ConfigError, allow: bool = False, hint: str = "--allow-path DIR") -> Path:
     """The ONE rule for a path that a file names (issue 21): it must lead (symbolic links resolved) inside
-    ``root`` (the folder of the file that names it, or the recorded/imported folder), the shipped data, or a
-    folder the user allowed (:func:`allowed_dirs`); ``allow``: the caller's explicit allowance (e.g.
+    ``root`` (the folder of the file that names it, or the recorded/imported folder), the shipped data, the
+    shipped data tree ``root`` itself lies in (a checkout's own ``scenes/`` naming its ``targets/``:
+    :func:`vision_calib.shipped.shipped_tree_of`), or a folder the user allowed (:func:`allowed_dirs`); ``allow``: the caller's explicit allowance (e.g.
     ``--allow-symlinks``). Returns ``path``; else ``error`` naming ``where`` and saying whether a symbolic
     link or the path itself leads out (nothing outside is opened)."""
     path = Path(path)
     if allow:
         return path
     real, base = path.resolve(), Path(root).resolve()
-    if _inside(real, base) or any(_inside(real, d) for d in allowed_dirs()):
+    tree = shipped_tree_of(base / "_")
+    if _inside(real, base) or (tree is not None and _inside(real, tree)) or any(_inside(real, d) for d in allowed_dirs()):
         return path
     lexical, lbase = Path(os.path.normpath(path.absolute())), Path(os.path.normpath(Path(root).absolute()))
     why = (f"a symbolic link leading out of the folder {base} (to {real})" if _inside(lexical, lbase)

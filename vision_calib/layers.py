@@ -21,7 +21,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("kinematics", "targets", "camera"),
     ("config",),
     ("frames",),
-    ("errors", "serialize", "plugins", "layers"),
+    ("errors", "serialize", "plugins", "layers", "shipped"),
 )
 
 #: third-party modules that ``identify`` and ``kinematics`` (and what they import) must not import

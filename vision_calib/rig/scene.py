@@ -36,6 +36,7 @@ from numpy.typing import ArrayLike
 from ..camera import CameraIntrinsics
 from ..config import Section, load_yaml, transform_from
 from ..errors import ConfigError, ParameterError
+from ..shipped import scenes_dir
 from ..kinematics.params import ParameterSet
 from .base import NamedConfigurations, NamedTrials, PoseGrids, Setup, pose_grid_names
 from .registry import kind_of_robot_file
@@ -44,7 +45,7 @@ if TYPE_CHECKING:  # annotations only
     from ..sensor.settings import SensorEffects
     from ..targets.kinds.base import TargetSpec
 
-SCENES_DIR = Path(__file__).resolve().parents[2] / "scenes"
+SCENES_DIR = scenes_dir()  # the installed package's shipped scenes (package data)
 TOP_KEYS = ("name", "robot", "mount", "units", "camera", "target", "effects", "render", "truth", "poses",
             "validation", "measurement", "identification")
 #: scene effect names -> SensorEffects field names (short forms accepted in scenes and studies)

@@ -20,6 +20,7 @@ import cv2
 import numpy as np
 
 from ..camera import CameraIntrinsics
+from ..shipped import targets_dir
 from ..targets import load_target
 from ..render.renderer import TargetRenderer, look_at_target
 
@@ -75,7 +76,7 @@ def main(argv=None):
 
     for name in a.scene:
         tgt, cam, dist, tilt = SCENES[name]
-        spec = load_target(Path(__file__).resolve().parents[2] / "targets" / tgt) if isinstance(tgt, str) else TargetSpec(**tgt)
+        spec = load_target(targets_dir() / tgt) if isinstance(tgt, str) else TargetSpec(**tgt)
         K = CameraIntrinsics(*cam)
         rng = np.random.default_rng(a.seed)
         # first pose fronto-parallel and centred, then random ones
