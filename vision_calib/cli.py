@@ -31,7 +31,7 @@ import sys  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 from . import __version__  # noqa: E402
-from .errors import VisionCalibError  # noqa: E402
+from .errors import ConfigError, VisionCalibError  # noqa: E402
 
 EXIT_CODES = """exit codes:
   0    done (also a "warning" verdict: calibrated model written, reason on stderr)
@@ -297,6 +297,23 @@ The pattern is read from the folder's own chessboard-data.txt or apriltag-data.t
     p.add_argument("target", help="target YAML (see targets/)")
     p.add_argument("--out", required=True, metavar="FILE", help="PNG or PDF file to write (printed at 100 %% scale)")
     p.add_argument("--dpi", type=_count, default=300, help="resolution of the image [dots per inch] (default 300)")
+    p = _command(sub, "init", "start your own cell (or a copy of the example recording) in a new folder", """
+  vision-calib init --list
+  vision-calib init my_cell --from ur5e
+  vision-calib init my_cell --urdf my_robot.urdf
+  vision-calib init my_recording --from example""", description=(
+        "Write a self-contained folder from a shipped starting point: DIR/scene.yaml (its entry point), the robot "
+        "file in DIR/robot/ and the target in DIR/target.yaml, each key you edit commented; for the example "
+        "recording, DIR is the recording (process it). With --urdf, your URDF replaces the robot (base and tip "
+        "links guessed and printed; --base-link / --tip-link override)."))
+    p.add_argument("dir", nargs="?", metavar="DIR", help="new folder to write (must not exist, or be empty)")
+    p.add_argument("--from", dest="from_name", metavar="NAME", default=None,
+                   help="starting point (default ur5e): see --list")
+    p.add_argument("--list", action="store_true", help="list the starting points and exit")
+    p.add_argument("--urdf", metavar="FILE", default=None, help="your robot's URDF (copied into DIR/robot/)")
+    p.add_argument("--base-link", default=None, help="with --urdf: the chain's base link (default: the root link)")
+    p.add_argument("--tip-link", default=None,
+                   help="with --urdf: the chain's tip link, the flange (default: the leaf with most movable joints)")
     for p in sub.choices.values():  # the one rule for paths named in files (config.confine): the user's allowance
         p.add_argument("--allow-path", action="append", default=[], metavar="DIR",
                        help="let files (scene, measured-pose, recording, study, ROS-I files) name files in DIR too "
@@ -450,6 +467,19 @@ def _cmd_target(args) -> int:
     return 0
 
 
+def _cmd_init(args) -> int:
+    from .io.init_cell import init_cell, list_starters
+
+    if args.list:
+        print(list_starters())
+        return 0
+    if args.dir is None:
+        raise ConfigError("init: give the new folder DIR (or --list to see the starting points)")
+    res = init_cell(args.dir, args.from_name, urdf=args.urdf, base_link=args.base_link, tip_link=args.tip_link)
+    print("\n".join(res["notes"]))
+    return 0
+
+
 #: subcommand -> function(args) -> exit code
 COMMANDS = {
     "identifiability": _cmd_identifiability,
@@ -465,6 +495,7 @@ COMMANDS = {
     "export-rosi": _cmd_export_rosi,
     "noise": _cmd_noise,
     "target": _cmd_target,
+    "init": _cmd_init,
 }
 
 
@@ -558,6 +589,8 @@ def _inputs(args) -> list:
         return [(args.spec, "file")]
     if c == "target":
         return [(args.target, "file")]
+    if c == "init" and args.urdf:
+        return [(args.urdf, "file")]
     return []
 
 
@@ -574,7 +607,11 @@ def _check_outputs(args) -> None:
 
 def _run_locked(args) -> int:
     from .config import allow_paths
+    from .shipped import shipped_path
 
+    for key in ("scene", "target", "folder", "src", "spec"):  # the README's shipped paths work from any folder
+        if isinstance(getattr(args, key, None), str):
+            setattr(args, key, str(shipped_path(getattr(args, key))))
     _check_outputs(args)
     held = []
     try:

@@ -41,3 +41,16 @@ class MeasurementError(VisionCalibError):
 class MissingExtraError(VisionCalibError, ImportError):
     """An optional dependency is not installed: message names the feature and the extra that installs it
     (e.g. ``pip install 'vision_calib[gpu]'`` for the torch/kornia sensor path)."""
+
+
+def import_extra(module: str, extra: str, feature: str):
+    """``import module`` for ``feature`` (words: what the user asked for), else :class:`MissingExtraError`
+    saying which extra of the package installs it and the pip command. Extras: pyproject.toml."""
+    import importlib
+
+    try:
+        return importlib.import_module(module)
+    except ImportError as exc:
+        raise MissingExtraError(
+            f"{feature} needs {module.split('.')[0]}, which is not installed ({exc}): install the optional extra "
+            f"with `pip install 'vision_calib[{extra}]'` (or 'vision_calib[all]' for every extra)") from exc

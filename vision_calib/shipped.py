@@ -53,3 +53,16 @@ def shipped_tree_of(path: Path, max_up: int = 4) -> Path | None:
         if (folder / MARKER).is_file():
             return folder
     return None
+
+
+def shipped_path(path) -> Path:
+    """``path`` itself when it exists (or is absolute); else the shipped file or folder of the same relative name
+    when there is one (``scenes/x.yaml``, ``targets/x.yaml``, ``examples/x``, or a bare scene file name ``x.yaml``),
+    so that the commands of the README work from any folder; else ``path`` (the caller names it missing)."""
+    path = Path(path)
+    if path.exists() or path.is_absolute():
+        return path
+    for cand in (data_dir() / path, scenes_dir() / path):
+        if cand.exists():
+            return cand
+    return path

@@ -6,40 +6,16 @@ installed, in it and in every process it starts (image workers, fork server). (`
 not do: scipy's array-API helpers look torch up in sys.modules and fail on None.)"""
 
 import json
-import os
-import subprocess
-import sys
-import textwrap
 from pathlib import Path
 
 import pytest
+from blocked_imports import run_blocked
 
 ROOT = Path(__file__).resolve().parents[2]
-BLOCKER = """import sys
-
-
-class _NotInstalled:
-    def find_spec(self, name, path=None, target=None):
-        if name.split(".")[0] in {blocked!r}:
-            raise ModuleNotFoundError(f"No module named {{name!r}} (blocked by the test)", name=name)
-        return None
-
-
-sys.meta_path.insert(0, _NotInstalled())
-"""
-
-
-def _run(tmp_path: Path, code: str, blocked=("torch", "kornia"), timeout=300) -> subprocess.CompletedProcess:
-    site = tmp_path / "site"
-    site.mkdir(exist_ok=True)
-    (site / "sitecustomize.py").write_text(BLOCKER.format(blocked=tuple(blocked)))
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(site), str(ROOT), os.environ.get("PYTHONPATH", "")])}
-    return subprocess.run([sys.executable, "-c", textwrap.dedent(code)], cwd=tmp_path, env=env, capture_output=True,
-                          text=True, timeout=timeout)
 
 
 def test_default_path_runs_without_torch_and_the_device_path_names_the_extra(tmp_path):
-    p = _run(tmp_path, f"""
+    p = run_blocked(tmp_path, f"""
         import json, sys
         import numpy as np
         try:
@@ -78,7 +54,7 @@ def test_default_path_runs_without_torch_and_the_device_path_names_the_extra(tmp
 
 def test_kornia_missing_alone_names_the_extra(tmp_path):
     pytest.importorskip("torch", reason="the torch/kornia sensor path is the optional extra [gpu]")
-    p = _run(tmp_path, """
+    p = run_blocked(tmp_path, """
         import numpy as np, torch
         from vision_calib.camera import CameraIntrinsics
         from vision_calib.errors import MissingExtraError
@@ -96,7 +72,7 @@ def test_kornia_missing_alone_names_the_extra(tmp_path):
 @pytest.mark.slow
 def test_simulate_renders_and_identifies_without_torch(tmp_path):
     """Rendering, the OpenCV sensor path in image workers, measurement and identification: no torch anywhere."""
-    p = _run(tmp_path, f"""
+    p = run_blocked(tmp_path, f"""
         import sys
         from vision_calib.cli import main
         sys.exit(main(["simulate", {str(ROOT / "scenes" / "rx90_eye_in_hand.yaml")!r}, "--poses", "8", "--frames",

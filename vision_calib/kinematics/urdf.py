@@ -2,9 +2,8 @@
 
 Parsing
 -------
-The file is read with the maintained ``yourdfpy`` package (imported lazily, without meshes or
-scene graph: no network, no mesh file is opened) after a strict well-formedness check with the
-standard library's XML parser; our own checks then name the file, link and joint of every problem
+The file is read with the standard library's XML parser (only its kinematic content: no mesh or
+other file named in it is opened, so no path in it leads anywhere); our own checks then name the file, link and joint of every problem
 we can detect on the chain: missing link, a link with two parents, a loop, a tip link not below the
 base link, an unsupported joint type (floating, planar) or a mimic joint on the chain, a
 non-finite origin/axis/limit, a zero axis, a revolute/prismatic joint without ``lower``/``upper``
@@ -60,12 +59,13 @@ import numpy as np
 
 from ..errors import ConfigError, ParameterError
 from ..frames import make_T, so3_exp, so3_right_jacobian
+from ..serialize import write_text_atomic
 from .params import DEFAULT_SCALE, ParameterSet
 from .serial import KNOWN_LEFT, KNOWN_RIGHT, MOUNT_SUFFIXES, JointChainChecks
+from .urdf_file import MOVABLE, read_urdf, set_origin, urdf_xml_text
 
 #: suffixes of the 6 placement parameters of a movable joint, in vector order
 JOINT_SUFFIXES = ("x", "y", "z", "rx", "ry", "rz")
-MOVABLE = ("revolute", "continuous", "prismatic")
 
 
 def _rot_axis(axis, v) -> np.ndarray:
@@ -310,52 +310,14 @@ def arm_parameter_names(n: int) -> list[str]:
 
 
 # ----------------------------------------------------------------------------- reading URDF
-def _read_urdf(path: Path):
-    """yourdfpy.URDF of ``path`` (no meshes, no scene graph) after a strict XML well-formedness check."""
-    import xml.etree.ElementTree as ET
-
-    if not path.is_file():
-        raise ConfigError(f"{path}: URDF file not found")
-    try:
-        root = ET.parse(path).getroot()
-    except ET.ParseError as exc:
-        raise ConfigError(f"{path}: not well-formed XML (line {exc.position[0]}, column {exc.position[1]}): {exc}") from None
-    if root.tag != "robot":
-        raise ConfigError(f"{path}: the root element must be <robot>, got <{root.tag}>")
-    for kind in ("link", "joint"):
-        seen = set()
-        for el in root.findall(kind):
-            nm = el.get("name")
-            if not nm:
-                raise ConfigError(f"{path}: a <{kind}> has no name attribute")
-            if nm in seen:
-                raise ConfigError(f"{path}: {kind} {nm!r} is defined twice")
-            seen.add(nm)
-    import yourdfpy
-
-    try:
-        return yourdfpy.URDF.load(str(path), build_scene_graph=False, build_collision_scene_graph=False,
-                                  load_meshes=False, load_collision_meshes=False)
-    except Exception as exc:  # yourdfpy raises assorted types on bad content; keep its message
-        raise ConfigError(f"{path}: cannot be read as URDF: {type(exc).__name__}: {exc}") from None
-
-
 def _chain_joints(robot, path: Path, base_link: str, tip_link: str) -> list:
-    """URDF joints (yourdfpy Joint objects) from base_link to tip_link, in chain order."""
-    links = {lk.name for lk in robot.links}
+    """URDF joints (:class:`UrdfJoint`) from base_link to tip_link, in chain order."""
+    links = set(robot.links)
     for what, nm in (("base_link", base_link), ("tip_link", tip_link)):
         if nm not in links:
             raise ConfigError(f"{path}: {what} {nm!r} is not a link of robot {robot.name!r} "
                               f"(links: {', '.join(sorted(links))})")
-    parent_of = {}
-    for j in robot.joints:
-        for role, lk in (("parent", j.parent), ("child", j.child)):
-            if lk not in links:
-                raise ConfigError(f"{path}: joint {j.name!r}: {role} link {lk!r} is not defined")
-        if j.child in parent_of:
-            raise ConfigError(f"{path}: link {j.child!r} is the child of two joints ({parent_of[j.child].name!r} and "
-                              f"{j.name!r}): a URDF must be a tree")
-        parent_of[j.child] = j
+    parent_of = {j.child: j for j in robot.joints}  # one parent each: _read_urdf checked the tree
     out, link, seen = [], tip_link, {tip_link}
     while link != base_link:
         if link not in parent_of:
@@ -412,7 +374,7 @@ def load_urdf_robot(path: str | os.PathLike, base_link: str, tip_link: str, left
     link and joint.
     """
     path = Path(path)
-    robot = _read_urdf(path).robot
+    robot = read_urdf(path)
     joints = _chain_joints(robot, path, base_link, tip_link)
     pending = np.eye(4)
     origins, raw, axes, prism, limits, names = [], [], [], [], [], []
@@ -457,13 +419,11 @@ def export_urdf(chain: URDFChain, x, path: str | os.PathLike, source: str | os.P
     src = Path(source or chain.meta.get("file", ""))
     if not str(src) or not src.is_file():
         raise ConfigError(f"export_urdf: source URDF {str(src)!r} not found")
-    urdf = _read_urdf(src)
+    urdf = read_urdf(src)
     new = calibrated_origins(chain, chain._x(x))
-    jmap = {j.name: j for j in urdf.robot.joints}
+    jmap = {el.get("name"): el for el in urdf.tree.getroot().findall("joint")}
     for nm, O in zip(chain.meta["joint_names"], new):
         if nm not in jmap:
             raise ConfigError(f"{src}: joint {nm!r} of chain {chain.name!r} is not in this file")
-        jmap[nm].origin = O
-    path = Path(path)
-    urdf.write_xml_file(str(path))
-    return path
+        set_origin(jmap[nm], O)
+    return write_text_atomic(Path(path), urdf_xml_text(urdf.tree))

@@ -124,8 +124,10 @@ class _GLScene:
                  texture_lod_bias, anisotropy, znear, zfar):
         os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
         os.environ.setdefault("EGL_PLATFORM", "surfaceless")
-        import pyrender
+        from ..errors import import_extra
 
+        pyrender = import_extra("pyrender", "sim", "rendering images of the target (simulate, demo and studies in "
+                                "image mode)")
         from .gl_adapter import GLOffscreen
 
         self.gl = GLOffscreen(s * K.width, s * K.height)

@@ -36,7 +36,7 @@ from numpy.typing import ArrayLike
 from ..camera import CameraIntrinsics
 from ..config import Section, load_yaml, transform_from
 from ..errors import ConfigError, ParameterError
-from ..shipped import scenes_dir
+from ..shipped import scenes_dir, shipped_path
 from ..kinematics.params import ParameterSet
 from .base import NamedConfigurations, NamedTrials, PoseGrids, Setup, pose_grid_names
 from .registry import kind_of_robot_file
@@ -226,9 +226,7 @@ def _truth(sec: Section, setup: Setup, Lf: float, Af: float) -> TruthSettings:
 
 def load_scene(path: str | Path) -> Scene:
     """Load and validate a scene file; ConfigError naming the file and key on bad input."""
-    path = Path(path)
-    if not path.exists() and not path.is_absolute() and (SCENES_DIR / path).exists():
-        path = SCENES_DIR / path
+    path = shipped_path(path)  # a shipped scene by its name (``h4_vision.yaml``, ``scenes/h4_vision.yaml``)
     return scene_from_section(Section(load_yaml(path), path))
 
 

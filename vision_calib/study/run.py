@@ -41,7 +41,10 @@ def _local_worker_init(main_pid: int) -> None:
 
 
 def _execute_dask(spec, todo, scheduler, on_done):
-    from distributed import Client, as_completed
+    from ..errors import import_extra
+
+    distributed = import_extra("distributed", "cluster", "a study on a Dask cluster (--scheduler)")
+    Client, as_completed = distributed.Client, distributed.as_completed
 
     own = not isinstance(scheduler, Client)
     client = Client(scheduler) if own else scheduler
