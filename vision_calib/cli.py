@@ -307,6 +307,7 @@ The pattern is read from the folder's own chessboard-data.txt or apriltag-data.t
         "recording, DIR is the recording (process it). With --urdf, your URDF replaces the robot (base and tip "
         "links guessed and printed; --base-link / --tip-link override)."))
     p.add_argument("dir", nargs="?", metavar="DIR", help="new folder to write (must not exist, or be empty)")
+    p.add_argument("--out", metavar="DIR", default=None, help="the same as DIR")
     p.add_argument("--from", dest="from_name", metavar="NAME", default=None,
                    help="starting point (default ur5e): see --list")
     p.add_argument("--list", action="store_true", help="list the starting points and exit")
@@ -473,9 +474,9 @@ def _cmd_init(args) -> int:
     if args.list:
         print(list_starters())
         return 0
-    if args.dir is None:
-        raise ConfigError("init: give the new folder DIR (or --list to see the starting points)")
-    res = init_cell(args.dir, args.from_name, urdf=args.urdf, base_link=args.base_link, tip_link=args.tip_link)
+    if (args.dir is None) == (args.out is None):
+        raise ConfigError("init: give the new folder, as DIR or --out DIR (or --list to see the starting points)")
+    res = init_cell(args.dir or args.out, args.from_name, urdf=args.urdf, base_link=args.base_link, tip_link=args.tip_link)
     print("\n".join(res["notes"]))
     return 0
 
@@ -557,7 +558,7 @@ def _locks(args) -> list:
 
     locks = []
     out = _out(args)
-    if out is not None:
+    if out is not None and args.command != "init":  # init refuses a folder that is not empty (a lock is a file)
         if args.command in ("target", "calibrate-camera"):  # a file: lock beside it
             locks.append(OutputLock(Path(out).parent, "output file", lock_path=Path(str(out) + ".lock")))
         else:
