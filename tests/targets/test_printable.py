@@ -411,3 +411,27 @@ def test_cli_refusals_are_named(tmp_path, capsys, args, needle):
     err = capsys.readouterr().err
     assert needle in err and "Traceback" not in err
     assert not any(p.suffix in (".pdf", ".svg") for p in tmp_path.iterdir())
+
+
+# ------------------------------------------------------------------------------------------ pieces
+def test_dots_are_circles_other_polygons_stay_polygons(tmp_path):
+    """A kind's dot (a regular area-preserving polygon) is written as the circle of its area; any other polygon
+    (a plugin kind's shape) as a polygon path, read back with its area."""
+    from vision_calib.targets.kinds.circles import dot_ring
+    from vision_calib.targets.sheet import Sheet, as_circle
+    from vision_calib.targets.vector import sheet_pdf, sheet_svg
+
+    assert as_circle(dot_ring(0.005) + [0.1, 0.2]) == pytest.approx((0.1, 0.2, 0.005), abs=1e-12)
+    assert as_circle(np.array([[0, 0], [1, 0], [1, 1], [0, 1]])) is None
+    tri = np.array([[20.0, 20.0], [80.0, 30.0], [40.0, 70.0]])  # area 1400 mm^2
+    sheet = Sheet(100.0, 100.0, np.zeros((0, 4)), np.zeros((0, 3)), (tri,), (), (20, 20, 80, 70), "t")
+    for img, *_ in (read_pdf_raster(sheet_pdf(sheet), 4.0), read_svg_raster(sheet_svg(sheet), 4.0)):
+        assert (255 - img.astype(float)).sum() / 255 / 16 == pytest.approx(1400, rel=1e-3)
+
+
+def test_long_words_are_cut_to_the_line():
+    from vision_calib.targets.sheet import wrap
+
+    lines = wrap("a " + "x" * 400 + " b", 50.0, 2.5)
+    assert "".join(lines).replace(" ", "") == "a" + "x" * 400 + "b"
+    assert all(text_width_mm(ln, 2.5) <= 50.0 for ln in lines)

@@ -60,7 +60,8 @@ def read_png_phys(path) -> tuple[int, int, int, int]:
     return w, h, ppx, ppy
 
 
-def export_printable(spec: TargetSpec, out_path, dpi: float | None = None, paper=None, source: str | None = None) -> Path:
+def export_printable(spec: TargetSpec, out_path, dpi: float | None = None, paper=None,
+                     source: str | None = None) -> Path:
     """Write the target for printing; the format follows the suffix of out_path (.pdf, .svg, .png); atomic write.
 
     ``.pdf`` / ``.svg``: vector drawings (:mod:`.vector`) of the sheet (:func:`.sheet.layout`): the board

@@ -3,8 +3,10 @@ a 100 mm scale bar and how to check the print). numpy only; written out by :mod:
 
 Sheet frame: millimetres, origin at the sheet's top-left corner, x to the right, y down (as the target frame:
 the board is drawn upright, target x along sheet x). With a paper size the board is centred on the sheet,
-portrait or landscape as it fits; without one the sheet is just big enough for the board and the label below it.
-Nothing is drawn closer than :data:`EDGE_MM` to the sheet's edge (printers leave it blank).
+portrait or landscape as it fits, the label below it (or, where there is not room for all of it below, the scale
+bar above and the text below); without one the sheet is just big enough for the board and the label below it.
+Nothing is drawn closer than :data:`EDGE_MM` to the sheet's edge (printers leave it blank) nor inside the board's
+outline (its white margin ``margin_m`` stays clear).
 """
 
 from __future__ import annotations
@@ -76,7 +78,7 @@ class Text:
     text: str
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Sheet:
     """What is printed, in mm in the sheet frame: black axis-aligned rectangles rects (N, 4) (x0, y0, x1, y1),
     black discs circles (M, 3) (cx, cy, r), further black polygons (each (V, 2), non-overlapping), text lines;
@@ -144,9 +146,16 @@ def label_paragraphs(spec, source: str) -> list[str]:
 
 
 def wrap(paragraph: str, width_mm: float, size_mm: float) -> list[str]:
-    """Lines of at most width_mm [mm] in Helvetica of size_mm (a word longer than a line stays whole)."""
-    lines, line = [], ""
-    for word in paragraph.split():
+    """Lines of at most width_mm [mm] in Helvetica of size_mm (a word longer than a line is cut)."""
+    lines, line, words = [], "", paragraph.split()[::-1]
+    while words:
+        word = words.pop()
+        if len(word) > 1 and text_width_mm(word, size_mm) > width_mm:
+            k = 1  # the longest head that fits (at least one character)
+            while k < len(word) - 1 and text_width_mm(word[:k + 1], size_mm) <= width_mm:
+                k += 1
+            words += [word[k:], word[:k]]
+            continue
         cand = f"{line} {word}" if line else word
         if line and text_width_mm(cand, size_mm) > width_mm:
             lines.append(line)
