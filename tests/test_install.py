@@ -107,8 +107,9 @@ def test_wheel_commands_from_any_folder(tmp_path):
     vc("identifiability", "cell/scene.yaml", "--poses", "30")
     vc("simulate", "cell/scene.yaml", "--poses", "12", "--out", "s", "--no-plots", "--frames", "2")
     assert (work / "s" / "calibrated_model.yaml").is_file()
-    vc("target", "targets/charuco_a5.yaml", "--out", "b.png", "--dpi", "50")
-    assert (work / "b.png").stat().st_size > 0
+    vc("target", "targets/charuco_a5.yaml", "--paper", "A4", "--out", "b.pdf")
+    pdf = (work / "b.pdf").read_bytes()
+    assert b"DICT_5X5_100" in pdf and b"/Image" not in pdf
 
 
 #: the modules of the extras [sim], [cluster], [gpu] and of [test]'s URDF reader: none is needed by the core

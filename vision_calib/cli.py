@@ -291,12 +291,20 @@ The pattern is read from the folder's own chessboard-data.txt or apriltag-data.t
     p.add_argument("--allow-symlinks", action="store_true", help="follow symlinks leading out of the folder")
     _add_json(p)
 
-    p = _command(sub, "target", "export a printable target image", """
-  vision-calib target targets/charuco_a5.yaml --out charuco_a5.pdf
+    p = _command(sub, "target", "export a printable target: a sheet with the board, a label and a 100 mm scale bar", """
+  vision-calib target targets/charuco_a5.yaml --paper A4 --out charuco_a5.pdf
+  vision-calib target targets/charuco_a5.yaml --paper 300x200 --out charuco_a5.svg
   vision-calib target targets/charuco_a5.yaml --out charuco_a5.png --dpi 600""")
     p.add_argument("target", help="target YAML (see targets/)")
-    p.add_argument("--out", required=True, metavar="FILE", help="PNG or PDF file to write (printed at 100 %% scale)")
-    p.add_argument("--dpi", type=_count, default=300, help="resolution of the image [dots per inch] (default 300)")
+    p.add_argument("--out", required=True, metavar="FILE",
+                   help="file to write: .pdf or .svg (vectors), .png (pixels); print it at 100 %% scale")
+    p.add_argument("--paper", default=None, metavar="SIZE",
+                   help="sheet: A2..A6, letter, legal or WxH in mm (e.g. 300x200); the board is centred, portrait "
+                        "or landscape as it fits (default: a sheet just big enough for the board and its label; "
+                        "a .png without --paper is the board alone)")
+    p.add_argument("--dpi", type=_count, default=None,
+                   help="resolution of a .png [dots per inch] (default 300); refused for .pdf / .svg")
+
     p = _command(sub, "init", "start your own cell (or a copy of the example recording) in a new folder", """
   vision-calib init --list
   vision-calib init my_cell --from ur5e
@@ -464,7 +472,10 @@ def _cmd_noise(args) -> int:
 def _cmd_target(args) -> int:
     from .targets import export_printable, load_target
 
-    print(f"wrote {export_printable(load_target(args.target), args.out, dpi=args.dpi)}")
+    out = export_printable(load_target(args.target), args.out, dpi=args.dpi, paper=args.paper,
+                           source=Path(args.target).name)
+    print(f"wrote {out}; print it at 100 % (actual size), then measure the 100 mm scale bar and a square"
+          if args.paper is not None or out.suffix.lower() != ".png" else f"wrote {out}")
     return 0
 
 

@@ -5,6 +5,8 @@ Frame and id conventions are written in :mod:`vision_calib.targets.spec`; the ki
 """
 
 from .printable import export_printable, read_png_phys
+from .sheet import PAPERS, Paper, layout, parse_paper
 from .spec import KINDS, TargetSpec, load_target, target_from_dict
 
-__all__ = ["KINDS", "TargetSpec", "export_printable", "load_target", "read_png_phys", "target_from_dict"]
+__all__ = ["KINDS", "PAPERS", "Paper", "TargetSpec", "export_printable", "layout", "load_target", "parse_paper",
+           "read_png_phys", "target_from_dict"]

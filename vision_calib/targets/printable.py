@@ -1,8 +1,9 @@
-"""Printable export of a target: PNG with its physical resolution in the file (pHYs chunk) or a
-one-page PDF of the board's true size. cv2 + numpy + stdlib only.
+"""Printable export of a target: a PDF or SVG sheet drawn as vectors (the board centred on a paper size, a label,
+a 100 mm scale bar; :mod:`.sheet`, :mod:`.vector`), or a PNG with its physical resolution in the file (pHYs chunk).
+cv2 + numpy + stdlib only.
 
-Print at 100 % scale ("actual size", no "fit to page"), then measure a square: the printed size is
-what the calibration uses.
+Print at 100 % scale ("actual size", no "fit to page"), then measure the scale bar and a square: the printed size
+is what the calibration uses.
 """
 
 from __future__ import annotations
@@ -15,7 +16,10 @@ import cv2
 import numpy as np
 
 from ..errors import ConfigError
+from ..serialize import write_bytes_atomic
+from .sheet import layout, parse_paper
 from .spec import TargetSpec
+from .vector import render_sheet, sheet_pdf, sheet_svg
 
 M_PER_INCH = 0.0254
 
@@ -56,56 +60,38 @@ def read_png_phys(path) -> tuple[int, int, int, int]:
     return w, h, ppx, ppy
 
 
-def pdf_bytes(img: np.ndarray, width_m: float, height_m: float) -> bytes:
-    """One-page PDF whose page is width_m x height_m [m] (true size), filled by the uint8 (H, W) image."""
-    H, W = img.shape
-    w_pt = width_m / M_PER_INCH * 72.0
-    h_pt = height_m / M_PER_INCH * 72.0
-    data = zlib.compress(np.ascontiguousarray(img, dtype=np.uint8).tobytes(), 6)
-    content = f"q {w_pt:.4f} 0 0 {h_pt:.4f} 0 0 cm /Im0 Do Q".encode()
-    objs = [
-        b"<< /Type /Catalog /Pages 2 0 R >>",
-        b"<< /Type /Pages /Kids [3 0 R] /Count 1 >>",
-        f"<< /Type /Page /Parent 2 0 R /MediaBox [0 0 {w_pt:.4f} {h_pt:.4f}] "
-        f"/Resources << /XObject << /Im0 4 0 R >> >> /Contents 5 0 R >>".encode(),
-        f"<< /Type /XObject /Subtype /Image /Width {W} /Height {H} /ColorSpace /DeviceGray "
-        f"/BitsPerComponent 8 /Interpolate false /Filter /FlateDecode /Length {len(data)} >>\nstream\n".encode()
-        + data + b"\nendstream",
-        f"<< /Length {len(content)} >>\nstream\n".encode() + content + b"\nendstream",
-    ]
-    out = bytearray(b"%PDF-1.4\n%\xe2\xe3\xcf\xd3\n")
-    offsets = []
-    for i, o in enumerate(objs, start=1):
-        offsets.append(len(out))
-        out += f"{i} 0 obj\n".encode() + o + b"\nendobj\n"
-    xref = len(out)
-    out += f"xref\n0 {len(objs) + 1}\n0000000000 65535 f \n".encode()
-    for off in offsets:
-        out += f"{off:010d} 00000 n \n".encode()
-    out += f"trailer\n<< /Size {len(objs) + 1} /Root 1 0 R >>\nstartxref\n{xref}\n%%EOF\n".encode()
-    return bytes(out)
+def export_printable(spec: TargetSpec, out_path, dpi: float | None = None, paper=None,
+                     source: str | None = None) -> Path:
+    """Write the target for printing; the format follows the suffix of out_path (.pdf, .svg, .png); atomic write.
 
-
-def export_printable(spec: TargetSpec, out_path, dpi: float = 300) -> Path:
-    """Write the board (incl. margin) for printing; the format follows the suffix of out_path.
-
-    ``.png``: pixels at round(dpi / 0.0254) px/m, stored in the pHYs chunk, so
-    width_px / px_per_m = outline width within half a pixel. ``.pdf``: the page is exactly
-    :meth:`TargetSpec.outline_m` (in points, 1/72 inch) and holds the image at ``dpi``.
-    Returns the written path. ConfigError on an unknown suffix or a non-positive dpi.
+    ``.pdf`` / ``.svg``: vector drawings (:mod:`.vector`) of the sheet (:func:`.sheet.layout`): the board
+    centred on ``paper`` (a :class:`~.sheet.Paper` or its text: "A4", "letter", "300x200"; None: a sheet just
+    big enough) with a label naming the target and its sizes, a 100 mm scale bar and how to check the print;
+    ``dpi`` is refused (no resolution). ``.png``: dpi [dots per inch] (default 300) stored in the pHYs chunk as
+    round(dpi / 0.0254) px/m; without paper the board alone (:meth:`TargetSpec.texture`, width_px / px_per_m =
+    outline width within half a pixel), with paper the sheet. source: the target file's name on the label
+    (default: spec.name). Returns the written path. ConfigError on an unknown suffix, a bad dpi or paper, or a
+    board that does not fit the paper.
     """
     out_path = Path(out_path)
+    suffix = out_path.suffix.lower()
+    if suffix not in (".png", ".pdf", ".svg"):
+        raise ConfigError(f"export_printable: {out_path}: suffix must be .pdf, .svg or .png")
+    if dpi is not None and suffix != ".png":
+        raise ConfigError(f"export_printable: dpi ({dpi}) applies to .png only; {out_path.name} is drawn as vectors "
+                          "(no resolution): leave dpi out")
+    dpi = 300 if dpi is None else dpi
     if not (np.isfinite(dpi) and dpi > 0):
         raise ConfigError(f"export_printable: dpi must be > 0, got {dpi}")
-    suffix = out_path.suffix.lower()
-    if suffix not in (".png", ".pdf"):
-        raise ConfigError(f"export_printable: {out_path}: suffix must be .png or .pdf")
+    if isinstance(paper, str):
+        paper = parse_paper(paper)
+    if suffix == ".png" and paper is None:
+        px_per_m = int(round(dpi / M_PER_INCH))
+        return write_bytes_atomic(out_path, png_with_phys(spec.texture(px_per_m), px_per_m))
+    sheet = layout(spec, paper, source)
+    if suffix == ".pdf":
+        return write_bytes_atomic(out_path, sheet_pdf(sheet))
+    if suffix == ".svg":
+        return write_bytes_atomic(out_path, sheet_svg(sheet).encode("utf-8"))
     px_per_m = int(round(dpi / M_PER_INCH))
-    img = spec.texture(px_per_m)
-    out_path.parent.mkdir(parents=True, exist_ok=True)
-    if suffix == ".png":
-        out_path.write_bytes(png_with_phys(img, px_per_m))
-    else:
-        w, h = spec.outline_m()
-        out_path.write_bytes(pdf_bytes(img, w, h))
-    return out_path
+    return write_bytes_atomic(out_path, png_with_phys(render_sheet(sheet, px_per_m / 1000.0), px_per_m))
