@@ -116,6 +116,27 @@ def _add_json(p):
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout instead of the summary")
 
 
+def _tcp(text: str) -> tuple[float, float, float]:
+    """argparse type: a tool point ``x,y,z`` in the flange frame [m]."""
+    try:
+        vals = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        vals = ()
+    if len(vals) != 3 or not all(abs(v) < 10 for v in vals):
+        raise argparse.ArgumentTypeError(f"expected x,y,z of the tool point in the flange frame in metres (|v| < 10), "
+                                         f"got {text!r}")
+    return vals
+
+
+def _add_holdout(p, folds=True):
+    if folds:
+        p.add_argument("--folds", type=_int_at_least(2), default=None,
+                       help="k of the held-out k-fold validation (default 5, fewer with fewer poses)")
+    p.add_argument("--tcp", type=_tcp, default=None, metavar="X,Y,Z",
+                   help="a tool point in the flange frame [m] where the held-out and predicted accuracy are given "
+                        "too (serial arms)")
+
+
 def _add_run_options(p):
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.add_argument("--fix-unidentifiable", action="store_true",
@@ -170,6 +191,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also write the rendered images as a recorded folder (input of `process`)")
     p.add_argument("--workers", type=_count, default=None, help="processes for rendering/measurement (default: cores)")
     _add_run_options(p)
+    _add_holdout(p)
 
     p = _command(sub, "demo", "the default scene end to end (README's main command)", """
   vision-calib demo
@@ -180,6 +202,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.add_argument("--method", choices=["igm", "lse", "ekf"], default=None,
                    help="H4 identification: igm (joint residuals, default), lse (pose residuals), ekf")
+    _add_holdout(p)
     _add_json(p)
 
     p = _command(sub, "process", "measure -> identify -> report on a recorded image folder", """
@@ -196,6 +219,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="calibrate the camera from the recording's images even when recording.yaml gives intrinsics")
     p.add_argument("--camera", default=None, metavar="CAMERA_YAML",
                    help="camera intrinsics from this camera.yaml (calibrate-camera's output) instead of recording.yaml's")
+    _add_holdout(p)
     _add_json(p)
 
     p = _command(sub, "calibrate-camera", "camera intrinsics + distortion from images of a target", """
@@ -217,6 +241,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "identification.method)")
     p.add_argument("--folds", type=_int_at_least(2), default=None,
                    help="k of the held-out validation (default: the file's)")
+    _add_holdout(p, folds=False)
     _add_run_options(p)
     _add_json(p)
 
@@ -380,7 +405,7 @@ def _cmd_simulate(args) -> int:
         n_poses=getattr(args, "poses", None), frames=getattr(args, "frames", None),
         method=getattr(args, "method", None), export_recording=getattr(args, "export_recording", None),
         workers=getattr(args, "workers", None), progress=not args.json, plots=not args.no_plots,
-        fix_unidentifiable=getattr(args, "fix_unidentifiable", False),
+        fix_unidentifiable=getattr(args, "fix_unidentifiable", False), folds=args.folds, tcp=args.tcp,
     )
     return _print_report(args, report)
 
@@ -398,7 +423,7 @@ def _cmd_process(args) -> int:
     report = process_folder(args.folder, out_dir=args.out, method=args.method, progress=not args.json,
                             plots=not args.no_plots, fix_unidentifiable=args.fix_unidentifiable,
                             allow_symlinks=args.allow_symlinks, refine_intrinsics=args.refine_intrinsics,
-                            camera_file=args.camera)
+                            camera_file=args.camera, folds=args.folds, tcp=args.tcp)
     return _print_report(args, report)
 
 
@@ -419,7 +444,7 @@ def _cmd_process_poses(args) -> int:
     from .experiment.poses import process_poses
 
     report = process_poses(args.file, out_dir=args.out, method=args.method, folds=args.folds,
-                           plots=not args.no_plots, fix_unidentifiable=args.fix_unidentifiable)
+                           plots=not args.no_plots, fix_unidentifiable=args.fix_unidentifiable, tcp=args.tcp)
     return _print_report(args, report)
 
 

@@ -138,7 +138,7 @@ def test_kfold_held_out_residuals_drop(tmp_path, truths):
     p = write_measured_poses(tmp_path / "k.yaml", RX90, _ids(len(q)), q, T, "T_cam_target",
                              default_sigma=(ST, SR), folds=4, seed=3)
     rep = process_poses(p, tmp_path / "out", plots=False)
-    kf = rep["kfold"]
+    kf = rep["holdout"]
     assert kf["folds"] == 4 and sum(f["n_test"] for f in kf["per_fold"]) == len(q)
     n_free = sum(r["free"] for r in rep["parameters"])
     for f in kf["per_fold"] + [kf["overall"]]:
@@ -149,7 +149,7 @@ def test_kfold_held_out_residuals_drop(tmp_path, truths):
     assert not rep["outliers"] and kf["without_outliers"] is None and kf["overall"]["n_poses"] == len(q)
     assert f"all {len(q)} poses (none flagged as an outlier)" in rep["summary_text"]
     on_disk = json.loads((tmp_path / "out" / "report.json").read_text())
-    assert on_disk["kind"] == "process_poses" and on_disk["kfold"]["overall"] == kf["overall"]
+    assert on_disk["kind"] == "process_poses" and on_disk["holdout"]["overall"] == kf["overall"]
 
 
 def test_cli_process_poses_end_to_end(tmp_path, truths, capsys):
@@ -260,7 +260,7 @@ def test_kfold_holds_out_every_pose_planted_outliers_labelled(tmp_path, truths):
     rep = process_poses(p, tmp_path / "out", plots=False)
     planted = [_ids(n)[k] for k in bad]
     assert sorted(o["pose_id"] for o in rep["outliers"]) == planted
-    kf = rep["kfold"]
+    kf = rep["holdout"]
     o, c = kf["overall"], kf["without_outliers"]
     assert sorted(kf["outliers"]) == planted and c["excluded"] == planted
     assert o["n_poses"] == n and sum(f["n_test"] for f in kf["per_fold"]) == n
@@ -288,11 +288,12 @@ def test_kfold_holds_out_every_pose_planted_outliers_labelled(tmp_path, truths):
 
 
 def test_kfold_validation_rejects_unknown_outlier_labels(truths):
-    from vision_calib.experiment.poses import kfold_validation
+    from vision_calib.experiment.holdout import holdout_validation
+    from vision_calib.experiment.steps import analyze_setup
 
     scene, x_true = truths[RX90]
     q, T = _data(scene, x_true, seed=13, n=12)
     setup = scene.setup
     meas = setup.synthetic_measurements(q, x_true, np.random.default_rng(0), ST, SR)
     with pytest.raises(ValueError, match="p999"):
-        kfold_validation(setup, meas, "lse", "pose", None, 3, 0, outliers=["p999"])
+        holdout_validation(setup, meas, "lse", "pose", analyze_setup(setup, q), 3, 0, outliers=["p999"])

@@ -127,6 +127,6 @@ def test_pose_with_a_wrong_joint_reading_rejected_and_named(tmp_path, rx90):
     assert [r["pose_id"] for r in rep["motion_check"]["inconsistent_poses"]] == ["p003"]
     assert [o["pose_id"] for o in rep["outliers"]] == ["p003"] and rep["verdict"]["n_rejected_poses"] == 1
     assert "does not follow its joints" in rep["outliers"][0]["reason"]
-    kf = rep["kfold"]
+    kf = rep["holdout"]
     assert kf["overall"]["n_poses"] == N and kf["without_outliers"]["excluded"] == ["p003"]
     assert rep["verdict"]["status"] == "ok"

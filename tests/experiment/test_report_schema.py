@@ -47,7 +47,7 @@ def test_report_of_a_real_run_validates(reports, validator, name, kind):
     errors = [f"{'/'.join(map(str, e.absolute_path))}: {e.message[:200]}" for e in validator.iter_errors(rep)]
     assert not errors, errors
     # the blocks the kind-specific rules require are there (the if/then of the schema took effect)
-    want = {"simulation": "accuracy", "process": "intrinsics", "process_handeye": "handeye", "process_poses": "kfold"}
+    want = {"simulation": "accuracy", "process": "intrinsics", "process_handeye": "handeye", "process_poses": "holdout"}
     assert rep[want[kind]] is not None
 
 

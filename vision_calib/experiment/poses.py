@@ -2,127 +2,21 @@
 measured poses (or positions) from a file (:mod:`vision_calib.io.measured_poses`) -> identifiability
 -> identification -> k-fold held-out validation -> report.json, calibrated_model.yaml, plots.
 
-Held-out validation: the poses are split into k folds (seeded permutation); for each fold the SAME
-base parameter set as the whole-data identification (its identifiability analysis) is identified on
-the other folds, and the residuals (measured - model) of the held-out poses are compared under the
-nominal parameters ("before") and the fold's identified ones ("after"). Residuals are those of the
-setup's problem: errors of the chain's measured transform (eye-in-hand: T_target_cam; fixed camera:
-T_cam_target) in its reference frame, so they include the measurement noise.
+Held-out validation and the decision that can fail the verdict: :mod:`vision_calib.experiment.holdout`.
 """
 
 from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Sequence
-
-import numpy as np
 
 from ..errors import ConfigError, DataError
-from ..identify.identifiability import IdentifiabilityReport
 from ..io.measured_poses import chain_direction, misreadings, read_measured_poses
 from ..io.report import build_report, parameters_table, residual_stats, write_report
-from ..rig import Measurements, Setup
 from .checks import drop_inconsistent, duplicate_poses, motion_verdict
 from .gross import gross_failure
+from .holdout import holdout_failure, holdout_lines, holdout_validation
 from .steps import check_method, identify_measurements
-
-
-def _stats(r: np.ndarray) -> dict:
-    """n_poses and mean / RMS / max of the position [mm] (and rotation [deg] for 6-component) residual norms
-    of r (N, m) SI, one norm per pose."""
-    dp = np.linalg.norm(r[:, :3], axis=1) * 1e3
-    out = {"n_poses": int(len(r)), "position_mean_mm": float(dp.mean()),
-           "position_rms_mm": float(np.sqrt(np.mean(dp**2))), "position_max_mm": float(dp.max())}
-    if r.shape[1] == 6:
-        dr = np.degrees(np.linalg.norm(r[:, 3:], axis=1))
-        out |= {"rotation_mean_deg": float(dr.mean()), "rotation_rms_deg": float(np.sqrt(np.mean(dr**2))),
-                "rotation_max_deg": float(dr.max())}
-    return out
-
-
-def fold_indices(n: int, folds: int, seed: int) -> list[np.ndarray]:
-    """k sorted index arrays partitioning range(n) (seeded permutation, sizes differing by at most 1)."""
-    perm = np.random.default_rng(int(seed)).permutation(n)
-    return [np.sort(p) for p in np.array_split(perm, folds)]
-
-
-def kfold_validation(setup: Setup, meas: Measurements, method: str, residual: str,
-                     analysis: IdentifiabilityReport | None, folds: int, seed: int,
-                     outliers: Sequence[tuple[str, str]] = ()) -> dict:
-    """Held-out residuals before (nominal) / after (identified on the other folds with the base parameter
-    set of ``analysis``, the whole data's IdentifiabilityReport) of EVERY pose of ``meas``, per fold and
-    overall. ``outliers``: labels of the poses the whole-data fit flagged; they are left out of every
-    training set but still held out and predicted in their own fold, so ``overall`` counts all poses and
-    ``without_outliers`` (None when there is none) the others.
-    {folds, seed, residual_of, outliers: [label], per_fold: [{fold, n_train, n_test, n_outliers_held_out,
-    converged, n_identified, before, after}], overall: {n_poses, before, after},
-    without_outliers: {n_poses, excluded: [label], before, after} | None}; before/after: :func:`_stats`."""
-    labels = list(meas.labels) or list(range(len(meas.T_cam_target)))
-    flagged = set(outliers)
-    unknown = flagged - set(labels)
-    if unknown:
-        raise ValueError(f"k-fold validation: outliers {sorted(map(str, unknown))} are not poses of the data")
-    base = setup.params.mask(analysis.base_parameters)
-    params = setup.params.only_free([nm for nm, b in zip(setup.params.names, base) if b])
-    per_fold, rb_all, ra_all, test_all = [], [], [], []
-    parts = fold_indices(len(labels), folds, seed)
-    for k, test in enumerate(parts):
-        train = np.array([i for j, p in enumerate(parts) if j != k for i in p if labels[i] not in flagged], int)
-        train.sort()
-        result = identify_measurements(setup, meas.subset(train), method, residual, analysis, robust=False,
-                                       context=f"k-fold validation, fold {k + 1} of {folds}", cross_check=False).result
-        held = setup.problem(meas.subset(test), residual, params=params)
-        rb, ra = held.residual(params.nominal), held.residual(result.identified)
-        rb_all.append(rb)
-        ra_all.append(ra)
-        test_all.append(test)
-        per_fold.append({"fold": k + 1, "n_train": int(len(train)), "n_test": int(len(test)),
-                         "n_outliers_held_out": int(sum(labels[i] in flagged for i in test)),
-                         "converged": bool(result.converged),
-                         "n_identified": int(np.sum(result.free)), "before": _stats(rb), "after": _stats(ra)})
-    rb, ra, idx = np.concatenate(rb_all), np.concatenate(ra_all), np.concatenate(test_all)
-    overall = {"n_poses": int(len(idx)), "before": _stats(rb), "after": _stats(ra)}
-    clean = None
-    if flagged:
-        keep = np.array([labels[i] not in flagged for i in idx])
-        clean = {"n_poses": int(keep.sum()), "excluded": [labels[i] for i in sorted(idx[~keep])],
-                 "before": _stats(rb[keep]), "after": _stats(ra[keep])}
-    return {"folds": int(folds), "seed": int(seed), "residual_of": chain_direction(setup),
-            "outliers": [lab for lab in labels if lab in flagged], "per_fold": per_fold, "overall": overall,
-            "without_outliers": clean}
-
-
-def _fmt(b: dict, a: dict) -> str:
-    """'position mean b -> a, RMS b -> a, max b -> a mm; rotation ... deg' (before -> after)."""
-
-    def one(key, unit, nd):
-        return (f"{key} mean {b[key + '_mean_' + unit]:.{nd}f} -> {a[key + '_mean_' + unit]:.{nd}f}, "
-                f"RMS {b[key + '_rms_' + unit]:.{nd}f} -> {a[key + '_rms_' + unit]:.{nd}f}, "
-                f"max {b[key + '_max_' + unit]:.{nd}f} -> {a[key + '_max_' + unit]:.{nd}f} {unit}")
-
-    s = one("position", "mm", 3)
-    return s + ("; " + one("rotation", "deg", 4) if "rotation_rms_deg" in b else "")
-
-
-def kfold_lines(kf: dict) -> list[str]:
-    """Summary lines of :func:`kfold_validation`: held-out mean / RMS / max before -> after over all poses,
-    then without the flagged outliers (naming them), then per fold."""
-    o, c, out = kf["overall"], kf.get("without_outliers"), kf.get("outliers") or []
-    names = ", ".join(map(str, out[:10])) + (", ..." if len(out) > 10 else "")
-    lines = [f"held-out {kf['folds']}-fold validation (seed {kf['seed']}, residuals of {kf['residual_of']}"
-             + (f"; the {len(out)} flagged outlier poses are in no training set" if out else "") + "):",
-             f"  all {o['n_poses']} poses" + (f" (the {len(out)} flagged outliers included)" if out else
-                                              " (none flagged as an outlier)") + ": " + _fmt(o["before"], o["after"])]
-    if c:
-        lines.append(f"  without the {len(c['excluded'])} flagged outliers ({names}), {c['n_poses']} poses: "
-                     + _fmt(c["before"], c["after"]))
-    lines += [f"  fold {f['fold']} ({f['n_test']} poses held out"
-              + (f", {f['n_outliers_held_out']} flagged outlier{'s' if f['n_outliers_held_out'] > 1 else ''}"
-                 if f.get("n_outliers_held_out") else "")
-              + "): " + _fmt(f["before"], f["after"]) + ("" if f["converged"] else " NOT CONVERGED")
-              for f in kf["per_fold"]]
-    return lines
 
 
 #: what sets the length scale of a measured-pose file (named by the motion check's scale refusal)
@@ -154,9 +48,11 @@ def screen_motions(setup, mp):
 
 
 def process_poses(path: str | Path, out_dir: str | Path | None, method: str | None = None, folds: int | None = None,
-                  plots: bool = True, fix_unidentifiable: bool = False) -> dict:
+                  plots: bool = True, fix_unidentifiable: bool = False, tcp=None) -> dict:
     """Identify a robot from a measured-pose file (YAML + CSV); writes DIR/report.json, summary.txt,
-    calibrated_model.yaml (+ plots). folds: k of the held-out validation (default: the file's)."""
+    calibrated_model.yaml (+ plots). folds: k of the held-out validation (default: the file's); tcp: a tool
+    point (x, y, z) in the flange frame [m] where the held-out and predicted accuracy are also given
+    (:mod:`vision_calib.experiment.holdout`, whose decision can fail the verdict: no calibrated model)."""
     t0 = time.perf_counter()
     mp = read_measured_poses(path)
     scene, setup, meas = mp.scene, mp.scene.setup, mp.measurements
@@ -175,8 +71,10 @@ def process_poses(path: str | Path, out_dir: str | Path | None, method: str | No
                             untested=f"a wrong robot file or scene mounts ({scene.path}), joint columns in another "
                                      "order, joint or length units (checked up front only for gross factors)",
                             motion_refusal=refusal, motion_check=check)
-    kf = None if failure else kfold_validation(setup, meas, method, mp.residual, rep, folds, mp.seed,
-                                               outliers=[r[0] for r in ident.rejected])
+    hold = None if failure else holdout_validation(
+        mp.scene.setup, meas, method, residual, rep, folds, mp.seed, outliers=[r[0] for r in ident.rejected],
+        tcp=tcp, result=result, fitted_setup=setup)
+    failure = failure or holdout_failure(hold)
     ps = setup.params
     n = len(mp.ids)
     report = build_report(
@@ -190,12 +88,11 @@ def process_poses(path: str | Path, out_dir: str | Path | None, method: str | No
                       "noise": mp.sigma_source, "pose_ids": list(mp.ids)},
         identifiability=rep, parameters=parameters_table(ps.names, ps.nominal, None, result, ps.kinds), result=result,
         identified=ident, warnings=duplicate_poses(meas), motion=motion,
-        residuals=residual_stats(result.residuals, problem.residual_kind), extra={"kfold": kf},
+        residuals=residual_stats(result.residuals, problem.residual_kind), extra={"holdout": hold},
         timings={"identify": t_id, "total": time.perf_counter() - t0}, failure=failure)
-    report["summary_text"] += "\n" + ("\n".join(kfold_lines(kf)) if kf else
-                                      "held-out validation skipped: the fit failed (see the verdict)")
+    report["summary_text"] += "\n" + "\n".join(holdout_lines(hold))
     write_report(Path(out_dir), report, setup, result, problem, plots=plots)
     return report
 
 
-__all__ = ["process_poses", "kfold_validation", "fold_indices", "kfold_lines"]
+__all__ = ["process_poses"]

@@ -24,6 +24,7 @@ from ..io.report import (REPORT_VERSION, build_report, measurements_block, param
 from ..rig import Measurements, load_scene
 from .checks import duplicate_poses, screen_measurements
 from .gross import gross_failure
+from .holdout import holdout_failure, holdout_lines, holdout_validation
 from .steps import check_method, identify_measurements, rejection_summary
 
 if TYPE_CHECKING:  # the measure package is imported where poses are measured
@@ -79,11 +80,14 @@ def _recording_setup(rec):
 
 def process_folder(folder: str | Path, out_dir: str | Path | None, method: str | None = None, progress: bool = False,
                    plots: bool = True, fix_unidentifiable: bool = False, allow_symlinks: bool = False,
-                   refine_intrinsics: bool = False, camera_file: str | Path | None = None) -> dict:
+                   refine_intrinsics: bool = False, camera_file: str | Path | None = None, folds: int | None = None,
+                   tcp=None) -> dict:
     """Process a recorded folder; writes DIR/measurements.json, DIR/report.json (+ plots, model).
     refine_intrinsics: calibrate the camera from the recording's images even when recording.yaml gives
     intrinsics (always done when it gives none); camera_file: a camera.yaml (``calibrate-camera``) used
-    instead of recording.yaml's intrinsics; the report's ``intrinsics`` block says which were used."""
+    instead of recording.yaml's intrinsics; the report's ``intrinsics`` block says which were used. folds / tcp:
+    the held-out validation's k and tool point (x, y, z in the flange frame, m), :mod:`.holdout`: its decision
+    can fail the verdict (no calibrated model)."""
     from .camera_step import SOURCE_CAMERA_FILE, fitted_camera, intrinsics_response, intrinsics_sensitivity, recording_intrinsics, remeasure
 
     t0 = time.perf_counter()
@@ -93,6 +97,7 @@ def process_folder(folder: str | Path, out_dir: str | Path | None, method: str |
     if rec.camera_file is not None and intr["source"] == f"{SOURCE_CAMERA_FILE} {rec.camera_file}":
         intr = {**intr, "source": f"{SOURCE_CAMERA_FILE} {relative_ref(rec.camera_file, out)}"}  # relative to report.json
     scene, setup = _recording_setup(rec) if rec.pose_kind != "flange_pose" else (None, None)
+    nominal = setup
     method = None if scene is None else check_method(setup, method or scene.identification.method, "--method")
     dets = {}
     pms = measure_recording(rec, progress, dets)
@@ -123,6 +128,10 @@ def process_folder(folder: str | Path, out_dir: str | Path | None, method: str |
     failure = gross_failure(setup, meas, ident, residual, where,
                             untested=f"a wrong robot file or scene mounts ({scene.path}), joint columns in another "
                                      "order, the target's or camera's description in recording.yaml")
+    hold = None if failure else holdout_validation(nominal, meas, method, residual, rep, folds, 0,
+                                                   outliers=[r[0] for r in ident.rejected], tcp=tcp, result=result,
+                                                   fitted_setup=setup)
+    failure = failure or holdout_failure(hold)
     cam_fit = None
     if ident.nuisance is not None:
         cam_fit = fitted_camera(rec.camera, used, ident.nuisance["coefficients"])
@@ -150,9 +159,9 @@ def process_folder(folder: str | Path, out_dir: str | Path | None, method: str |
         motion=motion,
         residuals=residual_stats(result.residuals, problem.residual_kind),
         extra={"intrinsics": intr, "intrinsics_sensitivity": sens,
-               "reprojection": reproj},
+               "reprojection": reproj, "holdout": hold},
         timings={"measure": t_meas, "identify": t_id, "total": time.perf_counter() - t0}, failure=failure)
-    report["summary_text"] += points_line(report.get("reprojection"))
+    report["summary_text"] += points_line(report.get("reprojection")) + "\n" + "\n".join(holdout_lines(hold))
     write_report(out, report, setup, result, problem, plots=plots,
                  overlays=_overlay_source(rec, dets, setup if report["verdict"].get("usable") else None,
                                           result) if plots else None)

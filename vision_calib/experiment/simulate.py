@@ -26,6 +26,7 @@ from ..io.report import REPORT_VERSION, build_report, measurements_block, parame
 from ..rig import Measurements, Scene, SCENES_DIR, load_scene, scene_poses
 from .image_chain import ImageChain, ImagePool, InlineImagePool, measure_poses, start_fork_server
 from .checks import screen_measurements
+from .holdout import holdout_failure, holdout_lines, holdout_validation
 from .steps import (check_method, identify_measurements, rejection_summary, rngs, run_analysis_and_truth,
                     shared_truth, unmodelled_truth)
 from .synthetic import run_synthetic
@@ -200,17 +201,34 @@ def _intrinsics_sensitivity(scene, ident, meas) -> dict:
     return intrinsics_sensitivity(ident, meas, cam, again, given_std=None)
 
 
+def truth_failure(evals: dict) -> dict | None:
+    """The report's ``failure`` when the calibrated model is worse than the nominal one against the truth on the
+    validation poses (position or rotation RMS; simulation only: the truth is known), else None."""
+    b, a = evals["before"].to_dict(), evals["after"].to_dict()
+    worse = [f"{q} RMS {b[k]:.4g} -> {a[k]:.4g} {u}" for q, k, u in (("position", "position_rms_mm", "mm"),
+                                                                       ("rotation", "rotation_rms_deg", "deg"))
+             if k in b and k in a and np.isfinite(a[k]) and a[k] > b[k]]
+    if not worse:
+        return None
+    return {"kind": "validation against the truth",
+            "message": "no calibrated model written: on the validation poses the calibrated model is further from "
+                       "the true robot than the nominal one (" + "; ".join(worse) + ")"}
+
+
 def run_simulation(scene: Scene | str | Path, out_dir: str | Path | None = None, seed: int | None = None,
                    n_poses: int | None = None, frames: int | None = None, method: str | None = None,
                    export_recording: str | Path | None = None, workers: int | None = None, progress: bool = False,
                    overrides: dict | None = None, plots: bool = True, pool: ImagePool | InlineImagePool | None = None,
-                   fix_unidentifiable: bool = False, reference: bool = True) -> dict:
+                   fix_unidentifiable: bool = False, reference: bool = True, folds: int | None = None,
+                   tcp=None) -> dict:
     """The whole simulated experiment; writes ``out_dir/report.json`` (+ plots, calibrated model)
     when out_dir is given and returns the report dict (with ``summary_text``). pool: an image pool to reuse
     (``image_chain.ImagePool``, or ``InlineImagePool``: the chain in this thread, the validation poses measured
     after the identification instead of beside it; same numbers), else one is started for this run (and shared by
     the identification and validation poses). reference: add the report's ``synthetic_reference`` (5 more
-    identifications; a study, which does not record it, leaves it out)."""
+    identifications; a study, which does not record it, leaves it out). folds / tcp: the held-out validation
+    (:mod:`.holdout`; its decision, and a validation against the truth worse than the nominal model, fail the
+    verdict: no calibrated model)."""
     t_start = time.perf_counter()
     if pool is None:
         start_fork_server()  # its imports overlap with the preparation below (no-op if started already)
@@ -269,6 +287,10 @@ def run_simulation(scene: Scene | str | Path, out_dir: str | Path | None = None,
         result, problem, setup = ident.result, ident.problem, ident.setup  # setup: after prepare_setup (H4 axis)
         sens = _intrinsics_sensitivity(scene, ident, meas_used)
         timings["identify"] = time.perf_counter() - t
+        t = time.perf_counter()
+        hold = holdout_validation(scene.setup, meas_used, method, residual, ident.analysis, folds, seed,
+                                  outliers=[r[0] for r in ident.rejected], tcp=tcp, result=result, fitted_setup=setup)
+        timings["holdout"] = time.perf_counter() - t
         if val_job is not None:
             val_meas, val_idx, val_pms, T_val = val_job.result()
         elif measured_validation:  # inline pool: the same measurements, after the identification
@@ -320,7 +342,9 @@ def run_simulation(scene: Scene | str | Path, out_dir: str | Path | None = None,
                   "effects": scene.effects.to_dict(), "validation_poses": int(len(validation))},
         measurements=mblock, identifiability=ident.analysis, parameters=parameters_table(
             ps.names, ps.nominal, shared_truth(setup, truth or scene.setup, x_true), result, ps.kinds),
-        result=result, identified=ident, motion=motion, accuracy=evals, timings=timings, extra=extra)
+        result=result, identified=ident, motion=motion, accuracy=evals, timings=timings,
+        extra={**extra, "holdout": hold}, failure=holdout_failure(hold) or truth_failure(evals))
+    report["summary_text"] += "\n" + "\n".join(holdout_lines(hold))
     if out_dir is not None:
         preloading.join()
         write_report(out_dir, report, setup, result, problem, evals, plots=plots,

@@ -1,0 +1,318 @@
+"""Held-out accuracy of every identification (``process``, ``simulate``, ``process-poses``) and the decision that
+protects the robot: no calibrated model that does not predict held-out poses better than the nominal one.
+
+k-fold over poses (seeded permutation; default :data:`DEFAULT_FOLDS`): for each fold the SAME base parameter set
+as the whole-data identification is identified on the other folds (the poses the whole-data fit flagged as
+outliers are in no training set, but are predicted in their own fold), and each held-out pose is predicted by the
+nominal model ("before") and by its fold's model ("after"). Errors are those of the chain's measured transform
+(eye-in-hand: T_target_cam; fixed camera / H4: T_cam_target) in its reference frame, always as a pose (or
+position) residual whatever residual the identification used: at the measured frame's origin ("target") and, with
+``tcp`` (x, y, z in the flange frame, m), at that tool point. They include the measurement noise.
+
+Per set: mean / RMS / 95th percentile / max of the position [mm] and rotation [deg] error norms, one per pose.
+The change of RMS (after - before) has a 95 % interval from a paired bootstrap over the poses (flagged outliers
+left out). Beside them the *predicted* accuracy of the whole-data model: the parameter covariance propagated to
+each measured pose's target origin and tool point (median and 95th percentile of the position std norm [mm]), and
+the predicted held-out RMS (fold covariance k/(k-1) x the whole-data one, plus the measurement covariance) with
+the ratio observed / predicted (about 1 when the reported std are right).
+
+Decision (``decision.ok`` False -> the verdict fails, exit 3, no calibrated model): a fold whose training poses
+cannot be identified (an identification error, not converged, or fewer equations than parameters); a held-out
+RMS (position or rotation) significantly worse after than before (the interval above 0); or neither
+significantly better (both intervals reaching 0).
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from ..errors import VisionCalibError
+from ..identify.identifiability import IdentifiabilityReport
+from ..rig import Measurements, Setup
+
+#: default number of folds (fewer when there are fewer poses)
+DEFAULT_FOLDS = 5
+#: bootstrap draws of the RMS change's interval, and its level
+BOOTSTRAP_DRAWS = 2000
+INTERVAL_LEVEL = 0.95
+#: relative step of the central differences of the tool point w.r.t. the parameters (scaled by the kind's scale)
+FD_STEP = 1e-4
+
+
+def fold_indices(n: int, folds: int, seed: int) -> list[np.ndarray]:
+    """k sorted index arrays partitioning range(n) (seeded permutation, sizes differing by at most 1)."""
+    perm = np.random.default_rng(int(seed)).permutation(n)
+    return [np.sort(p) for p in np.array_split(perm, folds)]
+
+
+def error_stats(dp_mm: np.ndarray, dr_deg: np.ndarray | None) -> dict:
+    """n_poses and mean / RMS / p95 / max of per-pose position [mm] (and rotation [deg]) error norms."""
+    def block(v, key, unit):
+        return {f"{key}_mean_{unit}": float(np.mean(v)), f"{key}_rms_{unit}": float(np.sqrt(np.mean(v**2))),
+                f"{key}_p95_{unit}": float(np.percentile(v, 95)), f"{key}_max_{unit}": float(np.max(v))}
+
+    out = {"n_poses": int(len(dp_mm)), **block(dp_mm, "position", "mm")}
+    if dr_deg is not None:
+        out |= block(dr_deg, "rotation", "deg")
+    return out
+
+
+def _chain_T(setup: Setup, poses, x) -> np.ndarray:
+    """(N, 4, 4) the chain's measured transform (T_target_cam eye-in-hand, else T_cam_target) at x."""
+    T = setup.T_cam_target(poses, x)
+    return np.linalg.inv(T) if getattr(setup, "mount", None) == "eye_in_hand" else T
+
+
+def _tool_in_right(setup: Setup, x, tcp) -> np.ndarray | None:
+    """The tool point (flange frame) in the chain's right frame (camera eye-in-hand, target fixed), (4,)."""
+    chain = getattr(setup, "chain", None)
+    if tcp is None or chain is None or not hasattr(chain, "nominal_transforms"):
+        return None
+    _, T_flange_right = chain.nominal_transforms(x)
+    return np.linalg.solve(T_flange_right, np.r_[np.asarray(tcp, float), 1.0])
+
+
+def tool_point_supported(setup: Setup) -> bool:
+    """Whether ``tcp`` (a point of the flange frame) has a meaning for this setup (a serial chain's flange)."""
+    return _tool_in_right(setup, setup.params.nominal, (0.0, 0.0, 0.0)) is not None
+
+
+def _tool_errors_mm(setup_model: Setup, meas: Measurements, idx, x, tcp) -> np.ndarray | None:
+    """(k,) position error norms [mm] at the tool point: measured chain transform vs the model's, both carrying
+    the tool point through the model's right mount at x."""
+    p = _tool_in_right(setup_model, x, tcp)
+    if p is None:
+        return None
+    sub = meas.subset(idx)
+    T_meas = sub.T_cam_target if getattr(setup_model, "mount", None) != "eye_in_hand" else np.linalg.inv(sub.T_cam_target)
+    T_mod = _chain_T(setup_model, sub.poses, x)
+    return np.linalg.norm((T_meas @ p)[:, :3] - (T_mod @ p)[:, :3], axis=1) * 1e3
+
+
+def _eval_kind(setup: Setup) -> str:
+    return "pose" if "pose" in setup.residuals else "position"
+
+
+def _norms(r: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    dp = np.linalg.norm(r[:, :3], axis=1) * 1e3
+    return dp, (np.degrees(np.linalg.norm(r[:, 3:6], axis=1)) if r.shape[1] >= 6 else None)
+
+
+def _interval(before: np.ndarray, after: np.ndarray, rng: np.random.Generator) -> list[float]:
+    """95 % paired-bootstrap interval of RMS(after) - RMS(before) over the poses (same unit as the inputs)."""
+    n = len(before)
+    idx = rng.integers(0, n, size=(BOOTSTRAP_DRAWS, n))
+    d = np.sqrt(np.mean(after[idx] ** 2, axis=1)) - np.sqrt(np.mean(before[idx] ** 2, axis=1))
+    a = (1 - INTERVAL_LEVEL) / 2
+    return [float(np.quantile(d, a)), float(np.quantile(d, 1 - a))]
+
+
+def predicted_accuracy(setup: Setup, meas: Measurements, x, free_names: Sequence[str], cov: np.ndarray,
+                       tcp=None) -> dict:
+    """The parameter covariance ``cov`` (n_free, n_free, of ``free_names``) propagated to every measured pose:
+    position std norm [mm] of the chain transform's origin ("target") and of the tool point, median and 95th
+    percentile; with ``per_pose`` position variances [m^2] (for the held-out prediction)."""
+    ps = setup.params
+    cols = [ps.names.index(n) for n in free_names]
+    x = np.asarray(x, float)
+    scale = np.asarray(getattr(ps, "scale", np.ones(len(ps.names))), float)
+    p_tool = _tool_in_right(setup, x, tcp)
+    pts = [np.array([0.0, 0.0, 0.0, 1.0])] + ([p_tool] if p_tool is not None else [])
+    J = np.zeros((len(pts), len(meas.poses), 3, len(cols)))
+    for k, c in enumerate(cols):
+        h = FD_STEP * (scale[c] if np.isfinite(scale[c]) and scale[c] > 0 else 1.0)
+        xp, xm = x.copy(), x.copy()
+        xp[c] += h
+        xm[c] -= h
+        Tp, Tm = _chain_T(setup, meas.poses, xp), _chain_T(setup, meas.poses, xm)
+        for i, p in enumerate(pts):
+            pp = p if i == 0 else _tool_in_right(setup, xp, tcp)
+            pm = p if i == 0 else _tool_in_right(setup, xm, tcp)
+            J[i, :, :, k] = ((Tp @ pp)[:, :3] - (Tm @ pm)[:, :3]) / (2 * h)
+    var = np.einsum("tnik,kl,tnil->tn", J, cov, J)  # trace of J cov J^T per point and pose [m^2]
+    out = {"workspace": f"the {len(meas.poses)} measured poses"}
+    for i, name in enumerate(("target", "tool")[: len(pts)]):
+        s = np.sqrt(np.maximum(var[i], 0.0)) * 1e3
+        out[name] = {"position_median_mm": float(np.median(s)), "position_p95_mm": float(np.percentile(s, 95)),
+                     "position_max_mm": float(np.max(s))}
+    out["per_pose_var_m2"] = var[0]
+    return out
+
+
+def holdout_validation(setup: Setup, meas: Measurements, method: str, residual: str | None,
+                       analysis: IdentifiabilityReport, folds: int | None, seed: int, outliers: Sequence[str] = (),
+                       tcp=None, result=None, fitted_setup: Setup | None = None) -> dict:
+    """k-fold held-out accuracy of ``meas`` (module docstring). ``setup``: the nominal setup ("before");
+    ``analysis``: the whole data's IdentifiabilityReport (its base parameters are identified in every fold);
+    ``outliers``: labels the whole-data fit flagged; ``result`` / ``fitted_setup``: the whole-data identification
+    (for the predicted accuracy). Returns the report's ``holdout`` block (with ``decision``)."""
+    from .steps import identify_measurements
+
+    labels = [str(lab) for lab in (meas.labels if len(meas.labels) else range(len(meas.poses)))]
+    flagged = {str(o) for o in outliers}
+    unknown = flagged - set(labels)
+    if unknown:
+        raise ValueError(f"held-out validation: outliers {sorted(unknown)} are not poses of the data")
+    n = len(labels)
+    k = int(min(folds or DEFAULT_FOLDS, n))
+    kind = _eval_kind(setup)
+    fitted_setup = fitted_setup or setup
+    base = set(analysis.base_parameters)  # (a prepared setup may have more: the H4's measured tilts)
+    params = setup.params.only_free([nm for nm in setup.params.names if nm in base])
+    per_fold, fails = [], []
+    rb, ra, tb, ta, idx_all = [], [], [], [], []
+    parts = fold_indices(n, k, seed) if k >= 2 else []
+    for f, test in enumerate(parts):
+        train = np.array(sorted(i for j, p in enumerate(parts) if j != f for i in p if labels[i] not in flagged), int)
+        rec = {"fold": f + 1, "n_train": int(len(train)), "n_test": int(len(test)),
+               "n_outliers_held_out": int(sum(labels[i] in flagged for i in test))}
+        try:
+            ident = identify_measurements(setup, meas.subset(train), method, residual, analysis, robust=False,
+                                          context=f"held-out validation, fold {f + 1} of {k}", cross_check=False)
+        except VisionCalibError as exc:
+            fails.append(f"fold {f + 1} ({len(train)} training poses): {exc}")
+            per_fold.append({**rec, "converged": False, "error": str(exc)})
+            continue
+        res, fsetup = ident.result, ident.setup
+        rec |= {"converged": bool(res.converged), "n_identified": int(np.sum(res.free))}
+        if not res.converged:
+            fails.append(f"fold {f + 1} ({len(train)} training poses): the identification did not converge "
+                         f"({res.message})")
+        elif res.dof <= 0:
+            fails.append(f"fold {f + 1} ({len(train)} training poses): {int(np.sum(res.free))} parameters from "
+                         f"{int(np.sum(res.free)) + int(res.dof)} equations, no redundancy")
+        before = setup.problem(meas.subset(test), kind, params=params).residual(setup.params.nominal)
+        after = fsetup.problem(meas.subset(test), kind, params=fsetup.params).residual(res.identified)
+        rb.append(before)
+        ra.append(after)
+        idx_all.append(test)
+        t_b = _tool_errors_mm(setup, meas, test, setup.params.nominal, tcp)
+        t_a = _tool_errors_mm(fsetup, meas, test, res.identified, tcp)
+        if t_b is not None:
+            tb.append(t_b)
+            ta.append(t_a)
+        per_fold.append({**rec, "before": error_stats(*_norms(before)), "after": error_stats(*_norms(after))})
+    out = {"folds": k, "seed": int(seed), "residual_kind": kind,
+           "residual_of": "T_target_cam" if getattr(setup, "mount", None) == "eye_in_hand" else "T_cam_target",
+           "outliers": [lab for lab in labels if lab in flagged], "per_fold": per_fold,
+           "tcp_m": None if tcp is None or not tb else [float(v) for v in tcp]}
+    if not idx_all:
+        out["decision"] = {"ok": False, "reason": "no fold could be identified: " + "; ".join(fails)
+                           if fails else f"{n} poses cannot be split into 2 folds"}
+        return out
+    idx = np.concatenate(idx_all)
+    rb, ra = np.concatenate(rb), np.concatenate(ra)
+    keep = np.array([labels[i] not in flagged for i in idx])
+    bp, br = _norms(rb)
+    ap, ar = _norms(ra)
+    out["overall"] = {"n_poses": int(len(idx)), "before": error_stats(bp, br), "after": error_stats(ap, ar)}
+    out["without_outliers"] = None if keep.all() else {
+        "n_poses": int(keep.sum()), "excluded": [labels[i] for i in sorted(idx[~keep])],
+        "before": error_stats(bp[keep], None if br is None else br[keep]),
+        "after": error_stats(ap[keep], None if ar is None else ar[keep])}
+    rng = np.random.default_rng([int(seed), 26])
+    inter = {"level": INTERVAL_LEVEL, "draws": BOOTSTRAP_DRAWS, "over": int(keep.sum()),
+             "position_rms_change_mm": _interval(bp[keep], ap[keep], rng)}
+    if br is not None:
+        inter["rotation_rms_change_deg"] = _interval(br[keep], ar[keep], rng)
+    out["interval"] = inter
+    if tb:
+        tb, ta = np.concatenate(tb), np.concatenate(ta)
+        out["tool"] = {"before": error_stats(tb, None), "after": error_stats(ta, None),
+                       "position_rms_change_mm": _interval(tb[keep], ta[keep], rng)}
+    if result is not None and np.all(np.isfinite(result.covariance)):
+        free = [nm for nm, f in zip(result.names, result.free) if f]
+        pred = predicted_accuracy(fitted_setup, meas, result.identified, free, result.covariance, tcp)
+        pb = fitted_setup.problem(meas, kind, params=fitted_setup.params)
+        meas_var = np.trace(pb.obs_cov[:, :3, :3], axis1=1, axis2=2)
+        fold_var = pred.pop("per_pose_var_m2") * k / max(k - 1, 1)
+        rms_pred = float(np.sqrt(np.mean((fold_var + meas_var)[idx][keep]))) * 1e3
+        obs = float(np.sqrt(np.mean(ap[keep] ** 2)))
+        pred["heldout_position_rms_mm"] = rms_pred
+        pred["ratio_observed_to_predicted"] = obs / rms_pred if rms_pred > 0 else None
+        out["predicted"] = pred
+    out["decision"] = _decide(out, fails)
+    return out
+
+
+def _decide(h: dict, fails: list[str]) -> dict:
+    """{ok, reason}: see the module docstring."""
+    if fails:
+        return {"ok": False, "reason": "the k-fold training sets cannot identify the free parameters: "
+                                       + "; ".join(fails[:3])}
+    inter, b, a = h["interval"], h["overall"]["before"], h["overall"]["after"]
+    changes = [("position", "mm", inter["position_rms_change_mm"])]
+    if "rotation_rms_change_deg" in inter:
+        changes.append(("rotation", "deg", inter["rotation_rms_change_deg"]))
+    figs = "; ".join(f"{q} RMS {b[f'{q}_rms_{u}']:.4g} -> {a[f'{q}_rms_{u}']:.4g} {u} (change {lo:+.3g}..{hi:+.3g} "
+                     f"{u}, {int(inter['level'] * 100)} % interval)" for q, u, (lo, hi) in changes)
+    worse = [q for q, _, (lo, _) in changes if lo > 0]
+    better = [q for q, _, (_, hi) in changes if hi < 0]
+    if worse:
+        return {"ok": False, "reason": f"the calibrated model predicts held-out poses worse than the nominal one in "
+                                       f"{' and '.join(worse)}: {figs}"}
+    if not better:
+        return {"ok": False, "reason": f"the calibrated model does not predict held-out poses better than the "
+                                       f"nominal one: {figs}"}
+    return {"ok": True, "reason": f"held-out poses predicted better in {' and '.join(better)}: {figs}"}
+
+
+def holdout_failure(h: dict | None) -> dict | None:
+    """The report's ``failure`` for a held-out decision that is not ok (None when it is, or there is none)."""
+    if h is None or h["decision"]["ok"]:
+        return None
+    return {"kind": "held-out validation", "message": "no calibrated model written: " + h["decision"]["reason"]}
+
+
+def _fmt(b: dict, a: dict) -> str:
+    def one(key, unit, nd):
+        return (f"{key} mean {b[f'{key}_mean_{unit}']:.{nd}f} -> {a[f'{key}_mean_{unit}']:.{nd}f}, "
+                f"RMS {b[f'{key}_rms_{unit}']:.{nd}f} -> {a[f'{key}_rms_{unit}']:.{nd}f}, "
+                f"95 % {b[f'{key}_p95_{unit}']:.{nd}f} -> {a[f'{key}_p95_{unit}']:.{nd}f}, "
+                f"max {b[f'{key}_max_{unit}']:.{nd}f} -> {a[f'{key}_max_{unit}']:.{nd}f} {unit}")
+
+    return one("position", "mm", 3) + ("; " + one("rotation", "deg", 4) if "rotation_rms_deg" in b else "")
+
+
+def holdout_lines(h: dict | None) -> list[str]:
+    """Summary lines of :func:`holdout_validation`."""
+    if h is None:
+        return ["held-out validation skipped: the fit failed (see the verdict)"]
+    out = h.get("outliers") or []
+    lines = [f"held-out {h['folds']}-fold validation (seed {h['seed']}, errors of {h['residual_of']}"
+             + (f"; the {len(out)} flagged outlier poses are in no training set" if out else "") + "):"]
+    if "overall" in h:
+        o = h["overall"]
+        lines.append(f"  at the target, all {o['n_poses']} poses"
+                     + (f" (the {len(out)} flagged outliers included)" if out else " (none flagged as an outlier)")
+                     + ": " + _fmt(o["before"], o["after"]))
+        c = h.get("without_outliers")
+        if c:
+            names = ", ".join(map(str, c["excluded"][:10])) + (", ..." if len(c["excluded"]) > 10 else "")
+            lines.append(f"  without the {len(c['excluded'])} flagged outliers ({names}), {c['n_poses']} poses: "
+                         + _fmt(c["before"], c["after"]))
+        if h.get("tool"):
+            t = h["tool"]
+            lo, hi = t["position_rms_change_mm"]
+            lines.append(f"  at the tool point {h['tcp_m']} m (flange frame): " + _fmt(t["before"], t["after"])
+                         + f" (RMS change {lo:+.3g}..{hi:+.3g} mm)")
+        p = h.get("predicted")
+        if p:
+            tool = p.get("tool")
+            lines.append(f"  predicted from the parameter covariance over {p['workspace']}: target position std "
+                         f"median {p['target']['position_median_mm']:.3g} mm, 95 % {p['target']['position_p95_mm']:.3g} mm"
+                         + (f"; tool point median {tool['position_median_mm']:.3g} mm, 95 % "
+                            f"{tool['position_p95_mm']:.3g} mm" if tool else "")
+                         + f"; held-out RMS predicted {p['heldout_position_rms_mm']:.3g} mm, observed / predicted "
+                         + (f"{p['ratio_observed_to_predicted']:.2f}" if p.get("ratio_observed_to_predicted") else "n/a"))
+    for f in h["per_fold"]:
+        if "error" in f:
+            lines.append(f"  fold {f['fold']}: {f['error']}")
+    lines.append(("  decision: ok, " if h["decision"]["ok"] else "  decision: FAILED, ") + h["decision"]["reason"])
+    return lines
+
+
+__all__ = ["DEFAULT_FOLDS", "fold_indices", "error_stats", "holdout_validation", "holdout_failure", "holdout_lines",
+           "predicted_accuracy", "tool_point_supported"]
