@@ -66,11 +66,15 @@ def overlay_selection(report: dict, n_worst: int = 3, max_rejected: int = 6) -> 
             if pid not in seen and len(out) < max_rejected:
                 seen.add(pid)
                 out.append((pid, role, str(it.get("reason") or "")))
+    from .report_text import figure_label
+
     worst = [p for p in (report.get("pose_residuals") or {}).get("poses", []) if p["pose_id"] not in seen]
     for p in worst[:max(0, int(n_worst))]:
         parts = [f"chi2 {p['chi2']:.3g}" if p.get("chi2") is not None else None]
-        parts += [f"{k.rsplit('_', 1)[0]} {p[k]:.3g} {k.rsplit('_', 1)[1]}" for k in
-                  ("translation_mm", "rotation_deg", "joint_deg") if p.get(k) is not None]
+        for k in ("translation_mm", "rotation_deg", "joint_deg"):
+            if p.get(k) is not None:
+                label, unit, f = figure_label(k)
+                parts.append(f"{label} {p[k] * f:.3g} {unit}".rstrip())
         out.append((p["pose_id"], "worst", "final residual: " + ", ".join(x for x in parts if x)))
     return out
 
