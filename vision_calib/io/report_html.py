@@ -235,12 +235,12 @@ def identifiability_section(report: dict) -> str:
     if idf.get("prior_parameters"):
         out.append("<p>identified partly from a prior: " + esc(", ".join(idf["prior_parameters"])) + "</p>")
     if idf.get("couplings"):
-        shown = {r["name"]: _display(r) for r in report.get("parameters") or []}
+        shown = {r["name"]: _display(r)[:2] for r in report.get("parameters") or []}
         body = []
         for c in idf["couplings"]:
-            unit, fp, _ = shown.get(c["parameter"], ("SI", 1.0, ""))
+            unit, fp = shown.get(c["parameter"], ("SI", 1.0))
             # 1 SI unit of the parameter ~ v SI units of k: 1 display unit of it ~ v * f_k / f_p display units of k
-            comb = " ".join(f"{v * shown.get(k, ('', 1.0))[1] / fp:+.4g} {shown.get(k, ('SI',))[0]} of {k}"
+            comb = " ".join(f"{v * shown.get(k, ('SI', 1.0))[1] / fp:+.4g} {shown.get(k, ('SI', 1.0))[0]} of {k}"
                             for k, v in (c.get("combination_si") or {}).items())
             body.append([esc(c["parameter"]), esc(f"1 {unit} ~ {comb}" if comb else "0 (no effect on the measurements)"),
                          num(c.get("fit_residual"), ".2g")])
