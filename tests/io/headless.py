@@ -3,7 +3,9 @@ static check that a page needs no network.
 
 :func:`browser_probe` loads a copy of the page with a probe script added (the shipped page has none): on load it
 writes into ``document.title`` how many <img> there are and how many decoded (naturalWidth > 0), where the verdict
-box is, how many parameter-table rows are rendered (not folded away) and any error events; the title is read back from ``--dump-dom``.
+box is, how many parameter-table rows are rendered (not folded away), the element the URL's fragment targets (its
+display, position, and its first image's natural and rendered width) and any error events; the title is read back
+from ``--dump-dom``.
 :func:`screenshot` loads the page as shipped with console logging on and keeps the screenshot (under the test's
 tmp dir and, when set, ``$VC_ARTEFACTS``). Without chromium the tests skip, except in CI (``CI=true``) where they
 fail: there the browser test must run."""
@@ -40,7 +42,14 @@ window.addEventListener('load', function () {
                verdict_text: v ? v.innerText : null, verdict_top: r ? r.top : null, verdict_height: r ? r.height : null,
                param_rows_visible: Array.prototype.filter.call(document.querySelectorAll('#parameters tbody tr'),
                  function (t) { return t.getClientRects().length > 0 && t.innerText.trim().length > 0; }).length,
-               errors: window.__errors};
+               target: null, errors: window.__errors};
+  var t = document.querySelector(':target');
+  if (t) {
+    var st = getComputedStyle(t), im = t.querySelector('img');
+    probe.target = {id: t.id, display: st.display, position: st.position,
+                    img_natural_width: im ? im.naturalWidth : null,
+                    img_width: im ? im.getBoundingClientRect().width : null};
+  }
   document.title = 'PROBE' + JSON.stringify(probe);
 });
 </script>"""
@@ -61,15 +70,17 @@ def _run(args, timeout=120) -> subprocess.CompletedProcess:
     return subprocess.run([need_chromium(), *FLAGS, *args], capture_output=True, text=True, timeout=timeout)
 
 
-def browser_probe(page: Path) -> dict:
-    """Load a copy of ``page`` beside it (same relative links) with :data:`PROBE` added as the first thing in
-    <head>; returns the probe's dict plus ``stderr`` (chromium's log) and ``dom`` (the dumped DOM)."""
+def browser_probe(page: Path, fragment: str = "", where: Path | None = None) -> dict:
+    """Load a copy of ``page`` beside it (same relative links; or in the folder ``where``, e.g. an empty one: the
+    page as mailed) with :data:`PROBE` added as the first thing in <head>, at ``#fragment`` when given; returns the
+    probe's dict plus ``stderr`` (chromium's log) and ``dom`` (the dumped DOM)."""
     text = Path(page).read_text()
     assert "<head>" in text, f"{page}: no <head>"
-    probed = Path(page).with_name("probe_" + Path(page).name)
+    probed = (Path(where) if where is not None else Path(page).parent) / ("probe_" + Path(page).name)
     probed.write_text(text.replace("<head>", "<head>" + PROBE, 1))
     try:
-        res = _run(["--dump-dom", "--enable-logging=stderr", "--v=0", probed.resolve().as_uri()])
+        res = _run(["--dump-dom", "--enable-logging=stderr", "--v=0",
+                    probed.resolve().as_uri() + (f"#{fragment}" if fragment else "")])
     finally:
         probed.unlink()
     m = re.search(r"<title>PROBE(.*?)</title>", res.stdout, re.S)

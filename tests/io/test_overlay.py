@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from vision_calib.camera import CameraIntrinsics
-from vision_calib.io.overlay import MAX_WIDTH_PX, build_overlays, draw_overlay, overlay_selection, recording_frames, \
-    OverlaySource
+from vision_calib.io.overlay import FULL_MAX_ENLARGE, FULL_MAX_WIDTH_PX, FULL_MIN_WIDTH_PX, MAX_WIDTH_PX, \
+    build_overlays, draw_overlay, overlay_selection, recording_frames, OverlaySource
 from vision_calib.measure import Detection
 from vision_calib.rig import SCENES_DIR
 from vision_calib.targets import load_target
@@ -69,6 +69,39 @@ def test_draw_overlay_without_detection_or_model_shows_the_whole_image():
     assert info["crop"] == [0, 0, 2000, 300] and info["width"] == MAX_WIDTH_PX
     assert info["model_rms_px"] is None and info["n_detected"] == 0
     assert cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_GRAYSCALE).shape == (96, 640)
+
+
+def test_full_size_overlay_enlarges_small_crops_with_square_pixels():
+    """The full-size overlay (max_width FULL_MAX_WIDTH_PX, min_width FULL_MIN_WIDTH_PX): a 230 px crop is enlarged by
+    the whole factor 4 (FULL_MAX_ENLARGE), each camera pixel a 4 x 4 block, and a detected corner drawn where its
+    pixel (integer coordinates = pixel centres) lies in the enlarged image; a wide crop keeps its camera pixels."""
+    img = np.zeros((480, 640), np.uint8)
+    img[200:280, 300:420:2] = 255  # one-pixel stripes: their edges survive only a whole-factor nearest enlargement
+    uv = np.array([[330.0, 240.0], [400.0, 300.0]])
+    det = Detection(True, "", np.array([1, 2]), uv, (640, 480), 0)
+    jpeg, info = draw_overlay(img, det, max_width=FULL_MAX_WIDTH_PX, min_width=FULL_MIN_WIDTH_PX)
+    x0, y0, x1, y1 = info["crop"]
+    k = min(FULL_MAX_ENLARGE, FULL_MIN_WIDTH_PX // (x1 - x0))
+    assert x1 - x0 < FULL_MIN_WIDTH_PX // 2 and k >= 2
+    assert info["scale"] == k and (info["width"], info["height"]) == ((x1 - x0) * k, (y1 - y0) * k)
+    im = cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR)
+    assert im.shape[:2] == (info["height"], info["width"])
+    # a stripe column (camera x = 302) is white over its k display columns, its dark neighbour (303) dark
+    row = int((250 - y0 + 0.5) * k)
+    col = [int(im[row, (302 - x0) * k + j, 1]) for j in range(k)] + [int(im[row, (303 - x0) * k + j, 1])
+                                                                      for j in range(k)]
+    assert min(col[:k]) > 150 and max(col[k:]) < 100, col
+    # the green cross of the detected corner at (400, 300) is centred on ((u - x0 + 0.5) k - 0.5, ...) (to the
+    # display pixel: the cross is 1 px thick, its arms 4 px); 2 px away on its arms still green, off them dark
+    u, v = np.floor((uv[1] - [x0, y0] + 0.5) * k - 0.5).astype(int)
+    for du, dv in ((0, 0), (2, 0), (-2, 0), (0, 2), (0, -2)):  # (JPEG chroma blurs a 1 px line: looser bounds)
+        b, g, r = im[v + dv, u + du].astype(int)
+        assert g > 120 and g > r + 30 and g > b + 30, (du, dv)
+    assert im[v + 2, u + 2, 1] < 80 and im[v - 2, u - 2, 1] < 80
+    # a crop wider than FULL_MIN_WIDTH_PX / 2: at its own pixels (factor 1), never downscaled below them
+    _, wide = draw_overlay(np.zeros((960, 1280), np.uint8), None, max_width=FULL_MAX_WIDTH_PX,
+                           min_width=FULL_MIN_WIDTH_PX)
+    assert wide["scale"] == 1 and wide["width"] == 1280
 
 
 def test_selection_rejected_first_then_worst_without_duplicates():

@@ -1,12 +1,16 @@
-"""report.html of real runs of every command that writes a report: self-contained (no network), the verdict first,
-the parameter table, the per-pose residuals worst first, the overlays of the rejected and worst poses; loaded in
-a real headless browser (chromium): no errors, the verdict box at the top, every image decodes; a screenshot is
-kept (tmp dir and $VC_ARTEFACTS)."""
+"""report.html of real runs of every command that writes a report: self-contained (no network, no sibling file
+needed: it shows everything when copied alone), the verdict first, the parameter table, the per-pose residuals worst
+first, the overlays of the rejected and worst poses, each opening at full size on the page; every table head a
+label (no raw report.json key), std to 2 significant digits, no truth mentioned on recorded data; loaded in a real
+headless browser (chromium): no errors, the verdict box at the top, every image decodes; a screenshot is kept (tmp
+dir and $VC_ARTEFACTS)."""
 
 import base64
+import copy
 import json
 import re
 import sys
+from html.parser import HTMLParser
 from pathlib import Path
 
 import cv2
@@ -14,7 +18,10 @@ import numpy as np
 import pytest
 
 from vision_calib.cli import main
-from vision_calib.io.overlay import MAX_WIDTH_PX
+from vision_calib.io.overlay import FULL_MAX_ENLARGE, FULL_MIN_WIDTH_PX, MAX_WIDTH_PX
+from vision_calib.io.report import parameter_table_text, summary_text
+from vision_calib.io.report_html import handeye_section, parameters_section
+from vision_calib.io.report_text import FIGURE_LABELS
 from vision_calib.rig import SCENES_DIR
 
 from headless import browser_probe, console_errors, need_chromium, network_references, screenshot  # noqa: E402
@@ -131,11 +138,174 @@ def test_overlays_show_the_rejected_and_the_worst_poses(runs):
     # poses' within a pixel
     rms = [float(m) for m in re.findall(r"RMS ([0-9.e+-]+) px", " ".join(caps))]
     assert len(rms) == 5 and min(rms[:2]) > 20 and max(rms[2:]) < 1
-    imgs = re.findall(r'src="data:image/jpeg;base64,([^"]+)"', ov)
-    assert len(imgs) == 6
-    for b in imgs:
-        im = cv2.imdecode(np.frombuffer(base64.b64decode(b), np.uint8), cv2.IMREAD_COLOR)
+    figs = re.findall(r"<figure>.*?</figure>", ov, re.S)
+    assert len(figs) == 6
+    for fig in figs:
+        im = jpeg(re.search(r'src="data:image/jpeg;base64,([^"]+)"', fig).group(1))
         assert im is not None and 0 < im.shape[1] <= MAX_WIDTH_PX
+
+
+def jpeg(b64: str):
+    return cv2.imdecode(np.frombuffer(base64.b64decode(b64), np.uint8), cv2.IMREAD_COLOR)
+
+
+@pytest.mark.slow
+def test_each_overlay_opens_at_full_size_on_the_page(runs):
+    """Each overlay's small image links to an anchor of the page holding the same overlay at full size: every camera
+    pixel at least one screen pixel, crops narrower than FULL_MIN_WIDTH_PX enlarged by a whole factor (at most
+    FULL_MAX_ENLARGE); the small ~230 px crops of issue 25 become ~920 px."""
+    text = (runs["proc"] / "report.html").read_text()
+    ov = section(text, "overlays")
+    figs = re.findall(r"<figure>.*?</figure>", ov, re.S)
+    assert len(figs) == 6
+    factors = []
+    for fig in figs:
+        m = re.search(r'<a class="zoom" href="#([\w-]+)"[^>]*><img src="data:image/jpeg;base64,([^"]+)"', fig)
+        assert m, fig[:300]
+        fid, thumb = m.group(1), jpeg(m.group(2))
+        box = re.search(rf'<div class="lightbox" id="{fid}">.*?</div>', ov, re.S)
+        assert box, fid
+        full = jpeg(re.search(r'src="data:image/jpeg;base64,([^"]+)"', box.group(0)).group(1))
+        x0, x1, y0, y1 = map(int, re.search(r"crop x (\d+)-(\d+), y (\d+)-(\d+) px", fig).groups())
+        k = full.shape[1] / (x1 - x0)
+        want = min(FULL_MAX_ENLARGE, max(1, FULL_MIN_WIDTH_PX // (x1 - x0)))
+        assert k == want and full.shape[0] == (y1 - y0) * want  # whole factor: square pixels
+        assert full.shape[1] >= thumb.shape[1]
+        assert f"#{fid}" in fig and "full size" in fig  # also a text link in the caption
+        factors.append(k)
+    assert max(factors) >= 2  # the small crops around the target are enlarged
+
+
+@pytest.mark.slow
+def test_full_size_overlay_shows_in_a_browser(runs):
+    """Opened (its anchor targeted, as a click does), the full-size overlay covers the window and shows its image
+    unscaled; not targeted, it is hidden."""
+    need_chromium()
+    text = (runs["proc"] / "report.html").read_text()
+    fid = re.search(r'<div class="lightbox" id="([\w-]+)"', text).group(1)
+    probe = browser_probe(runs["proc"] / "report.html", fragment=fid)
+    assert probe["errors"] == []
+    t = probe["target"]
+    assert t["id"] == fid and t["display"] == "block" and t["position"] == "fixed"
+    assert t["img_natural_width"] > MAX_WIDTH_PX * 0.6 and t["img_width"] == t["img_natural_width"]
+    assert browser_probe(runs["proc"] / "report.html")["target"] is None
+
+
+class _Links(HTMLParser):
+    def __init__(self):
+        super().__init__()
+        self.links, self.ids, self.imgs, self.heads, self._a, self._th = [], set(), [], [], None, None
+
+    def handle_starttag(self, tag, attrs):
+        a = dict(attrs)
+        if "id" in a:
+            self.ids.add(a["id"])
+        if tag == "a" and "href" in a:
+            self._a = {"href": a["href"], "download": "download" in a, "text": ""}
+            self.links.append(self._a)
+        if tag == "img":
+            self.imgs.append(a.get("src", ""))
+        if tag == "th":
+            self._th = ""
+
+    def handle_endtag(self, tag):
+        if tag == "a":
+            self._a = None
+        if tag == "th" and self._th is not None:
+            self.heads.append(self._th.strip())
+            self._th = None
+
+    def handle_data(self, data):
+        if self._a is not None:
+            self._a["text"] += data
+        if self._th is not None:
+            self._th += data
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ALL)
+def test_page_needs_no_sibling_file(runs, name, tmp_path):
+    """Mailed alone, the page shows everything: every image a data URI, every link either to an anchor of the page
+    or a sibling file offered as an optional download (labelled so); copied alone into an empty folder it loads
+    with every image decoded and no error."""
+    out = runs[name]
+    rep = json.loads((out / "report.json").read_text())
+    text = (out / "report.html").read_text()
+    p = _Links()
+    p.feed(text)
+    assert p.imgs and all(src.startswith("data:image/") for src in p.imgs)
+    siblings = set(rep["files"].values())
+    for a in p.links:
+        if a["href"].startswith("#"):
+            assert a["href"][1:] in p.ids, a
+        else:
+            assert a["href"] in siblings and a["download"] and a["text"].startswith("download "), a
+    downloads = section(text, "more")
+    assert "optional downloads" in downloads and "needs none of them" in downloads
+    need_chromium()
+    alone = tmp_path / "mail"
+    alone.mkdir()
+    probe = browser_probe(out / "report.html", where=alone)
+    assert probe["errors"] == [] and console_errors(probe["stderr"]) == []
+    assert probe["decoded"] == probe["n_images"] == len(p.imgs)
+
+
+RAW_KEY = re.compile(r"^[A-Za-z0-9]+(_[A-Za-z0-9]+)+$")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ALL)
+def test_every_figure_key_shown_has_a_label(runs, name):
+    """Every figure key the report emits in a block the page or the text shows by key (validation accuracy, k-fold,
+    per-pose residuals, residual RMS) has its label in the one table (report_text.FIGURE_LABELS), and no table head
+    of the page is a raw key (V3_m)."""
+    rep = json.loads((runs[name] / "report.json").read_text())
+    keys = set()
+    for block in ((rep.get("accuracy") or {}).get("before"), (rep.get("accuracy") or {}).get("after"),
+                  ((rep.get("kfold") or {}).get("overall") or {}).get("before"), rep.get("residuals")):
+        keys |= set(block or {})
+    for p in (rep.get("pose_residuals") or {}).get("poses", []):
+        keys |= set(p) - {"pose_id"}
+    for p in (rep.get("measurements") or {}).get("poses", [])[:1]:
+        keys |= {"reprojection_rms_px", "n_corners"} & set(p)
+    assert keys and keys <= set(FIGURE_LABELS), sorted(keys - set(FIGURE_LABELS))
+    p = _Links()
+    p.feed((runs[name] / "report.html").read_text())
+    assert p.heads and not [h for h in p.heads if RAW_KEY.match(h)]
+
+
+@pytest.mark.slow
+def test_no_truth_in_captions_of_recorded_data(runs):
+    """Recorded data has no truth: its page never speaks of one; the simulation's page does (its plot captions)."""
+    for name in ("proc", "handeye", "poses"):
+        assert "truth" not in (runs[name] / "report.html").read_text().lower(), name
+    plots = section((runs["sim"] / "report.html").read_text(), "plots")
+    assert "truth (red x)" in plots
+
+
+@pytest.mark.slow
+def test_std_printed_to_two_significant_digits(runs):
+    """A hand-eye std of 3.6123 um (issue 25: summary.txt said 0.00 mm) reads 0.0036 mm in summary.txt and on the
+    page, its value to the same decimal place; a parameter std of 3.6123 um / 1.2345e-5 rad likewise."""
+    rep = copy.deepcopy(json.loads((runs["handeye"] / "report.json").read_text()))
+    he = rep["handeye"]
+    name = he["A"] if rep["settings"]["mount"] == "eye_in_hand" else "T_base_cam"
+    t = he["transforms"][name]
+    t["std_xyz_m"] = [3.6123e-6, 0.012345, 1.0]
+    t["std_rot_deg"] = [0.00049876, 0.25, 2.0]
+    line = next(ln for ln in summary_text(rep).splitlines() if ln.startswith(name + ":"))
+    assert "(std 0.0036, 12, 1000)" in line and "(std 0.00050, 0.25, 2.0)" in line, line
+    x_mm = f"{t['xyz_m'][0] * 1e3:.4f}"
+    assert line.startswith(f"{name}: xyz = {x_mm}, "), line
+    assert f"{x_mm} ± 0.0036" in handeye_section(rep)
+    rows = [{"name": "d2", "unit": "m", "nominal": 0.1, "identified": 0.1001, "std": 3.6123e-6, "true": None,
+             "free": True},
+            {"name": "theta2", "unit": "rad", "nominal": 0.0, "identified": 1e-4, "std": 1.2345e-5, "true": None,
+             "free": True}]
+    text = parameter_table_text(rows)
+    assert re.search(r"^d2 .* 0\.0036$", text, re.M) and re.search(r"^theta2 .* 0\.00071$", text, re.M), text
+    page = parameters_section({"parameters": rows})
+    assert "<td>0.0036</td>" in page and "<td>0.00071</td>" in page
 
 
 @pytest.mark.slow

@@ -50,9 +50,9 @@ def test_parameters_one_axis_per_unit_and_z_scores(figures, tmp_path):
     plots.plot_parameters(tmp_path / "p.png", names, nominal, ident, std, true, kinds)
     top = [a for a in figures[0].axes if "deviation" in a.get_ylabel()]
     z = [a for a in figures[0].axes if a.get_ylabel().startswith("z =")]
-    assert [a.get_ylabel() for a in top] == ["length deviation [mm]", "angle deviation [mrad]",
+    assert [a.get_ylabel() for a in top] == ["length deviation [mm]", "angle deviation [deg]",
                                              "coefficient deviation [1]"]
-    for a, sl, f in zip(top, (slice(0, 2), slice(2, 4), slice(4, 5)), (1e3, 1e3, 1.0)):
+    for a, sl, f in zip(top, (slice(0, 2), slice(2, 4), slice(4, 5)), (1e3, np.degrees(1.0), 1.0)):
         y = a.lines[0].get_ydata()  # the error-bar markers
         assert y == pytest.approx((ident - nominal)[sl] * f)
         truth = [ln for ln in a.lines if ln.get_marker() == "x"]  # the truth markers

@@ -63,6 +63,13 @@ DETECT_POWER = 0.8
 #: (no power) but, normalised, magnifies second-order structure of the residuals: on clean synthetic H4 runs
 #: (model 12, 81 poses) the overall test had p < 0.05 in 35 % of 100 runs with 1e-6, 7 % with 1e-2 (KS p 0.66)
 RANK_TOL = 1e-2
+#: a joint-error shape (one harmonic at one phase) whose group test sees at most this fraction of its own whitened
+#: energy counts as absorbed by the parameters: no detectable amplitude (None). Round-off level: absorbed shapes
+#: compute to 1e-17..1e-20 (also negative), the smallest meaningful fractions on the RX-90 example are ~3e-5
+SEEN_TOL = 1e-12
+#: detectable amplitudes above this [deg] are reported as None: a joint error of that size is no small error,
+#: the first-order analysis (residual change per rad of joint error) that gives the amplitude does not hold
+MAX_DETECTABLE_DEG = 10.0
 
 
 def _stats():
@@ -173,7 +180,8 @@ def lack_of_fit(problem: IdentificationProblem, result: IdentificationResult, jo
     joint (1-based), harmonics [{order, amplitude_deg, amplitude_std_deg, phase_deg, statistic,
     p_value, detectable_amplitude_deg [best, worst phase]}] from the fit of that order's sin/cos pair alone
     (order 0: the constant, when no parameter absorbs it; the detectable amplitude: flagged with probability
-    DETECT_POWER by the group test), best_order; other groups: effect_rms_sigma
+    DETECT_POWER by the group test; None where no amplitude is meaningful: a phase the parameters absorb, or one
+    above MAX_DETECTABLE_DEG), best_order; other groups: effect_rms_sigma
     (RMS per pose of the fitted effect, noise std units) and coefficients (SI per unit regressor, per
     component)), overall {dof, statistic, p_value, significant}, message (empty when nothing is flagged).
     """
@@ -265,13 +273,27 @@ def detectable_noncentrality(dof: int, dof_res: int, p_threshold: float, power: 
     return float(brentq(pw, 0.0 if pw(0.0) > 0 else 1e-12, hi, xtol=1e-6))
 
 
+def _detectable_deg(lam_star: float, seen: float, own: float) -> float | None:
+    """Detectable amplitude [deg] sqrt(lam_star / seen) of a joint-error shape whose group test sees ``seen`` of
+    noncentrality per rad^2, out of the shape's own whitened energy ``own`` per rad^2; None where no amplitude is
+    meaningfully detectable: the test sees at most :data:`SEEN_TOL` of the shape's energy (the parameters absorb
+    it; what is left is round-off), or the amplitude exceeds :data:`MAX_DETECTABLE_DEG` (beyond the first-order
+    analysis). Without these bounds an absorbed phase read as a detectable amplitude of 1e+06-1e+07 deg
+    (``process --refine-intrinsics`` of examples/rx90_eye_in_hand, joint 2)."""
+    if not (own > 0 and seen > SEEN_TOL * own):
+        return None
+    amp = float(np.degrees(np.sqrt(lam_star / seen)))
+    return amp if amp <= MAX_DETECTABLE_DEG else None
+
+
 def _joint_amplitudes(Q, e, dof_res, Xw, harmonics, test, lam_star, B) -> dict:
     """Per harmonic order h: the sin/cos pair fitted alone (columns 2i, 2i+1 of Xw): amplitude sqrt(a^2 + b^2)
     [deg] of delta = a sin(h q) + b cos(h q) (of the part the test sees: a phase component the parameters absorb
     to within RANK_TOL counts 0), its std (first order), phase [deg] (delta = amp sin(h q +
     phase)), statistic and p-value, and detectable_amplitude_deg [best phase, worst phase]: the amplitude
     of a joint error A sin(h q + phase) that the group's test flags with probability DETECT_POWER (noncentrality
-    ``lam_star`` = A^2 |B^T W x_phase|^2, B (N, r) the group test's basis, extreme over the phase); best_order =
+    ``lam_star`` = A^2 |B^T W x_phase|^2, B (N, r) the group test's basis, extreme over the phase; None where
+    none is meaningful, e.g. at a phase the parameters absorb: :func:`_detectable_deg`); best_order =
     the order with the smallest p-value."""
     rows = []
     for i, h in enumerate(harmonics):
@@ -284,8 +306,9 @@ def _joint_amplitudes(Q, e, dof_res, Xw, harmonics, test, lam_star, B) -> dict:
         grad = np.array([a, b]) / amp if amp > 0 else np.zeros(2)
         sd = float(np.sqrt(max(grad @ g["cov"] @ grad, 0.0)))
         M = B.T @ X2  # what the group's test sees of each column, per rad
-        ev = np.clip(np.linalg.eigvalsh(M.T @ M), 0.0, None)  # noncentrality per rad^2, min/max over the phase
-        mda = [float(np.degrees(np.sqrt(lam_star / v))) if v > 0 else None for v in (ev[1], ev[0])]
+        ev, V = np.linalg.eigh(M.T @ M)  # noncentrality per rad^2, min/max over the phase
+        own = np.sum((X2 @ V) ** 2, axis=0)  # the regressor's own energy in those two phase directions
+        mda = [_detectable_deg(lam_star, ev[i], own[i]) for i in (1, 0)]
         rows.append({"order": int(h), "amplitude_deg": float(np.degrees(amp)),
                      "amplitude_std_deg": float(np.degrees(sd)),
                      "phase_deg": float(np.degrees(np.arctan2(b, a))), "statistic": g["statistic"],
@@ -293,8 +316,7 @@ def _joint_amplitudes(Q, e, dof_res, Xw, harmonics, test, lam_star, B) -> dict:
     X1 = Xw[:, 2 * len(harmonics):]  # the constant: a joint offset, unless a parameter absorbs it (then no row)
     g = _group_test(Q, e, dof_res, X1, test)
     if g["statistic"] is not None:
-        v = float(np.sum((B.T @ X1) ** 2))
-        mda = float(np.degrees(np.sqrt(lam_star / v))) if v > 0 else None
+        mda = _detectable_deg(lam_star, float(np.sum((B.T @ X1) ** 2)), float(np.sum(X1 ** 2)))
         rows.append({"order": 0, "amplitude_deg": float(np.degrees(abs(g["beta"][0]))),
                      "amplitude_std_deg": float(np.degrees(np.sqrt(max(g["cov"][0, 0], 0.0)))),
                      "phase_deg": 90.0 if g["beta"][0] >= 0 else -90.0, "statistic": g["statistic"],
@@ -347,4 +369,4 @@ def parameter_shift(problem: IdentificationProblem, result: IdentificationResult
 
 
 __all__ = ["lack_of_fit", "lack_of_fit_message", "parameter_shift", "detectable_noncentrality", "DEFAULT_LEVEL",
-           "DEFAULT_HARMONICS", "DETECT_POWER"]
+           "DEFAULT_HARMONICS", "DETECT_POWER", "SEEN_TOL", "MAX_DETECTABLE_DEG"]

@@ -1,6 +1,9 @@
 """Overlay images of what the detector found, for report.html: one frame of a pose with its detected corners,
 the target corners reprojected through the measured pose (PnP) and through the calibrated model, and why the
-pose was rejected. Small JPEGs (at most :data:`MAX_WIDTH_PX` wide), drawn with OpenCV.
+pose was rejected. JPEGs drawn with OpenCV, twice: a small one for the page (at most :data:`MAX_WIDTH_PX` wide)
+and a full-size one the page opens on a click (every camera pixel at least one display pixel; crops narrower
+than :data:`FULL_MIN_WIDTH_PX` enlarged by a whole factor, at most :data:`FULL_MAX_ENLARGE`, pixels kept
+square; at most :data:`FULL_MAX_WIDTH_PX` wide).
 
 Which poses: :func:`overlay_selection` (the worst residuals and the rejected poses of a report); where their
 images come from: an :class:`OverlaySource` the pipeline builds (a recorded folder's files, or the simulation's
@@ -19,6 +22,12 @@ if TYPE_CHECKING:  # annotations only: the module imports neither the target kin
 
 #: overlay width limit [px] (the image is downscaled, never enlarged)
 MAX_WIDTH_PX = 640
+#: the full-size overlay: crops narrower than this [px] are enlarged by a whole factor (nearest pixel) towards it
+FULL_MIN_WIDTH_PX = 1280
+#: ... by at most this factor
+FULL_MAX_ENLARGE = 4
+#: ... and wider crops downscaled to this width [px] (a 4K frame's overlay stays a few hundred kB)
+FULL_MAX_WIDTH_PX = 2560
 #: JPEG quality of an overlay
 JPEG_QUALITY = 80
 #: colours (BGR) and what they mark, in the order of the legend
@@ -57,11 +66,15 @@ def overlay_selection(report: dict, n_worst: int = 3, max_rejected: int = 6) -> 
             if pid not in seen and len(out) < max_rejected:
                 seen.add(pid)
                 out.append((pid, role, str(it.get("reason") or "")))
+    from .report_text import figure_label
+
     worst = [p for p in (report.get("pose_residuals") or {}).get("poses", []) if p["pose_id"] not in seen]
     for p in worst[:max(0, int(n_worst))]:
         parts = [f"chi2 {p['chi2']:.3g}" if p.get("chi2") is not None else None]
-        parts += [f"{k.rsplit('_', 1)[0]} {p[k]:.3g} {k.rsplit('_', 1)[1]}" for k in
-                  ("translation_mm", "rotation_deg", "joint_deg") if p.get(k) is not None]
+        for k in ("translation_mm", "rotation_deg", "joint_deg"):
+            if p.get(k) is not None:
+                label, unit, f = figure_label(k)
+                parts.append(f"{label} {p[k] * f:.3g} {unit}".rstrip())
         out.append((p["pose_id"], "worst", "final residual: " + ", ".join(x for x in parts if x)))
     return out
 
@@ -98,9 +111,12 @@ def _crop_box(points, w: int, h: int, margin: float = 0.15, min_px: int = 160):
 
 
 def draw_overlay(image, detection=None, T_measured=None, T_model=None, target=None, intrinsics=None,
-                 label: str = "", max_width: int = MAX_WIDTH_PX, vector_px: float = 25.0) -> tuple[bytes, dict]:
+                 label: str = "", max_width: int = MAX_WIDTH_PX, vector_px: float = 25.0,
+                 min_width: int = 0) -> tuple[bytes, dict]:
     """JPEG bytes of ``image`` ((H, W) uint8 grey) cropped to the target (the detected and reprojected corners,
-    with a margin; the whole image when there are none) and downscaled to at most ``max_width`` px wide, with
+    with a margin; the whole image when there are none) and downscaled to at most ``max_width`` px wide (or,
+    narrower than ``min_width``, enlarged by the whole factor k <= :data:`FULL_MAX_ENLARGE` that keeps it within
+    both widths: each image pixel a k x k square), with
     the detected corners (``detection``: measure.Detection, distorted px), the target corners through
     ``T_measured`` and ``T_model`` (T_cam_target (4, 4) m or None), the model - detected vector of each corner
     magnified so that the longest is ``vector_px`` display px (never shrunk), and ``label`` top-left. Also returns
@@ -126,14 +142,17 @@ def draw_overlay(image, detection=None, T_measured=None, T_model=None, target=No
     allpts = [np.zeros((0, 2))] + [np.array(list(det_uv.values()))] * bool(det_uv) + [uv for _, uv in proj.values()]
     x0, y0, x1, y1 = _crop_box(np.concatenate(allpts), w, h)
     s = min(1.0, float(max_width) / (x1 - x0))
+    if s == 1.0 and min_width > x1 - x0:  # enlarged by a whole factor, within both widths
+        s = float(max(1, min(FULL_MAX_ENLARGE, int(min_width // (x1 - x0)), int(max_width // (x1 - x0)))))
     crop = img[y0:y1, x0:x1]
     small = cv2.resize(crop, (max(1, round((x1 - x0) * s)), max(1, round((y1 - y0) * s))),
-                       interpolation=cv2.INTER_AREA) if s < 1 else crop.copy()
+                       interpolation=cv2.INTER_AREA if s < 1 else cv2.INTER_NEAREST) if s != 1 else crop.copy()
     out = cv2.cvtColor(small, cv2.COLOR_GRAY2BGR)
     shift = 4  # sub-pixel drawing: coordinates in 1/16 px
 
-    def pt(uv):
-        return (int(round((uv[0] - x0) * s * (1 << shift))), int(round((uv[1] - y0) * s * (1 << shift))))
+    def pt(uv):  # image px (integer = pixel centre) -> display px of the resized crop (pixel edges aligned)
+        return (int(round(((uv[0] - x0 + 0.5) * s - 0.5) * (1 << shift))),
+                int(round(((uv[1] - y0 + 0.5) * s - 0.5) * (1 << shift))))
 
     info = {"crop": [x0, y0, x1, y1], "width": int(out.shape[1]), "height": int(out.shape[0]), "scale": s,
             "n_detected": len(det_uv), "n_measured": 0, "n_model": 0, "model_rms_px": None, "model_max_px": None,
@@ -179,7 +198,8 @@ def _measured_poses(report: dict) -> dict:
 
 def build_overlays(report: dict, source: OverlaySource, n_worst: int = 3, max_rejected: int = 6) -> list[dict]:
     """Overlays of :func:`overlay_selection`'s poses: [{pose_id, role, reason, jpeg (bytes) or None, note,
-    drawn (``draw_overlay``'s info)}] in that order; a pose without an image keeps its note (why)."""
+    drawn (``draw_overlay``'s info), full_jpeg and full_drawn (the same drawn at full size: module docstring)}]
+    in that order; a pose without an image keeps its note (why)."""
     sel = overlay_selection(report, n_worst, max_rejected)
     if not sel:
         return []
@@ -188,12 +208,16 @@ def build_overlays(report: dict, source: OverlaySource, n_worst: int = 3, max_re
     out = []
     for pid, role, reason in sel:
         img, det, note = frames.get(pid, (None, None, "no image"))
-        entry = {"pose_id": pid, "role": role, "reason": reason, "jpeg": None, "note": note, "drawn": None}
+        entry = {"pose_id": pid, "role": role, "reason": reason, "jpeg": None, "note": note, "drawn": None,
+                 "full_jpeg": None, "full_drawn": None}
         if img is not None:
             T_model = source.model_pose(pid) if source.model_pose is not None else None
             frame = "" if det is None else f" frame {det.frame_index}"
-            entry["jpeg"], entry["drawn"] = draw_overlay(img, det, measured.get(pid), T_model, source.target,
-                                                         source.intrinsics, label=f"pose {pid}{frame} ({role})")
+            args = (img, det, measured.get(pid), T_model, source.target, source.intrinsics)
+            entry["jpeg"], entry["drawn"] = draw_overlay(*args, label=f"pose {pid}{frame} ({role})")
+            entry["full_jpeg"], entry["full_drawn"] = draw_overlay(*args, label=f"pose {pid}{frame} ({role})",
+                                                                   max_width=FULL_MAX_WIDTH_PX,
+                                                                   min_width=FULL_MIN_WIDTH_PX)
         out.append(entry)
     return out
 

@@ -146,12 +146,12 @@ def plot_residuals(path, r_before, r_after, kind: str, labels=None) -> Path:
     return _save(fig, path)
 
 
-#: display unit of a parameter kind: (unit, factor from SI)
-_PARAM_UNITS = {"length": ("mm", 1e3), "angle": ("mrad", 1e3), "coefficient": ("1", 1.0)}
+#: display unit of a parameter kind: (unit, factor from SI); the units of the report's tables (lengths mm, angles deg)
+_PARAM_UNITS = {"length": ("mm", 1e3), "angle": ("deg", float(np.degrees(1.0))), "coefficient": ("1", 1.0)}
 
 
 def plot_parameters(path, names, nominal, identified, std, true=None, kinds=None) -> Path:
-    """Identified - nominal with ±2 std error bars, one axis per unit (lengths in mm, angles in mrad,
+    """Identified - nominal with ±2 std error bars, one axis per unit (lengths in mm, angles in deg,
     coefficients dimensionless), true - nominal as markers; with ``true`` (simulation) a second row:
     z = (identified - true) / std per parameter, the ±2 band shaded. Arrays (n,) SI; kinds (n,) parameter kinds."""
     plt = _fig()

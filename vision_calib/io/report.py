@@ -53,7 +53,8 @@ import numpy as np
 from ..serialize import write_json_atomic, write_text_atomic
 from .model_export import write_calibrated_model
 from .portable import relative_source
-from .report_text import KIND_UNITS, lack_of_fit_line, method_check_line
+from .report_text import (KIND_UNITS, figure_label, fmt_sig, handeye_values, lack_of_fit_line,
+                          method_check_line)
 
 REPORT_VERSION = "2.0"
 #: JSON Schema (draft 2020-12) of report.json, shipped as package data
@@ -90,8 +91,9 @@ def parameters_table(names, nominal, x_true, result, kinds=None) -> list[dict]:
 
 def parameter_table_text(rows: list[dict]) -> str:
     """The summary's parameter table of the identified (free) rows of :func:`parameters_table`: name, unit,
-    nominal, identified +- std, and in simulation the true value and z = (identified - true) / std; lengths in
-    mm, angles in deg (rows without a unit: SI). Empty when nothing was identified."""
+    nominal, identified +- std (:func:`.report_text.fmt_sig`: 2 significant digits), and in simulation the true
+    value and z = (identified - true) / std; lengths in mm, angles in deg (rows without a unit: SI). Empty when
+    nothing was identified."""
     free = [r for r in rows if r.get("free")]
     if not free:
         return ""
@@ -106,7 +108,7 @@ def parameter_table_text(rows: list[dict]) -> str:
         shown, f, fmt = KIND_UNITS.get(kind, (unit or "SI", 1.0, "12.6g"))
         std = r.get("std")
         line = (f"{r['name']:<18} {shown:>4} {r['nominal'] * f:{fmt}} {r['identified'] * f:{fmt}} "
-                f"{'n/a' if std is None else format(std * f, '.3g'):>10}")
+                f"{fmt_sig(None if std is None else std * f):>10}")
         if sim:
             t = r.get("true")
             z = (r["identified"] - t) / std if t is not None and std else None
@@ -132,15 +134,15 @@ def residual_stats(r, kind) -> dict:
     return {"joint_rms_deg": [float(v) for v in np.degrees(np.sqrt(np.mean(r**2, axis=0)))]}
 
 
-#: summary labels of residual_stats keys: (words, unit)
-RESIDUAL_LABELS = {"translation_rms_mm": ("translation x, y, z", "mm"), "rotation_rms_deg": ("rotation x, y, z", "deg"),
-                   "joint_rms_deg": ("joints 1..n", "deg")}
-
-
 def residuals_line(res: dict) -> str:
-    """One summary line of a :func:`residual_stats` block, each figure with what it is and its unit."""
-    parts = [f"{RESIDUAL_LABELS.get(k, (k, ''))[0]} " + ", ".join(f"{x:.4g}" for x in vals)
-             + f" {RESIDUAL_LABELS.get(k, ('', ''))[1]}".rstrip() for k, vals in res.items()]
+    """One summary line of a :func:`residual_stats` block, each figure with what it is and its unit
+    (:func:`.report_text.figure_label`)."""
+    def part(k, vals):
+        label, unit, f = figure_label(k)
+        axes = "joints 1..n" if k.startswith("joint") else "x, y, z"
+        return f"{label} {axes} " + ", ".join(f"{x * f:.4g}" for x in vals) + (f" {unit}" if unit else "")
+
+    parts = [part(k, vals) for k, vals in res.items()]
     where = ("" if set(res) == {"joint_rms_deg"} else
              ", per axis of the measured transform's left frame")
     return f"residual RMS after the fit (measured - model{where}): " + "; ".join(parts)
@@ -393,17 +395,18 @@ def summary_text(report: dict) -> str:
         lines.append(reprojection_line(report["reprojection"]))
     if "accuracy" in report:
         b, a = report["accuracy"]["before"], report["accuracy"]["after"]
-        lines.append(f"validation ({b['n_poses']} poses): position RMS {b['position_rms_mm']:.3f} -> "
-                     f"{a['position_rms_mm']:.3f} mm, max {b['position_max_mm']:.3f} -> {a['position_max_mm']:.3f} mm, "
-                     f"rotation RMS {b['rotation_rms_deg']:.4f} -> {a['rotation_rms_deg']:.4f} deg")
-        if "V2_rad" in a:
-            imp = 100 * (1 - a["V2_rad"] / b["V2_rad"]) if b["V2_rad"] > 0 else float("nan")
+        lines.append(f"validation ({b['n_poses']} poses, nominal -> identified): "
+                     + ", ".join(_before_after(k, b, a, {"mm": ".3f", "deg": ".4f"}.get(figure_label(k)[1], ".4g"))
+                                 for k in ("position_rms_mm", "position_max_mm", "rotation_rms_deg") if k in a))
+        crit = [k for k in a if k not in _ACCURACY_SHOWN and k in b]  # the kind's criteria (H4: V1, V2, V3)
+        if crit:
             vm = report.get("validation_measurements")
-            src = (f" (V1/V2 from {vm['n_valid']} of {vm['n_poses']} validation poses measured from images)"
-                   if vm else "")
-            lines.append(f"H4 criteria{src}: V1 {b['V1_rad']:.3g} -> {a['V1_rad']:.3g} rad, V2 {b['V2_rad']:.3g} -> "
-                         f"{a['V2_rad']:.3g} rad ({imp:.1f} % better), V3 {b['V3_m'] * 1e3:.4f} -> "
-                         f"{a['V3_m'] * 1e3:.4f} mm")
+            kind = ((report.get("source") or {}).get("scene") or {}).get("robot_kind")
+            how = [f"robot kind {kind}"] * bool(kind) + [f"V1/V2 from {vm['n_valid']} of {vm['n_poses']} validation "
+                                                          "poses measured from images"] * bool(vm)
+            parts = [_before_after(k, b, a, ".3g") + (f" ({100 * (1 - a[k] / b[k]):.1f} % better)"
+                                                      if k == "V2_rad" and b[k] > 0 else "") for k in crit]
+            lines.append("criteria" + (f" ({'; '.join(how)})" if how else "") + ": " + ", ".join(parts))
     if "synthetic_reference" in report:
         lines += _reference_lines(report)
     if "handeye" in report:
@@ -411,6 +414,16 @@ def summary_text(report: dict) -> str:
     if "timings_s" in report and "total" in report["timings_s"]:
         lines.append(f"time: {report['timings_s']['total']:.1f} s")
     return "\n".join(lines)
+
+
+#: accuracy keys of the summary's validation line (the rest of the block: the kind's criteria, their own line)
+_ACCURACY_SHOWN = ("position_rms_mm", "position_max_mm", "rotation_rms_deg", "rotation_max_deg", "n_poses")
+
+
+def _before_after(key: str, b: dict, a: dict, fmt: str) -> str:
+    """'label b -> a unit' of one figure key of two dicts, in its display unit (:func:`.report_text.figure_label`)."""
+    label, unit, f = figure_label(key)
+    return f"{label} {b[key] * f:{fmt}} -> {a[key] * f:{fmt}}" + (f" {unit}" if unit else "")
 
 
 def _reference_lines(report: dict) -> list[str]:
@@ -425,7 +438,9 @@ def _reference_lines(report: dict) -> list[str]:
            f"position RMS median {a['position_rms_mm']:.3f} mm (range {rg['position_rms_mm'][0]:.3f}-"
            f"{rg['position_rms_mm'][1]:.3f})")
     if "V2_rad" in a:
-        out += f", V2 median {a['V2_rad']:.3g} rad (range {rg['V2_rad'][0]:.3g}-{rg['V2_rad'][1]:.3g})"
+        label, unit, f = figure_label("V2_rad")
+        out += (f", {label.split(':')[0]} median {a['V2_rad'] * f:.3g} {unit} (range {rg['V2_rad'][0] * f:.3g}-"
+                f"{rg['V2_rad'][1] * f:.3g})")
     return [out]
 
 
@@ -440,8 +455,8 @@ def _intrinsics_line(block: dict) -> str:
     how = (f"; their uncertainty {'is included in the fit' if prop.get('in_fit') else 'is added to the std'} "
            f"({prop['n_directions']} directions)") if prop else ""
     return (f"intrinsics ({block['source']}, {block['n_views_used']} views, RMS {block['rms_px']:.3f} px): "
-            + ", ".join(f"{k} {v[k]:.2f} ± {s[k]:.2f}" for k in names[:4]) + " px; dist "
-            + ", ".join(f"{k} {v[k]:.4g} ± {s[k]:.2g}" for k in names[4:]) + how)
+            + ", ".join(f"{k} {v[k]:.2f} ± {fmt_sig(s[k])}" for k in names[:4]) + " px; dist "
+            + ", ".join(f"{k} {v[k]:.4g} ± {fmt_sig(s[k])}" for k in names[4:]) + how)
 
 
 def _handeye_lines(report: dict) -> list[str]:
@@ -450,14 +465,13 @@ def _handeye_lines(report: dict) -> list[str]:
     lines = []
     for name in names:
         t = he["transforms"][name]
-        lines.append(f"{name}: xyz = " + ", ".join(f"{v * 1e3:.1f}" for v in t["xyz_m"]) + " mm (std "
-                     + ", ".join(f"{v * 1e3:.2f}" for v in t["std_xyz_m"]) + "); rpy = "
-                     + ", ".join(f"{v:.2f}" for v in t["rpy_deg"]) + " deg (std "
-                     + ", ".join(f"{v:.2f}" for v in t["std_rot_deg"]) + ")")
+        xyz, rpy = handeye_values(t)
+        lines.append(f"{name}: xyz = " + ", ".join(x for x, _ in xyz) + " mm (std " + ", ".join(s for _, s in xyz)
+                     + "); rpy = " + ", ".join(x for x, _ in rpy) + " deg (std " + ", ".join(s for _, s in rpy) + ")")
     rob = he.get("robot_pose_std")
     if rob:
-        est = (f" ± {rob['std_translation_mm']:.3f}" if rob.get("std_translation_mm") is not None else "",
-               f" ± {rob['std_rotation_deg']:.4f}" if rob.get("std_rotation_deg") is not None else "")
+        est = (f" ± {fmt_sig(rob['std_translation_mm'])}" if rob.get("std_translation_mm") is not None else "",
+               f" ± {fmt_sig(rob['std_rotation_deg'])}" if rob.get("std_rotation_deg") is not None else "")
         lines.append(f"robot pose error ({rob['source']}): {rob['translation_mm']:.3f}{est[0]} mm, "
                      f"{rob['rotation_deg']:.4f}{est[1]} deg per axis (in the weights)")
     cf = he.get("closed_form_comparison")

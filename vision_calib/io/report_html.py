@@ -1,5 +1,9 @@
-"""report.html: the run's report as one self-contained page (no network: CSS inline, images as base64 data
-URIs, no script), built from the report.json dict (:mod:`.report`) beside which it is written.
+"""report.html: the run's report as one self-contained page (no network, no sibling file needed: CSS inline,
+images as base64 data URIs, no script; the files beside it are linked only as optional downloads), built from the
+report.json dict (:mod:`.report`) beside which it is written. Each overlay opens at full size on the page itself
+(a CSS ``:target`` lightbox holding the full-size image). Units a person reads: lengths in mm, angles in deg;
+figure keys by their labels (:data:`.report_text.FIGURE_LABELS`); standard deviations to 2 significant digits
+(:func:`.report_text.fmt_sig`).
 
 Order: the verdict (ok / warning / failed, and the warnings in words), the parameter table, identifiability
 (rank, what cannot be identified and what it is coupled with, the condition number and what it is computed
@@ -13,9 +17,12 @@ from __future__ import annotations
 import base64
 import html
 import math
+import re
 from pathlib import Path
 
 from ..serialize import write_text_atomic
+from .report_text import (KIND_UNITS, figure_head, figure_label, fmt_sig, handeye_values, lack_of_fit_line,
+                          method_check_line)
 
 #: the file name beside report.json
 HTML_NAME = "report.html"
@@ -39,6 +46,14 @@ figcaption{color:#444;font-size:.9em;margin-top:3px}
 .grid{display:flex;flex-wrap:wrap;gap:14px}.grid figure{flex:0 1 560px;margin:0}
 pre{background:#f6f8fa;padding:8px;overflow-x:auto;font-size:.85em}
 .muted{color:#667}ul.w li{margin:2px 0}
+a.zoom{cursor:zoom-in}
+.lightbox{display:none}
+.lightbox:target{display:block;position:fixed;inset:0;z-index:10;overflow:auto;padding:10px 14px;
+background:#15191d;color:#eee}
+.lightbox img{max-width:none;height:auto;border:0;display:block}
+.lightbox p{margin:0 0 8px;font-size:.9em}
+.lightbox a.close{position:sticky;top:0;float:right;background:#fff;color:#111;font-weight:700;padding:3px 10px;
+border-radius:4px;text-decoration:none}
 """
 
 
@@ -139,8 +154,6 @@ def verdict_section(report: dict) -> str:
 
 def _display(row: dict):
     """(unit shown, factor from SI, format) of a parameter row (lengths mm, angles deg, else SI)."""
-    from .report_text import KIND_UNITS
-
     kind = {"m": "length", "rad": "angle"}.get(row.get("unit"))
     return KIND_UNITS.get(kind, (row.get("unit") or "SI", 1.0, ".6g"))
 
@@ -159,7 +172,7 @@ def parameters_section(report: dict) -> str:
         fmt = fmt.lstrip("0123456789") or ".6g"
         std = r.get("std")
         line = [esc(r["name"]), esc(unit), num(r["nominal"] * f, fmt), num(r["identified"] * f, fmt),
-                num(None if std is None else std * f, ".3g"), num((r["identified"] - r["nominal"]) * f, "+.4g")]
+                fmt_sig(None if std is None else std * f), num((r["identified"] - r["nominal"]) * f, "+.4g")]
         z = None
         if sim:
             t = r.get("true")
@@ -169,7 +182,7 @@ def parameters_section(report: dict) -> str:
         cls.append("bad" if z is not None and abs(z) > 3 else "warn" if z is not None and abs(z) > 2 else "")
     fixed = [r for r in rows if not r.get("free")]
     out = [f'<section id="parameters"><h2>Identified parameters ({len(free)} free)</h2>',
-           '<p class="muted">lengths in mm, angles in deg; ± one standard deviation'
+           '<p class="muted">lengths in mm, angles in deg; ± one standard deviation (2 significant digits)'
            + (" (from the measurement covariance; the z-score compares the estimate with the simulation's truth: "
               "|z| &gt; 2 shaded, |z| &gt; 3 red)" if sim else "") + ".</p>",
            table(head, body, left=(0,), row_classes=cls)]
@@ -195,12 +208,11 @@ def handeye_section(report: dict) -> str:
         t = tf[name]
         if not isinstance(t, dict) or "xyz_m" not in t:
             continue
-        body.append([esc(name)] + [f"{num(v * 1e3, '.2f')} ± {num(s * 1e3, '.2g')}" for v, s in
-                                   zip(t["xyz_m"], t.get("std_xyz_m") or [float("nan")] * 3)]
-                    + [f"{num(v, '.3f')} ± {num(s, '.2g')}" for v, s in
-                       zip(t.get("rpy_deg") or [], t.get("std_rot_deg") or [float("nan")] * 3)])
+        xyz, rpy = handeye_values(t)
+        body.append([esc(name)] + [f"{esc(v)} ± {esc(sd)}" for v, sd in xyz + rpy])
     return ('<section id="parameters"><h2>Identified transforms (hand-eye)</h2>'
-            + table(["transform", "x [mm]", "y [mm]", "z [mm]", "roll [deg]", "pitch [deg]", "yaw [deg]"], body)
+            '<p class="muted">± one standard deviation (2 significant digits); each value to the same decimal place.'
+            '</p>' + table(["transform", "x [mm]", "y [mm]", "z [mm]", "roll [deg]", "pitch [deg]", "yaw [deg]"], body)
             + "</section>")
 
 
@@ -223,14 +235,18 @@ def identifiability_section(report: dict) -> str:
     if idf.get("prior_parameters"):
         out.append("<p>identified partly from a prior: " + esc(", ".join(idf["prior_parameters"])) + "</p>")
     if idf.get("couplings"):
+        shown = {r["name"]: _display(r)[:2] for r in report.get("parameters") or []}
         body = []
         for c in idf["couplings"]:
-            comb = " ".join(f"{v:+.4g}·{k}" for k, v in (c.get("combination_si") or {}).items())
-            body.append([esc(c["parameter"]), esc(comb or "0 (no effect on the measurements)"),
+            unit, fp = shown.get(c["parameter"], ("SI", 1.0))
+            # 1 SI unit of the parameter ~ v SI units of k: 1 display unit of it ~ v * f_k / f_p display units of k
+            comb = " ".join(f"{v * shown.get(k, ('SI', 1.0))[1] / fp:+.4g} {shown.get(k, ('SI', 1.0))[0]} of {k}"
+                            for k, v in (c.get("combination_si") or {}).items())
+            body.append([esc(c["parameter"]), esc(f"1 {unit} ~ {comb}" if comb else "0 (no effect on the measurements)"),
                          num(c.get("fit_residual"), ".2g")])
-        out.append("<p>not identifiable, and the identifiable parameters it is coupled with (its effect equals this "
-                   "combination, SI ratios):</p>" + table(["parameter", "equivalent combination", "fit residual"],
-                                                           body, left=(0, 1)))
+        out.append("<p>not identifiable, and the identifiable parameters it is coupled with (a deviation of it has the "
+                   "effect of this combination; lengths in mm, angles in deg):</p>"
+                   + table(["parameter", "equivalent combination", "fit residual"], body, left=(0, 1)))
     elif idf.get("non_identifiable"):
         out.append("<p>not identifiable: " + esc(", ".join(idf["non_identifiable"])) + "</p>")
     if corr:
@@ -252,8 +268,6 @@ ADEQUACY_MEANING = {
 
 
 def adequacy_section(report: dict) -> str:
-    from .report_text import lack_of_fit_line, method_check_line
-
     a = report.get("adequacy")
     out = ['<section id="adequacy"><h2>Does the model explain the data? (chi-square adequacy test)</h2>']
     if a:
@@ -285,8 +299,8 @@ def residuals_section(report: dict, shown: int = 15) -> str:
     out = ['<section id="poses"><h2>Per-pose residuals, worst first</h2>']
     if pr and pr.get("poses"):
         keys = [k for k in ("translation_mm", "rotation_deg", "joint_deg") if k in pr["poses"][0]]
-        head = ["pose", "chi2", "p-value"] + [k.replace("_", " [") + "]" for k in keys]
-        head += ["reprojection RMS [px]", "corners"] if meas else []
+        head = ["pose"] + [figure_head(k) for k in ("chi2", "p_value", *keys)]
+        head += [figure_head(k) for k in ("reprojection_rms_px", "n_corners")] if meas else []
         rows, cls = [], []
         for p in pr["poses"]:
             r = [esc(p["pose_id"]), num(p.get("chi2"), ".3g"), num(p.get("p_value"), ".2g")]
@@ -312,15 +326,27 @@ def residuals_section(report: dict, shown: int = 15) -> str:
     return "\n".join(out) + "</section>"
 
 
-#: what each plot of report.json's ``files`` shows
+#: what each plot of report.json's ``files`` shows: (caption, what it adds when the run has a truth: simulation)
 PLOT_CAPTIONS = {
-    "residuals_plot": "Residual norm per pose with the nominal and the identified parameters (log scale), and "
-                      "their histograms; translation and rotation rows for pose residuals.",
-    "parameters_plot": "Identified − nominal per parameter, one axis per unit, ±2σ error bars; in simulation the "
-                       "truth (red x) and the z-scores against it (grey band: ±2).",
-    "error_map_plot": "Validation position error per pose, nominal and identified model, each panel with its own "
-                      "colour scale.",
+    "residuals_plot": ("Residual norm per pose with the nominal and the identified parameters (log scale), and "
+                       "their histograms; translation [mm] and rotation [deg] rows for pose residuals.", ""),
+    "parameters_plot": ("Identified − nominal per parameter, one axis per unit (lengths in mm, angles in deg), ±2σ "
+                        "error bars.", " The simulation's truth (red x) and the z-scores against it (grey band: ±2)."),
+    "error_map_plot": ("Validation position error [mm] per pose, nominal and identified model, each panel with its "
+                       "own colour scale.", " The error is against the simulation's truth."),
 }
+
+
+def has_truth(report: dict) -> bool:
+    """Whether the run knows a truth (a simulation): a parameter row with a true value, or kind simulation."""
+    return report.get("kind") == "simulation" or any(r.get("true") is not None for r in report.get("parameters") or [])
+
+
+def plot_caption(key: str, report: dict) -> str:
+    """The caption of a plot of report.json's ``files``: what it shows, and what it shows of the truth only when
+    there is one (recorded data has none)."""
+    text, truth = PLOT_CAPTIONS.get(key, ("", ""))
+    return text + (truth if has_truth(report) else "")
 
 
 def plots_section(report: dict, out_dir) -> str:
@@ -331,9 +357,14 @@ def plots_section(report: dict, out_dir) -> str:
             continue
         img = png_img(Path(out_dir) / name, name)
         if img:
-            figs.append(f"<figure>{img}<figcaption>{esc(name)}: {esc(PLOT_CAPTIONS.get(key, ''))}</figcaption>"
+            figs.append(f"<figure>{img}<figcaption>{esc(name)}: {esc(plot_caption(key, report))}</figcaption>"
                         "</figure>")
     return '<section id="plots"><h2>Plots</h2>' + ("\n".join(figs) or "<p>no plots in this run</p>") + "</section>"
+
+
+def _overlay_id(o: dict, i: int) -> str:
+    """The page anchor of the i-th overlay's full-size view (letters, digits, '-' only)."""
+    return f"overlay-{i}-" + re.sub(r"[^A-Za-z0-9-]", "-", str(o["pose_id"]))
 
 
 def overlays_section(overlays) -> str:
@@ -342,37 +373,75 @@ def overlays_section(overlays) -> str:
     if overlays is None:
         return ""
     out = ['<section id="overlays"><h2>What the detector saw: the rejected and the worst poses</h2>',
-           "<p class=\"muted\">" + esc("; ".join(LEGEND.values())) + ".</p>"]
+           "<p class=\"muted\">" + esc("; ".join(LEGEND.values())) + ". Click an image (or its \"full size\" link) "
+           "to open it at full size on this page.</p>"]
     if not overlays:
         out.append("<p>no rejected poses and no per-pose residuals to show</p>")
-    figs = []
-    for o in overlays:
+    figs, boxes = [], []
+    for i, o in enumerate(overlays):
         d = o.get("drawn") or {}
         extra = (f"; {d['n_detected']} corners detected; crop x {d['crop'][0]}-{d['crop'][2]}, "
                  f"y {d['crop'][1]}-{d['crop'][3]} px" if d else "") + (
             f"; model reprojection vs detected: RMS {d['model_rms_px']:.3g} px, max {d['model_max_px']:.3g} px "
             f"(lines magnified x{d['vector_gain']:.3g})" if d.get("model_rms_px") is not None else "")
         cap = f"pose {o['pose_id']}, {o['role']}: {o['reason'] or 'no reason recorded'}{extra}"
-        img = (f'<img src="{data_uri(o["jpeg"], "image/jpeg")}" alt="overlay of pose {esc(o["pose_id"])}">'
+        alt = f"overlay of pose {esc(o['pose_id'])}"
+        img = (f'<img src="{data_uri(o["jpeg"], "image/jpeg")}" alt="{alt}">'
                if o.get("jpeg") else f"<p>(no image: {esc(o.get('note') or 'not available')})</p>")
-        figs.append(f"<figure>{img}<figcaption>{esc(cap)}</figcaption></figure>")
+        link = ""
+        if o.get("jpeg") and o.get("full_jpeg"):
+            fid, fd = _overlay_id(o, i), o.get("full_drawn") or {}
+            size = f"{fd.get('width')} x {fd.get('height')} px" if fd else "full size"
+            scale = (f", {fd['scale']:.3g} screen px per camera px" if fd.get("scale") else "")
+            img = f'<a class="zoom" href="#{fid}" title="open at full size">{img}</a>'
+            link = f' <a href="#{fid}">[full size: {esc(size)}]</a>'
+            boxes.append(f'<div class="lightbox" id="{fid}"><a class="close" href="#overlays">close ✕</a>'
+                         f"<p>{esc(cap)}; shown at full size, {esc(size)}{esc(scale)}</p>"
+                         f'<img src="{data_uri(o["full_jpeg"], "image/jpeg")}" alt="{alt} at full size"></div>')
+        figs.append(f"<figure>{img}<figcaption>{esc(cap)}{link}</figcaption></figure>")
     out.append('<div class="grid">' + "\n".join(figs) + "</div>")
+    out += boxes
     return "\n".join(out) + "</section>"
+
+
+def figures_table(columns, what: str = "figure") -> str:
+    """<table> of figure dicts [(column name, {key: value})]: one row per key of the first dict (not n_poses),
+    named by its label and display unit, its values converted to that unit (:func:`.report_text.figure_label`);
+    ``what``: the head of the label column."""
+    keys = [k for k in columns[0][1] if k != "n_poses"]
+    rows = []
+    for k in keys:
+        label, unit, f = figure_label(k)
+        rows.append([esc(label), esc(unit), *(num(d[k] * f if isinstance(d.get(k), (int, float)) else None, ".4g")
+                                              for _, d in columns)])
+    return table([what, "unit", *(name for name, _ in columns)], rows, left=(0, 1))
 
 
 def more_section(report: dict) -> str:
     out = ['<section id="more"><h2>Validation, camera and the rest</h2>']
     acc = report.get("accuracy")
     if acc:
-        keys = [k for k in acc["before"] if k != "n_poses"]
-        out.append(f"<p>validation on {acc['before'].get('n_poses')} poses never used in the fit (simulation: "
-                   "against the truth):</p>")
-        out.append(table(["", *keys], [[esc(w), *(num(acc[w].get(k), ".4g") for k in keys)]
-                                       for w in ("before", "after")]))
+        out.append(f"<p>validation on {acc['before'].get('n_poses')} poses never used in the fit"
+                   + (" (against the simulation's truth)" if has_truth(report) else "") + ":</p>")
+        out.append(figures_table([("before (nominal model)", acc["before"]), ("after (identified model)", acc["after"])],
+                                 "validation error"))
+    kf = report.get("kfold")
+    if isinstance(kf, dict) and (kf.get("overall") or {}).get("before"):
+        o, c = kf["overall"], kf.get("without_outliers")
+        out.append(f"<p>held-out {esc(kf.get('folds'))}-fold validation: each pose predicted by the model identified "
+                   f"on the other folds (residuals of {esc(kf.get('residual_of', ''))}), before = nominal model, "
+                   "after = identified:</p>")
+        cols = [(f"all {o.get('n_poses')} poses: {w}", o[w]) for w in ("before", "after")]
+        if c:
+            cols += [(f"without the {len(c.get('excluded') or [])} flagged outliers: {w}", c[w])
+                     for w in ("before", "after")]
+        out.append(figures_table(cols, "held-out residual"))
     files = report.get("files") or {}
-    if files:
-        out.append("<p>files beside this page: " + ", ".join(
-            f'<a href="{esc(v)}">{esc(v)}</a>' for v in dict.fromkeys(files.values())) + "</p>")
+    extra = [v for v in dict.fromkeys(files.values()) if v != HTML_NAME]
+    if extra:  # optional: everything they show is on this page (the plots embedded, report.json's figures above)
+        out.append('<p class="muted">optional downloads (the files written beside this page; the page itself needs '
+                   "none of them): " + ", ".join(f'<a href="{esc(v)}" download>download {esc(v)}</a>' for v in extra)
+                   + "</p>")
     out.append("<details><summary>summary.txt (everything in one screen of text)</summary><pre>"
                + esc(report.get("summary_text", "")) + "</pre></details>")
     return "\n".join(out) + "</section>"
