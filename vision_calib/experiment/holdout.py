@@ -259,6 +259,13 @@ def _decide(h: dict, fails: list[str]) -> dict:
     return {"ok": True, "reason": f"held-out poses predicted better in {' and '.join(better)}: {figs}"}
 
 
+def flagged_labels(meas: Measurements, rejected) -> list[str]:
+    """Labels of the poses of ``meas`` among ``rejected`` [(label, reason)] (the identification's rejected poses:
+    those removed before it, e.g. by the motion check, are not in ``meas`` and have nothing to predict)."""
+    have = {str(lab) for lab in meas.labels}
+    return [str(r[0]) for r in rejected if str(r[0]) in have]
+
+
 def holdout_failure(h: dict | None) -> dict | None:
     """The report's ``failure`` for a held-out decision that is not ok (None when it is, or there is none)."""
     if h is None or h["decision"]["ok"]:
@@ -315,4 +322,4 @@ def holdout_lines(h: dict | None) -> list[str]:
 
 
 __all__ = ["DEFAULT_FOLDS", "fold_indices", "error_stats", "holdout_validation", "holdout_failure", "holdout_lines",
-           "predicted_accuracy", "tool_point_supported"]
+           "predicted_accuracy", "tool_point_supported", "flagged_labels"]

@@ -15,7 +15,7 @@ from ..io.measured_poses import chain_direction, misreadings, read_measured_pose
 from ..io.report import build_report, parameters_table, residual_stats, write_report
 from .checks import drop_inconsistent, duplicate_poses, motion_verdict
 from .gross import gross_failure
-from .holdout import holdout_failure, holdout_lines, holdout_validation
+from .holdout import flagged_labels, holdout_failure, holdout_lines, holdout_validation
 from .steps import check_method, identify_measurements
 
 
@@ -72,7 +72,7 @@ def process_poses(path: str | Path, out_dir: str | Path | None, method: str | No
                                      "order, joint or length units (checked up front only for gross factors)",
                             motion_refusal=refusal, motion_check=check)
     hold = None if failure else holdout_validation(
-        mp.scene.setup, meas, method, residual, rep, folds, mp.seed, outliers=[r[0] for r in ident.rejected],
+        mp.scene.setup, meas, method, residual, rep, folds, mp.seed, outliers=flagged_labels(meas, ident.rejected),
         tcp=tcp, result=result, fitted_setup=setup)
     failure = failure or holdout_failure(hold)
     ps = setup.params

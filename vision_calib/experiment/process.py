@@ -24,7 +24,7 @@ from ..io.report import (REPORT_VERSION, build_report, measurements_block, param
 from ..rig import Measurements, load_scene
 from .checks import duplicate_poses, screen_measurements
 from .gross import gross_failure
-from .holdout import holdout_failure, holdout_lines, holdout_validation
+from .holdout import flagged_labels, holdout_failure, holdout_lines, holdout_validation
 from .steps import check_method, identify_measurements, rejection_summary
 
 if TYPE_CHECKING:  # the measure package is imported where poses are measured
@@ -129,7 +129,7 @@ def process_folder(folder: str | Path, out_dir: str | Path | None, method: str |
                             untested=f"a wrong robot file or scene mounts ({scene.path}), joint columns in another "
                                      "order, the target's or camera's description in recording.yaml")
     hold = None if failure else holdout_validation(nominal, meas, method, residual, rep, folds, 0,
-                                                   outliers=[r[0] for r in ident.rejected], tcp=tcp, result=result,
+                                                   outliers=flagged_labels(meas, ident.rejected), tcp=tcp, result=result,
                                                    fitted_setup=setup)
     failure = failure or holdout_failure(hold)
     cam_fit = None

@@ -26,7 +26,7 @@ from ..io.report import REPORT_VERSION, build_report, measurements_block, parame
 from ..rig import Measurements, Scene, SCENES_DIR, load_scene, scene_poses
 from .image_chain import ImageChain, ImagePool, InlineImagePool, measure_poses, start_fork_server
 from .checks import screen_measurements
-from .holdout import holdout_failure, holdout_lines, holdout_validation
+from .holdout import flagged_labels, holdout_failure, holdout_lines, holdout_validation
 from .steps import (check_method, identify_measurements, rejection_summary, rngs, run_analysis_and_truth,
                     shared_truth, unmodelled_truth)
 from .synthetic import run_synthetic
@@ -289,7 +289,7 @@ def run_simulation(scene: Scene | str | Path, out_dir: str | Path | None = None,
         timings["identify"] = time.perf_counter() - t
         t = time.perf_counter()
         hold = holdout_validation(scene.setup, meas_used, method, residual, ident.analysis, folds, seed,
-                                  outliers=[r[0] for r in ident.rejected], tcp=tcp, result=result, fitted_setup=setup)
+                                  outliers=flagged_labels(meas_used, ident.rejected), tcp=tcp, result=result, fitted_setup=setup)
         timings["holdout"] = time.perf_counter() - t
         if val_job is not None:
             val_meas, val_idx, val_pms, T_val = val_job.result()

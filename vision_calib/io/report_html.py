@@ -417,6 +417,37 @@ def figures_table(columns, what: str = "figure") -> str:
     return table([what, "unit", *(name for name, _ in columns)], rows, left=(0, 1))
 
 
+def holdout_html(h: dict | None) -> str:
+    """The held-out k-fold validation (``experiment.holdout``): decision, before/after at the target (and the tool
+    point), the RMS change's interval, the predicted accuracy; "" when there is none."""
+    if not isinstance(h, dict) or not (h.get("overall") or {}).get("before"):
+        return ""
+    d = h.get("decision") or {}
+    o, c = h["overall"], h.get("without_outliers")
+    out = [f"<h3>Held-out accuracy ({esc(h.get('folds'))}-fold)</h3>",
+           f"<p class=\"{'ok' if d.get('ok') else 'failed'}\">{'passed' if d.get('ok') else 'FAILED'}: "
+           f"{esc(d.get('reason', ''))}</p>",
+           f"<p>each pose predicted by the model identified on the other folds (errors of "
+           f"{esc(h.get('residual_of', ''))}, measurement noise included); before = nominal model, after = "
+           "calibrated; flagged outliers are in no training set:</p>"]
+    cols = [(f"all {o.get('n_poses')} poses: {w}", o[w]) for w in ("before", "after")]
+    if c:
+        cols += [(f"without the {len(c.get('excluded') or [])} flagged outliers: {w}", c[w]) for w in ("before", "after")]
+    t = h.get("tool")
+    if t:
+        cols += [(f"tool point {esc(h.get('tcp_m'))} m: {w}", t[w]) for w in ("before", "after")]
+    out.append(figures_table(cols, "held-out error"))
+    p = h.get("predicted")
+    if p:
+        rows = [[esc(f"std at the {what}"), "mm", num(p[what]["position_median_mm"], ".3g"),
+                 num(p[what]["position_p95_mm"], ".3g")] for what in ("target", "tool") if what in p]
+        out.append(f"<p>predicted from the parameter covariance over {esc(p.get('workspace'))}; held-out RMS predicted "
+                   f"{num(p.get('heldout_position_rms_mm'), '.3g')} mm, observed / predicted "
+                   f"{num(p.get('ratio_observed_to_predicted'), '.2f')}:</p>")
+        out.append(table(["position", "unit", "median", "95 %"], rows, left=(0, 1)))
+    return "\n".join(out)
+
+
 def more_section(report: dict) -> str:
     out = ['<section id="more"><h2>Validation, camera and the rest</h2>']
     acc = report.get("accuracy")
@@ -425,17 +456,7 @@ def more_section(report: dict) -> str:
                    + (" (against the simulation's truth)" if has_truth(report) else "") + ":</p>")
         out.append(figures_table([("before (nominal model)", acc["before"]), ("after (identified model)", acc["after"])],
                                  "validation error"))
-    kf = report.get("kfold")
-    if isinstance(kf, dict) and (kf.get("overall") or {}).get("before"):
-        o, c = kf["overall"], kf.get("without_outliers")
-        out.append(f"<p>held-out {esc(kf.get('folds'))}-fold validation: each pose predicted by the model identified "
-                   f"on the other folds (residuals of {esc(kf.get('residual_of', ''))}), before = nominal model, "
-                   "after = identified:</p>")
-        cols = [(f"all {o.get('n_poses')} poses: {w}", o[w]) for w in ("before", "after")]
-        if c:
-            cols += [(f"without the {len(c.get('excluded') or [])} flagged outliers: {w}", c[w])
-                     for w in ("before", "after")]
-        out.append(figures_table(cols, "held-out residual"))
+    out.append(holdout_html(report.get("holdout")))
     files = report.get("files") or {}
     extra = [v for v in dict.fromkeys(files.values()) if v != HTML_NAME]
     if extra:  # optional: everything they show is on this page (the plots embedded, report.json's figures above)

@@ -53,11 +53,14 @@ def decimals_of(std, default: int, most: int = 6) -> int:
 #: unit is mm for lengths, deg for angles. The one table of html (validation tables, column heads) and text.
 FIGURE_LABELS = {
     # validation accuracy (rig.base.Evaluation.to_dict; the model vs the truth on held-out poses), the held-out
-    # k-fold residuals (process-poses: experiment.poses.kfold_validation) and the residual RMS per axis after the
+    # k-fold residuals (experiment.holdout.holdout_validation) and the residual RMS per axis after the
     # fit (io.report.residual_stats): the table or line names which
     "position_mean_mm": ("position mean", "mm", 1.0),
     "position_rms_mm": ("position RMS", "mm", 1.0),
     "position_max_mm": ("position max", "mm", 1.0),
+    "position_p95_mm": ("position 95th percentile", "mm", 1.0),
+    "rotation_p95_deg": ("rotation 95th percentile", "deg", 1.0),
+    "position_median_mm": ("position std, median", "mm", 1.0),
     "rotation_mean_deg": ("rotation mean", "deg", 1.0),
     "rotation_rms_deg": ("rotation RMS", "deg", 1.0),
     "rotation_max_deg": ("rotation max", "deg", 1.0),
