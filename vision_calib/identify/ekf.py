@@ -28,7 +28,10 @@ stopping when the step is below STEP_TOL * max(1, |z|) or no descent is left. Co
 at the final iterate).
 
 P0 = diag(prior_std²) of the free parameters (``problem.prior_std``, default 100 x scale: an
-essentially uninformative prior around x0).
+essentially uninformative prior around x0). The problem's prior rows (``problem.prior_rows``: parameters whose
+prior N(nominal, prior_std²) is part of the least-squares cost, e.g. the H4's measured mount tilts) start from the
+uninformative 100 x scale instead and enter every pass as linear pseudo-observations, applied before the poses,
+so that the passes reach the same optimum as ``solve_lse`` (which has them as rows of its cost).
 
 Passes. Pass 1 is the sequential filter above. Its weak point: with a broad prior the first
 poses fix the estimate only along the few directions they see, the estimate can wander far
@@ -104,6 +107,14 @@ class _Model:
         J = np.asarray(self.problem.jacobian(x, np.array([k])), float)[0]
         return r, (self.W[k] @ J[:, self.fi]) * self.s[None, :]
 
+    def prior_terms(self, z):
+        """The problem's prior rows (``problem.prior_rows``, linear pseudo-observations N(nominal, prior_std^2)) at
+        z: whitened residual (p,) and scaled H (p, n); (None, None) when there are none."""
+        if not self.problem.n_prior:
+            return None, None
+        return (self.problem.prior_residual(self.x_of(z)),
+                self.problem.prior_jacobian() * self.s[None, :])
+
     def batch_terms(self, z):
         """All poses at z: whitened residuals (n_obs, m), H (n_obs, m, n), full Jacobian (n_obs, m, n_params);
         None when the model cannot be evaluated there or a value is not finite (the result says which)."""
@@ -177,6 +188,11 @@ def _first_pass(model: _Model, P0, Q, obs_order, n_iter):
     """Sequential (iterated) EKF over the poses from z = 0. Returns (z, P, updates, every update converged)."""
     z, P = np.zeros(P0.shape[0]), P0.copy()
     updates, all_conv = 0, True
+    rp, Hp = model.prior_terms(z)
+    if rp is not None:  # the prior rows: one linear update (exact), before the poses
+        K = _gain(P, Hp)
+        z = z + K @ rp
+        P = _joseph(P, K, Hp)
     for k in obs_order:
         P = P + Q
         if n_iter == 1:  # plain EKF (thesis eqs. 4.2-4.9), linearised at the prediction
@@ -195,9 +211,15 @@ def _first_pass(model: _Model, P0, Q, obs_order, n_iter):
     return z, P, updates, all_conv
 
 
-def _relinearised_pass(z_lin, rw, H, P0, Q, obs_order):
-    """One pass with every pose linearised at z_lin (rw (n_obs, m), H (n_obs, m, n) there), prior mean z_lin."""
+def _relinearised_pass(z_lin, rw, H, P0, Q, obs_order, prior=(None, None)):
+    """One pass with every pose linearised at z_lin (rw (n_obs, m), H (n_obs, m, n) there), prior mean z_lin;
+    ``prior``: the problem's prior rows (rp (p,), Hp (p, n)) at z_lin, applied first (they are linear)."""
     z, P = z_lin.copy(), P0.copy()
+    rp, Hp = prior
+    if rp is not None:
+        K = _gain(P, Hp)
+        z = z + K @ rp
+        P = _joseph(P, K, Hp)
     for k in obs_order:
         P = P + Q
         K = _gain(P, H[k])
@@ -206,10 +228,14 @@ def _relinearised_pass(z_lin, rw, H, P0, Q, obs_order):
     return z, P
 
 
-def _distance(rw, H, P) -> float:
-    """max_i |delta_i| / std_i with delta the undamped Gauss-Newton step to the LSE optimum (scaled units)."""
+def _distance(rw, H, P, prior=(None, None)) -> float:
+    """max_i |delta_i| / std_i with delta the undamped Gauss-Newton step to the LSE optimum (scaled units; the
+    problem's prior rows ``prior`` = (rp, Hp) are part of that cost, as in solve_lse)."""
     n = H.shape[-1]
-    delta = -np.linalg.lstsq(H.reshape(-1, n), rw.ravel(), rcond=None)[0]
+    A, b = H.reshape(-1, n), rw.ravel()
+    if prior[0] is not None:
+        A, b = np.vstack([A, prior[1]]), np.concatenate([b, prior[0]])
+    delta = -np.linalg.lstsq(A, b, rcond=None)[0]
     std = np.sqrt(np.clip(np.diag(P), 1e-300, None))
     d = float(np.max(np.abs(delta) / std)) if n else 0.0
     return d if np.isfinite(d) else float("inf")
@@ -237,6 +263,9 @@ def _prior_cov(problem: IdentificationProblem, s) -> np.ndarray:
         if prior.shape != (len(params),):
             raise DataError(f"prior_std has shape {prior.shape}, expected ({len(params)},)")
     prior_z = prior[params.free_index] / s
+    if problem.n_prior:  # their prior enters as the prior rows (pseudo-observations), not as P0
+        rows = np.flatnonzero(np.any(problem.prior_jacobian() != 0, axis=0))
+        prior_z[rows] = 100.0
     ok = np.isfinite(prior_z) & (prior_z > 0)
     if not np.all(ok):
         bad = [params.free_names[i] for i in np.flatnonzero(~ok)]
@@ -292,10 +321,11 @@ def solve_ekf(
             distances.append(float("inf"))
             break
         rw, H, J = terms
-        distances.append(_distance(rw, H, P))
+        prior = model.prior_terms(z)
+        distances.append(_distance(rw, H, P, prior))
         if (passes is None and distances[-1] < tol) or len(pass_estimates) >= limit:
             break
-        z, P = _relinearised_pass(z, rw, H, P0, Q, obs_order)
+        z, P = _relinearised_pass(z, rw, H, P0, Q, obs_order, prior)
         updates += obs_order.size
         pass_estimates.append(model.x_of(z))
     converged, message = _verdict(distances[-1], tol, len(pass_estimates), passes, max_passes)
