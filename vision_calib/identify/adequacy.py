@@ -92,6 +92,8 @@ def model_adequacy(result: IdentificationResult, level: float = DEFAULT_LEVEL, n
              "p_value": float(_chi2().sf(pc[k], m)) if np.isfinite(pc[k]) else 0.0}
             for k in order
         ]
+    if result.pose_chi2 is not None and m and dof > 0:
+        out["pose_tail"] = pose_tail(np.asarray(result.pose_chi2, float), m, result.labels, k_hi, level)
     if dof <= 0 or not np.isfinite(chi2):
         why = "no redundancy (dof <= 0)" if dof <= 0 else "the cost is not finite"
         out.update(verdict="not available", explanation=f"no chi-square test: {why}")
@@ -121,6 +123,43 @@ def model_adequacy(result: IdentificationResult, level: float = DEFAULT_LEVEL, n
             f"chi2/dof = {v:.3g} within the expected {lo:.3g}-{hi:.3g} ({how}): the residuals agree with the "
             "measurement covariance"))
     return out
+
+
+#: per-pose p-value below which a pose counts in the tail test (:func:`pose_tail`)
+POSE_TAIL_P = 0.01
+
+
+def pose_tail(pose_chi2: np.ndarray, m: int, labels=(), k_hi: float = 1.0, level: float = DEFAULT_LEVEL) -> dict:
+    """The per-pose p-values tested as a whole: the count of poses whose whitened squared residual norm has an
+    upper-tail p < :data:`POSE_TAIL_P` under chi2(m) (at the most lenient covariance factor ``k_hi``) against
+    Binomial(n, POSE_TAIL_P), and the clusters of such poses (runs in pose order with gaps of at most 2 poses).
+    {threshold, n_poses, n_below, expected, p_value (P[count >= n_below]), significant (p_value < level),
+    clusters: [[first label, last label, count]], message}."""
+    from scipy.stats import binom
+
+    pc = np.asarray(pose_chi2, float)
+    ok = np.isfinite(pc)
+    n = int(ok.sum())
+    p = np.where(ok, _chi2().sf(np.where(ok, pc, 0.0) / k_hi, m), 0.0)
+    below = np.flatnonzero(ok & (p < POSE_TAIL_P))
+    pv = float(binom.sf(len(below) - 1, n, POSE_TAIL_P)) if n else 1.0
+    lab = [str(x) for x in labels] if len(labels) == len(pc) else [f"#{i}" for i in range(len(pc))]
+    clusters, run = [], []
+    for i in below:
+        if run and i - run[-1] > 3:
+            clusters.append(run)
+            run = []
+        run.append(int(i))
+    if run:
+        clusters.append(run)
+    clusters = [[lab[r[0]], lab[r[-1]], len(r)] for r in clusters if len(r) >= 2]
+    sig = bool(pv < level)
+    where = ("; clustered in " + ", ".join(f"{a}-{b} ({c} poses)" for a, b, c in clusters)) if clusters else ""
+    msg = (f"{len(below)} of {n} poses have a residual with p < {POSE_TAIL_P:g} ({n * POSE_TAIL_P:.2g} expected at "
+           f"the measurement noise; binomial p {pv:.2g}){where}: the model or the measurement misses something at "
+           "those poses") if sig else ""
+    return {"threshold": POSE_TAIL_P, "n_poses": n, "n_below": int(len(below)), "expected": n * POSE_TAIL_P,
+            "p_value": pv, "significant": sig, "clusters": clusters, "message": msg}
 
 
 def _robust_scale(problem: IdentificationProblem, res: IdentificationResult) -> float:

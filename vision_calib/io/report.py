@@ -225,11 +225,14 @@ def verdict(result, measurements: dict | None = None, identified: IdentifiedFit 
     usable = bool(result.converged and finite) and failure is None
     adq = (adequacy or {}).get("verdict")
     lof = bool((lack_of_fit or {}).get("significant"))
+    tail = ((adequacy or {}).get("pose_tail") or {}) if adq == "consistent" else {}
     n_all = (measurements or {}).get("n_poses", 0)
     n_rej = (measurements or {}).get("n_rejected", 0) + n_out
     many = bool(n_all) and n_rej > MAX_REJECTED_FRACTION * n_all  # detection failures count as rejected views
-    status = "failed" if not usable else ("warning" if adq == "too large" or lof or many else "ok")
+    status = "failed" if not usable else ("warning" if adq == "too large" or lof or many or tail.get("significant")
+                                          else "ok")
     why = ([misfit_message(adequacy)] if adq == "too large" else []) + ([lack_of_fit["message"]] if lof else [])
+    why += [tail["message"]] if tail.get("significant") else []
     why += [f"{n_rej} of {n_all} poses rejected (more than {MAX_REJECTED_FRACTION:.0%}; measurement and outliers): "
             "the result rests on the views that were easy to measure"] if many else []
     message = getattr(result, "message", "") if not usable else "; ".join(why)
