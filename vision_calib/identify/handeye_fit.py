@@ -11,11 +11,12 @@ response to the flange pose error at the current estimate, ``robot_cov = diag(s_
 2. the start: the candidate of least weighted cost (weights at that closed form);
 3. iteratively reweighted least squares: LSE with the weights at x, weights recomputed at the new x, until x
    moves by less than 1e-3 of its std. When the robot's std are not given, the two variances
-   ``theta = (s_t^2, s_r^2)`` are estimated at each step with the camera covariance known: REML of the
-   model linearised at x (Fisher scoring, the fixed point of ``sum_j tr(P V_i P V_j) theta_j =
-   r^T W V_i W r - tr(P V_i P V_cam)``, ``V_t = D_t D_t^T``, ``V_r = D_r D_r^T`` the blocks of the
-   translation and rotation columns of D, ``W = C^-1``, ``P = W - W J (J^T W J)^-1 J^T W``; a negative value
-   is set to 0); their covariance ``2 (tr(P V_i P V_j))^-1``;
+   ``theta = (s_t^2, s_r^2)`` are estimated at each step with the camera covariance known: the maximum of the
+   REML likelihood of the model linearised at x, ``-0.5 (log|C| + log|J^T C^-1 J| + r^T P r)``,
+   ``C = camera + s_t^2 V_t + s_r^2 V_r``, ``V_t = D_t D_t^T``, ``V_r = D_r D_r^T`` the blocks of the translation
+   and rotation columns of D, ``P = W - W J (J^T W J)^-1 J^T W``, ``W = C^-1``, searched over the whole box
+   :data:`THETA_BOUNDS` (log grid + bounded refinement: a global maximum, so no collapse to 0 and no runaway
+   of a local Fisher-scoring fixed point); their covariance ``2 (tr(P V_i P V_j))^-1``;
 4. never worse than a candidate: every candidate's cost under the final weights; when one is below
    ours (another local minimum), the iteration restarts from it and the lower cost is kept.
 
@@ -83,47 +84,83 @@ def _robot_cov(theta) -> np.ndarray:
     return robot_pose_cov(np.sqrt(max(theta[0], 0.0)), np.sqrt(max(theta[1], 0.0)))
 
 
-def _reml_step(problem: IdentificationProblem, result: IdentificationResult):
-    """(theta (2,), cov (2, 2)): one REML Fisher-scoring step for the robot's variances (module docstring) at
-    the result's x, with the problem's current weights; a component the data do not see (tr ~ 0) stays 0."""
-    x = result.identified
+#: bounds of the robot's estimated std per axis in the REML search: translation [m], rotation [rad] (the lower
+#: ones stand for 0: far below any camera's resolution; the upper ones far above any robot's error)
+THETA_BOUNDS = ((1e-7, 0.5), (1e-8, 0.5))
+
+
+def _reml_terms(problem: IdentificationProblem, x):
+    """(J (N, m, p) free columns, r (N, m), camera cov (N, m, m), V_t, V_r (N, m, m)) at x: what the REML
+    likelihood of the robot's variances needs (module docstring)."""
     D = flange_error_map(problem, x)  # (N, 6, 6)
-    n_obs, m = problem.n_obs, problem.m
-    free = np.asarray(result.free, bool)
-    J = np.asarray(problem.jacobian(x), float)[:, :, free].reshape(n_obs * m, -1)
-    r = np.asarray(problem.residual(x), float).reshape(-1)
+    free = problem.params.free
+    J = np.asarray(problem.jacobian(x), float)[:, :, free]
+    r = np.asarray(problem.residual(x), float)
+    Vt = D[:, :, :3] @ np.swapaxes(D[:, :, :3], 1, 2)
+    Vr = D[:, :, 3:] @ np.swapaxes(D[:, :, 3:], 1, 2)
+    return J, r, np.asarray(problem.meta["camera_cov"], float), Vt, Vr
+
+
+def _reml_negll(theta, J, r, cam, Vt, Vr) -> float:
+    """-REML log-likelihood (up to a constant) of theta = (s_t^2, s_r^2) for the model linearised at x:
+    0.5 (log|C| + log|J^T C^-1 J| + r^T P r), C = blockdiag(cam_k + s_t^2 Vt_k + s_r^2 Vr_k)."""
+    C = cam + theta[0] * Vt + theta[1] * Vr
+    try:
+        L = np.linalg.cholesky(C)
+    except np.linalg.LinAlgError:
+        return np.inf
+    Li = np.linalg.inv(L)
+    Jw = Li @ J  # whitened (N, m, p)
+    rw = np.einsum("kij,kj->ki", Li, r)
+    A = np.einsum("kip,kiq->pq", Jw, Jw)
+    g = np.einsum("kip,ki->p", Jw, rw)
+    sign, logdetA = np.linalg.slogdet(A)
+    if sign <= 0:
+        return np.inf
+    rPr = float(np.sum(rw**2) - g @ np.linalg.solve(A, g))
+    return 0.5 * (2.0 * np.sum(np.log(np.diagonal(L, axis1=1, axis2=2))) + logdetA + rPr)
+
+
+def _reml_step(problem: IdentificationProblem, result: IdentificationResult):
+    """(theta (2,), cov (2, 2)): the robot's variances maximising the REML likelihood of the model linearised at
+    the result's x (camera covariance known), searched over the whole box :data:`THETA_BOUNDS` (a log grid, then
+    a bounded quasi-Newton refinement from its best point): the maximum is global on the box, so the estimate
+    neither collapses to 0 nor runs away where the likelihood does not; its covariance is the inverse Fisher
+    information 2 (tr(P V_i P V_j))^-1 at the maximum. A component at its lower bound is reported as 0."""
+    from scipy.optimize import minimize
+
+    terms = _reml_terms(problem, result.identified)
+    lo = np.log([b[0] ** 2 for b in THETA_BOUNDS])
+    hi = np.log([b[1] ** 2 for b in THETA_BOUNDS])
+    grid = [np.linspace(lo[i], hi[i], 17) for i in range(2)]
+    vals = np.array([[_reml_negll(np.exp([u, v]), *terms) for v in grid[1]] for u in grid[0]])
+    i, j = np.unravel_index(np.argmin(vals), vals.shape)
+    u0 = np.array([grid[0][i], grid[1][j]])
+    opt = minimize(lambda u: _reml_negll(np.exp(u), *terms), u0, method="L-BFGS-B", bounds=list(zip(lo, hi)))
+    u = opt.x if np.isfinite(opt.fun) and opt.fun <= vals[i, j] else u0
+    theta = np.exp(u)
+    theta[u <= lo + 1e-6] = 0.0  # at the lower bound: no robot error visible along that component
+    return theta, _theta_cov(problem, terms, theta)
+
+
+def _theta_cov(problem, terms, theta) -> np.ndarray:
+    """2 (tr(P V_i P V_j))^-1 over the robot's two variances at theta (pseudo-inverse: an unseen one is inf-free 0)."""
+    J, r, cam, Vt, Vr = terms
+    n_obs, m = r.shape
+    C = cam + theta[0] * Vt + theta[1] * Vr
+    Winv = np.linalg.inv(C)
     W = np.zeros((n_obs * m, n_obs * m))
-    Vs = [np.zeros_like(W) for _ in range(3)]
-    blocks = (problem.meta["camera_cov"], D[:, :, :3] @ np.swapaxes(D[:, :, :3], 1, 2),
-              D[:, :, 3:] @ np.swapaxes(D[:, :, 3:], 1, 2))
-    Winv = np.linalg.inv(problem.obs_cov)
+    Vs = [np.zeros_like(W), np.zeros_like(W)]
     for k in range(n_obs):
         sl = slice(k * m, (k + 1) * m)
         W[sl, sl] = Winv[k]
-        for V, b in zip(Vs, blocks):
-            V[sl, sl] = b[k]
-    WJ = W @ J
-    P = W - WJ @ np.linalg.pinv(J.T @ WJ) @ WJ.T
+        Vs[0][sl, sl], Vs[1][sl, sl] = Vt[k], Vr[k]
+    Jf = J.reshape(n_obs * m, -1)
+    WJ = W @ Jf
+    P = W - WJ @ np.linalg.pinv(Jf.T @ WJ) @ WJ.T
     PV = [P @ V for V in Vs]
-    T = np.array([[np.sum(PV[i] * PV[j].T) for j in range(3)] for i in range(3)])
-    Wr = W @ r
-    q = np.array([Wr @ V @ Wr for V in Vs])
-    Ti, rhs = T[1:, 1:], q[1:] - T[1:, 0]
-    theta = np.zeros(2)
-    seen = np.diag(Ti) > 1e-12 * max(np.max(np.abs(Ti)), 1e-300)
-    for _ in range(3):  # solve, then drop a component that comes out negative (boundary of theta >= 0)
-        if not seen.any():
-            break
-        idx = np.flatnonzero(seen)
-        sol = np.linalg.solve(Ti[np.ix_(idx, idx)], rhs[idx])
-        theta[:] = 0.0
-        theta[idx] = sol
-        if np.all(sol >= 0):
-            break
-        seen[idx[sol < 0]] = False
-    theta = np.maximum(theta, 0.0)
-    cov = 2.0 * np.linalg.pinv(Ti)
-    return theta, cov
+    T = np.array([[np.sum(PV[i] * PV[j].T) for j in range(2)] for i in range(2)])
+    return 2.0 * np.linalg.pinv(T)
 
 
 def _irls(base: IdentificationProblem, x0, theta, estimate: bool, max_iter: int = 50):
