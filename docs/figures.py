@@ -415,6 +415,20 @@ def _study_h4_models() -> str:
             f"\n\nV2 (mean ± std, mrad): variant D {rows['D'][v2]}, variant H {rows['H'][v2]}.")
 
 
+@figure("study-image-spec")
+def _study_image_spec() -> str:
+    import yaml
+
+    spec = yaml.safe_load((ROOT / "scenes" / "studies" / "h4_image_noise.yaml").read_text())
+    sw, n = spec["sweep"], spec["repetitions"]
+    cells = math.prod(len(v) for v in sw.values())
+    fmt = lambda v: "[" + ", ".join(f"{x:g}" for x in v) + "]"
+    (key, val), = spec["target"].items()
+    return (f"(`scenes/studies/h4_image_noise.yaml`) grey noise {fmt(sw['noise_grey'])} x frames per pose "
+            f"{fmt(sw['frames'])} x number of poses {fmt(sw['n_poses'])}, {n} runs per cell ({n * cells} runs), "
+            f"target `{key}: {val:g}`.")
+
+
 @figure("study-h4-noise", slow=True)
 def _study_h4_noise() -> str:
     return text_block(study("h4_noise").shown())
