@@ -208,7 +208,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = _command(sub, "process", "measure -> identify -> report on a recorded image folder", """
   vision-calib process recording/ --out out/run
   vision-calib process recording/ --out out/run --camera camera.yaml --no-plots --json""")
-    p.add_argument("folder", help="recorded folder (recording.yaml, poses.csv, images; README: File formats)")
+    p.add_argument("folder", help="recorded folder (recording.yaml, poses.csv, images; format: docs/formats.md)")
     p.add_argument("--out", required=True, metavar="DIR",
                    help="output folder (report.json, summary.txt, plots, calibrated model)")
     p.add_argument("--method", choices=["lse", "ekf", "igm"], default=None, help=_METHOD_HELP)
@@ -226,7 +226,7 @@ def build_parser() -> argparse.ArgumentParser:
   vision-calib calibrate-camera images/ --target targets/charuco_a5.yaml --out camera.yaml""")
     p.add_argument("folder", help="folder of images (searched recursively: png, jpg, jpeg, bmp, tif, tiff)")
     p.add_argument("--target", required=True, help="target YAML (see targets/)")
-    p.add_argument("--out", required=True, metavar="FILE", help="camera YAML to write (README: File formats)")
+    p.add_argument("--out", required=True, metavar="FILE", help="camera YAML to write (format: docs/workflows.md)")
     _add_json(p)
 
     p = _command(sub, "process-poses", "joints + measured poses (no images) -> identify -> k-fold report "

@@ -114,36 +114,76 @@ def test_local_two_workers_subprocess(reference, tmp_path):
     assert_same_rows(ref, rows(tmp_path / "w2"))
 
 
+# The interrupted study's entry point: ``vision-calib study`` with every run but the first held at a gate (a file the
+# test removes only after the signal). Spawned study workers import this file as ``__mp_main__`` before their first
+# task, so the module-level wrapper is in force there too; a held run first marks its worker as parked.
+_GATED_STUDY = r"""
+import os, sys, time
+from pathlib import Path
+from vision_calib.study import run as R
+
+GATE = Path(os.environ["VC_TEST_GATE"])
+_run_cell = R.run_cell
+
+
+def _gated_run_cell(spec, cell, rep):
+    if (cell, rep) != (R.study_cells(spec)[0], 0):  # the plan's first run goes through, every other one waits
+        (GATE.parent / f"parked_{os.getpid()}").touch()
+        while GATE.exists():
+            time.sleep(0.05)
+    return _run_cell(spec, cell, rep)
+
+
+R.run_cell = _gated_run_cell
+
+if __name__ == "__main__":
+    from vision_calib.cli import run
+
+    run()
+"""
+
+
 def test_ctrl_c_stops_promptly_then_resume_is_exact(reference, tmp_path):
     """Ctrl-C (SIGINT to the whole process group, as a terminal sends it) during a ``--workers 2`` images study:
     exit 130 within seconds, nothing left behind; the study then resumes from runs/ and every row equals the
-    uninterrupted ``--workers 1`` one."""
+    uninterrupted ``--workers 1`` one. The signal arrives at a known point, not raced against the study's end: the
+    first run has been written and both workers are parked inside a run that cannot end before the signal."""
     spec, ref = reference
     spec8 = write_spec(tmp_path, repetitions=4)  # same hash as the reference (repetitions only select runs)
     out = tmp_path / "int"
-    p = subprocess.Popen([sys.executable, "-m", "vision_calib.cli", "study", str(spec8), "--out", str(out),
-                          "--workers", "2", "--no-plots", "--json"], cwd=ROOT, env=_env(), stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, text=True, start_new_session=True)
+    gate_dir = tmp_path / "gate"
+    gate_dir.mkdir()
+    gate = gate_dir / "closed"
+    gate.touch()
+    script = tmp_path / "gated_study.py"
+    script.write_text(_GATED_STUDY)
+    p = subprocess.Popen([sys.executable, str(script), "study", str(spec8), "--out", str(out), "--workers", "2",
+                          "--no-plots", "--json"], cwd=ROOT, env={**_env(), "VC_TEST_GATE": str(gate)},
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
         deadline = time.time() + HANG_GUARD_S
-        while not list((out / "runs").glob("*.json")) and time.time() < deadline and p.poll() is None:
+        while p.poll() is None and time.time() < deadline and not (
+                list((out / "runs").glob("*.json")) and len(list(gate_dir.glob("parked_*"))) == 2):
             time.sleep(0.1)
         assert p.poll() is None, p.communicate()
+        assert len(list(gate_dir.glob("parked_*"))) == 2, "the two workers never parked at the gate"
         os.killpg(p.pid, signal.SIGINT)
         t0 = time.time()
         _, err = p.communicate(timeout=HANG_GUARD_S)
         stop_s = time.time() - t0
     finally:
+        gate.unlink(missing_ok=True)
         if p.poll() is None:
             os.killpg(p.pid, signal.SIGKILL)
             p.wait()
     assert p.returncode == 130, err
     assert "interrupted" in err
-    # the runs in flight are stopped, not waited for (a run takes seconds; generous bound for a loaded machine)
+    # the runs in flight are stopped, not waited for (they would wait for the gate: the hang guard); generous bound
+    # for a loaded machine
     assert stop_s < 30, stop_s
     assert_group_gone(p.pid)
     done = len(list((out / "runs").glob("*.json")))
-    assert 1 <= done < 8
+    assert done == 1  # the first run; the other seven were held
     res = S.run_study(spec8, out, workers=2, plots=False)
     assert (res["n_reused"], res["n_computed"], res["n_failed"]) == (done, 8 - done, 0)
     resumed = rows(out)
