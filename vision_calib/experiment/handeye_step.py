@@ -3,10 +3,12 @@
 
 1. the fit with the robot's pose error in the weights (given std, or estimated), started from the best of
    OpenCV's closed forms (``measure.handeye.closed_forms``, passed to ``fit_handeye`` as its candidates);
-2. with redundancy (at least twice as many equations as parameters), the outlier test of
-   ``identify.fit_rejecting_outliers`` (robust fit, chi-square test per pose at the family-wise level
-   ``steps.OUTLIER_LEVEL``, also ``steps.OUTLIER_MIN_RATIO`` x the median pose), and the fit redone on the
-   kept poses (closed forms, robot variance and weights recomputed without the rejected ones);
+2. with redundancy (at least twice as many equations as parameters), the deletion outlier test
+   (:func:`deletion_test`: each pose against the fit without it, the robot's pose-error variances estimated
+   without it, so an outlier cannot mask itself by inflating them; chi-square per pose at the family-wise level
+   ``steps.OUTLIER_LEVEL``, also ``steps.OUTLIER_MIN_RATIO`` x the median pose), the worst failing pose
+   rejected and the test redone until none fails; the leave-one-out fits of the kept poses give the jackknife
+   std, and a reported std below it by more than :data:`JACKKNIFE_TOLERANCE` is raised to it;
 3. an optional shared measurement error (intrinsics calibrated from the same images) as nuisance
    coefficients (``identify.nuisance.with_nuisance``) on the final weights;
 4. the chi-square adequacy test (``identify.model_adequacy``) and the a-posteriori variance factor: the std
@@ -22,7 +24,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..errors import IdentifiabilityError
-from ..identify import fit_rejecting_outliers, model_adequacy
+from ..identify import model_adequacy
 from ..identify.handeye_fit import HandeyeFit, closed_form_comparison, fit_handeye
 from ..identify.handeye_problem import transforms_from_x
 from ..identify.problem import IdentificationProblem, IdentificationResult
@@ -50,6 +52,8 @@ class HandeyeIdentified:
     prepared: dict | None = None
     lack_of_fit: dict | None = None
     method_check: dict | None = None
+    #: the deletion outlier test and the leave-one-out scatter of the kept poses (:func:`deletion_test`)
+    deletion: dict | None = None
 
 
 def identify_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: str, pose_cov: ArrayLike,
@@ -62,16 +66,23 @@ def identify_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: s
     F, M, C = (np.asarray(a, float) for a in (T_base_flange, T_cam_target, pose_cov))
     labels = list(labels)
     fit = fit_handeye(F, M, mount, C, labels, robot_std, candidates=closed_forms(F, M, mount))
-    rejected = []
-    pb = fit.problem
-    if robust and pb.n_obs * pb.m >= 2 * int(np.sum(fit.result.free)):
-        _, out = fit_rejecting_outliers(pb, fit.result.identified, level=OUTLIER_LEVEL, min_ratio=OUTLIER_MIN_RATIO)
-        if out:
-            bad = {lab for lab, _ in out}
-            keep = [k for k, lab in enumerate(labels) if str(lab) not in bad]
-            if len(keep) < 3:
-                raise IdentifiabilityError(f"{where}: only {len(keep)} poses left after rejecting outliers")
-            rejected = list(out)
+    rejected, deletion = [], None
+    if robust and fit.problem.n_obs * fit.problem.m >= 2 * int(np.sum(fit.result.free)):
+        keep = list(range(len(labels)))
+        while True:
+            deletion = deletion_test(F[keep], M[keep], mount, C[keep], [labels[k] for k in keep], robot_std, fit)
+            worst = int(np.argmax(deletion["d"]))
+            if not deletion["d"][worst] > deletion["threshold"]:
+                break
+            lab = str(labels[keep[worst]])
+            rejected.append((lab, f"deletion residual norm^2 {deletion['d'][worst]:.4g} > {deletion['threshold']:.4g} "
+                                  f"(each pose against the fit without it, the robot pose error re-estimated without "
+                                  f"it; chi-square, 6 dof, family-wise false-alarm level {OUTLIER_LEVEL:g} over "
+                                  f"{len(keep)} poses)"))
+            del keep[worst]
+            if len(keep) < 3 or len(rejected) > MAX_REJECT_FRACTION * len(labels):
+                raise IdentifiabilityError(f"{where}: {len(rejected)} of {len(labels)} poses fail the deletion "
+                                           "outlier test: the model or the measurement is wrong, not a few outliers")
             fit = fit_handeye(F[keep], M[keep], mount, C[keep], [labels[k] for k in keep], robot_std,
                               candidates=closed_forms(F[keep], M[keep], mount))
     result, pb, nz = fit.result, fit.problem, None
@@ -82,6 +93,9 @@ def identify_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: s
     if factor > 1:
         result = replace(result, std=result.std * np.sqrt(factor), covariance=result.covariance * factor)
     extra = ()
+    if deletion is not None:  # the leave-one-out scatter of the kept poses' fits against the reported std
+        result, jk_line = _with_jackknife(result, deletion)
+        extra += (jk_line,) if jk_line else ()
     if adequacy.get("verdict") == "too large":
         extra += (misfit_warning(adequacy, "the hand-eye model", "the measurement noise (camera + robot pose error, "
                                  f"robot std {fit.robot['source']})"),)
@@ -90,7 +104,86 @@ def identify_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: s
     if extra:
         result = replace(result, warnings=tuple(result.warnings) + extra)
     A, B = transforms_from_x(pb, result.identified)
-    return HandeyeIdentified(result, A, B, pb, tuple(rejected), adequacy, max(factor, 1.0), fit, nz)
+    return HandeyeIdentified(result, A, B, pb, tuple(rejected), adequacy, max(factor, 1.0), fit, nz,
+                             deletion=None if deletion is None else _deletion_block(deletion, result))
+
+
+#: more poses failing the deletion test than this fraction: the model or the measurement is wrong
+MAX_REJECT_FRACTION = 0.3
+#: the leave-one-out scatter may exceed the reported std by this factor before the std are inflated to it
+JACKKNIFE_TOLERANCE = 1.3
+
+
+def _theta(fit: HandeyeFit) -> tuple[float, float]:
+    """(translation m, rotation rad) std per axis of the robot's pose error of a fit (given or estimated)."""
+    return fit.robot["translation_mm"] * 1e-3, float(np.radians(fit.robot["rotation_deg"]))
+
+
+def deletion_test(F, M, mount: str, C, labels: Sequence[str], robot_std, fit: HandeyeFit) -> dict:
+    """Each pose k tested against the fit WITHOUT it (the robot's pose-error variances re-estimated without it,
+    started from ``fit``): the deletion (externally studentized) statistic ``d_k = r_k^T S_k^-1 r_k``, r_k the
+    residual of pose k under the fit without it, ``S_k = C_k + J_k Sigma_(-k) J_k^T`` (C_k: camera + robot pose
+    error at that fit; Sigma_(-k) its parameter covariance), against chi2(6) at the family-wise level
+    ``OUTLIER_LEVEL`` over the N poses (and ``OUTLIER_MIN_RATIO`` x the median). An outlier cannot inflate the
+    variances it is tested with. Returns {d (N,), threshold, x_loo (N, 12): each fit's parameters}."""
+    from scipy.stats import chi2
+
+    from ..identify.handeye_problem import handeye_problem, reweighted, robot_pose_cov
+
+    n = len(labels)
+    d, xs = np.full(n, np.inf), np.zeros((n, 12))
+    for k in range(n):
+        rest = [j for j in range(n) if j != k]
+        fk = fit_handeye(F[rest], M[rest], mount, C[rest], [labels[j] for j in rest], robot_std,
+                         candidates={"all poses": (fit.A, fit.B)})
+        xs[k] = fk.result.identified
+        allp = handeye_problem(F, M, mount, fk.A, fk.B, C, labels=list(labels), robot_cov=robot_pose_cov(*_theta(fk)))
+        one = reweighted(allp, fk.result.identified).subset([k])  # pose k at the fit without it
+        free = np.asarray(fk.result.free, bool)
+        r = np.asarray(one.residual(fk.result.identified), float)[0]
+        J = np.asarray(one.jacobian(fk.result.identified), float)[0][:, free]
+        S = one.obs_cov[0] + J @ fk.result.covariance @ J.T
+        try:
+            d[k] = float(r @ np.linalg.solve(S, r))
+        except np.linalg.LinAlgError:
+            d[k] = np.inf
+    thr = float(chi2.isf(OUTLIER_LEVEL / n, 6))
+    thr = max(thr, OUTLIER_MIN_RATIO**2 * float(np.median(d[np.isfinite(d)]))) if np.isfinite(d).any() else thr
+    return {"d": d, "threshold": thr, "x_loo": xs, "labels": [str(lab) for lab in labels]}
+
+
+def _with_jackknife(result: IdentificationResult, deletion: dict):
+    """(result, warning or ""): the jackknife std of the leave-one-out fits of the kept poses; where it exceeds the
+    reported std by more than :data:`JACKKNIFE_TOLERANCE`, the std (and covariance) are raised to it: the
+    estimate depends on single poses more than the noise model says."""
+    xs = deletion["x_loo"]
+    n = len(xs)
+    jk = np.sqrt((n - 1) / n * np.sum((xs - xs.mean(axis=0)) ** 2, axis=0))
+    free = np.asarray(result.free, bool)
+    ratio = np.where(free & (result.std > 0), jk / np.where(result.std > 0, result.std, 1.0), 1.0)
+    deletion["jackknife_std"], deletion["ratio"] = jk, ratio
+    big = free & (ratio > JACKKNIFE_TOLERANCE)
+    if not big.any():
+        return result, ""
+    f = np.where(big, ratio, 1.0)
+    std = result.std * f
+    cov = result.covariance * np.outer(f[free], f[free])
+    names = [nm for nm, b in zip(result.names, big) if b]
+    line = (f"the leave-one-out scatter of the estimate is up to {ratio.max():.2f} x its reported std "
+            f"({', '.join(names[:6])}): single poses move it more than the noise model says; those std are raised to "
+            "the jackknife std")
+    return replace(result, std=std, covariance=cov), line
+
+
+def _deletion_block(deletion: dict, result: IdentificationResult) -> dict:
+    """The report's ``deletion`` block: per pose its deletion statistic, the threshold, the jackknife / reported
+    std ratio per identified parameter."""
+    free = np.asarray(result.free, bool)
+    return {"how": "each pose against the fit without it (robot pose error re-estimated without it)",
+            "threshold": float(deletion["threshold"]),
+            "poses": [{"pose_id": lab, "d": float(v) if np.isfinite(v) else None}
+                      for lab, v in zip(deletion["labels"], deletion["d"])],
+            "jackknife_ratio": {n: float(r) for n, r, f in zip(result.names, deletion.get("ratio", []), free) if f}}
 
 
 def _with_shared_error(fit, nuisance):
@@ -121,7 +214,7 @@ def handeye_blocks(ident: HandeyeIdentified) -> dict:
     cf = fit.closed_forms
     if ident.nuisance is not None:  # the solution moved with the shared error: compare with the final one
         cf = closed_form_comparison(ident.problem, ident.result.identified, fit.candidates, cf["start"])
-    return {"robot_pose_std": fit.robot, "closed_form_comparison": cf}
+    return {"robot_pose_std": fit.robot, "closed_form_comparison": cf, "deletion_test": ident.deletion}
 
 
 __all__ = ["HandeyeIdentified", "identify_handeye", "handeye_blocks"]
