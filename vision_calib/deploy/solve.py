@@ -18,6 +18,10 @@ FD_STEP = 1e-6
 #: a goal is reached when |dt| <= TOL_T_M and |drot| <= TOL_R_RAD
 TOL_T_M = 1e-11
 TOL_R_RAD = 1e-11
+#: an accepted step below this [rad or m] on every joint ends the iteration of that goal (a minimum off the goal)
+STALL_STEP = 1e-13
+#: ... or an accepted step gaining less than this fraction of the cost
+STALL_GAIN = 1e-6
 
 
 def joint_jacobian(f: Callable, q: np.ndarray, T_goal: np.ndarray) -> np.ndarray:
@@ -47,8 +51,9 @@ def levenberg_marquardt(f: Callable, T_goal: np.ndarray, q0: np.ndarray, limits:
         return (np.linalg.norm(res[:, :3], axis=1) <= TOL_T_M) & (np.linalg.norm(res[:, 3:], axis=1) <= TOL_R_RAD)
 
     ok = done(r)
+    stalled = np.zeros(N, bool)
     for _ in range(max_iter):
-        act = np.flatnonzero(~ok & (lam < 1e12))
+        act = np.flatnonzero(~ok & ~stalled & (lam < 1e12))
         if not act.size:
             break
         qa = q[act]
@@ -62,6 +67,10 @@ def levenberg_marquardt(f: Callable, T_goal: np.ndarray, q0: np.ndarray, limits:
         ct = np.sum(rt * rt, axis=1)
         better = ct < cost[act]
         idx = act[better]
+        # a local minimum off the goal: the accepted step, or its relative gain, vanishes (a goal being reached
+        # gains orders of magnitude per step)
+        stalled[idx] = ((np.abs(qt[better] - qa[better]).max(axis=1) < STALL_STEP)
+                        | ((ct[better] > (1.0 - STALL_GAIN) * cost[idx]) & (ct[better] > TOL_T_M**2)))
         q[idx], r[idx], cost[idx] = qt[better], rt[better], ct[better]
         lam[idx] = np.maximum(lam[idx] * 0.1, 1e-12)
         lam[act[~better]] *= 10.0
