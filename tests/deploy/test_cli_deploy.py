@@ -140,3 +140,16 @@ def test_export_option_after_a_run(tmp_path, capsys):
     assert main(["process-poses", str(mp), "--out", str(out2), "--no-plots", "--json", "--export", "ur_yaml"]) == 2
     assert "format 'ur_yaml' cannot represent this serial robot" in capsys.readouterr().err
     assert (out2 / "report.json").is_file() and (out2 / "calibrated_model.yaml").is_file()  # the run's outputs kept
+
+
+def test_the_runs_take_export_and_check_its_name(capsys):
+    from vision_calib.cli import build_parser
+
+    ap = build_parser()
+    for run in EXPORTING_RUNS:
+        extra = {"simulate": ["s.yaml", "--out", "o"], "process": ["f", "--out", "o"],
+                 "process-poses": ["m.yaml", "--out", "o"]}[run]
+        assert ap.parse_args([run, *extra, "--export", "urdf"]).export == "urdf"
+        with pytest.raises(SystemExit) as e:
+            ap.parse_args([run, *extra, "--export", "step"])
+        assert e.value.code == 2 and "invalid choice: 'step'" in capsys.readouterr().err

@@ -11,8 +11,9 @@ q (N, n_joints) [rad, m for prismatic joints]:
   [dt (m), drot (rad)] in the base frame (analytic);
 - ``observed(q, x)`` / ``observed_jacobian(q, x)``: the same for the transform the calibration measured (serial:
   ``chain.forward``, e.g. T_target_cam, in the left mount's frame; H4: T_cam_target, camera frame);
-- ``inverse(T_base_tool (N, 4, 4), x, q_start (N, n) | None, labels)`` -> q (N, n): on the model of x; a chain by
-  damped Newton from q_start (None: multi-start), the H4 by its closed-form inverse geometric model;
+- ``inverse(T_base_tool (N, 4, 4), x, q_start (N, n) | None, labels, what, x_seed)`` -> q (N, n): on the model of x;
+  a chain by damped Newton (``deploy.solve``) from q_start, else from the solution of the model of x_seed (the
+  nominal), else from the stored starts nearest each goal; the H4 by its closed-form inverse geometric model;
   :class:`PoseNotReachedError` naming the pose (label) when it is not reached.
 """
 

@@ -12,16 +12,57 @@ compared with where the nominal model meant it? All in the camera frame, as the 
   the camera frame by ``frames.inverse_error_map`` when the observed transform is its inverse).
 
 Figures: RMS over the poses of the translation error norm [m] and of the rotation angle [rad], and the predicted
-RMS sqrt(mean(trace(cov))) of each.
+RMS sqrt(mean(trace(cov))) of each. :func:`calibrate_scene` and :func:`workspace_joints` give the runs and the
+joint sets (tests/deploy, benchmarks/bench_deploy.py).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from pathlib import Path
+
 from .. import frames as F
+from ..errors import DataError
 from ..deploy import CalibratedRobot
-from ..experiment.synthetic import SyntheticRun
+from ..deploy.solve import joint_jacobian
+from ..experiment.steps import analyze_setup
+from ..experiment.synthetic import SyntheticRun, run_synthetic
+from ..io.model_export import write_calibrated_model
+from ..rig import SCENES_DIR
+
+#: smallest singular value [m or rad per rad] of the tool's joint Jacobian of a workspace joint set: the shipped
+#: RX-90 scene works next to its elbow singularity (q3 = 90 deg), where a calibrated pose may not be reachable
+MIN_SINGULAR = 0.02
+
+
+def calibrate_scene(name: str, folder, seed: int = 1, n_poses: int | None = None) -> tuple[SyntheticRun, Path]:
+    """(run, folder): ``run_synthetic`` on the shipped scene ``name`` (its default poses, ``n_poses`` to change it),
+    the result written into ``folder`` as ``io.report.write_report`` writes it (calibrated_model.yaml with the
+    fit's covariance, fixed and folded parameters)."""
+    run = run_synthetic(SCENES_DIR / f"{name}.yaml", seed=seed, n_poses=n_poses)
+    rep, _ = analyze_setup(run.setup, run.poses, run.residual)
+    res = run.result
+    folder = Path(folder)
+    write_calibrated_model(folder / "calibrated_model.yaml", run.setup, res.identified, res.std, res.free, res,
+                           run.problem, rep.to_dict())
+    return run, folder
+
+
+def workspace_joints(robot: CalibratedRobot, setup, n: int = 200, seed: int = 5) -> np.ndarray:
+    """n joint sets (n, n_joints) of the scene's workspace as the nominal model commands them: serial arms, the
+    scene's random joint sets (target in view) away from singular configurations (MIN_SINGULAR); H4, the joints
+    of random workspace poses by the nominal inverse model."""
+    rng = np.random.default_rng(seed)
+    if robot.n_joints == 4:
+        return setup.robot.igm(setup.sample_poses(rng, n), robot.x_nominal)
+    q = setup.sample_poses(rng, 6 * n)
+    T = robot.kin.tool(q, robot.x_nominal)
+    sv = np.linalg.svd(joint_jacobian(lambda v: robot.kin.tool(v, robot.x_nominal), q, T), compute_uv=False)[:, -1]
+    q = q[sv > MIN_SINGULAR]
+    if len(q) < n:
+        raise DataError(f"{setup.name}: only {len(q)} of {6 * n} joint sets away from singular configurations")
+    return q[:n]
 
 
 def _rms(e: np.ndarray) -> float:
@@ -58,4 +99,4 @@ def compensation_against_truth(run: SyntheticRun, robot: CalibratedRobot, q: np.
     return out
 
 
-__all__ = ["compensation_against_truth"]
+__all__ = ["MIN_SINGULAR", "calibrate_scene", "compensation_against_truth", "workspace_joints"]
