@@ -552,7 +552,12 @@ def _exporting(run):
             return code
         from .io.controller_export import FORMATS, export
 
-        path = export(args.out, fmt, Path(args.out) / FORMATS[fmt].file)
+        try:
+            path = export(args.out, fmt, Path(args.out) / FORMATS[fmt].file)
+        except VisionCalibError as exc:
+            print(f"vision-calib: error: --export {fmt}: {exc} (the run's outputs in {args.out} are kept)",
+                  file=sys.stderr)
+            return exc.exit_code
         print(f"vision-calib: exported {path} ({fmt})", file=sys.stderr)
         return code
 

@@ -138,7 +138,9 @@ def test_export_option_after_a_run(tmp_path, capsys):
     assert (out / FORMATS["dh"].file).read_text().startswith("# modified-DH table")
     out2 = tmp_path / "out2"
     assert main(["process-poses", str(mp), "--out", str(out2), "--no-plots", "--json", "--export", "ur_yaml"]) == 2
-    assert "format 'ur_yaml' cannot represent this serial robot" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "--export ur_yaml: " in err and "format 'ur_yaml' cannot represent this serial robot" in err
+    assert f"the run's outputs in {out2} are kept" in err
     assert (out2 / "report.json").is_file() and (out2 / "calibrated_model.yaml").is_file()  # the run's outputs kept
 
 

@@ -140,7 +140,7 @@ class CalibratedRobot:
         C = self.covariance
         if not np.any(C):
             return T, np.zeros((len(T), 6, 6))
-        J = self._fd_jacobian(fun, q) if fd else jac(q, self.x)
+        J = self._fd_jacobian(fun, q) if fd or jac is None else jac(q, self.x)
         return T, np.einsum("kin,nm,kjm->kij", J, C, J)
 
     def _fd_jacobian(self, fun, q) -> np.ndarray:
@@ -156,7 +156,7 @@ class CalibratedRobot:
     def forward(self, q: ArrayLike, fd: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """(T_base_tool (4, 4) or (N, 4, 4) [m], covariance (6, 6) or (N, 6, 6) [m, rad: translation, then rotation
         vector, base frame]) at joint values q (n,) or (N, n). The covariance propagates the parameter covariance
-        through the analytic parameter Jacobian (fd: a central finite difference instead)."""
+        through the analytic parameter Jacobian (fd, or a kinematics without one: central finite differences)."""
         q, single = _check_q(q, self.n_joints)
         T, C = self._propagate(self.kin.tool, self.kin.tool_jacobian, q, fd)
         return (T[0], C[0]) if single else (T, C)

@@ -223,8 +223,9 @@ def _read_covariance(top: Section, names: tuple, free: np.ndarray, std: np.ndarr
         s = np.where(np.isfinite(std) & free, std, 0.0)
         C[np.diag_indices(n)] = s**2
         unknown = [nm for nm, f, sd in zip(names, free, std) if f and not np.isfinite(sd)]
-        notes.append("the file has no covariance (format 1): the covariance is diagonal, from the parameters' std; "
-                     "their correlations are ignored" + (f"; no std for {unknown} (taken as 0)" if unknown else ""))
+        notes.append("the file has no covariance (written before format 2, or the fit gave none): the covariance is "
+                     "diagonal, from the parameters' std; their correlations are ignored"
+                     + (f"; no std for {unknown} (taken as 0)" if unknown else ""))
         return C, "diagonal (std of the parameters; no covariance in the file)", notes
     cs = top.section("covariance").check_known(("names", "matrix"))
     cn = [str(v) for v in cs.get("names", list)]
