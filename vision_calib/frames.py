@@ -274,3 +274,20 @@ def so3_right_jacobian_inv(r) -> np.ndarray:
     # 1/th^2 - (1 + cos th) / (2 th sin th), series 1/12 + th^2/720 near 0
     c = np.where(small, 1.0 / 12.0 + th**2 / 720.0, 1.0 / ths**2 - (1.0 + np.cos(ths)) / (2.0 * ths * np.sin(ths)))
     return np.eye(3) + 0.5 * K + c * (K @ K)
+
+
+def swing_twist(R, axis):
+    """Swing-twist split of rotations R (..., 3, 3) about the unit ``axis`` (3,) of their own (right-hand) frame:
+    ``(R_swing (..., 3, 3), twist (...,) rad)`` with ``R = R_swing @ Rot(axis, twist)``, R_swing a rotation about
+    an axis perpendicular to ``axis`` and twist in (-pi, pi]. Exact (to rounding) for any R whose swing is not a
+    half turn."""
+    R = np.asarray(R, dtype=float)
+    a = np.asarray(axis, dtype=float)
+    a = a / np.linalg.norm(a)
+    q = Rotation.from_matrix(R.reshape(-1, 3, 3)).as_quat()  # (k, 4) scalar last
+    twist = 2.0 * np.arctan2(q[:, :3] @ a, q[:, 3])
+    twist = (twist + np.pi) % (2.0 * np.pi) - np.pi
+    twist = np.where(twist == -np.pi, np.pi, twist)
+    Rt = Rotation.from_rotvec(twist[:, None] * a[None, :]).as_matrix()
+    swing = R.reshape(-1, 3, 3) @ np.swapaxes(Rt, -1, -2)
+    return swing.reshape(R.shape), twist.reshape(R.shape[:-2])

@@ -14,6 +14,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("study",),
     ("sim",),
     ("experiment",),
+    ("deploy",),
     ("io",),
     ("measure",),
     ("rig",),

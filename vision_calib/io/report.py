@@ -500,7 +500,8 @@ def write_report(out_dir, report: dict, setup=None, result=None, problem=None, e
     files = {"report": "report.json"}
     if setup is not None and report["verdict"].get("usable", report["verdict"]["ok"]):  # never from a failed fit
         files["model"] = "calibrated_model.yaml"
-        write_calibrated_model(out / files["model"], setup, result.identified, result.std, result.free)
+        write_calibrated_model(out / files["model"], setup, result.identified, result.std, result.free,
+                               result, problem, report.get("identifiability"))
         files.update(setup.export_model_files(out, result.identified))
     else:  # a calibrated model left by an earlier run into the same folder must not pass for this run's
         for stale in out.glob("calibrated_model.*"):

@@ -589,6 +589,12 @@ class H4Robot:
             return J, Jp @ self.nacelle_pose_jacobian_meas(T_cam_target, x)
         return J
 
+    def joint_offset_form(self, x=None) -> tuple[np.ndarray, np.ndarray]:
+        """(x (n,) unchanged, offsets (4,) = q0_1..q0_4 rad): the motor angle is q_i + q0_i
+        (``kinematics.protocols.JointOffsetForm``)."""
+        x = self._x(x).copy()
+        return x, np.array([x[self.names.index(f"q0_{i}")] for i in range(1, 5)])
+
     # ------------------------------------------------------------------ copies
     def with_values(self, x) -> "H4Robot":
         """Copy whose nominal values are x (n,) (e.g. a perturbed 'true' robot)."""

@@ -48,3 +48,14 @@ class PrismaticJoints(Protocol):
     a joint whose value is a length (m); a chain without it has revolute joints only (rad)."""
 
     prismatic: np.ndarray
+
+
+@runtime_checkable
+class JointOffsetForm(Protocol):
+    """Optional capability of a robot model: the joint zero offsets a controller can take. ``joint_offset_form(x)
+    -> (x_equiv (n_params,), offsets (n_joints,))``: x_equiv gives the same kinematics as x (every prediction
+    equal to rounding) with all of a joint's motion about (revolute, rad) or along (prismatic, m) its own axis
+    at its origin carried by its joint-offset parameter; offsets: that parameter's value per joint (SerialChain:
+    theta_i; URDFChain: q0_i; H4Robot: q0_i), the model's joint value being reading + offset."""
+
+    def joint_offset_form(self, x=None) -> tuple[np.ndarray, np.ndarray]: ...

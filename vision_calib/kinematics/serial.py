@@ -315,6 +315,12 @@ class SerialChain(JointChainChecks):
         x = self._x(x)
         return self._mount(x, self.left, self.left_R_nominal), self._mount(x, self.right, self.right_R_nominal)
 
+    def joint_offset_form(self, x=None) -> tuple[np.ndarray, np.ndarray]:
+        """(x (n_params,) unchanged, offsets (n,) = theta_1..theta_n rad): in modified DH theta_i is already the
+        joint's only rotation about its axis, the model angle theta_i + q_i (``kinematics.protocols.JointOffsetForm``)."""
+        x = self._x(x).copy()
+        return x, np.array([x[self._idx[f"theta{i}"]] for i in range(1, self.n_joints + 1)])
+
     def _mount(self, x, m, R_nom) -> np.ndarray:
         i = self._idx
         t = [x[i[f"{m}.{s}"]] for s in ("tx", "ty", "tz")]

@@ -58,7 +58,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ConfigError, ParameterError
-from ..frames import make_T, so3_exp, so3_right_jacobian
+from ..frames import make_T, so3_exp, so3_right_jacobian, swing_twist, xyz_rotvec_from_T
 from ..serialize import write_text_atomic
 from .params import DEFAULT_SCALE, ParameterSet
 from .serial import KNOWN_LEFT, KNOWN_RIGHT, MOUNT_SUFFIXES, JointChainChecks
@@ -216,6 +216,28 @@ class URDFChain(JointChainChecks):
     def _mount(self, x, side, R_nom) -> np.ndarray:
         v = x[self._idx[side]]
         return make_T(R_nom @ so3_exp(v[3:]), v[:3])
+
+    def joint_offset_form(self, x=None) -> tuple[np.ndarray, np.ndarray]:
+        """(x_equiv (n_params,), offsets (n,)): the same kinematics as x (None = nominal) with each joint's motion
+        about / along its own axis moved into its offset q0_i (``kinematics.protocols.JointOffsetForm``).
+        Revolute: ``Exp(r_i) Rot(axis_i, q0_i) = Exp(r_i') Rot(axis_i, q0_i')``, r_i' the swing (no rotation about
+        the axis, :func:`frames.swing_twist`), q0_i' the twist in (-pi, pi]. Prismatic: the part of the placement
+        translation along the moved axis goes into q0_i (m). Exact to rounding; the rest of x unchanged."""
+        x = self._x(x).copy()
+        D, q0 = self.joint_placements(x)
+        for i in range(self.n_joints):
+            k, kq = self._idx["joint"][i], self._idx["q0"][i]
+            R = D[i, :3, :3]
+            if self.prismatic[i]:
+                u = R @ self.axes[i]
+                s = float(x[k[:3]] @ u)
+                x[k[:3]] = x[k[:3]] - s * u
+                x[kq] = q0[i] + s
+            else:
+                swing, twist = swing_twist(R @ _rot_axis(self.axes[i], q0[i : i + 1])[0], self.axes[i])
+                x[k[3:]] = xyz_rotvec_from_T(make_T(swing))[3:]
+                x[kq] = float(twist)
+        return x, x[self._idx["q0"]].copy()
 
     # ------------------------------------------------------------------ forward model
     def _motion(self, i, v) -> np.ndarray:

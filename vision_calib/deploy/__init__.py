@@ -1,0 +1,12 @@
+"""deploy stage: from a calibration result to the controller.
+
+:class:`CalibratedRobot` (``CalibratedRobot.load(result_folder_or_calibrated_model_yaml, tcp=None)``): forward
+kinematics with its covariance, inverse kinematics on the calibrated model, compensation of joint commands meant
+for the nominal model, the joint offsets a controller can take. The file exports a controller reads (URDF, DH
+table, UR kinematics YAML, ROS static transforms) are in :mod:`vision_calib.io.controller_export`.
+"""
+
+from .kinematics import PoseNotReachedError
+from .robot import CalibratedRobot, model_path
+
+__all__ = ["CalibratedRobot", "PoseNotReachedError", "model_path"]
