@@ -135,7 +135,7 @@ def deletion_test(F, M, mount: str, C, labels: Sequence[str], robot_std, fit: Ha
     for k in range(n):
         rest = [j for j in range(n) if j != k]
         fk = fit_handeye(F[rest], M[rest], mount, C[rest], [labels[j] for j in rest], robot_std,
-                         candidates={"all poses": (fit.A, fit.B)})
+                         candidates={"all poses": (fit.A, fit.B)}, theta_start=np.square(_theta(fit)))
         xs[k] = fk.result.identified
         allp = handeye_problem(F, M, mount, fk.A, fk.B, C, labels=list(labels), robot_cov=robot_pose_cov(*_theta(fk)))
         one = reweighted(allp, fk.result.identified).subset([k])  # pose k at the fit without it

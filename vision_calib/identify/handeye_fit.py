@@ -121,23 +121,29 @@ def _reml_negll(theta, J, r, cam, Vt, Vr) -> float:
     return 0.5 * (2.0 * np.sum(np.log(np.diagonal(L, axis1=1, axis2=2))) + logdetA + rPr)
 
 
-def _reml_step(problem: IdentificationProblem, result: IdentificationResult):
+def _reml_step(problem: IdentificationProblem, result: IdentificationResult, start=None):
     """(theta (2,), cov (2, 2)): the robot's variances maximising the REML likelihood of the model linearised at
     the result's x (camera covariance known), searched over the whole box :data:`THETA_BOUNDS` (a log grid, then
     a bounded quasi-Newton refinement from its best point): the maximum is global on the box, so the estimate
     neither collapses to 0 nor runs away where the likelihood does not; its covariance is the inverse Fisher
-    information 2 (tr(P V_i P V_j))^-1 at the maximum. A component at its lower bound is reported as 0."""
+    information 2 (tr(P V_i P V_j))^-1 at the maximum. A component at its lower bound is reported as 0. ``start``:
+    variances (2,) near the maximum (e.g. the fit of a superset of the poses): a local refinement from there, no
+    grid."""
     from scipy.optimize import minimize
 
     terms = _reml_terms(problem, result.identified)
     lo = np.log([b[0] ** 2 for b in THETA_BOUNDS])
     hi = np.log([b[1] ** 2 for b in THETA_BOUNDS])
-    grid = [np.linspace(lo[i], hi[i], 17) for i in range(2)]
-    vals = np.array([[_reml_negll(np.exp([u, v]), *terms) for v in grid[1]] for u in grid[0]])
-    i, j = np.unravel_index(np.argmin(vals), vals.shape)
-    u0 = np.array([grid[0][i], grid[1][j]])
+    if start is not None:
+        u0 = np.clip(np.log(np.maximum(np.asarray(start, float), 1e-300)), lo, hi)
+        f0 = _reml_negll(np.exp(u0), *terms)
+    else:
+        grid = [np.linspace(lo[i], hi[i], 17) for i in range(2)]
+        vals = np.array([[_reml_negll(np.exp([u, v]), *terms) for v in grid[1]] for u in grid[0]])
+        i, j = np.unravel_index(np.argmin(vals), vals.shape)
+        u0, f0 = np.array([grid[0][i], grid[1][j]]), vals[i, j]
     opt = minimize(lambda u: _reml_negll(np.exp(u), *terms), u0, method="L-BFGS-B", bounds=list(zip(lo, hi)))
-    u = opt.x if np.isfinite(opt.fun) and opt.fun <= vals[i, j] else u0
+    u = opt.x if np.isfinite(opt.fun) and opt.fun <= f0 else u0
     theta = np.exp(u)
     theta[u <= lo + 1e-6] = 0.0  # at the lower bound: no robot error visible along that component
     return theta, _theta_cov(problem, terms, theta)
@@ -163,8 +169,9 @@ def _theta_cov(problem, terms, theta) -> np.ndarray:
     return 2.0 * np.linalg.pinv(T)
 
 
-def _irls(base: IdentificationProblem, x0, theta, estimate: bool, max_iter: int = 50):
-    """(result, problem with the final weights, theta, theta cov or None, iterations) from x0."""
+def _irls(base: IdentificationProblem, x0, theta, estimate: bool, max_iter: int = 50, theta_start=None):
+    """(result, problem with the final weights, theta, theta cov or None, iterations) from x0; theta_start: the
+    REML search's start (None: a global search over the box at the first step)."""
     x = np.asarray(x0, float)
     tcov = None
     pb = reweighted(base, x, _robot_cov(theta))
@@ -173,7 +180,7 @@ def _irls(base: IdentificationProblem, x0, theta, estimate: bool, max_iter: int 
     for it in range(1, max_iter + 1):
         t_old = theta.copy()
         if estimate:
-            theta, tcov = _reml_step(pb, res)
+            theta, tcov = _reml_step(pb, res, theta_start if it == 1 else theta)
         pb = reweighted(base, res.identified, _robot_cov(theta))
         new = solve_lse(pb, res.identified)
         free = np.asarray(new.free, bool)
@@ -212,7 +219,7 @@ def closed_form_comparison(problem: IdentificationProblem, x: ArrayLike, candida
 
 def fit_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: str, pose_cov: ArrayLike,
                 labels: Sequence[str] | None = None, robot_std: tuple[float, float] | None = None,
-                estimate_robot: bool = True, candidates: dict | None = None) -> HandeyeFit:
+                estimate_robot: bool = True, candidates: dict | None = None, theta_start=None) -> HandeyeFit:
     """Hand-eye fit with the robot's pose error (module docstring).
 
     T_base_flange (N, 4, 4) reported flange poses [m]; T_cam_target (N, 4, 4) measured; pose_cov (N, 6, 6)
@@ -221,7 +228,9 @@ def fit_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: str, p
     estimated from the data when ``estimate_robot`` (REML, camera covariance known), else 0 (exact flange
     poses). candidates: {name: (A, B) (4, 4) each, or an error message (str)}, the closed forms of these poses
     to start from and compare with (e.g. ``measure.handeye.closed_forms``); None -> :func:`default_candidates`.
-    DataError when no candidate is a solution (degenerate motions)."""
+    theta_start: (s_t^2 [m^2], s_r^2 [rad^2]) near the estimate (e.g. of a superset of these poses): the REML
+    search refines locally from there instead of searching the whole box. DataError when no candidate is a
+    solution (degenerate motions)."""
     F = np.asarray(T_base_flange, float)
     M = np.asarray(T_cam_target, float)
     cands = default_candidates(F, M, mount) if candidates is None else dict(candidates)
@@ -239,12 +248,12 @@ def fit_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: str, p
         return weighted_cost(reweighted(base, xc, _robot_cov(theta)), xc)
 
     start = min(ok, key=lambda m: cost_at(ok[m]))
-    res, pb, th, tcov, its = _irls(base, x_from_transforms(base, *ok[start]), theta, estimate)
+    res, pb, th, tcov, its = _irls(base, x_from_transforms(base, *ok[start]), theta, estimate, theta_start=theta_start)
     # never worse than a closed form under the final weights: restart from one that is lower
     costs = {m: weighted_cost(pb, x_from_transforms(pb, *v)) for m, v in ok.items()}
     best = min(costs, key=costs.get)
     if costs[best] < res.cost_final * (1 - 1e-9):
-        r2 = _irls(base, x_from_transforms(base, *ok[best]), theta, estimate)
+        r2 = _irls(base, x_from_transforms(base, *ok[best]), theta, estimate, theta_start=theta_start)
         if r2[0].cost_final < res.cost_final:
             res, pb, th, tcov, its = r2
             start = best
