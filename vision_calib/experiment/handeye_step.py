@@ -120,29 +120,33 @@ def _theta(fit: HandeyeFit) -> tuple[float, float]:
 
 
 def deletion_test(F, M, mount: str, C, labels: Sequence[str], robot_std, fit: HandeyeFit) -> dict:
-    """Each pose k tested against the fit WITHOUT it (the robot's pose-error variances re-estimated without it,
-    started from ``fit``): the deletion (externally studentized) statistic ``d_k = r_k^T S_k^-1 r_k``, r_k the
+    """Each pose k tested against the fit WITHOUT it (``identify.handeye_fit.deletion_fit``: the robot's pose-error
+    variances re-estimated without it, refined from ``fit``'s, and the least squares with those weights): the deletion (externally studentized) statistic ``d_k = r_k^T S_k^-1 r_k``, r_k the
     residual of pose k under the fit without it, ``S_k = C_k + J_k Sigma_(-k) J_k^T`` (C_k: camera + robot pose
     error at that fit; Sigma_(-k) its parameter covariance), against chi2(6) at the family-wise level
     ``OUTLIER_LEVEL`` over the N poses (and ``OUTLIER_MIN_RATIO`` x the median). An outlier cannot inflate the
     variances it is tested with. Returns {d (N,), threshold, x_loo (N, 12): each fit's parameters}."""
     from scipy.stats import chi2
 
+    from ..identify.handeye_fit import deletion_fit
     from ..identify.handeye_problem import handeye_problem, reweighted, robot_pose_cov
 
     n = len(labels)
     d, xs = np.full(n, np.inf), np.zeros((n, 12))
+    theta = np.square(_theta(fit))
     for k in range(n):
         rest = [j for j in range(n) if j != k]
-        fk = fit_handeye(F[rest], M[rest], mount, C[rest], [labels[j] for j in rest], robot_std,
-                         candidates={"all poses": (fit.A, fit.B)}, theta_start=np.square(_theta(fit)))
-        xs[k] = fk.result.identified
-        allp = handeye_problem(F, M, mount, fk.A, fk.B, C, labels=list(labels), robot_cov=robot_pose_cov(*_theta(fk)))
-        one = reweighted(allp, fk.result.identified).subset([k])  # pose k at the fit without it
-        free = np.asarray(fk.result.free, bool)
-        r = np.asarray(one.residual(fk.result.identified), float)[0]
-        J = np.asarray(one.jacobian(fk.result.identified), float)[0][:, free]
-        S = one.obs_cov[0] + J @ fk.result.covariance @ J.T
+        _, rk, th = deletion_fit(F[rest], M[rest], mount, C[rest], [labels[j] for j in rest], fit.A, fit.B, theta,
+                                 robot_std is None and fit.robot["source"] == "estimated")
+        x = rk.identified
+        xs[k] = x
+        allp = handeye_problem(F, M, mount, fit.A, fit.B, C, labels=list(labels),
+                               robot_cov=robot_pose_cov(*np.sqrt(th)))
+        one = reweighted(allp, x).subset([k])  # pose k at the fit without it
+        free = np.asarray(rk.free, bool)
+        r = np.asarray(one.residual(x), float)[0]
+        J = np.asarray(one.jacobian(x), float)[0][:, free]
+        S = one.obs_cov[0] + J @ rk.covariance @ J.T
         try:
             d[k] = float(r @ np.linalg.solve(S, r))
         except np.linalg.LinAlgError:

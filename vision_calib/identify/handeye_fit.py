@@ -271,5 +271,24 @@ def fit_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: str, p
                       cands)
 
 
-__all__ = ["HandeyeFit", "DEFAULT_CANDIDATE", "default_candidates", "closed_form_comparison", "fit_handeye",
+def deletion_fit(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: str, pose_cov: ArrayLike,
+                 labels: Sequence[str], A: np.ndarray, B: np.ndarray, theta: ArrayLike, estimate: bool):
+    """The fit of a subset of the poses near a fit of all of them (A, B (4, 4), robot variances ``theta`` =
+    (s_t^2 [m^2], s_r^2 [rad^2])): the variances re-estimated on the subset (REML refined locally from
+    ``theta``) when ``estimate``, then the least squares with those weights from (A, B). Returns (problem with
+    the final weights, result, theta (2,)); for the deletion test (``experiment.handeye_step``)."""
+    theta = np.asarray(theta, float)
+    base = handeye_problem(T_base_flange, T_cam_target, mount, A, B, pose_cov, labels=labels,
+                           robot_cov=_robot_cov(theta))
+    x = x_from_transforms(base, A, B)
+    pb = reweighted(base, x, _robot_cov(theta))
+    res = solve_lse(pb, x)
+    if estimate:
+        theta, _ = _reml_step(pb, res, start=theta)
+        pb = reweighted(base, res.identified, _robot_cov(theta))
+        res = solve_lse(pb, res.identified)
+    return pb, res, theta
+
+
+__all__ = ["HandeyeFit", "deletion_fit", "DEFAULT_CANDIDATE", "default_candidates", "closed_form_comparison", "fit_handeye",
            "weighted_cost"]
