@@ -82,12 +82,40 @@ def process_folder(folder: str | Path, out_dir: str | Path | None, method: str |
                    plots: bool = True, fix_unidentifiable: bool = False, allow_symlinks: bool = False,
                    refine_intrinsics: bool = False, camera_file: str | Path | None = None, folds: int | None = None,
                    tcp=None) -> dict:
+    """Process a recorded folder (:func:`process_once`); with intrinsics given and a reprojection far above its
+    noise model, the cause tested (:mod:`.cause`): the run redone with the intrinsics refined from the images,
+    the two hypotheses compared, the decisive one applied, both in the report's ``cause`` block."""
+    import tempfile
+
+    from ..errors import VisionCalibError
+    from .cause import cause_test_applies, compare
+
+    kw = dict(method=method, progress=progress, fix_unidentifiable=fix_unidentifiable, allow_symlinks=allow_symlinks,
+              folds=folds, tcp=tcp)
+    report = process_once(folder, out_dir, plots=plots, refine_intrinsics=refine_intrinsics, camera_file=camera_file,
+                          **kw)
+    if refine_intrinsics or camera_file is not None or not cause_test_applies(report):
+        return report
+    with tempfile.TemporaryDirectory(prefix="vision_calib_cause_") as tmp:
+        try:
+            refined, why = process_once(folder, tmp, plots=False, refine_intrinsics=True, **kw), None
+        except VisionCalibError as exc:
+            refined, why = None, str(exc)
+    block = compare(report, refined, why)
+    return process_once(folder, out_dir, plots=plots, refine_intrinsics=block["chosen"] == "refined", cause=block,
+                        **kw)
+
+
+def process_once(folder: str | Path, out_dir: str | Path | None, method: str | None = None, progress: bool = False,
+                 plots: bool = True, fix_unidentifiable: bool = False, allow_symlinks: bool = False,
+                 refine_intrinsics: bool = False, camera_file: str | Path | None = None, folds: int | None = None,
+                 tcp=None, cause: dict | None = None) -> dict:
     """Process a recorded folder; writes DIR/measurements.json, DIR/report.json (+ plots, model).
     refine_intrinsics: calibrate the camera from the recording's images even when recording.yaml gives
     intrinsics (always done when it gives none); camera_file: a camera.yaml (``calibrate-camera``) used
     instead of recording.yaml's intrinsics; the report's ``intrinsics`` block says which were used. folds / tcp:
     the held-out validation's k and tool point (x, y, z in the flange frame, m), :mod:`.holdout`: its decision
-    can fail the verdict (no calibrated model)."""
+    can fail the verdict (no calibrated model). cause: the :mod:`.cause` block, reported as is."""
     from .camera_step import SOURCE_CAMERA_FILE, fitted_camera, intrinsics_response, intrinsics_sensitivity, recording_intrinsics, remeasure
 
     t0 = time.perf_counter()
@@ -107,7 +135,7 @@ def process_folder(folder: str | Path, out_dir: str | Path | None, method: str |
                       {"version": REPORT_VERSION, "folder": relative_ref(rec.folder, out), **mblock})
     t_meas = time.perf_counter() - t0
     if scene is None:
-        return _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets)
+        return _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets, cause)
 
     meas, ok = Measurements.from_pose_measurements(rec.poses, rec.poses, pms)
     residual = setup.residual_for(method, scene.identification.residual)
@@ -159,9 +187,10 @@ def process_folder(folder: str | Path, out_dir: str | Path | None, method: str |
         motion=motion,
         residuals=residual_stats(result.residuals, problem.residual_kind),
         extra={"intrinsics": intr, "intrinsics_sensitivity": sens,
-               "reprojection": reproj, "holdout": hold},
+               "reprojection": reproj, "holdout": hold, "cause": cause},
         timings={"measure": t_meas, "identify": t_id, "total": time.perf_counter() - t0}, failure=failure)
-    report["summary_text"] += points_line(report.get("reprojection")) + "\n" + "\n".join(holdout_lines(hold))
+    report["summary_text"] += points_line(report.get("reprojection")) + "\n" + "\n".join(holdout_lines(hold)) + (
+        "\n" + cause["message"] if cause else "")
     write_report(out, report, setup, result, problem, plots=plots,
                  overlays=_overlay_source(rec, dets, setup if report["verdict"].get("usable") else None,
                                           result) if plots else None)
@@ -203,7 +232,7 @@ def _chain_reprojection(setup, meas, problem, result, dets, rec, fitted=None) ->
     return reprojection_with(T, dets, [meas.labels[k] for k in idx], rec.target, rec.camera, fitted)
 
 
-def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None) -> dict:
+def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None, cause=None) -> dict:
     """Flange poses known: identify the camera mount and the target mount only (``handeye_step``: the robot's
     pose error in the weights, given by recording.yaml ``robot_pose_std`` or estimated; closed-form start;
     outlier test, adequacy test and variance factor as the robot-chain path)."""
@@ -262,9 +291,9 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None) -> dict:
         measurements=mblock, warnings=[*rec.notes, *intr["warnings"], *([rwarn] if rwarn else [])], result=result,
         identified=ident,
         residuals=residual_stats(result.residuals, "pose"),
-        extra={"handeye": he, "intrinsics": intr, "reprojection": he["reprojection"]},
+        extra={"handeye": he, "intrinsics": intr, "reprojection": he["reprojection"], "cause": cause},
         timings={"total": time.perf_counter() - t0})
-    report["summary_text"] += points_line(report.get("reprojection"))
+    report["summary_text"] += points_line(report.get("reprojection")) + ("\n" + cause["message"] if cause else "")
     write_report(out, report, plots=plots, overlays=_overlay_source(rec, dets) if plots else None)
     return report
 

@@ -266,7 +266,7 @@ def fit_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: str, p
         s = np.sqrt(th)
         ss = np.where(s > 0, sd / (2 * np.maximum(s, 1e-300)), np.sqrt(sd))
         robot.update(std_translation_mm=1e3 * float(ss[0]), std_rotation_deg=float(np.degrees(ss[1])),
-                     method="REML (Fisher scoring) with the camera covariance known")
+                     method="REML (maximum over a box) with the camera covariance known")
     return HandeyeFit(res, A, B, pb, robot, closed_form_comparison(pb, res.identified, cands, start), its,
                       cands)
 
