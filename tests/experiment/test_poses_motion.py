@@ -130,3 +130,18 @@ def test_pose_with_a_wrong_joint_reading_rejected_and_named(tmp_path, rx90):
     kf = rep["holdout"]
     assert kf["overall"]["n_poses"] == N and kf["without_outliers"]["excluded"] == ["p003"]
     assert rep["verdict"]["status"] == "ok"
+
+
+def test_swapped_joint_columns_named_as_such(tmp_path, rx90, capsys):
+    """Joints 2 and 3 in each other's columns (issue 28): the motion check reads it as a length scale (0.54 x);
+    the diagnosis refits every pair of columns swapped and names the one that fits first: exit 3, no model."""
+    scene, q, T = rx90
+    q = q.copy()
+    q[:, [1, 2]] = q[:, [2, 1]]
+    rc, err, rep = _run(tmp_path, _write(tmp_path, q, T), capsys)
+    assert rc == 3
+    hits = [t["candidate"] for t in rep["failure"]["tests"] if t["fits"]]
+    assert hits and hits[0].startswith("joints 2 and 3 swapped"), hits
+    assert "joints 2 and 3 swapped (their columns in the wrong order in the input): that reading of the input fits" \
+        in rep["failure"]["message"].split(". ")[0] + ". " + rep["failure"]["message"]
+    assert not (tmp_path / "out" / "calibrated_model.yaml").exists()

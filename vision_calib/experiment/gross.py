@@ -11,8 +11,8 @@ model-31 truth fitted with model 12 at image precision 5.1). Input errors give 1
 ``measured:`` direction 2.1e4, swapped x/y columns 1.6e5 on 205 RX-90 poses). Above :data:`GROSS_CHI2_DOF`
 = 1e3 (residuals 32 times the stated noise: a covariance wrong by 30x in std, or model errors ten times the
 largest measured above) the fit is a failure; the alternatives the caller can build from its raw input
-(the other pose direction, swapped columns, scalar-first quaternions, a joint's sign reversed) are refitted
-and the message says which one fits.
+(the other pose direction, swapped columns, scalar-first quaternions, a joint's sign reversed, two joint columns
+swapped) are refitted and the message says first which one fits.
 
 **Moves no calibration correction can be** (:func:`convention_moves`): the identified model is compared
 with the nominal one, not only by the size of the step: an angle (joint offset, twist, a mount's rotation
@@ -152,6 +152,23 @@ def joint_sign_candidates(meas: Measurements) -> dict:
     return out
 
 
+def joint_swap_candidates(meas: Measurements) -> dict:
+    """{label: measurements with joints i and j's columns swapped} for every pair i < j (1-based labels): two
+    columns of poses.csv in the wrong order."""
+    out = {}
+    n = np.shape(meas.joints)[1]
+    for i in range(n):
+        for j in range(i + 1, n):
+            q = np.array(meas.joints, float)
+            q[:, [i, j]] = q[:, [j, i]]
+            poses = np.array(meas.poses, float)
+            if poses.shape == q.shape:
+                poses[:, [i, j]] = poses[:, [j, i]]
+            out[f"joints {i + 1} and {j + 1} swapped (their columns in the wrong order in the input)"] = \
+                replace(meas, poses=poses, joints=q)
+    return out
+
+
 def _fmt(v: float) -> str:
     return "not fitted" if not np.isfinite(v) else f"{v:.3g}"
 
@@ -176,6 +193,7 @@ def gross_failure(setup, meas: Measurements, ident, residual: str, where: str, a
         return None
     cands = dict(alternatives or {})
     cands.update(joint_sign_candidates(meas))
+    cands.update(joint_swap_candidates(meas))
     tests, plain = [], []  # plain: the readings that fit without a convention move (whatever their motions)
     for what, alt in cands.items():
         c, r = _refit(setup, alt, residual, params)
@@ -193,7 +211,7 @@ def gross_failure(setup, meas: Measurements, ident, residual: str, where: str, a
     # an equivalent model reached by another reading (e.g. two parallel joints negated) fits too, but only the
     # right reading brings the model back to the nominal one: those are the hits; the others are named after
     hits = [t for t in tests if t["fits"]] or [t for t in tests if t["fits_with_moves"]]
-    shown = hits or [t for t in tests if not t["candidate"].startswith("joint ")] or tests
+    shown = hits or [t for t in tests if not t["candidate"].startswith(("joint ", "joints "))] or tests
     if not hits:  # readings that fit the poses but not their motions are named too
         shown += [t for t in tests if t["motions_follow_joints"] is False and t["candidate"] in plain and t not in shown]
 
@@ -209,8 +227,9 @@ def gross_failure(setup, meas: Measurements, ident, residual: str, where: str, a
 
     tested = "; ".join(line(t) for t in shown)
     n_joint = sum(t["candidate"].startswith("joint ") for t in tests)
+    n_swap = sum(t["candidate"].startswith("joints ") for t in tests)
     if not hits and n_joint and len(shown) < len(tests):
-        tested += f"; each of the {n_joint} joints' readings negated: no fit"
+        tested += f"; each of the {n_joint} joints' readings negated and each of the {n_swap} pairs swapped: no fit"
     also = f"; {motion_refusal}" if motion_refusal else ""
     if gross:
         kind = "gross misfit"
@@ -229,6 +248,11 @@ def gross_failure(setup, meas: Measurements, ident, residual: str, where: str, a
         kind = "inconsistent motions"
         head = (f"{where}: {motion_refusal} (the fit itself reaches chi2/dof {_fmt(chi2)}: the model absorbed it), "
                 "not a calibration")
+    if hits:  # the reading that fits is the diagnosis: say it first
+        head = (f"{where}: {hits[0]['candidate']}: that reading of the input fits (chi2/dof "
+                f"{_fmt(np.nan if hits[0]['chi2_dof'] is None else hits[0]['chi2_dof'])}"
+                + (", its motions follow its joints" if hits[0]["motions_follow_joints"] else "") + "). "
+                + head[len(where) + 2:])
     msg = (f"{head}. Likely causes" + (", each checked for motion consistency and" if motion_check is not None
                                        else ",") + f" refitted on {min(len(meas.T_cam_target), REFIT_POSES)} poses: {tested}"
            + ("" if hits else " (none fits)") + (f". Not tested here: {untested}" if untested else ""))
@@ -236,5 +260,5 @@ def gross_failure(setup, meas: Measurements, ident, residual: str, where: str, a
             "moves": [m["text"] for m in moves], "motion_check": motion_refusal, "tests": tests, "message": msg}
 
 
-__all__ = ["gross_failure", "convention_moves", "joint_sign_candidates", "describe", "GROSS_CHI2_DOF",
+__all__ = ["gross_failure", "convention_moves", "joint_sign_candidates", "joint_swap_candidates", "describe", "GROSS_CHI2_DOF",
            "CONVENTION_ANGLE_RAD"]
