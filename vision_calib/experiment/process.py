@@ -239,6 +239,7 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None, cause=No
     from ..identify.handeye_problem import handeye_problem, stack_measurements
     from ..io.report_handeye import handeye_report
     from .camera_step import SOURCE_CAMERA_FILE, fitted_camera, intrinsics_directions, residual_response
+    from .handeye_gross import handeye_gross_failure, quaternion_scalar_first
     from .handeye_step import handeye_blocks, identify_handeye
 
     ok = [i for i, pm in enumerate(pms) if pm.valid]
@@ -260,6 +261,11 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None, cause=No
     ident = identify_handeye(rec.poses[ok], T, mount, cov, labels, rec.robot_pose_std,
                              nuisance=nuisance if dirs else None, where=str(rec.folder))
     result, A, B, problem = ident.result, ident.A, ident.B, ident.problem
+    other = "fixed" if mount == "eye_in_hand" else "eye_in_hand"
+    failure = handeye_gross_failure(rec.poses[ok], T, mount, ident, str(rec.folder), alternatives={
+        "the flange quaternions read scalar-first (w, x, y, z written under qx, qy, qz, qw)":
+            (quaternion_scalar_first(rec.poses[ok]), T, mount),
+        f"the camera mount {other} (recording.yaml camera_mount: {rec.camera_mount})": (rec.poses[ok], T, other)})
     cam_fit = None
     if ident.nuisance is not None:
         cam_fit = fitted_camera(rec.camera, used, ident.nuisance["coefficients"])
@@ -292,7 +298,7 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None, cause=No
         identified=ident,
         residuals=residual_stats(result.residuals, "pose"),
         extra={"handeye": he, "intrinsics": intr, "reprojection": he["reprojection"], "cause": cause},
-        timings={"total": time.perf_counter() - t0})
+        timings={"total": time.perf_counter() - t0}, failure=failure)
     report["summary_text"] += points_line(report.get("reprojection")) + ("\n" + cause["message"] if cause else "")
     write_report(out, report, plots=plots, overlays=_overlay_source(rec, dets) if plots else None)
     return report

@@ -67,9 +67,10 @@ def opencv_closed_form(T_base_flange, T_cam_target_meas, mount: str = "fixed",
         else:
             raise ConfigError(f"opencv_closed_form: unknown method {method!r}; expected one of "
                               f"{sorted(_ROBOT_WORLD) + sorted(_HAND_EYE)}")
-    except cv2.error as exc:
+    except (cv2.error, ValueError) as exc:  # ValueError: a returned rotation that is no rotation (det <= 0)
         raise DataError(f"closed-form hand-eye calibration failed ({str(exc).splitlines()[0]}): the poses need "
-                        f"rotations about at least two non-parallel axes; or give A0 and B0") from None
+                        f"rotations about at least two non-parallel axes, and the camera mount must be the right "
+                        f"one (eye_in_hand or fixed); or give A0 and B0") from None
     A, B = np.asarray(A, float), np.asarray(B, float)
     if not (np.all(np.isfinite(A)) and np.all(np.isfinite(B))):
         raise DataError("closed-form hand-eye calibration returned a non-finite result (degenerate motions? "

@@ -1,0 +1,82 @@
+"""Gross input errors in the hand-eye route (experiment/handeye_gross.py, issue 28 item 3): a simulated eye-in-hand
+flange-pose recording damaged as users damage theirs -- the board declared twice its size, the flange quaternions
+written scalar-first, the wrong camera mount -- ends in exit 3 with the reading that fits named and no calibrated
+model; the clean recording passes."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+import yaml
+from flange_folder import flange_pose_folder
+
+from vision_calib.cli import main
+
+pytestmark = pytest.mark.slow
+RX90 = "scenes/rx90_eye_in_hand.yaml"
+
+
+@pytest.fixture(scope="module")
+def flange_rec(tmp_path_factory):
+    from vision_calib.experiment.simulate import run_simulation
+
+    d = tmp_path_factory.mktemp("hegross")
+    run_simulation(RX90, out_dir=d / "sim", seed=5, n_poses=16, frames=1, export_recording=d / "rec", workers=2,
+                   plots=False, reference=False)
+    folder, _, _ = flange_pose_folder(d / "rec", d / "flange", robot_std_mm=0.1, robot_std_deg=0.01, seed=3)
+    return folder
+
+
+def _damaged(src, dst, edit_yaml=None, edit_csv=None):
+    shutil.copytree(src, dst)
+    if edit_yaml:
+        doc = yaml.safe_load((dst / "recording.yaml").read_text())
+        edit_yaml(doc)
+        (dst / "recording.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
+    if edit_csv:
+        lines = (dst / "poses.csv").read_text().splitlines()
+        (dst / "poses.csv").write_text("\n".join([lines[0]] + [edit_csv(ln) for ln in lines[1:]]) + "\n")
+    return dst
+
+
+def _run(folder, out, capsys):
+    rc = main(["process", str(folder), "--out", str(out), "--no-plots"])
+    err = capsys.readouterr().err
+    return rc, err, json.loads((out / "report.json").read_text())
+
+
+def test_clean_recording_passes(flange_rec, tmp_path, capsys):
+    rc, err, rep = _run(flange_rec, tmp_path / "out", capsys)
+    assert rc == 0 and "failure" not in rep, err
+
+
+def _scale(doc):
+    doc["target"]["square_m"] *= 2
+    doc["target"]["marker_m"] *= 2
+
+
+def _scalar_first(line):
+    f = line.split(",")
+    return ",".join(f[:4] + [f[7], f[4], f[5], f[6]])
+
+
+@pytest.mark.parametrize("damage, needle", [
+    (dict(edit_yaml=_scale), "the board's size off by 2"),
+    (dict(edit_csv=_scalar_first), "the flange quaternions read scalar-first"),
+    (dict(edit_yaml=lambda d: d.update(camera_mount="fixed")), "the camera mount eye_in_hand"),
+], ids=["board x2", "quaternion scalar-first", "mount fixed"])
+def test_damage_named_and_refused(flange_rec, tmp_path, capsys, damage, needle):
+    folder = _damaged(flange_rec, tmp_path / "bad", **damage)
+    rc, err, rep = _run(folder, tmp_path / "out", capsys)
+    assert rc == 3, err
+    f = rep["failure"]
+    hits = [t["candidate"] for t in f["tests"] if t["fits"]]
+    assert hits and hits[0].startswith(needle), (hits, f["message"])
+    assert needle in err
+    assert not (tmp_path / "out" / "calibrated_model.yaml").exists()
+    if "size" in needle:
+        scale = [t["scale"] for t in f["tests"] if "scale" in t][0]
+        assert np.isclose(scale, 2.0, rtol=0.02)
