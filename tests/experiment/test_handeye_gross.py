@@ -53,6 +53,15 @@ def test_clean_recording_passes(flange_rec, tmp_path, capsys):
     assert rc == 0 and "failure" not in rep, err
 
 
+def test_exact_flange_poses_do_not_warn(flange_rec, tmp_path, capsys):
+    """Perfect flange poses (issue 28 item 5): the chi-square band reads the image-measured poses' covariance as
+    trusted within IMAGE_COV_SCALE, as the robot-chain route does: no misfit warning."""
+    exact, _, _ = flange_pose_folder(flange_rec.parent / "rec", tmp_path / "exact", robot_std_mm=0.0, robot_std_deg=0.0)
+    rc, err, rep = _run(exact, tmp_path / "out", capsys)
+    assert rc == 0 and rep["verdict"]["status"] == "ok", (rep["verdict"], err)
+    assert rep["adequacy"]["verdict"] == "consistent" and rep["adequacy"]["cov_scale"] == [0.55, 1.3]
+
+
 def _scale(doc):
     doc["target"]["square_m"] *= 2
     doc["target"]["marker_m"] *= 2

@@ -58,11 +58,14 @@ class HandeyeIdentified:
 
 def identify_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: str, pose_cov: ArrayLike,
                      labels: Sequence[str], robot_std: tuple[float, float] | None = None, robust: bool = True,
-                     nuisance: Callable | None = None, where: str = "") -> HandeyeIdentified:
+                     nuisance: Callable | None = None, where: str = "",
+                     cov_scale: tuple[float, float] = (1.0, 1.0)) -> HandeyeIdentified:
     """Steps of the module docstring. T_base_flange, T_cam_target (N, 4, 4) [m]; pose_cov (N, 6, 6) [m, rad];
     labels (N,); robot_std: (translation m, rotation rad) per axis of the flange pose error, or None
     (estimated); nuisance: callable (problem, x) -> U (n_obs, 6, d) or None, the response of every pose's
-    residual to one std of each direction of a shared error (``experiment.camera_step.residual_response``)."""
+    residual to one std of each direction of a shared error (``experiment.camera_step.residual_response``);
+    cov_scale: the range of the factor by which the true camera covariance may differ from ``pose_cov``
+    (``identify.adequacy.IMAGE_COV_SCALE`` for poses measured from images), read by the adequacy test."""
     F, M, C = (np.asarray(a, float) for a in (T_base_flange, T_cam_target, pose_cov))
     labels = list(labels)
     fit = fit_handeye(F, M, mount, C, labels, robot_std, candidates=closed_forms(F, M, mount))
@@ -88,7 +91,7 @@ def identify_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: s
     result, pb, nz = fit.result, fit.problem, None
     if nuisance is not None:
         result, nz = _with_shared_error(fit, nuisance)
-    adequacy = model_adequacy(result)
+    adequacy = model_adequacy(result, cov_scale=cov_scale)
     factor = float(result.chi2_dof) if robust and np.isfinite(result.chi2_dof) else 1.0
     if factor > 1:
         result = replace(result, std=result.std * np.sqrt(factor), covariance=result.covariance * factor)

@@ -258,8 +258,10 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None, cause=No
                                  lambda Tm: handeye_problem(m["T_base_flange"], Tm, mount, m["A0"], m["B0"], pb.obs_cov,
                                                             labels=pb.labels), used)
 
+    from ..identify.adequacy import IMAGE_COV_SCALE
+
     ident = identify_handeye(rec.poses[ok], T, mount, cov, labels, rec.robot_pose_std,
-                             nuisance=nuisance if dirs else None, where=str(rec.folder))
+                             nuisance=nuisance if dirs else None, where=str(rec.folder), cov_scale=IMAGE_COV_SCALE)
     result, A, B, problem = ident.result, ident.A, ident.B, ident.problem
     other = "fixed" if mount == "eye_in_hand" else "eye_in_hand"
     failure = handeye_gross_failure(rec.poses[ok], T, mount, ident, str(rec.folder), alternatives={
