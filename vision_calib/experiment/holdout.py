@@ -317,6 +317,11 @@ def holdout_lines(h: dict | None) -> list[str]:
     for f in h["per_fold"]:
         if "error" in f:
             lines.append(f"  fold {f['fold']}: {f['error']}")
+            continue
+        no = f.get("n_outliers_held_out")
+        lines.append(f"  fold {f['fold']} ({f['n_test']} poses held out"
+                     + (f", {no} flagged outlier{'s' if no > 1 else ''}" if no else "") + "): "
+                     + _fmt(f["before"], f["after"]) + ("" if f["converged"] else " NOT CONVERGED"))
     lines.append(("  decision: ok, " if h["decision"]["ok"] else "  decision: FAILED, ") + h["decision"]["reason"])
     return lines
 
