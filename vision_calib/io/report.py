@@ -487,6 +487,26 @@ def _handeye_lines(report: dict) -> list[str]:
     return lines
 
 
+def _add_joint_offsets(report: dict, model_path: Path) -> None:
+    """The report's ``joint_offsets`` (the calibrated model file's: the joint-offset form a controller takes) and
+    its summary line, where the robot has one; the joint offsets the identifiability reduction folded into other
+    parameters are named as such (the offsets carry them)."""
+    from .model_export import OFFSET_CONVENTION, read_calibrated_model
+
+    cm = read_calibrated_model(model_path)
+    if not cm.joint_offsets:
+        return
+    report["joint_offsets"] = {"convention": OFFSET_CONVENTION, "offsets": cm.joint_offsets,
+                               "folded": [f["parameter"] for f in cm.folded if f["parameter"].startswith(("q0_", "theta"))]}
+    vals = ", ".join(f"{q} {o['offset'] * (180 / np.pi if o['unit'] == 'rad' else 1e3):+.4f} "
+                     f"{'deg' if o['unit'] == 'rad' else 'mm'}" for q, o in cm.joint_offsets.items())
+    folded = report["joint_offsets"]["folded"]
+    report["summary_text"] = report.get("summary_text", "") + (
+        f"\njoint offsets for the controller (model joint = reading + offset; the same predictions as the identified "
+        f"parameters): {vals}" + (f" (these carry {', '.join(folded)}, which the identifiability reduction folded "
+                                  "into other parameters)" if folded else ""))
+
+
 def write_report(out_dir, report: dict, setup=None, result=None, problem=None, evaluations=None,
                  plots: bool = True, overlays=None) -> Path:
     """report.json + summary.txt + report.html (+ calibrated_model.yaml with a setup; + residuals.png,
@@ -503,6 +523,7 @@ def write_report(out_dir, report: dict, setup=None, result=None, problem=None, e
         write_calibrated_model(out / files["model"], setup, result.identified, result.std, result.free,
                                result, problem, report.get("identifiability"))
         files.update(setup.export_model_files(out, result.identified))
+        _add_joint_offsets(report, out / files["model"])
     else:  # a calibrated model left by an earlier run into the same folder must not pass for this run's
         for stale in out.glob("calibrated_model.*"):
             stale.unlink()
