@@ -11,7 +11,7 @@ Topics read:
   positions in rad (revolute) or m (prismatic), as the recording's ``units: {length: m, angle: rad}``;
 - intrinsics (optional): ``sensor_msgs/CameraInfo`` K and D (``plumb_bob``: k1, k2, p1, p2, k3); else the cell's.
 
-Time: every message's ``header.stamp`` (the bag's log time for a topic whose stamps are all zero) in ns.
+Time: every message's ``header.stamp`` (the bag's log time for a topic whose first stamp is zero) in ns.
 
 Standstills (:func:`standstills`): a joint-state sample is *still* when, over the samples within +-window/2 of
 it, every joint's range (max - min) is at most ``speed x window`` (a mean speed below ``speed`` [rad/s or m/s]
@@ -139,13 +139,16 @@ def _stamp_ns(msg) -> int:
 
 
 def _messages(reader, conns):
-    """[(stamp ns, log time ns, message)] in the bag's order; header stamps, or log times when a topic's stamps
-    are all zero."""
-    out = [(_stamp_ns(m), t, m) for c, t, raw in reader.messages(connections=conns)
-           for m in (reader.deserialize(raw, c.msgtype),)]
-    if out and all(s == 0 for s, _, _ in out):
-        out = [(t, t, m) for _, t, m in out]
-    return out
+    """(stamp ns, log time ns, message) of the connections, in the bag's order, one at a time (an image bag does
+    not fit in memory): header stamps, or the log times when the topic's first message has a zero stamp (a
+    driver that does not stamp)."""
+    use_log = None
+    for c, t, raw in reader.messages(connections=conns):
+        m = reader.deserialize(raw, c.msgtype)
+        s = _stamp_ns(m)
+        if use_log is None:
+            use_log = s == 0
+        yield (t if use_log else s), t, m
 
 
 def check_clock(stamps_ns, bag, topic: str, max_gap_s: float) -> None:
@@ -313,7 +316,7 @@ def _camera(reader, info_topic, setup, bag, notes: list):
             raise DataError(f"{bag}: no --camera-info-topic and the cell has no camera intrinsics: give one of them")
         return setup.camera, "the cell's camera (no camera info topic)"
     conns = topic_connections(reader, info_topic, (INFO_TYPE,), bag, "camera info")
-    msgs = _messages(reader, conns)
+    msgs = list(_messages(reader, conns))
     if not msgs:
         raise DataError(f"{bag}: camera info topic {info_topic!r} holds no message")
     first = camera_from_info(msgs[0][2], f"{bag}: topic {info_topic!r} message 0")
@@ -357,7 +360,7 @@ def import_bag(bag, scene, image_topic: str, joints_topic: str, out, camera_info
             iconns = topic_connections(reader, image_topic, IMAGE_TYPES, bag, "image")
             jconns = topic_connections(reader, joints_topic, (JOINT_TYPE,), bag, "joint states")
             camera, cam_source = _camera(reader, camera_info_topic, setup, bag, notes)
-            jm = _messages(reader, jconns)
+            jm = list(_messages(reader, jconns))
             check_clock([s for s, _, _ in jm], bag, joints_topic, settings.max_gap_s)
             t_j, Q = joint_matrix(jm, names, bag, joints_topic)
             stills = standstills(t_j, Q, settings)
