@@ -349,6 +349,7 @@ The pattern is read from the folder's own chessboard-data.txt or apriltag-data.t
     p.add_argument("--tip-link", default=None,
                    help="with --urdf: the chain's tip link, the flange (default: the leaf with most movable joints)")
     _add_import_bag(sub)
+    _add_import_pairs(sub)
     for p in sub.choices.values():  # the one rule for paths named in files (config.confine): the user's allowance
         p.add_argument("--allow-path", action="append", default=[], metavar="DIR",
                        help="let files (scene, measured-pose, recording, study, ROS-I files) name files in DIR too "
@@ -581,6 +582,39 @@ def _cmd_import_bag(args) -> int:
 
 COMMANDS["import-bag"] = _cmd_import_bag
 # ------------------------------------------------------------------------------------------------ end of import-bag
+
+
+# -------------------------------------- import-pairs: hand-eye pose pairs of other tools (io/transform_pairs.py)
+def _add_import_pairs(sub) -> None:
+    p = _command(sub, "import-pairs", "a pose-pair file for process-poses from a TransformPairs YAML "
+                 "(handeye_calib_camodocal, easy_handeye-style samplers: T1_i base->end effector, T2_i "
+                 "camera->marker)", """
+  vision-calib import-pairs TransformPairsInput.yml --mount fixed --out pairs/pairs.yaml
+  vision-calib process-poses pairs/pairs.yaml --out out/handeye""")
+    p.add_argument("file", help="TransformPairs YAML (OpenCV FileStorage: %%YAML:1.0, ---, frameCount, T1_i, T2_i)")
+    p.add_argument("--mount", required=True, choices=("eye_in_hand", "fixed"),
+                   help="eye_in_hand: camera on the flange, marker fixed; fixed: camera on a stand, marker on the "
+                        "flange")
+    p.add_argument("--folds", type=_int_at_least(2), default=5, help="k of process-poses' held-out validation "
+                                                                     "(default 5)")
+    # dest out_file: a file output, written atomically (no folder lock: the lock would make FILE.yaml a folder)
+    p.add_argument("--out", dest="out_file", required=True, metavar="FILE.yaml",
+                   help="pose-pair file to write (its two CSVs beside it); the measured poses' noise is estimated "
+                        "per axis by process-poses")
+
+
+def _cmd_import_pairs(args) -> int:
+    from .config import check_output_apart
+    from .io.transform_pairs import import_pairs
+
+    check_output_apart(args.out_file, [(args.file, "file")], "--out")
+    path = import_pairs(args.file, args.mount, args.out_file, folds=args.folds)
+    print(f"wrote pose-pair file {path} (process it: vision-calib process-poses {path} --out DIR)")
+    return 0
+
+
+COMMANDS["import-pairs"] = _cmd_import_pairs
+# ---------------------------------------------------------------------------------------------- end of import-pairs
 
 
 def _out(args):

@@ -308,7 +308,8 @@ def _never_still(bw, stamps, Q):  # the joint states creep all along (5 mrad/s o
     ("joint names", None, ["--joint-names", "a1,a2,a3,a4,a5,a6"],
      "no message names the cell's joints a1, a2, a3, a4, a5, a6; the bag's joint names are q1, q2, q3, q4, q5, q6"),
     ("joint count", None, ["--joint-names", "q1,q2"], "--joint-names: 2 names (q1, q2) for the cell's 6 joints"),
-    ("encoding", _bayer, ["--image-topic", "/camera/image_raw"], "image encoding 'bayer_rggb8' not supported (supported: mono8, bgr8, rgb8, mono16"),
+    ("encoding", _bayer, ["--image-topic", "/camera/image_raw"],
+     "image encoding 'bayer_rggb8' not supported (supported: mono8, bgr8, rgb8, mono16"),
 ])
 def test_damaged_bags_are_named(tmp_path, capsys, case, edit, extra, message):
     """Each damage gives exit 2 and one line naming the bag, the topic and what is wrong."""

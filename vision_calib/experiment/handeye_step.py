@@ -52,16 +52,20 @@ class HandeyeIdentified:
     method_check: dict | None = None
 
 
-def identify_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: str, pose_cov: ArrayLike,
+def identify_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: str, pose_cov: ArrayLike | None,
                      labels: Sequence[str], robot_std: tuple[float, float] | None = None, robust: bool = True,
-                     nuisance: Callable | None = None, where: str = "") -> HandeyeIdentified:
-    """Steps of the module docstring. T_base_flange, T_cam_target (N, 4, 4) [m]; pose_cov (N, 6, 6) [m, rad];
-    labels (N,); robot_std: (translation m, rotation rad) per axis of the flange pose error, or None
-    (estimated); nuisance: callable (problem, x) -> U (n_obs, 6, d) or None, the response of every pose's
-    residual to one std of each direction of a shared error (``experiment.camera_step.residual_response``)."""
-    F, M, C = (np.asarray(a, float) for a in (T_base_flange, T_cam_target, pose_cov))
+                     nuisance: Callable | None = None, where: str = "",
+                     noise_frame: str | None = None) -> HandeyeIdentified:
+    """Steps of the module docstring. T_base_flange, T_cam_target (N, 4, 4) [m]; pose_cov (N, 6, 6) [m, rad]
+    (None with noise_frame); labels (N,); robot_std: (translation m, rotation rad) per axis of the flange pose
+    error, or None (estimated); nuisance: callable (problem, x) -> U (n_obs, 6, d) or None, the response of every
+    pose's residual to one std of each direction of a shared error (``experiment.camera_step.residual_response``);
+    noise_frame: "target" | "camera" when the measured poses' noise is not known: its std per axis of that frame
+    is estimated (``identify.handeye_fit.fit_estimated_noise``)."""
+    F, M = (np.asarray(a, float) for a in (T_base_flange, T_cam_target))
+    C = None if pose_cov is None else np.asarray(pose_cov, float)
     labels = list(labels)
-    fit = fit_handeye(F, M, mount, C, labels, robot_std, candidates=closed_forms(F, M, mount))
+    fit = fit_handeye(F, M, mount, C, labels, robot_std, candidates=closed_forms(F, M, mount), noise_frame=noise_frame)
     rejected = []
     pb = fit.problem
     if robust and pb.n_obs * pb.m >= 2 * int(np.sum(fit.result.free)):
@@ -72,8 +76,8 @@ def identify_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: s
             if len(keep) < 3:
                 raise IdentifiabilityError(f"{where}: only {len(keep)} poses left after rejecting outliers")
             rejected = list(out)
-            fit = fit_handeye(F[keep], M[keep], mount, C[keep], [labels[k] for k in keep], robot_std,
-                              candidates=closed_forms(F[keep], M[keep], mount))
+            fit = fit_handeye(F[keep], M[keep], mount, None if C is None else C[keep], [labels[k] for k in keep],
+                              robot_std, candidates=closed_forms(F[keep], M[keep], mount), noise_frame=noise_frame)
     result, pb, nz = fit.result, fit.problem, None
     if nuisance is not None:
         result, nz = _with_shared_error(fit, nuisance)
@@ -84,7 +88,8 @@ def identify_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: s
     extra = ()
     if adequacy.get("verdict") == "too large":
         extra += (misfit_warning(adequacy, "the hand-eye model", "the measurement noise (camera + robot pose error, "
-                                 f"robot std {fit.robot['source']})"),)
+                                 f"robot std {fit.robot['source']}"
+                                 + (", measured poses' std estimated per axis" if fit.noise else "") + ")"),)
     if rejected:
         extra += (f"{len(rejected)} outlier poses rejected: " + "; ".join(f"{lab}: {why}" for lab, why in rejected[:5]),)
     if extra:
@@ -115,13 +120,17 @@ def _with_shared_error(fit, nuisance):
 
 def handeye_blocks(ident: HandeyeIdentified) -> dict:
     """The report's hand-eye additions: ``robot_pose_std`` (given or estimated, mm / deg per axis, with the
-    estimate's std) and ``closed_form_comparison`` (each OpenCV method's weighted cost and distance to the
+    estimate's std), ``measured_noise`` (when the measured poses' std per axis was estimated) and
+    ``closed_form_comparison`` (each OpenCV method's weighted cost and distance to the
     final solution, under the final weights)."""
     fit = ident.fit
     cf = fit.closed_forms
     if ident.nuisance is not None:  # the solution moved with the shared error: compare with the final one
         cf = closed_form_comparison(ident.problem, ident.result.identified, fit.candidates, cf["start"])
-    return {"robot_pose_std": fit.robot, "closed_form_comparison": cf}
+    out = {"robot_pose_std": fit.robot, "closed_form_comparison": cf}
+    if fit.noise is not None:
+        out["measured_noise"] = fit.noise
+    return out
 
 
 __all__ = ["HandeyeIdentified", "identify_handeye", "handeye_blocks"]

@@ -250,6 +250,13 @@ def _read_poses_csv(cpath: Path, pose_kind: str, Lf: float, Af: float) -> tuple[
     return ids, T_from_xyz_quat(vals[:, :3] * Lf, q / nq[:, None])
 
 
+def read_flange_csv(path, length_factor: float = 1.0) -> tuple[list[str], np.ndarray]:
+    """(pose ids, (N, 4, 4) T_base_flange [m]) of a flange-pose CSV ``pose_id,x,y,z,qx,qy,qz,qw`` (a flange-pose
+    recording's poses.csv; positions times ``length_factor`` [m per file unit]); DataError naming the file and
+    line (columns, numbers, duplicate ids, quaternion norm, implausible positions)."""
+    return _read_poses_csv(Path(path), "flange_pose", float(length_factor), 1.0)
+
+
 def _find_images(folder: Path, ids, frames: int, allow_symlinks: bool) -> tuple[dict, list[str]]:
     """({pose_id: sorted image paths}, extra files) under folder/images; symlinks checked."""
     images, extra = {}, []

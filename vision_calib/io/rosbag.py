@@ -379,7 +379,8 @@ def import_bag(bag, scene, image_topic: str, joints_topic: str, out, camera_info
                 if size is None:
                     size = shape
                 elif shape != size:
-                    raise DataError(f"{where}: image size {shape[0]}x{shape[1]}, the first image is {size[0]}x{size[1]}")
+                    raise DataError(f"{where}: image size {shape[0]}x{shape[1]}, the first image is "
+                                    f"{size[0]}x{size[1]}")
                 ok, buf = cv2.imencode(".png", img)  # lossless; written once the whole bag is read
                 frames.setdefault(hit, []).append(buf.tobytes())
             check_clock(stamps, bag, image_topic, float("inf"))  # images come only at standstills: no gap limit
@@ -414,4 +415,5 @@ def import_bag(bag, scene, image_topic: str, joints_topic: str, out, camera_info
 
 
 __all__ = ["StillSettings", "Standstill", "BagImport", "RAW_ENCODINGS", "open_bag", "topic_connections",
-           "check_clock", "joint_matrix", "standstills", "check_encoding", "decode_image", "camera_from_info", "import_bag"]
+           "check_clock", "joint_matrix", "standstills", "check_encoding", "decode_image", "camera_from_info",
+           "import_bag"]
