@@ -54,6 +54,10 @@ def test_noise_per_axis_is_estimated_not_assumed_isotropic():
         assert abs(got - true) < 4 * sd + 1e-3, (got, sd, true)
     assert n["translation_mm"][2] > 3 * max(n["translation_mm"][:2])
     assert n["rotation_deg"][2] < min(n["rotation_deg"][:2]) / 3
+    # per camera axis: the tag faces the camera, so depth is the camera's z too (the rotations mix more)
+    c = identify_handeye(d.T_base_flange, d.T_cam_target, "fixed", None, d.labels, (0.0, 0.0),
+                         noise_frame="camera").fit.noise
+    assert c["frame"] == "camera" and c["translation_mm"][2] > 2 * max(c["translation_mm"][:2])
 
 
 def test_better_than_plain_least_squares_from_the_best_closed_form():
