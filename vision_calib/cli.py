@@ -349,6 +349,8 @@ The pattern is read from the folder's own chessboard-data.txt or apriltag-data.t
     p.add_argument("--tip-link", default=None,
                    help="with --urdf: the chain's tip link, the flange (default: the leaf with most movable joints)")
     _add_deploy_commands(sub)
+    _add_import_bag(sub)
+    _add_import_pairs(sub)
     for p in sub.choices.values():  # the one rule for paths named in files (config.confine): the user's allowance
         p.add_argument("--allow-path", action="append", default=[], metavar="DIR",
                        help="let files (scene, measured-pose, recording, study, ROS-I files) name files in DIR too "
@@ -640,6 +642,85 @@ COMMANDS = {
     "inverse": _cmd_inverse,
     "export": _cmd_export,
 }
+
+
+# ------------------------------------------------------- import-bag: a recorded folder from a ROS bag (io/rosbag.py)
+def _add_import_bag(sub) -> None:
+    p = _command(sub, "import-bag", "a recorded folder from a ROS 1 / ROS 2 bag: images + joint states, one pose per "
+                 "standstill (needs the [ros] extra)", """
+  vision-calib import-bag session.bag --scene my_cell/scene.yaml --image-topic /camera/image_raw \\
+      --joints-topic /joint_states --camera-info-topic /camera/camera_info --out recording/
+  vision-calib import-bag session_ros2/ --scene my_cell --image-topic /cam/image/compressed \\
+      --joints-topic /joint_states --joint-names j1,j2,j3,j4,j5,j6 --out recording/""")
+    p.add_argument("bag", help="ROS 1 .bag, ROS 2 bag folder (metadata.yaml), .db3 or .mcap")
+    p.add_argument("--scene", required=True, metavar="CELL",
+                   help="the cell: its scene file, or a folder with scene.yaml (robot, mount, target, camera)")
+    p.add_argument("--image-topic", required=True, help="sensor_msgs/Image (mono8, bgr8, rgb8, mono16) or "
+                                                        "sensor_msgs/CompressedImage (jpeg, png)")
+    p.add_argument("--joints-topic", required=True, help="sensor_msgs/JointState")
+    p.add_argument("--camera-info-topic", default=None,
+                   help="sensor_msgs/CameraInfo (K, D plumb_bob; default: the cell's camera intrinsics)")
+    p.add_argument("--joint-names", default=None, metavar="N1,N2,..",
+                   help="the bag's names of the cell's joints, in the cell's order (default: a URDF cell's joint "
+                        "names, q1..qn for an MDH robot)")
+    p.add_argument("--still-speed", type=_sigma, default=1e-3, metavar="RAD_S",
+                   help="standstill: mean joint speed below this over the window [rad/s, m/s] (default 0.001)")
+    p.add_argument("--still-window", type=_sigma, default=0.5, metavar="S",
+                   help="standstill window and shortest standstill [s] (default 0.5)")
+    p.add_argument("--max-gap", type=_sigma, default=1.0, metavar="S",
+                   help="longest gap of the joint states [s] before the bag counts as damaged (default 1)")
+    p.add_argument("--max-frames", type=_count, default=None, help="frames kept per pose (default: all)")
+    p.add_argument("--out", required=True, metavar="DIR", help="recorded folder to write (new or empty)")
+
+
+def _cmd_import_bag(args) -> int:
+    from .config import check_output_apart
+    from .io.rosbag import StillSettings, import_bag
+
+    check_output_apart(args.out, [(args.bag, "folder" if Path(args.bag).is_dir() else "file")])
+    names = None if args.joint_names is None else args.joint_names.split(",")
+    res = import_bag(args.bag, args.scene, args.image_topic, args.joints_topic, args.out,
+                     camera_info_topic=args.camera_info_topic, joint_names=names,
+                     settings=StillSettings(args.still_speed, args.still_window, args.max_gap, args.max_frames))
+    print(res.summary())
+    return 0
+
+
+COMMANDS["import-bag"] = _cmd_import_bag
+# ------------------------------------------------------------------------------------------------ end of import-bag
+
+
+# -------------------------------------- import-pairs: hand-eye pose pairs of other tools (io/transform_pairs.py)
+def _add_import_pairs(sub) -> None:
+    p = _command(sub, "import-pairs", "a pose-pair file for process-poses from a TransformPairs YAML "
+                 "(handeye_calib_camodocal, easy_handeye-style samplers: T1_i base->end effector, T2_i "
+                 "camera->marker)", """
+  vision-calib import-pairs TransformPairsInput.yml --mount fixed --out pairs/pairs.yaml
+  vision-calib process-poses pairs/pairs.yaml --out out/handeye""")
+    p.add_argument("file", help="TransformPairs YAML (OpenCV FileStorage: %%YAML:1.0, ---, frameCount, T1_i, T2_i)")
+    p.add_argument("--mount", required=True, choices=("eye_in_hand", "fixed"),
+                   help="eye_in_hand: camera on the flange, marker fixed; fixed: camera on a stand, marker on the "
+                        "flange")
+    p.add_argument("--folds", type=_int_at_least(2), default=5, help="k of process-poses' held-out validation "
+                                                                     "(default 5)")
+    # dest out_file: a file output, written atomically (no folder lock: the lock would make FILE.yaml a folder)
+    p.add_argument("--out", dest="out_file", required=True, metavar="FILE.yaml",
+                   help="pose-pair file to write (its two CSVs beside it); the measured poses' noise is estimated "
+                        "per axis by process-poses")
+
+
+def _cmd_import_pairs(args) -> int:
+    from .config import check_output_apart
+    from .io.transform_pairs import import_pairs
+
+    check_output_apart(args.out_file, [(args.file, "file")], "--out")
+    path = import_pairs(args.file, args.mount, args.out_file, folds=args.folds)
+    print(f"wrote pose-pair file {path} (process it: vision-calib process-poses {path} --out DIR)")
+    return 0
+
+
+COMMANDS["import-pairs"] = _cmd_import_pairs
+# ---------------------------------------------------------------------------------------------- end of import-pairs
 
 
 def _out(args):

@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..errors import IdentifiabilityError
-from ..identify import model_adequacy
+from ..identify import fit_rejecting_outliers, model_adequacy
 from ..identify.handeye_fit import HandeyeFit, closed_form_comparison, fit_handeye
 from ..identify.handeye_problem import transforms_from_x
 from ..identify.problem import IdentificationProblem, IdentificationResult
@@ -56,21 +56,25 @@ class HandeyeIdentified:
     deletion: dict | None = None
 
 
-def identify_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: str, pose_cov: ArrayLike,
+def identify_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: str, pose_cov: ArrayLike | None,
                      labels: Sequence[str], robot_std: tuple[float, float] | None = None, robust: bool = True,
                      nuisance: Callable | None = None, where: str = "",
-                     cov_scale: tuple[float, float] = (1.0, 1.0)) -> HandeyeIdentified:
-    """Steps of the module docstring. T_base_flange, T_cam_target (N, 4, 4) [m]; pose_cov (N, 6, 6) [m, rad];
-    labels (N,); robot_std: (translation m, rotation rad) per axis of the flange pose error, or None
-    (estimated); nuisance: callable (problem, x) -> U (n_obs, 6, d) or None, the response of every pose's
-    residual to one std of each direction of a shared error (``experiment.camera_step.residual_response``);
+                     cov_scale: tuple[float, float] = (1.0, 1.0), noise_frame: str | None = None) -> HandeyeIdentified:
+    """Steps of the module docstring. T_base_flange, T_cam_target (N, 4, 4) [m]; pose_cov (N, 6, 6) [m, rad]
+    (None with noise_frame); labels (N,); robot_std: (translation m, rotation rad) per axis of the flange pose
+    error, or None (estimated); nuisance: callable (problem, x) -> U (n_obs, 6, d) or None, the response of every
+    pose's residual to one std of each direction of a shared error (``experiment.camera_step.residual_response``);
     cov_scale: the range of the factor by which the true camera covariance may differ from ``pose_cov``
-    (``identify.adequacy.IMAGE_COV_SCALE`` for poses measured from images), read by the adequacy test."""
-    F, M, C = (np.asarray(a, float) for a in (T_base_flange, T_cam_target, pose_cov))
+    (``identify.adequacy.IMAGE_COV_SCALE`` for poses measured from images), read by the adequacy test;
+    noise_frame: "target" | "camera" when the measured poses' noise is not known: its std per axis of that frame
+    is estimated (``identify.handeye_fit.fit_estimated_noise``; outliers then by the robust chi-square test of
+    ``identify.fit_rejecting_outliers``, the deletion test needing the noise known)."""
+    F, M = (np.asarray(a, float) for a in (T_base_flange, T_cam_target))
+    C = None if pose_cov is None else np.asarray(pose_cov, float)
     labels = list(labels)
-    fit = fit_handeye(F, M, mount, C, labels, robot_std, candidates=closed_forms(F, M, mount))
+    fit = fit_handeye(F, M, mount, C, labels, robot_std, candidates=closed_forms(F, M, mount), noise_frame=noise_frame)
     rejected, deletion = [], None
-    if robust and fit.problem.n_obs * fit.problem.m >= 2 * int(np.sum(fit.result.free)):
+    if robust and noise_frame is None and fit.problem.n_obs * fit.problem.m >= 2 * int(np.sum(fit.result.free)):
         keep = list(range(len(labels)))
         while True:
             deletion = deletion_test(F[keep], M[keep], mount, C[keep], [labels[k] for k in keep], robot_std, fit)
@@ -88,6 +92,17 @@ def identify_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: s
                                            "outlier test: the model or the measurement is wrong, not a few outliers")
             fit = fit_handeye(F[keep], M[keep], mount, C[keep], [labels[k] for k in keep], robot_std,
                               candidates=closed_forms(F[keep], M[keep], mount))
+    elif robust and fit.problem.n_obs * fit.problem.m >= 2 * int(np.sum(fit.result.free)):
+        _, out = fit_rejecting_outliers(fit.problem, fit.result.identified, level=OUTLIER_LEVEL,
+                                        min_ratio=OUTLIER_MIN_RATIO)
+        if out:
+            bad = {lab for lab, _ in out}
+            keep = [k for k, lab in enumerate(labels) if str(lab) not in bad]
+            if len(keep) < 3:
+                raise IdentifiabilityError(f"{where}: only {len(keep)} poses left after rejecting outliers")
+            rejected = list(out)
+            fit = fit_handeye(F[keep], M[keep], mount, None if C is None else C[keep], [labels[k] for k in keep],
+                              robot_std, candidates=closed_forms(F[keep], M[keep], mount), noise_frame=noise_frame)
     result, pb, nz = fit.result, fit.problem, None
     if nuisance is not None:
         result, nz = _with_shared_error(fit, nuisance)
@@ -101,7 +116,8 @@ def identify_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: s
         extra += (jk_line,) if jk_line else ()
     if adequacy.get("verdict") == "too large":
         extra += (misfit_warning(adequacy, "the hand-eye model", "the measurement noise (camera + robot pose error, "
-                                 f"robot std {fit.robot['source']})"),)
+                                 f"robot std {fit.robot['source']}"
+                                 + (", measured poses' std estimated per axis" if fit.noise else "") + ")"),)
     if rejected:
         extra += (f"{len(rejected)} outlier poses rejected: " + "; ".join(f"{lab}: {why}" for lab, why in rejected[:5]),)
     if extra:
@@ -215,13 +231,17 @@ def _with_shared_error(fit, nuisance):
 
 def handeye_blocks(ident: HandeyeIdentified) -> dict:
     """The report's hand-eye additions: ``robot_pose_std`` (given or estimated, mm / deg per axis, with the
-    estimate's std) and ``closed_form_comparison`` (each OpenCV method's weighted cost and distance to the
+    estimate's std), ``measured_noise`` (when the measured poses' std per axis was estimated) and
+    ``closed_form_comparison`` (each OpenCV method's weighted cost and distance to the
     final solution, under the final weights)."""
     fit = ident.fit
     cf = fit.closed_forms
     if ident.nuisance is not None:  # the solution moved with the shared error: compare with the final one
         cf = closed_form_comparison(ident.problem, ident.result.identified, fit.candidates, cf["start"])
-    return {"robot_pose_std": fit.robot, "closed_form_comparison": cf, "deletion_test": ident.deletion}
+    out = {"robot_pose_std": fit.robot, "closed_form_comparison": cf, "deletion_test": ident.deletion}
+    if fit.noise is not None:
+        out["measured_noise"] = fit.noise
+    return out
 
 
 __all__ = ["HandeyeIdentified", "identify_handeye", "handeye_blocks"]

@@ -100,6 +100,11 @@ def _norms(r: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
     return dp, (np.degrees(np.linalg.norm(r[:, 3:6], axis=1)) if r.shape[1] >= 6 else None)
 
 
+def rms_change_interval(before: np.ndarray, after: np.ndarray, rng: np.random.Generator) -> list[float]:
+    """95 % paired-bootstrap interval of RMS(after) - RMS(before) over the poses (same unit as the inputs)."""
+    return _interval(before, after, rng)
+
+
 def _interval(before: np.ndarray, after: np.ndarray, rng: np.random.Generator) -> list[float]:
     """95 % paired-bootstrap interval of RMS(after) - RMS(before) over the poses (same unit as the inputs)."""
     n = len(before)
@@ -326,5 +331,5 @@ def holdout_lines(h: dict | None) -> list[str]:
     return lines
 
 
-__all__ = ["DEFAULT_FOLDS", "fold_indices", "error_stats", "holdout_validation", "holdout_failure", "holdout_lines",
+__all__ = ["DEFAULT_FOLDS", "fold_indices", "error_stats", "rms_change_interval", "holdout_validation", "holdout_failure", "holdout_lines",
            "predicted_accuracy", "tool_point_supported", "flagged_labels"]

@@ -3,6 +3,11 @@ measured poses (or positions) from a file (:mod:`vision_calib.io.measured_poses`
 -> identification -> k-fold held-out validation -> report.json, calibrated_model.yaml, plots.
 
 Held-out validation and the decision that can fail the verdict: :mod:`vision_calib.experiment.holdout`.
+
+Pose pairs (a file naming ``flange_poses``: flange poses + measured target poses, no robot model):
+:func:`process_pose_pairs`, the hand-eye route of ``process`` (``experiment.handeye_step``: closed-form start,
+the robot's pose error in the weights, outlier test, adequacy, variance factor) with the measured poses' std per
+axis estimated when the file gives none, and a k-fold held-out validation of its own (:func:`pair_holdout`).
 """
 
 from __future__ import annotations
@@ -10,8 +15,10 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from ..errors import ConfigError, DataError
-from ..io.measured_poses import chain_direction, misreadings, read_measured_poses
+import numpy as np
+
+from ..errors import ConfigError, DataError, VisionCalibError
+from ..io.measured_poses import PosePairs, chain_direction, misreadings, read_measured_poses
 from ..io.report import build_report, parameters_table, residual_stats, write_report
 from .checks import drop_inconsistent, duplicate_poses, motion_verdict
 from .gross import gross_failure
@@ -55,6 +62,11 @@ def process_poses(path: str | Path, out_dir: str | Path | None, method: str | No
     (:mod:`vision_calib.experiment.holdout`, whose decision can fail the verdict: no calibrated model)."""
     t0 = time.perf_counter()
     mp = read_measured_poses(path)
+    if isinstance(mp, PosePairs):
+        if method not in (None, "lse") or fix_unidentifiable or tcp is not None:
+            raise ConfigError(f"{mp.path}: a pose-pair file (flange_poses) is a hand-eye fit: --method, "
+                              "--fix-unidentifiable and --tcp do not apply")
+        return process_pose_pairs(mp, out_dir, folds=folds, plots=plots, t0=t0)
     scene, setup, meas = mp.scene, mp.scene.setup, mp.measurements
     method = check_method(setup, method or scene.identification.method, "--method")
     folds = int(folds or mp.folds)
@@ -95,4 +107,160 @@ def process_poses(path: str | Path, out_dir: str | Path | None, method: str | No
     return report
 
 
-__all__ = ["process_poses"]
+# ------------------------------------------------------------------------------------------- pose pairs
+def _pair_errors(A, B, F, M, mount: str) -> np.ndarray:
+    """(N, 6) frames.pose_error of the measured T_cam_target M against the model A G B [m, rad] (camera frame)."""
+    from ..frames import pose_error
+    from ..identify.handeye_problem import mount_G
+
+    return pose_error(A @ mount_G(F, mount) @ B, M)
+
+
+def pair_holdout(pp: PosePairs, folds: int, seed: int, outliers=()) -> dict:
+    """k-fold held-out validation of a pose-pair fit: the poses split by ``holdout.fold_indices``; each fold's
+    model identified on the other folds (the whole-data outliers in no training set; the fit of
+    ``handeye_step.identify_handeye`` without its outlier test) predicts the held-out poses ("after"), beside the
+    OpenCV closed form that fold's fit started from ("before"). Errors of T_cam_target, position [mm] and rotation
+    [deg] norms (``holdout.error_stats``), overall and without the flagged outliers; the paired-bootstrap interval
+    of the RMS change. Decision not ok (the verdict fails): a fold that cannot be identified, or our model
+    predicting held-out poses significantly worse than the closed form."""
+    from .handeye_step import identify_handeye
+    from .holdout import error_stats, fold_indices, rms_change_interval
+
+    labels = [str(i) for i in pp.ids]
+    n, flagged = len(labels), {str(o) for o in outliers}
+    F, M, C = pp.T_base_flange, pp.T_cam_target, pp.cov
+    frame = pp.noise_frame if C is None else None
+    per_fold, fails, rb, ra, idx_all = [], [], [], [], []
+    parts = fold_indices(n, folds, seed)
+    for f, test in enumerate(parts):
+        train = np.array(sorted(i for j, q in enumerate(parts) if j != f for i in q if labels[i] not in flagged), int)
+        rec = {"fold": f + 1, "n_train": int(len(train)), "n_test": int(len(test)),
+               "n_outliers_held_out": int(sum(labels[i] in flagged for i in test))}
+        try:
+            fi = identify_handeye(F[train], M[train], pp.mount, None if C is None else C[train],
+                                  [labels[i] for i in train], pp.robot_std, robust=False, noise_frame=frame,
+                                  where=f"{pp.path}: held-out validation, fold {f + 1} of {folds}")
+        except VisionCalibError as exc:
+            fails.append(f"fold {f + 1} ({len(train)} training poses): {exc}")
+            per_fold.append({**rec, "converged": False, "error": str(exc)})
+            continue
+        start = fi.fit.closed_forms["start"]
+        Acf, Bcf = fi.fit.candidates[start]
+        if not fi.result.converged:
+            fails.append(f"fold {f + 1} ({len(train)} training poses): the fit did not converge ({fi.result.message})")
+        before, after = _pair_errors(Acf, Bcf, F[test], M[test], pp.mount), _pair_errors(fi.A, fi.B, F[test],
+                                                                                         M[test], pp.mount)
+        rb.append(before)
+        ra.append(after)
+        idx_all.append(test)
+        per_fold.append({**rec, "converged": bool(fi.result.converged), "closed_form": start,
+                         "before": error_stats(*_norms(before)), "after": error_stats(*_norms(after))})
+    out = {"folds": int(folds), "seed": int(seed), "residual_kind": "pose", "residual_of": "T_cam_target",
+           "before_is": "the OpenCV closed form each fold's fit started from (measure.handeye.closed_forms)",
+           "after_is": "the hand-eye fit of the fold's training poses",
+           "outliers": [lab for lab in labels if lab in flagged], "per_fold": per_fold, "tcp_m": None}
+    if not idx_all:
+        out["decision"] = {"ok": False, "reason": "no fold could be identified: " + "; ".join(fails)}
+        return out
+    idx = np.concatenate(idx_all)
+    rb, ra = np.concatenate(rb), np.concatenate(ra)
+    keep = np.array([labels[i] not in flagged for i in idx])
+    (bp, br), (ap, ar) = _norms(rb), _norms(ra)
+    out["overall"] = {"n_poses": int(len(idx)), "before": error_stats(bp, br), "after": error_stats(ap, ar)}
+    out["without_outliers"] = None if keep.all() else {
+        "n_poses": int(keep.sum()), "excluded": [labels[i] for i in sorted(idx[~keep])],
+        "before": error_stats(bp[keep], br[keep]), "after": error_stats(ap[keep], ar[keep])}
+    rng = np.random.default_rng([int(seed), 27])
+    inter = {"level": 0.95, "over": int(keep.sum()),
+             "position_rms_change_mm": rms_change_interval(bp[keep], ap[keep], rng),
+             "rotation_rms_change_deg": rms_change_interval(br[keep], ar[keep], rng)}
+    out["interval"] = inter
+    worse = [q for q, key in (("position", "position_rms_change_mm"), ("rotation", "rotation_rms_change_deg"))
+             if inter[key][0] > 0]
+    o = out["overall"]
+    figs = (f"position RMS {o['before']['position_rms_mm']:.4g} -> {o['after']['position_rms_mm']:.4g} mm "
+            f"(change {inter['position_rms_change_mm'][0]:+.3g}..{inter['position_rms_change_mm'][1]:+.3g}), rotation "
+            f"RMS {o['before']['rotation_rms_deg']:.4g} -> {o['after']['rotation_rms_deg']:.4g} deg (change "
+            f"{inter['rotation_rms_change_deg'][0]:+.3g}..{inter['rotation_rms_change_deg'][1]:+.3g}), "
+            "closed form -> ours")
+    if fails:
+        out["decision"] = {"ok": False, "reason": "the k-fold training sets cannot be fitted: " + "; ".join(fails[:3])}
+    elif worse:
+        out["decision"] = {"ok": False, "reason": f"our model predicts held-out poses significantly worse than the "
+                                                  f"closed form in {' and '.join(worse)}: {figs}"}
+    else:
+        out["decision"] = {"ok": True, "reason": figs}
+    return out
+
+
+def _norms(r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(position error norms [mm], rotation error norms [deg]) of pose errors r (N, 6) [m, rad]."""
+    return np.linalg.norm(r[:, :3], axis=1) * 1e3, np.degrees(np.linalg.norm(r[:, 3:], axis=1))
+
+
+def pair_holdout_lines(h: dict) -> list[str]:
+    """Summary lines of :func:`pair_holdout`."""
+    def fmt(b, a):
+        return (f"position mean {b['position_mean_mm']:.3f} -> {a['position_mean_mm']:.3f}, RMS "
+                f"{b['position_rms_mm']:.3f} -> {a['position_rms_mm']:.3f}, max {b['position_max_mm']:.3f} -> "
+                f"{a['position_max_mm']:.3f} mm; rotation RMS {b['rotation_rms_deg']:.4f} -> "
+                f"{a['rotation_rms_deg']:.4f}"
+                f", max {b['rotation_max_deg']:.4f} -> {a['rotation_max_deg']:.4f} deg")
+
+    out = h.get("outliers") or []
+    lines = [f"held-out {h['folds']}-fold validation (seed {h['seed']}, errors of T_cam_target, the OpenCV closed form "
+             "-> our fit, both from the same training poses"
+             + (f"; the {len(out)} flagged outlier poses are in no training set" if out else "") + "):"]
+    if "overall" in h:
+        o = h["overall"]
+        lines.append(f"  all {o['n_poses']} poses: " + fmt(o["before"], o["after"]))
+        c = h.get("without_outliers")
+        if c:
+            lines.append(f"  without the {len(c['excluded'])} flagged outliers, {c['n_poses']} poses: "
+                         + fmt(c["before"], c["after"]))
+    for f in h["per_fold"]:
+        if "error" in f:
+            lines.append(f"  fold {f['fold']}: {f['error']}")
+    lines.append(("  decision: ok, " if h["decision"]["ok"] else "  decision: FAILED, ") + h["decision"]["reason"])
+    return lines
+
+
+def process_pose_pairs(pp: PosePairs, out_dir, folds: int | None = None, plots: bool = True,
+                       t0: float | None = None) -> dict:
+    """Hand-eye identification of a pose-pair file (module docstring); writes DIR/report.json (kind
+    ``process_pose_pairs``: the ``handeye`` block with the measured poses' estimated noise, ``holdout``),
+    summary.txt, report.html. folds: k of the held-out validation (default the file's)."""
+    from ..io.report_handeye import handeye_report
+    from .handeye_step import handeye_blocks, identify_handeye
+    from .holdout import holdout_failure
+
+    t0 = time.perf_counter() if t0 is None else t0
+    n = len(pp.ids)
+    folds = int(folds or pp.folds)
+    if not 2 <= folds <= n:
+        raise ConfigError(f"{pp.path}: folds: {folds} folds need 2 <= folds <= {n} (the number of pose pairs)")
+    frame = pp.noise_frame if pp.cov is None else None
+    ident = identify_handeye(pp.T_base_flange, pp.T_cam_target, pp.mount, pp.cov, list(pp.ids), pp.robot_std,
+                             where=str(pp.path), noise_frame=frame)
+    result, A, B, problem = ident.result, ident.A, ident.B, ident.problem
+    he = handeye_report(result, A, B, problem)
+    he.update(handeye_blocks(ident))
+    t_id = time.perf_counter() - t0
+    hold = pair_holdout(pp, folds, pp.seed, outliers=[lab for lab, _ in ident.rejected])
+    report = build_report(
+        "process_pose_pairs",
+        source={"file": str(pp.path), "csv": str(pp.csv_path), "flange_csv": str(pp.flange_path)},
+        settings={"poses": n, "mount": pp.mount, "method": "lse", "measured": pp.measured, "units": pp.units,
+                  "noise": pp.sigma_source, "folds": folds, "fold_seed": pp.seed},
+        measurements={"n_poses": n, "n_valid": n, "n_rejected": 0, "rejected": [], "measured": pp.measured,
+                      "noise": pp.sigma_source, "pose_ids": list(pp.ids)},
+        result=result, identified=ident, residuals=residual_stats(result.residuals, "pose"),
+        extra={"handeye": he, "holdout": hold},
+        timings={"identify": t_id, "total": time.perf_counter() - t0}, failure=holdout_failure(hold))
+    report["summary_text"] += "\n" + "\n".join(pair_holdout_lines(hold))
+    write_report(Path(out_dir), report, plots=plots)
+    return report
+
+
+__all__ = ["process_poses", "process_pose_pairs", "pair_holdout"]

@@ -54,7 +54,9 @@ class HandeyeFit:
     robot: {source "given" | "estimated" | "none", translation_mm, rotation_deg (std per axis of the flange
     pose error), std_translation_mm, std_rotation_deg (of the estimate; None when given)}; closed_forms:
     the report's ``closed_form_comparison`` block (:func:`closed_form_comparison`); iterations: IRLS steps;
-    candidates: the closed forms it started from (``fit_handeye``'s argument)."""
+    candidates: the closed forms it started from (``fit_handeye``'s argument); noise: the measured poses' noise
+    when estimated ({source "estimated", frame, translation_mm (3,), rotation_deg (3,) std per axis, their
+    std_*}), else None (``pose_cov`` given)."""
 
     result: IdentificationResult
     A: np.ndarray
@@ -64,6 +66,7 @@ class HandeyeFit:
     closed_forms: dict
     iterations: int
     candidates: dict
+    noise: dict | None = None
 
 
 def default_candidates(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: str) -> dict:
@@ -168,6 +171,57 @@ def _theta_cov(problem, terms, theta) -> np.ndarray:
     T = np.array([[np.sum(PV[i] * PV[j].T) for j in range(2)] for i in range(2)])
     return 2.0 * np.linalg.pinv(T)
 
+def _block_products(P: np.ndarray, V: np.ndarray, n_obs: int, m: int) -> np.ndarray:
+    """P @ blockdiag(V) for P (n_obs m, n_obs m) and V (n_obs, m, m), without forming the block diagonal."""
+    return np.einsum("ank,nkl->anl", P.reshape(n_obs * m, n_obs, m), V).reshape(n_obs * m, n_obs * m)
+
+
+def _reml(problem: IdentificationProblem, result: IdentificationResult, known, blocks):
+    """(theta (k,), cov (k, k)): one REML Fisher-scoring step (module docstring) for the variances theta of the
+    covariance components ``blocks`` (k, N, 6, 6) at the result's x with the problem's current weights; ``known``
+    (N, 6, 6) the known part of the covariance (None: none). A component the data do not see (tr ~ 0), or that
+    comes out negative, is 0 (boundary theta >= 0); the system is solved in the least-squares sense (components
+    the data cannot tell apart share their total)."""
+    x = result.identified
+    n_obs, m = problem.n_obs, problem.m
+    free = np.asarray(result.free, bool)
+    J = np.asarray(problem.jacobian(x), float)[:, :, free].reshape(n_obs * m, -1)
+    r = np.asarray(problem.residual(x), float).reshape(-1)
+    Winv = np.linalg.inv(problem.obs_cov)
+    W = np.zeros((n_obs * m, n_obs * m))
+    for k in range(n_obs):
+        W[k * m:(k + 1) * m, k * m:(k + 1) * m] = Winv[k]
+    WJ = W @ J
+    P = W - WJ @ np.linalg.pinv(J.T @ WJ) @ WJ.T
+    PV = [_block_products(P, V, n_obs, m) for V in blocks]
+    T = np.array([[np.sum(PV[i] * PV[j].T) for j in range(len(PV))] for i in range(len(PV))])
+    Wr = (W @ r).reshape(n_obs, m)
+    q = np.array([np.einsum("nk,nkl,nl->", Wr, V, Wr) for V in blocks])
+    rhs = q.copy()
+    if known is not None:
+        PK = _block_products(P, np.asarray(known, float), n_obs, m)
+        rhs -= np.array([np.sum(PVi * PK.T) for PVi in PV])
+    theta = np.zeros(len(blocks))
+    seen = np.diag(T) > 1e-12 * max(np.max(np.abs(T)), 1e-300)
+    for _ in range(len(blocks) + 1):  # solve, then drop the components that come out negative
+        if not seen.any():
+            break
+        idx = np.flatnonzero(seen)
+        sol = np.linalg.lstsq(T[np.ix_(idx, idx)], rhs[idx], rcond=1e-12)[0]
+        theta[:] = 0.0
+        theta[idx] = sol
+        if np.all(sol >= 0):
+            break
+        seen[idx[sol < 0]] = False
+    return np.maximum(theta, 0.0), 2.0 * np.linalg.pinv(T)
+
+
+def _robot_blocks(problem: IdentificationProblem, x) -> tuple[np.ndarray, np.ndarray]:
+    """(V_t, V_r) (N, 6, 6): the residual covariance per unit variance of the flange's translation and rotation
+    error per axis at x (``D_t D_t^T``, ``D_r D_r^T`` of :func:`.handeye_problem.flange_error_map`)."""
+    D = flange_error_map(problem, x)
+    return D[:, :, :3] @ np.swapaxes(D[:, :, :3], 1, 2), D[:, :, 3:] @ np.swapaxes(D[:, :, 3:], 1, 2)
+
 
 def _irls(base: IdentificationProblem, x0, theta, estimate: bool, max_iter: int = 50, theta_start=None):
     """(result, problem with the final weights, theta, theta cov or None, iterations) from x0; theta_start: the
@@ -217,9 +271,10 @@ def closed_form_comparison(problem: IdentificationProblem, x: ArrayLike, candida
             "ours": ours, "start": start, "methods": methods}
 
 
-def fit_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: str, pose_cov: ArrayLike,
+def fit_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: str, pose_cov: ArrayLike | None,
                 labels: Sequence[str] | None = None, robot_std: tuple[float, float] | None = None,
-                estimate_robot: bool = True, candidates: dict | None = None, theta_start=None) -> HandeyeFit:
+                estimate_robot: bool = True, candidates: dict | None = None, theta_start=None,
+                noise_frame: str | None = None) -> HandeyeFit:
     """Hand-eye fit with the robot's pose error (module docstring).
 
     T_base_flange (N, 4, 4) reported flange poses [m]; T_cam_target (N, 4, 4) measured; pose_cov (N, 6, 6)
@@ -229,8 +284,11 @@ def fit_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: str, p
     poses). candidates: {name: (A, B) (4, 4) each, or an error message (str)}, the closed forms of these poses
     to start from and compare with (e.g. ``measure.handeye.closed_forms``); None -> :func:`default_candidates`.
     theta_start: (s_t^2 [m^2], s_r^2 [rad^2]) near the estimate (e.g. of a superset of these poses): the REML
-    search refines locally from there instead of searching the whole box. DataError when no candidate is a
-    solution (degenerate motions)."""
+    search refines locally from there instead of searching the whole box.
+    noise_frame: None (the measured poses' covariance is ``pose_cov``), or "target" | "camera": their noise is
+    not known and its std per axis (3 translations, 3 rotations) in that frame is estimated with the robot's
+    (:func:`fit_estimated_noise`; ``pose_cov`` is not used).
+    DataError when no candidate is a solution (degenerate motions)."""
     F = np.asarray(T_base_flange, float)
     M = np.asarray(T_cam_target, float)
     cands = default_candidates(F, M, mount) if candidates is None else dict(candidates)
@@ -238,6 +296,10 @@ def fit_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: str, p
     if not ok:
         raise DataError("no closed-form hand-eye solution (" + "; ".join(f"{m}: {v}" for m, v in cands.items())
                         + ")")
+    if noise_frame is not None:
+        return fit_estimated_noise(F, M, mount, labels, robot_std, estimate_robot, cands, noise_frame)
+    if pose_cov is None:
+        raise DataError("fit_handeye: give pose_cov (the measured poses' covariance), or noise_frame to estimate it")
     estimate = robot_std is None and estimate_robot
     theta = np.zeros(2) if robot_std is None else np.array([float(robot_std[0]) ** 2, float(robot_std[1]) ** 2])
     first = next(iter(ok.values()))
@@ -290,5 +352,154 @@ def deletion_fit(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: str, 
     return pb, res, theta
 
 
-__all__ = ["HandeyeFit", "deletion_fit", "DEFAULT_CANDIDATE", "default_candidates", "closed_form_comparison", "fit_handeye",
-           "weighted_cost"]
+# ----------------------------------------------------------------------- measured poses of unknown noise
+#: frames in which the measured poses' per-axis noise is estimated: the target's axes (a single tag: tilt about its
+#: in-plane x, y and depth along its z are the noisy ones) or the camera's
+NOISE_FRAMES = ("target", "camera")
+#: an estimated per-axis variance is kept at least this fraction of the largest of its kind (the weights stay finite)
+NOISE_FLOOR_REL = 1e-6
+#: ... and at least this [m^2 for translations, rad^2 for rotations]
+NOISE_FLOOR_ABS = 1e-14
+ROBOT_TRANSLATION_NOT_SEPARABLE = (
+    "not separable from the measured poses' translation noise: an isotropic flange translation error is an "
+    "isotropic error of the measured translation, whatever its frame; it is part of their estimated std")
+
+
+def measured_noise_blocks(T_cam_target: ArrayLike, frame: str) -> np.ndarray:
+    """(6, N, 6, 6): the covariance of each measured pose's error (``frames.pose_error`` convention, camera frame)
+    for a unit variance of one axis of its error in ``frame`` ("target": the axes of R_cam_target; "camera"):
+    ``b b^T`` with b the axis' column of blockdiag(R, R). Axes: x, y, z translation, then rotation."""
+    T = np.asarray(T_cam_target, float)
+    if frame not in NOISE_FRAMES:
+        raise DataError(f"noise frame must be one of {', '.join(NOISE_FRAMES)}, got {frame!r}")
+    R = T[:, :3, :3] if frame == "target" else np.broadcast_to(np.eye(3), (T.shape[0], 3, 3))
+    Bk = np.zeros((T.shape[0], 6, 6))
+    Bk[:, :3, :3] = R
+    Bk[:, 3:, 3:] = R
+    return np.einsum("nai,nbi->inab", Bk, Bk)
+
+
+def _floored(theta_cam: np.ndarray) -> np.ndarray:
+    """Per-axis variances (6,) with the floors (:data:`NOISE_FLOOR_REL`, :data:`NOISE_FLOOR_ABS`) per kind."""
+    out = np.array(theta_cam, float)
+    for sl in (slice(0, 3), slice(3, 6)):
+        out[sl] = np.maximum(out[sl], max(NOISE_FLOOR_REL * float(np.max(out[sl])), NOISE_FLOOR_ABS))
+    return out
+
+
+def _noise_weights(base: IdentificationProblem, x, Vc: np.ndarray, theta_cam, robot_cov) -> IdentificationProblem:
+    """The problem with obs_cov = sum_i theta_cam_i Vc_i + D robot_cov D^T at x."""
+    import dataclasses
+
+    cam = np.einsum("i,inab->nab", np.asarray(theta_cam, float), Vc)
+    pb = dataclasses.replace(base, obs_cov=cam, meta={**base.meta, "camera_cov": cam})
+    return reweighted(pb, x, robot_cov)
+
+
+def _noise_irls(base, x0, Vc, theta_cam, s_robot, est_robot: bool, max_iter: int = 50):
+    """(result, problem with the final weights, theta_cam (6,), robot variances (2,), theta cov or None,
+    iterations): IRLS with REML of the 6 per-axis variances (and the robot's rotation variance when est_robot;
+    its translation is then 0: :data:`ROBOT_TRANSLATION_NOT_SEPARABLE`), the robot's given variances s_robot (2,)
+    otherwise known."""
+    x = np.asarray(x0, float)
+    th_c, th_r = _floored(theta_cam), np.array(s_robot, float)
+    pb = _noise_weights(base, x, Vc, th_c, _robot_cov(th_r))
+    res = solve_lse(pb, x)
+    tcov, it = None, 1
+    for it in range(1, max_iter + 1):
+        old = np.r_[th_c, th_r[1]]
+        Vt, Vr = _robot_blocks(pb, res.identified)
+        if est_robot:
+            th, tcov = _reml(pb, res, None, [*Vc, Vr])
+            th_c, th_r = _floored(th[:6]), np.array([0.0, th[6]])
+        else:
+            th, tcov = _reml(pb, res, th_r[0] * Vt + th_r[1] * Vr, list(Vc))
+            th_c = _floored(th)
+        pb = _noise_weights(base, res.identified, Vc, th_c, _robot_cov(th_r))
+        new = solve_lse(pb, res.identified)
+        free = np.asarray(new.free, bool)
+        dx = np.abs(new.identified - res.identified)[free] / np.where(new.std[free] > 0, new.std[free], np.inf)
+        tstd = np.sqrt(np.clip(np.diag(tcov), 0, None))
+        now = np.r_[th_c, th_r[1]][:len(tstd)]
+        dt = np.abs(now - old[:len(tstd)]) / np.where(tstd > 0, tstd, np.inf)
+        res = new
+        if np.all(dx < X_TOL_STD) and np.all(dt < THETA_TOL_STD):
+            break
+    return res, pb, th_c, th_r, tcov, it
+
+
+def _std_of_std(var: np.ndarray, var_cov_diag: np.ndarray) -> np.ndarray:
+    """Delta method: std(s) = std(s^2) / (2 s) (sqrt(std(s^2)) where s ~ 0)."""
+    sd = np.sqrt(np.clip(var_cov_diag, 0, None))
+    s = np.sqrt(np.clip(var, 0, None))
+    return np.where(s > 0, sd / (2 * np.maximum(s, 1e-300)), np.sqrt(sd))
+
+
+def fit_estimated_noise(T_base_flange: np.ndarray, T_cam_target: np.ndarray, mount: str, labels, robot_std,
+                        estimate_robot: bool, candidates: dict, frame: str) -> HandeyeFit:
+    """:func:`fit_handeye` when the measured poses' noise is not known (pose pairs from a tracker or a tag
+    detector: a single AR tag's pose is far noisier in depth and in tilt about its in-plane axes than in-plane).
+
+    Their error is modelled per axis of ``frame`` (:func:`measured_noise_blocks`): 6 variances (translation x, y,
+    z [m^2], rotation x, y, z [rad^2]) estimated by REML with the robot's rotation variance (the robot's
+    translation variance is confounded with them: :data:`ROBOT_TRANSLATION_NOT_SEPARABLE`), or with the robot's
+    given std known. Start: each axis' mean squared residual at the closed forms (the smallest over them), the
+    candidate of least cost under those weights; then as :func:`fit_handeye` (IRLS, never worse than a closed form
+    under the final weights)."""
+    F, M = T_base_flange, T_cam_target
+    ok = {m: v for m, v in candidates.items() if not isinstance(v, str)}
+    Vc = measured_noise_blocks(M, frame)
+    R = M[:, :3, :3] if frame == "target" else np.broadcast_to(np.eye(3), (M.shape[0], 3, 3))
+    first = next(iter(ok.values()))
+    probe = handeye_problem(F, M, mount, first[0], first[1], None, sigma_t_m=1e-3, sigma_rot_rad=1e-3, labels=labels)
+
+    def axis_ms(v):  # mean squared residual per axis of the frame at a candidate
+        r = np.asarray(probe.residual(x_from_transforms(probe, *v)), float)
+        e = np.concatenate([np.einsum("nji,nj->ni", R, r[:, :3]), np.einsum("nji,nj->ni", R, r[:, 3:])], axis=1)
+        return np.mean(e**2, axis=0)
+
+    theta0 = _floored(np.min([axis_ms(v) for v in ok.values()], axis=0))
+    s_robot = np.zeros(2) if robot_std is None else np.array([float(robot_std[0]) ** 2, float(robot_std[1]) ** 2])
+    est_robot = robot_std is None and estimate_robot
+    base = handeye_problem(F, M, mount, first[0], first[1], np.einsum("i,inab->nab", theta0, Vc), labels=labels)
+
+    def cost_at(v):
+        xc = x_from_transforms(base, *v)
+        return weighted_cost(_noise_weights(base, xc, Vc, theta0, _robot_cov(s_robot)), xc)
+
+    start = min(ok, key=lambda m: cost_at(ok[m]))
+    out = _noise_irls(base, x_from_transforms(base, *ok[start]), Vc, theta0, s_robot, est_robot)
+    pb = out[1]
+    costs = {m: weighted_cost(pb, x_from_transforms(pb, *v)) for m, v in ok.items()}
+    best = min(costs, key=costs.get)
+    if costs[best] < out[0].cost_final * (1 - 1e-9):
+        o2 = _noise_irls(base, x_from_transforms(base, *ok[best]), Vc, theta0, s_robot, est_robot)
+        if o2[0].cost_final < out[0].cost_final:
+            out, start = o2, best
+    res, pb, th_c, th_r, tcov, its = out
+    A, B = transforms_from_x(pb, res.identified)
+    dg = np.diag(tcov) if tcov is not None else np.full(7, np.nan)
+    sc = _std_of_std(th_c, dg[:6])
+    noise = {"source": "estimated", "frame": frame,
+             "method": "REML (Fisher scoring) of the variance per axis of the measured poses' error"
+                       + (", with the robot's rotation variance" if est_robot else ", the robot's std given"),
+             "translation_mm": (1e3 * np.sqrt(th_c[:3])).tolist(),
+             "rotation_deg": np.degrees(np.sqrt(th_c[3:])).tolist(),
+             "std_translation_mm": (1e3 * sc[:3]).tolist(), "std_rotation_deg": np.degrees(sc[3:]).tolist()}
+    if est_robot:
+        sr = _std_of_std(th_r[1:], dg[6:7])
+        robot = {"source": "estimated", "translation_mm": None, "rotation_deg": float(np.degrees(np.sqrt(th_r[1]))),
+                 "std_translation_mm": None, "std_rotation_deg": float(np.degrees(sr[0])),
+                 "translation": ROBOT_TRANSLATION_NOT_SEPARABLE,
+                 "method": "REML (Fisher scoring) with the measured poses' per-axis variances"}
+    else:
+        robot = {"source": "given" if robot_std is not None else "none",
+                 "translation_mm": 1e3 * float(np.sqrt(s_robot[0])),
+                 "rotation_deg": float(np.degrees(np.sqrt(s_robot[1]))),
+                 "std_translation_mm": None, "std_rotation_deg": None}
+    return HandeyeFit(res, A, B, pb, robot, closed_form_comparison(pb, res.identified, candidates, start), its,
+                      candidates, noise)
+
+
+__all__ = ["HandeyeFit", "deletion_fit", "DEFAULT_CANDIDATE", "NOISE_FRAMES", "default_candidates", "closed_form_comparison",
+           "fit_handeye", "fit_estimated_noise", "measured_noise_blocks", "weighted_cost"]

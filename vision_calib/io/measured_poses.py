@@ -20,6 +20,24 @@ Two files: a YAML description and a CSV with one row per robot pose::
     pose_id,q1,..,qn,x,y,z,qx,qy,qz,qw[,sigma columns]   # full pose, quaternion scalar last
     pose_id,q1,..,qn,x,y,z[,sigma columns]               # position only (measured: p_*)
 
+Pose pairs (hand-eye without images: flange poses known, the robot model plays no part)::
+
+    format: vision_calib.measured_poses/1
+    flange_poses: pairs_flange.csv           # pose_id,x,y,z,qx,qy,qz,qw: T_base_flange (units.length, quaternion
+                                             # scalar last), as a flange-pose recording's poses.csv; instead of scene
+    mount: eye_in_hand                       # eye_in_hand (camera on the flange) | fixed (target on the flange)
+    csv: pairs.csv                           # pose_id,x,y,z,qx,qy,qz,qw[,noise columns]: the measured T_cam_target
+    units: {length: m, angle: deg}
+    measured: T_cam_target                   # T_cam_target | T_target_cam (full poses only)
+    default_sigma: {t_mm: .., r_deg: ..}     # optional here: without it and without noise columns the std per axis
+    noise_frame: target                      # of the measured poses is estimated, per axis of this frame
+                                             # (target | camera; default target: a tag's tilt and depth)
+    robot_pose_std: {translation_mm: 0.1, rotation_deg: 0.01}   # optional: given; absent: estimated
+    folds: 5
+    seed: 0
+
+:func:`read_measured_poses` gives a :class:`PosePairs` for such a file; ``write_pose_pairs`` writes one.
+
 ``T_a_b`` is the pose of frame b in frame a, ``p_a_b`` the position of frame b's origin in frame a.
 Noise columns (one group): ``sigma_x,sigma_y,sigma_z[,sigma_rx,sigma_ry,sigma_rz]`` or
 ``sigma_t[,sigma_r]`` (isotropic) or the upper triangle ``cov_<i>_<j>`` of the covariance over
@@ -49,7 +67,15 @@ if TYPE_CHECKING:  # annotations only
     from ..rig import Measurements, Scene
 
 FORMAT = "vision_calib.measured_poses/1"
-YAML_KEYS = ("format", "scene", "csv", "units", "measured", "default_sigma", "folds", "seed")
+YAML_KEYS = ("format", "scene", "csv", "units", "measured", "default_sigma", "folds", "seed", "flange_poses", "mount",
+             "noise_frame", "robot_pose_std")
+#: the keys of a pose-pair file (``flange_poses`` instead of ``scene``), refused in a joint file
+PAIR_KEYS = ("flange_poses", "mount", "noise_frame", "robot_pose_std")
+PAIR_MOUNTS = ("eye_in_hand", "fixed")
+#: frames of the estimated per-axis noise of pose pairs (``identify.handeye_fit.NOISE_FRAMES``)
+NOISE_FRAMES = ("target", "camera")
+#: a median measured distance below this [m] is metres declared as millimetres (a camera sees its target from afar)
+MIN_MEDIAN_DISTANCE_M = 0.01
 #: the keys of a scene written inside the file (``scene:`` a mapping): those process-poses reads
 INLINE_SCENE_KEYS = ("name", "robot", "mount", "units", "mounts", "urdf", "identification")
 MEASURED = ("T_cam_target", "T_target_cam", "p_cam_target", "p_target_cam")
@@ -90,6 +116,31 @@ class MeasuredPoses:
         return self.measured.startswith("p_")
 
 
+@dataclass(frozen=True)
+class PosePairs:
+    """A validated pose-pair file (flange poses + measured poses, no robot model). ``T_base_flange`` (N, 4, 4) [m];
+    ``T_cam_target`` (N, 4, 4) the measured poses in the camera convention [m] (``T_meas``: the rows as given,
+    ``measured``); ``cov`` (N, 6, 6) their covariance in the camera convention [m, rad], or None: estimated per
+    axis of ``noise_frame`` by the fit; ``robot_std``: (translation m, rotation rad) given, or None (estimated)."""
+
+    path: Path
+    csv_path: Path
+    flange_path: Path
+    mount: str
+    measured: str
+    ids: tuple
+    T_base_flange: np.ndarray
+    T_meas: np.ndarray
+    T_cam_target: np.ndarray
+    cov: np.ndarray | None
+    sigma_source: str
+    noise_frame: str | None
+    robot_std: tuple | None
+    units: dict
+    folds: int
+    seed: int
+
+
 def _suggest(name: str, known) -> str:
     close = difflib.get_close_matches(name, list(known), n=1)
     return f"; did you mean {close[0]!r}?" if close else ""
@@ -123,8 +174,8 @@ def _header(csv_path: Path, header: list[str], n_joints: int, position_only: boo
         cols[h] = i
     for need in ["pose_id", *joints, *pose]:
         if need not in cols:
-            raise DataError(f"{csv_path}: line 1: missing column {need!r} (need pose_id, {joints[0]}..{joints[-1]}, "
-                            f"{','.join(pose)})")
+            qs = f"{joints[0]}..{joints[-1]}, " if joints else ""
+            raise DataError(f"{csv_path}: line 1: missing column {need!r} (need pose_id, {qs}{','.join(pose)})")
     present = [g for g, names in groups.items() if any(c in cols for c in names)]
     if len(present) > 1:
         raise DataError(f"{csv_path}: line 1: noise columns of two kinds ({' and '.join(present)}): give one")
@@ -312,6 +363,9 @@ def _settings(top: Section):
     fmt = top.get("format", str)
     if fmt != FORMAT:
         raise top.error("format", f"expected {FORMAT!r}, got {fmt!r}")
+    for k in PAIR_KEYS:
+        if k in top:
+            raise top.error(k, "belongs to a pose-pair file (flange_poses instead of scene: docs/measured_poses.md)")
     scene_path = top.section("scene") if isinstance(top.data.get("scene"), dict) else top.path_value("scene")
     csv_path = top.path_value("csv", None) or top.file.with_suffix(".csv")
     us = _only(top.section("units"), ("length", "angle"))
@@ -357,14 +411,17 @@ def _load_scene(ref):
     return scene_from_section(ref)
 
 
-def read_measured_poses(path) -> MeasuredPoses:
-    """Read and validate a measured-pose YAML + CSV (see the module docstring). ConfigError for the YAML,
-    DataError for the CSV, each naming the file and the key / line / pose / column."""
+def read_measured_poses(path) -> MeasuredPoses | PosePairs:
+    """Read and validate a measured-pose YAML + CSV (see the module docstring): a :class:`MeasuredPoses` (joints,
+    ``scene``), or a :class:`PosePairs` for a file naming ``flange_poses``. ConfigError for the YAML, DataError for
+    the CSV, each naming the file and the key / line / pose / column."""
     from ..rig import Measurements
     from ..rig.base import ChainMeasured
 
     path = Path(path)
     top = Section(load_yaml(path), path)
+    if "flange_poses" in top:
+        return _read_pose_pairs(top)
     scene_path, csv_path, Lf, Af, units, measured, default, folds, seed = _settings(top)
     scene = _load_scene(scene_path)
     setup = scene.setup
@@ -394,6 +451,129 @@ def read_measured_poses(path) -> MeasuredPoses:
     meas = Measurements(q, q, T_ct, cov_ct, tuple(ids))
     return MeasuredPoses(path, csv_path, scene, measured, residual, tuple(ids), q, T, cov, meas, src, units, folds,
                          seed)
+
+
+def _pair_settings(top: Section):
+    """(flange csv, csv, Lf, Af, units, measured, mount, default sigmas or None, noise_frame or None, robot std or
+    None, folds, seed) of a pose-pair file."""
+    _only(top, YAML_KEYS)
+    fmt = top.get("format", str)
+    if fmt != FORMAT:
+        raise top.error("format", f"expected {FORMAT!r}, got {fmt!r}")
+    if "scene" in top:
+        raise top.error("scene", "a pose-pair file (flange_poses) needs no robot model: give scene or flange_poses, "
+                                 "not both")
+    flange = top.path_value("flange_poses")
+    csv_path = top.path_value("csv", None) or top.file.with_suffix(".csv")
+    mount = top.get("mount", str, choices=PAIR_MOUNTS)
+    us = _only(top.section("units"), ("length", "angle"))
+    units = {"length": us.get("length", str, choices=LENGTH_UNITS), "angle": us.get("angle", str, choices=ANGLE_UNITS)}
+    measured = top.get("measured", str, choices=MEASURED)
+    if measured.startswith("p_"):
+        raise top.error("measured", "pose pairs need full poses (T_cam_target or T_target_cam): a hand-eye fit needs "
+                                    "the rotations")
+    default = None
+    if "default_sigma" in top:
+        ds = _only(top.section("default_sigma"), ("t_m", "t_mm", "t_cm", "r_rad", "r_deg"))
+        default = (length_key(ds, "t"), angle_key(ds, "r"))
+        for val, kind in zip(default, ("length", "angle")):
+            lo, hi = SIGMA_RANGE[kind]
+            if not lo <= val <= hi:
+                raise ds.error(None, f"a {kind} std of {val:.4g} (SI) is outside the plausible {lo:g}-{hi:g}")
+    frame = top.get("noise_frame", str, None, choices=NOISE_FRAMES)
+    robot = None
+    if "robot_pose_std" in top:
+        rs = _only(top.section("robot_pose_std"), ("translation_mm", "rotation_deg"))
+        robot = (rs.number("translation_mm", float, min=0.0, max=100.0, unit="mm") * 1e-3,
+                 float(np.radians(rs.number("rotation_deg", float, min=0.0, max=10.0, unit="deg"))))
+    folds = top.get("folds", int, 5)
+    if folds < 2:
+        raise top.error("folds", f"expected an integer >= 2, got {folds}")
+    return (flange, csv_path, LENGTH_UNITS[units["length"]], ANGLE_UNITS[units["angle"]], units, measured, mount,
+            default, frame, robot, folds, top.nonnegative("seed", int, 0))
+
+
+def _read_pose_pairs(top: Section) -> PosePairs:
+    """The :class:`PosePairs` of a pose-pair YAML (module docstring): its two CSVs joined by pose id."""
+    from .recording import read_flange_csv
+
+    flange, csv_path, Lf, Af, units, measured, mount, default, frame, robot, folds, seed = _pair_settings(top)
+    ids, v, group, lines = _rows(csv_path, 0, False)
+    if group == "none" and default is None:
+        src, frame = f"estimated per axis ({frame or 'target'} frame)", frame or "target"
+    elif group != "none" and default is not None:
+        raise top.error("default_sigma", f"{csv_path.name} has its own noise columns: remove one of the two")
+    elif frame is not None:
+        raise top.error("noise_frame", "applies when the measured poses' noise is estimated (no default_sigma, no "
+                                       "noise columns)")
+    else:
+        src = None
+    T = _poses(csv_path, ids, lines, v, False, Lf)
+    cov = None
+    if src is None:
+        cov, src = _covariances(csv_path, ids, lines, v, group, 6, Lf, Af, default, units)
+    fids, Tf = read_flange_csv(flange, Lf)
+    index = {pid: k for k, pid in enumerate(fids)}
+    missing = [pid for pid in ids if pid not in index]
+    if missing:
+        raise DataError(f"{flange}: no flange pose for pose id(s) {', '.join(map(repr, missing[:10]))} of "
+                        f"{csv_path.name}")
+    extra = [pid for pid in fids if pid not in set(ids)]
+    if extra:
+        raise DataError(f"{csv_path}: no measured pose for pose id(s) {', '.join(map(repr, extra[:10]))} of "
+                        f"{flange.name}")
+    Tf = Tf[[index[pid] for pid in ids]]
+    d = float(np.median(np.linalg.norm(T[:, :3, 3], axis=1)))
+    if d < MIN_MEDIAN_DISTANCE_M:
+        raise DataError(f"{csv_path}: columns x,y,z: the measured distances are {d * 1e3:.3g} mm (median, read with "
+                        f"units.length: {units['length']}): metres declared as millimetres?")
+    if len(ids) < max(folds, 3):
+        raise top.error("folds", f"{folds} folds need at least {max(folds, 3)} pose pairs, {csv_path.name} has "
+                                 f"{len(ids)}")
+    T_ct, cov_ct = (to_camera_convention(None, measured, T, cov) if cov is not None else
+                    (T if measured == "T_cam_target" else F.inv_T(T), None))
+    return PosePairs(top.file, csv_path, flange, mount, measured, tuple(ids), Tf, T, T_ct, cov_ct, src, frame, robot,
+                     units, folds, seed)
+
+
+def write_pose_pairs(yaml_path, ids, T_base_flange, T, mount: str, measured: str = "T_cam_target", units=None,
+                     sigmas=None, default_sigma=None, noise_frame: str | None = None, robot_pose_std=None,
+                     folds: int = 5, seed: int = 0) -> Path:
+    """Write a pose-pair YAML, its measured-pose CSV (``<stem>.csv``) and its flange-pose CSV
+    (``<stem>_flange.csv``). T_base_flange, T: (N, 4, 4) [m] (T: rows of ``measured``); units {length, angle} of
+    the CSVs (default m, deg); sigmas (N, 6) per-component std [m, rad] or default_sigma (t m, r rad) or neither
+    (noise estimated, per axis of ``noise_frame``); robot_pose_std (translation m, rotation rad) or None."""
+    import yaml
+
+    from ..serialize import write_text_atomic
+
+    yaml_path = Path(yaml_path)
+    units = units or {"length": "m", "angle": "deg"}
+    Lf, Af = LENGTH_UNITS[units["length"]], ANGLE_UNITS[units["angle"]]
+
+    def pose_lines(TT, extra_head=(), extra=None):
+        xyz, quat = F.xyz_quat_from_T(np.asarray(TT, float))
+        vals = np.column_stack([xyz / Lf, quat] + ([extra] if extra is not None else []))
+        out = [",".join(["pose_id", *POSE_COLS, *extra_head])]
+        return out + [",".join([str(pid)] + [repr(float(x)) for x in row]) for pid, row in zip(ids, vals)]
+
+    unit = np.array([Lf] * 3 + [Af] * 3)
+    head = [f"sigma_{c}" for c in COMPONENTS] if sigmas is not None else []
+    csv_path, flange_path = yaml_path.with_suffix(".csv"), yaml_path.with_name(yaml_path.stem + "_flange.csv")
+    write_text_atomic(csv_path, "\n".join(pose_lines(T, head, None if sigmas is None else
+                                                       np.asarray(sigmas, float) / unit)) + "\n")
+    write_text_atomic(flange_path, "\n".join(pose_lines(T_base_flange)) + "\n")
+    doc = {"format": FORMAT, "flange_poses": flange_path.name, "mount": mount, "csv": csv_path.name,
+           "units": dict(units), "measured": measured, "folds": int(folds), "seed": int(seed)}
+    if default_sigma is not None:
+        doc["default_sigma"] = {"t_mm": float(default_sigma[0]) * 1e3, "r_deg": float(np.degrees(default_sigma[1]))}
+    if noise_frame is not None:
+        doc["noise_frame"] = noise_frame
+    if robot_pose_std is not None:
+        doc["robot_pose_std"] = {"translation_mm": float(robot_pose_std[0]) * 1e3,
+                                 "rotation_deg": float(np.degrees(robot_pose_std[1]))}
+    write_text_atomic(yaml_path, yaml.safe_dump(doc, sort_keys=False))
+    return yaml_path
 
 
 def _scene_ref(scene_path, yaml_path: Path) -> str:
@@ -453,5 +633,6 @@ def write_measured_poses(yaml_path, scene_path, ids, q, T, measured: str, units=
     return yaml_path
 
 
-__all__ = ["FORMAT", "MEASURED", "INLINE_SCENE_KEYS", "MeasuredPoses", "read_measured_poses", "write_measured_poses",
+__all__ = ["FORMAT", "MEASURED", "INLINE_SCENE_KEYS", "MeasuredPoses", "PosePairs", "read_measured_poses",
+           "write_measured_poses", "write_pose_pairs",
            "to_camera_convention", "chain_direction", "misreadings"]

@@ -19,7 +19,7 @@ import yaml
 from ..serialize import write_bytes_atomic, write_text_atomic
 
 #: keys of report.json's ``source`` (and of its ``scene``) whose values are file or folder paths
-SOURCE_PATH_KEYS = ("path", "folder", "file", "csv")
+SOURCE_PATH_KEYS = ("path", "folder", "file", "csv", "flange_csv")
 
 
 def relative_ref(path, holder_dir) -> str:

@@ -103,10 +103,13 @@ def _target_dict(spec) -> dict:
     return {k: v.item() if isinstance(v, np.generic) else v for k, v in spec.to_dict().items()}
 
 
-def write_recording(folder, scene, poses, joints, frames: int) -> Path:
+def write_recording(folder, scene, poses, joints, frames: int, camera=None, source: str | None = None,
+                    notes=None) -> Path:
     """Write recording.yaml, poses.csv and a copy of the scene (``folder/scene/``: scene, robot and target
-    files, named relatively) for a simulated run (images are written by the workers into ``folder/images``).
-    joints: (N, n) rad, the encoder readings of each pose."""
+    files, named relatively) for a simulated run or an import (images are written by the caller into
+    ``folder/images/<pose_id>/``, pose ids ``000``, ``001``...). joints: (N, n) rad, the encoder readings of
+    each pose; camera: the intrinsics (default the scene's); source, notes: recording.yaml's ``source`` and
+    ``notes`` (words: where the recording comes from)."""
     from ..targets import load_target
 
     folder = Path(folder)
@@ -114,8 +117,10 @@ def write_recording(folder, scene, poses, joints, frames: int) -> Path:
     setup = scene.setup
     doc = {
         "format": FORMAT,
+        **({"source": str(source)} if source else {}),
+        **({"notes": [str(n) for n in notes]} if notes else {}),
         "units": {"length": "m", "angle": "rad"},
-        "camera": setup.camera.to_dict(),
+        "camera": (camera or setup.camera).to_dict(),
         "camera_mount": setup.mount,
         "target": _target_dict(load_target(scene.target_path)),
         "scene": None,  # below: the copied scene, relative to this file
@@ -243,6 +248,13 @@ def _read_poses_csv(cpath: Path, pose_kind: str, Lf: float, Af: float) -> tuple[
     if bad.size:
         raise DataError(f"{cpath}: pose {ids[bad[0]]!r}: quaternion norm {nq[bad[0]]:.4f} is not 1")
     return ids, T_from_xyz_quat(vals[:, :3] * Lf, q / nq[:, None])
+
+
+def read_flange_csv(path, length_factor: float = 1.0) -> tuple[list[str], np.ndarray]:
+    """(pose ids, (N, 4, 4) T_base_flange [m]) of a flange-pose CSV ``pose_id,x,y,z,qx,qy,qz,qw`` (a flange-pose
+    recording's poses.csv; positions times ``length_factor`` [m per file unit]); DataError naming the file and
+    line (columns, numbers, duplicate ids, quaternion norm, implausible positions)."""
+    return _read_poses_csv(Path(path), "flange_pose", float(length_factor), 1.0)
 
 
 def _find_images(folder: Path, ids, frames: int, allow_symlinks: bool) -> tuple[dict, list[str]]:

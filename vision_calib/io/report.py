@@ -4,7 +4,7 @@ plots, calibrated model. All writes atomic.
 report.json, version 2 (each value once)::
 
     version: "2.0"
-    kind: simulation | process | process_handeye | process_poses
+    kind: simulation | process | process_handeye | process_poses | process_pose_pairs
     verdict: {ok, status, usable, converged, adequacy, lack_of_fit, message, n_rejected_poses, warnings: n,
               failure: kind}                                     # read first; failure only when one was found
     failure: {kind, chi2_dof, moves, tests: [{candidate, chi2_dof, fits}], message}  # experiment/gross.py
@@ -324,6 +324,10 @@ def _what(report) -> str:
         return (f"scene {src['scene']['name']}" + (f"  seed {report['seed']}" if "seed" in report else "")
                 + f"  poses {s.get('poses')}" + (f"  frames {s['frames']}" if s.get("frames") else "")
                 + f"  method {s.get('method')}")
+    if "flange_csv" in src:  # a pose-pair file (process-poses, hand-eye)
+        s = report["settings"]
+        return (f"pose pairs {Path(str(src['file'])).name}  poses {s.get('poses')}  mount {s.get('mount')}  "
+                f"noise {s.get('noise')}")
     return f"recording {Path(str(src.get('folder'))).name}"  # the folder's name: no absolute path in summary.txt
 
 
@@ -475,8 +479,17 @@ def _handeye_lines(report: dict) -> list[str]:
     if rob:
         est = (f" ± {fmt_sig(rob['std_translation_mm'])}" if rob.get("std_translation_mm") is not None else "",
                f" ± {fmt_sig(rob['std_rotation_deg'])}" if rob.get("std_rotation_deg") is not None else "")
-        lines.append(f"robot pose error ({rob['source']}): {rob['translation_mm']:.3f}{est[0]} mm, "
-                     f"{rob['rotation_deg']:.4f}{est[1]} deg per axis (in the weights)")
+        tr = (f"{rob['translation_mm']:.3f}{est[0]} mm" if rob.get("translation_mm") is not None
+              else "translation in the measured poses' std (not separable)")
+        lines.append(f"robot pose error ({rob['source']}): {tr}, {rob['rotation_deg']:.4f}{est[1]} deg per axis "
+                     "(in the weights)")
+    mn = he.get("measured_noise")
+    if mn:
+        lines.append(f"measured poses' noise ({mn['source']}, std per axis of the {mn['frame']} frame): translation "
+                     + ", ".join(f"{v:.3g} ± {fmt_sig(s)}" for v, s in
+                                 zip(mn["translation_mm"], mn["std_translation_mm"]))
+                     + " mm; rotation " + ", ".join(f"{v:.3g} ± {fmt_sig(s)}" for v, s in
+                                                    zip(mn["rotation_deg"], mn["std_rotation_deg"])) + " deg")
     cf = he.get("closed_form_comparison")
     if cf:
         ok = {m: v for m, v in cf["methods"].items() if "cost" in v}

@@ -114,7 +114,8 @@ def _what(report: dict) -> str:
     src, s = report.get("source") or {}, report.get("settings") or {}
     parts = [{"simulation": "simulated experiment", "process": "recorded folder, robot chain",
               "process_handeye": "recorded folder, hand-eye (flange poses given)",
-              "process_poses": "measured-pose file"}.get(report.get("kind"), str(report.get("kind")))]
+              "process_poses": "measured-pose file",
+              "process_pose_pairs": "pose-pair file, hand-eye (flange poses given)"}.get(report.get("kind"), str(report.get("kind")))]
     if "scene" in src:
         parts.append(f"scene {src['scene'].get('name')}")
     if "folder" in src:
@@ -221,7 +222,8 @@ def identifiability_section(report: dict) -> str:
     corr = (report.get("identification") or {}).get("correlation_warnings") or []
     if not idf:
         return ('<section id="identifiability"><h2>Identifiability</h2><p>No identifiability analysis in this run'
-                + (" (hand-eye: the two mounting transforms only)" if report.get("kind") == "process_handeye" else "")
+                + (" (hand-eye: the two mounting transforms only)" if report.get("kind") in ("process_handeye",
+                                                                                           "process_pose_pairs") else "")
                 + ".</p></section>")
     full = idf["rank"] == idf["n_params"]
     out = ['<section id="identifiability"><h2>Identifiability</h2>',

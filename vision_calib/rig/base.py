@@ -307,6 +307,11 @@ class Setup:
             pid = list(ids)[k] if ids is not None else k
             raise DataError(f"{where}: pose {pid!r} joint q{j + 1} is not finite ({q[k, j]})")
 
+    def joint_names(self) -> tuple[str, ...]:
+        """Names of the joints in the order of the joint columns (what a ROS ``JointState`` calls them):
+        ``q1..qn`` by default; kinds whose robot file names its joints (URDF) give those names."""
+        return tuple(f"q{j + 1}" for j in range(self.n_joints))
+
     def fixed_note(self, name: str) -> str:
         """Why parameter ``name`` is fixed (for tables)."""
         return "fixed (not free in the scene)"

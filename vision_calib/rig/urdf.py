@@ -80,6 +80,10 @@ class URDFSetup(SerialSetup):
         return load_urdf_robot(ctx.robot_path, sec.get("base_link", str, base), sec.get("tip_link", str, tip), left,
                                right)
 
+    def joint_names(self) -> tuple[str, ...]:
+        """The URDF names of the chain's movable joints, base to tip."""
+        return tuple(self.chain.meta["joint_names"])
+
     def model_dict(self) -> dict:
         m = self.chain.meta
         return {**super().model_dict(), "urdf": {"base_link": m["base_link"], "tip_link": m["tip_link"]}}
