@@ -112,9 +112,10 @@ def test_wheel_commands_from_any_folder(tmp_path):
     assert b"DICT_5X5_100" in pdf and b"/Image" not in pdf
 
 
-#: the modules of the extras [sim], [cluster], [gpu] and of [test]'s URDF reader: none is needed by the core
+#: the modules of the extras [sim], [cluster], [gpu], [plan], [ros] and of [test]'s URDF reader: none is needed by
+#: the core
 EXTRA_MODULES = ("pyrender", "OpenGL", "trimesh", "dask", "distributed", "pyarrow", "torch", "kornia", "yourdfpy",
-                 "lxml")
+                 "lxml", "fcl", "rosbags")
 
 
 def test_core_commands_run_without_the_extras_and_the_others_name_theirs(tmp_path):
