@@ -329,14 +329,22 @@ def build_model(scene, setup, rng: np.random.Generator | None = None) -> RobotMo
             bodies, source = [], f"URDF collision elements ({robot_file.name})"
             for k in range(n + 1):
                 items = cols.get(k, [])
-                if any(s == "mesh" for _, s, _, _ in items) and k < n:
-                    notes.append(f"{setup.link_names()[k]}: mesh collision geometry is not read: its primitive capsule "
-                                 "is used")
-                    bodies.append(prim[k])
-                for j, (link, shape, dims, T) in enumerate(items):
+                if any(s == "mesh" for _, s, _, _ in items):
+                    meshes = sorted({lk for lk, s, _, _ in items if s == "mesh"})
+                    notes.append(f"{', '.join(meshes)}: mesh collision geometry is not read"
+                                 + (f": the primitive capsule of {prim[k].name} is used" if k < n else
+                                    " (no primitive on the flange: not checked)"))
+                    if k < n:
+                        bodies.append(prim[k])
+                per_link = {}
+                for link, _, _, _ in items:
+                    per_link[link] = per_link.get(link, 0) + 1
+                seen = {}
+                for link, shape, dims, T in items:
+                    j = seen[link] = seen.get(link, -1) + 1
                     if shape == "mesh":
                         continue
-                    nm = link if len(items) == 1 else f"{link}[{j}]"
+                    nm = link if per_link[link] == 1 else f"{link}[{j}]"
                     if shape == "capsule":
                         ax = T[:3, 2] * dims[1] / 2
                         bodies.append(segment_body(nm, k, T[:3, 3] - ax, T[:3, 3] + ax, dims[0]))

@@ -3,11 +3,13 @@
 Two phases, per joint set:
 
 1. broad phase, numpy, vectorised over all joint sets and pairs: a lower bound of every checked pair's distance
-   from the bodies' capsule hulls (segment-to-segment distance minus both radii; against a plane, the hull's lowest
-   end above it minus its radius). A pair whose bound is at least the clearance is clear. When both hulls are the
-   shapes themselves (capsules, spheres, planes) the bound IS the distance: the pair is decided there;
+   from the bodies' capsule hulls (segment-to-segment distance minus both radii). A pair whose bound is at least
+   the clearance is clear. When both hulls are the shapes themselves (capsules, spheres) the bound IS the
+   distance: the pair is decided there. The height of any body above a plane is computed exactly
+   (:func:`plane_heights`; FCL's half-space distance query is unreliable: it crashed in python-fcl 0.7, and a large
+   box standing for the plane is off by ~0.5 mm);
 2. narrow phase, FCL, only for the pairs left (a box or a cylinder closer than the clearance by its hull):
-   ``fcl.distance`` on the exact shapes (a plane is a large box: FCL's half-space distance is unreliable).
+   ``fcl.distance`` on the exact shapes.
 
 :func:`CollisionChecker.clearances` gives the exact clearance of a few joint sets (FCL on every pair): what the
 plan reports per pose. FCL is imported on first use (``errors.import_extra``: the ``[plan]`` extra).
@@ -22,6 +24,21 @@ from .bodies import Body, RobotModel, body_hulls, segment_distance
 
 #: joint sets per broad-phase block (memory: ~ pairs x block x 100 bytes)
 BLOCK = 4096
+
+
+def plane_heights(shape: str, dims, T: np.ndarray, n: np.ndarray, p0: np.ndarray) -> np.ndarray:
+    """Signed distance [m] of a body (shape, dims as ``bodies.Body``) at poses T (..., 4, 4) above the plane through
+    p0 (3,) of unit normal n (3,) (negative: it reaches below the plane)."""
+    c = np.einsum("...i,i->...", T[..., :3, 3] - p0, n)
+    if shape == "sphere":
+        return c - dims[0]
+    cz = np.abs(np.einsum("...i,i->...", T[..., :3, 2], n))
+    if shape == "capsule":
+        return c - 0.5 * dims[1] * cz - dims[0]
+    if shape == "cylinder":
+        return c - 0.5 * dims[1] * cz - dims[0] * np.sqrt(np.clip(1 - cz**2, 0, 1))
+    h = np.asarray(dims, float) / 2  # box: the lowest corner
+    return c - sum(h[k] * np.abs(np.einsum("...i,i->...", T[..., :3, k], n)) for k in range(3))
 
 
 def _fcl():
@@ -74,12 +91,10 @@ class CollisionChecker:
         if len(op):
             bi, oi = op[:, 0], op[:, 1]
             pl = self.o_plane[oi]
-            if pl.any():  # signed height of the hull's ends above the plane
-                k = np.flatnonzero(pl)
-                n_, p0 = self.o_n[oi[k]], self.o_a[oi[k]]
-                ha = np.einsum("nki,ki->nk", a[:, bi[k]] - p0, n_)
-                hb = np.einsum("nki,ki->nk", b[:, bi[k]] - p0, n_)
-                lo[:, k] = np.minimum(ha, hb) - self.r[bi[k]]
+            for k in np.flatnonzero(pl):  # exact height above the plane
+                bd = self.model.bodies[bi[k]]
+                T = frames[:, bd.frame] @ bd.T_frame_body
+                lo[:, k] = plane_heights(bd.shape, bd.dims, T, self.o_n[oi[k]], self.o_a[oi[k]])
             k = np.flatnonzero(~pl)
             if k.size:
                 lo[:, k] = segment_distance(a[:, bi[k]], b[:, bi[k]], self.o_a[oi[k]], self.o_b[oi[k]]) \
@@ -91,7 +106,8 @@ class CollisionChecker:
         return lo, ls
 
     # ------------------------------------------------------------------ narrow phase
-    def _set(self, frame_set: np.ndarray, bodies) -> None:
+    def place(self, frame_set: np.ndarray, bodies) -> None:
+        """Set the FCL transforms of the robot bodies ``bodies`` (indices) for one joint set's frames (n + 2, 4, 4)."""
         for k in bodies:
             bd = self.model.bodies[k]
             T = frame_set[bd.frame] @ bd.T_frame_body
@@ -108,7 +124,8 @@ class CollisionChecker:
         ok = np.ones(N, bool)
         why = [None] * N
         op, sp = self.model.obstacle_pairs, self.model.self_pairs
-        op_exact = self.b_exact[op[:, 0]] & self.o_exact[op[:, 1]] if len(op) else np.zeros(0, bool)
+        op_exact = (self.b_exact[op[:, 0]] & self.o_exact[op[:, 1]]) | self.o_plane[op[:, 1]] if len(op) else \
+            np.zeros(0, bool)
         sp_exact = self.b_exact[sp[:, 0]] & self.b_exact[sp[:, 1]] if len(sp) else np.zeros(0, bool)
         c = self.clearance
         names = [b.name for b in self.model.bodies]
@@ -132,7 +149,7 @@ class CollisionChecker:
             und_s = (ls < c) & ~sp_exact
             for n in np.flatnonzero((und_o.any(axis=1) | und_s.any(axis=1)) & ok[s:s + len(F)]):
                 ko, ks = np.flatnonzero(und_o[n]), np.flatnonzero(und_s[n])
-                self._set(F[n], set(op[ko, 0].tolist()) | set(sp[ks].ravel().tolist()))
+                self.place(F[n], set(op[ko, 0].tolist()) | set(sp[ks].ravel().tolist()))
                 for k in ko:
                     d = self._distance(self.robot_objs[op[k, 0]], self.obst_objs[op[k, 1]])
                     if d < c:
@@ -148,7 +165,7 @@ class CollisionChecker:
         return ok, why
 
     def clearances(self, frames: np.ndarray) -> list[dict]:
-        """Exact clearance of each joint set (FCL on every checked pair): [{clearance_m, closest: [body, other],
+        """Exact clearance of each joint set (FCL on every checked pair, planes exactly): [{clearance_m, closest: [body, other],
         obstacle_m, self_m}] (the smallest distance overall, to an obstacle, between two links; a negative or zero
         distance: in contact or penetrating)."""
         out = []
@@ -156,10 +173,14 @@ class CollisionChecker:
         names = [b.name for b in self.model.bodies]
         onames = [b.name for b in self.model.obstacles]
         for F in frames:
-            self._set(F, range(len(self.model.bodies)))
+            self.place(F, range(len(self.model.bodies)))
             best, which, d_o, d_s = np.inf, None, np.inf, np.inf
             for i, j in op:
-                d = self._distance(self.robot_objs[i], self.obst_objs[j])
+                if self.o_plane[j]:
+                    bd = self.model.bodies[i]
+                    d = float(plane_heights(bd.shape, bd.dims, F[bd.frame] @ bd.T_frame_body, self.o_n[j], self.o_a[j]))
+                else:
+                    d = self._distance(self.robot_objs[i], self.obst_objs[j])
                 d_o = min(d_o, d)
                 if d < best:
                     best, which = d, [names[i], onames[j]]
@@ -174,4 +195,4 @@ class CollisionChecker:
         return out
 
 
-__all__ = ["CollisionChecker"]
+__all__ = ["CollisionChecker", "plane_heights"]

@@ -73,6 +73,14 @@ def information(scene, poses: np.ndarray, base: np.ndarray, analysis=None) -> In
     return Information(information_blocks(problem), np.asarray(base, bool), tuple(params.free_names), residual, analysis)
 
 
+def identifiability(scene, poses: np.ndarray, base: np.ndarray):
+    """IdentifiabilityReport (``identify.analyze``) of commanded poses for the ``base`` parameters, whitened by the
+    cell's noise (the parameters outside the base set are not identifiable from the candidate region at all)."""
+    from ..identify import analyze
+
+    return analyze(_problem(scene, poses, base)[0], selection="order")
+
+
 def info_matrix(A: np.ndarray, idx=None) -> np.ndarray:
     Ai = A if idx is None else A[np.asarray(idx, int)]
     return np.einsum("kmi,kmj->ij", Ai, Ai)
@@ -129,5 +137,5 @@ def select(scene, info: Information, poses: np.ndarray, n: int, rng: np.random.G
     return sub[pool[idx]]
 
 
-__all__ = ["Information", "information", "base_mask", "select", "d_criterion", "d_efficiency", "leverages",
+__all__ = ["Information", "information", "base_mask", "identifiability", "select", "d_criterion", "d_efficiency", "leverages",
            "pool_indices", "info_matrix", "pose_covariances"]

@@ -263,7 +263,8 @@ def _settings(scene: Scene, source: CandidateSource, n_candidates: int, seed: in
 def plan_cell(scene, n_poses: int, out_dir=None, seed: int = 0, n_candidates: int = DEFAULT_CANDIDATES,
               source: CandidateSource | None = None, draws: int = DRAWS, counts=None, plots: bool = True) -> dict:
     """Plan ``n_poses`` poses for the scene (module docstring); writes the outputs into ``out_dir`` when given and
-    returns plan.json's content. Seeded: the same seed gives the same plan."""
+    returns plan.json's content. Seeded: the same seed gives the same plan. draws: Monte Carlo draws of the
+    predicted accuracy (0: none); counts: its pose counts (default N / 2, N, 2 N)."""
     t0 = time.perf_counter()
     scene = _load(scene)
     setup = scene.setup
@@ -301,9 +302,7 @@ def plan_cell(scene, n_poses: int, out_dir=None, seed: int = 0, n_candidates: in
     A_sel = info.A[pick]
     lev = D.leverages(A_sel, D.info_matrix(A_sel))
     design = _efficiency(info.A, pick, rng, n)
-    from ..experiment.steps import analyze_setup
-
-    rep, _ = analyze_setup(setup, P, scene.identification.residual)
+    rep = D.identifiability(scene, P, base)
     n_min = -(-info.A.shape[2] // info.A.shape[1])
     cts = _counts(n, n_min, len(pool), counts)
     memo = {n: P}
@@ -314,15 +313,17 @@ def plan_cell(scene, n_poses: int, out_dir=None, seed: int = 0, n_candidates: in
         return memo[c]
 
     t_pred = time.perf_counter()
-    pred = predicted_accuracy(scene, plan_of_count, pool, cts, base, draws, seed)
-    pred["seconds"] = time.perf_counter() - t_pred
+    pred = None
+    if draws:  # 0: no prediction (tests)
+        pred = predicted_accuracy(scene, plan_of_count, pool, cts, base, draws, seed)
+        pred["seconds"] = time.perf_counter() - t_pred
     tb = _tour_block(tour, ids, joints)
     warnings = []
     for a, b, (w, frac) in tour["colliding"]:
         ia, ib = order.index(a), order.index(b)
         k = min(ia, ib)
         tb["moves"][k]["collides"] = True
-        tb["moves"][k]["why"] = f"{w[0]} within {w[2] * 1e3:.1f} mm of {w[1]} at {100 * frac:.0f} % of the move"
+        tb["moves"][k]["why"] = f"{contact_words(w)} at {100 * frac:.0f} % of the move"
         warnings.append(f"move {ids[k]} -> {ids[k + 1]} collides: {tb['moves'][k]['why']} (no order avoids it: "
                         "insert a via point, or plan again with another seed)")
     notes = [] if checker is not None else [H4_NOTE if setup.kind == "h4" else
@@ -344,7 +345,7 @@ def plan_cell(scene, n_poses: int, out_dir=None, seed: int = 0, n_candidates: in
                                           "scaled units)", "base_parameters": list(info.names),
                    "pool": f"{len(sub)} screened candidates; exchange on the {D.POOL_TOP} of largest leverage + "
                            f"{D.POOL_RANDOM} random"},
-        "identifiability": _ident_block(rep),
+        "identifiability": _ident_block(rep, setup, base),
         "predicted_accuracy": pred,
         "notes": notes, "warnings": warnings,
         "seconds": None,
@@ -357,10 +358,15 @@ def plan_cell(scene, n_poses: int, out_dir=None, seed: int = 0, n_candidates: in
     return plan
 
 
-def _ident_block(rep) -> dict:
+def _ident_block(rep, setup, base) -> dict:
+    """The identifiability of the poses for the base parameters, and the parameters no candidate identifies."""
     d = rep.to_dict()
-    return {k: d[k] for k in ("n_params", "n_obs", "rank", "condition_number", "condition_number_of", "non_identifiable",
-                              "base_parameters")}
+    out = {k: d[k] for k in ("n_params", "n_obs", "rank", "condition_number", "condition_number_of",
+                             "non_identifiable", "base_parameters")}
+    out["not_in_base_set"] = [nm for nm, b, f in zip(setup.params.names, base, setup.params.free) if f and not b]
+    out["of"] = ("the base parameters (identifiable from the candidate region), whitened by the cell's noise; "
+                 "not_in_base_set: the scene's free parameters no pose of the region identifies (fixed at nominal)")
+    return out
 
 
 def _screen_line(c: dict) -> str:
@@ -389,15 +395,17 @@ def check_poses(scene, csv_path, out_dir=None, seed: int = 0, n_candidates: int 
     clear = checker.clearances(setup.link_frames(P)) if checker is not None else None
     problems = {}
     lim = setup.reachable(P)
+    col_ok, col_why = (checker.screen(setup.link_frames(P)) if checker is not None
+                       else (np.ones(len(P), bool), [None] * len(P)))
     for i, pid in enumerate(ids):
         why = []
         if not lim[i]:
             why.append("outside the joint limits" if isinstance(setup, ArmFrames) else "unreachable by the inverse model")
-        elif not own["measurable"][i]:
-            why.append(_view_why(figs, i, ViewLimits.of_scene(scene)))
-        elif own["collision_free"] is not None and not own["collision_free"][i]:
-            w = own["collision_why"].get(i)
-            why.append(f"collides: {w[0]} within {w[2] * 1e3:.1f} mm of {w[1]}" if w else "collides")
+        else:
+            if not col_ok[i]:
+                why.append(f"collides: {contact_words(col_why[i])}")
+            if not own["measurable"][i]:
+                why.append(_view_why(figs, i, ViewLimits.of_scene(scene)))
         if why:
             problems[pid] = "; ".join(why)
     check = None
@@ -420,7 +428,7 @@ def check_poses(scene, csv_path, out_dir=None, seed: int = 0, n_candidates: int 
             if m["collides"]:
                 j = int(np.flatnonzero(~ok)[0])
                 w = why[j]
-                m["why"] = f"{w[0]} within {w[2] * 1e3:.1f} mm of {w[1]} at {100 * (j + 1) / (len(S) + 1):.0f} % of the move"
+                m["why"] = f"{contact_words(w)} at {100 * (j + 1) / (len(S) + 1):.0f} % of the move"
                 warnings.append(f"move {ids[k]} -> {ids[k + 1]} collides: {m['why']}")
         moves.append(m)
     for pid, w in problems.items():
@@ -453,10 +461,8 @@ def check_poses(scene, csv_path, out_dir=None, seed: int = 0, n_candidates: int 
             opt_logdet = D.d_criterion(info.A, opt)["logdet"]
             out_design["d_efficiency_vs_plan"] = D.d_efficiency(crit["logdet"], opt_logdet, L)
             plan_n = both[opt]
-            pred = predicted_accuracy(scene, lambda c: plan_n, pool, [n], base, draws, seed, given=U)
-            from ..experiment.steps import analyze_setup
-
-            rep = _ident_block(analyze_setup(setup, U, scene.identification.residual)[0])
+            pred = predicted_accuracy(scene, lambda c: plan_n, pool, [n], base, draws, seed, given=U) if draws else None
+            rep = _ident_block(D.identifiability(scene, U, base), setup, base)
         else:
             warnings.append(f"{n} usable poses give fewer equations than the {L} base parameters: nothing identifiable "
                             f"to predict (at least {n_min} poses)")
@@ -495,6 +501,12 @@ def check_poses(scene, csv_path, out_dir=None, seed: int = 0, n_candidates: int 
 
         write_plan(out_dir, scene, res, P, joints, model, plots=plots, recording=False)
     return res
+
+
+def contact_words(w) -> str:
+    """A collision finding (body, other, distance m) in words: "a within 6.3 mm of b" or "a 12.0 mm into b"."""
+    a, b, d = w
+    return f"{a} within {d * 1e3:.1f} mm of {b}" if d >= 0 else f"{a} {-d * 1e3:.1f} mm into {b}"
 
 
 def _view_why(figs, i, lim: ViewLimits) -> str:

@@ -17,6 +17,7 @@ from ..serialize import write_bytes_atomic, write_json_atomic, write_text_atomic
 PICTURE = "plan_poses.png"
 PLAN_JSON = "plan.json"
 HTML = "report.html"
+SIM_SCENE = "simulate_plan.yaml"
 
 
 # ----------------------------------------------------------------------------------------------- 3-D picture
@@ -214,10 +215,12 @@ def plan_html(res: dict, out_dir) -> str:
     ident = res.get("identifiability")
     if ident:
         out.append("<h2>Identifiability</h2>")
-        out.append(f"<p>{ident['n_params']} parameters, rank {ident['rank']} over these {ident['n_obs']} poses; "
+        out.append(f"<p>{ident['n_params']} base parameters, rank {ident['rank']} over these {ident['n_obs']} poses; "
                    f"condition number {ident['condition_number']:.4g}"
                    + (f" (of the {esc(ident['condition_number_of'])})" if ident.get("condition_number_of") else "")
-                   + f"; not identifiable (fixed at nominal): {esc(', '.join(ident['non_identifiable']) or 'none')}.</p>")
+                   + f"; not identifiable from these poses: {esc(', '.join(ident['non_identifiable']) or 'none')}; "
+                   f"not identifiable from any pose of the region (fixed at nominal): "
+                   f"{esc(', '.join(ident.get('not_in_base_set') or []) or 'none')}.</p>")
     sc_ = res["screening"]
     out.append("<h2>Candidates</h2>")
     by = ", ".join(f"{k} {v}" for k, v in (sc_.get("not_measurable_by_reason") or {}).items() if v)
@@ -243,6 +246,27 @@ def plan_html(res: dict, out_dir) -> str:
     return page(title, "\n".join(out))
 
 
+def write_simulate_scene(out: Path, scene) -> Path:
+    """``out/simulate_plan.yaml``: the scene copied by the recording (``out/scene/``) with its identification poses
+    taken from the plan's ``poses.csv`` (``poses: {kind: file}``, angles in rad as recording.yaml says), so that
+    ``simulate out/simulate_plan.yaml`` renders exactly the plan (its validation poses stay random)."""
+    import yaml
+
+    from ..config import load_yaml
+
+    rec = load_yaml(out / "recording.yaml")
+    copied = out / rec["scene"]
+    doc = dict(load_yaml(copied))
+    for key in ("robot", "target"):
+        if doc.get(key):
+            doc[key] = (Path(rec["scene"]).parent / doc[key]).as_posix()
+    doc["name"] = f"{scene.name}_plan"
+    doc["poses"] = {"kind": "file", "path": "poses.csv", "units": {"angle": "rad"}}
+    head = (f"# scene {scene.name!r} with the identification poses of this plan (poses.csv): `vision-calib simulate "
+            f"{SIM_SCENE} --out DIR` renders exactly the planned poses\n")
+    return write_text_atomic(out / SIM_SCENE, head + yaml.safe_dump(doc, sort_keys=False))
+
+
 def write_plan(out_dir, scene, res: dict, poses: np.ndarray, joints: np.ndarray, model, plots: bool = True,
                recording: bool = True) -> dict:
     """Write the plan's files into out_dir (module docstring; ``recording``: the recording skeleton and poses.csv,
@@ -256,7 +280,9 @@ def write_plan(out_dir, scene, res: dict, poses: np.ndarray, joints: np.ndarray,
         write_recording(out, scene, poses, joints, scene.measurement.frames)
         for p in res["poses"]:
             (out / "images" / p["id"]).mkdir(parents=True, exist_ok=True)
-        files.update({"poses": "poses.csv", "recording": "recording.yaml", "scene": "scene/", "images": "images/"})
+        write_simulate_scene(out, scene)
+        files.update({"poses": "poses.csv", "recording": "recording.yaml", "scene": "scene/", "images": "images/",
+                      "simulate_scene": SIM_SCENE})
     if plots:
         draw_plan(out / PICTURE, scene, poses, model)
         files["picture"] = PICTURE
