@@ -61,6 +61,8 @@ def test_plan_outputs_a_recording_to_fill_and_a_scene_that_simulates_it(ur5e_pla
     sim = load_scene(out / "simulate_plan.yaml")
     assert np.array_equal(scene_poses(sim, np.random.default_rng(5)), q)  # exactly the plan, whatever the seed
     assert sim.validation.kind == "random"
+    orig = load_scene(CELL).setup  # the random validation poses come from the cell's region, as without the file
+    assert np.array_equal(sim.setup.q_center, orig.q_center) and np.array_equal(sim.setup.q_spread, orig.q_spread)
     saved = json.loads((out / "plan.json").read_text())
     assert saved["format"] == "vision_calib.plan/1" and saved["files"]["poses"] == "poses.csv"
     html = (out / "report.html").read_text()

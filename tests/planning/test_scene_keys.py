@@ -94,6 +94,8 @@ def test_poses_from_a_file(tmp_path):
     ("pose_id,q1,q2,q3,q4,q5,q6\n", "{kind: file, path: nowhere.csv}", ConfigError, "poses.path: file not found"),
     ("pose_id,q1,q2,q3,q4,q5,q6\n", "{kind: file, path: /etc/hostname}", ConfigError, "outside the folder"),
     ("pose_id,q1,q2,q3,q4,q5,q6\n", "{kind: file, path: plan/poses.csv, center: [0]}", ConfigError, "poses.center"),
+    ("pose_id,q1,q2,q3,q4,q5,q6\n", "{kind: file, path: plan/poses.csv, configurations: x}", ConfigError,
+     "poses.configurations"),
 ])
 def test_bad_pose_files_are_named(tmp_path, csv, poses, err, needle):
     with pytest.raises(err, match=needle):

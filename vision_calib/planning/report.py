@@ -261,7 +261,10 @@ def write_simulate_scene(out: Path, scene) -> Path:
         if doc.get(key):
             doc[key] = (Path(rec["scene"]).parent / doc[key]).as_posix()
     doc["name"] = f"{scene.name}_plan"
-    doc["poses"] = {"kind": "file", "path": "poses.csv", "units": {"angle": "rad"}}
+    # the region's keys stay (serial: center, spread): they still draw the random validation poses
+    region = {k: v for k, v in (doc.get("poses") or {}).items() if k not in ("kind", "count", "configurations", "path",
+                                                                             "units")}
+    doc["poses"] = {"kind": "file", "path": "poses.csv", "units": {"angle": "rad"}, **region}
     head = (f"# scene {scene.name!r} with the identification poses of this plan (poses.csv): `vision-calib simulate "
             f"{SIM_SCENE} --out DIR` renders exactly the planned poses\n")
     return write_text_atomic(out / SIM_SCENE, head + yaml.safe_dump(doc, sort_keys=False))

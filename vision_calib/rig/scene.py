@@ -201,7 +201,7 @@ def _pose_settings(sec: Section, kinds, extra_keys=(), Lf: float = 1.0, Af: floa
     if kind == "file":
         from .pose_file import pose_file_units
 
-        sec.check_known(("kind", "count", "path", "units"))
+        sec.check_known(("kind", "count", "path", "units") + tuple(extra_keys))  # kind keys: the random region
         path = sec.path_value("path")
         if not path.is_file():
             raise sec.error("path", f"not a file: {path} (a poses.csv: pose_id,q1..qn)")
