@@ -68,8 +68,8 @@ def predicted_accuracy(scene, plan_of_count: Callable[[int], np.ndarray], pool: 
            "noise": {"sigma_mm": scene.measurement.sigma_t_m * 1e3,
                      "sigma_deg": float(np.degrees(scene.measurement.sigma_r_rad)),
                      "sigma_q_deg": float(np.degrees(scene.measurement.sigma_q_rad))},
-           "validation": f"{scene.validation.count or 30} random {scene.validation.kind} poses of the scene per draw "
-                         "(its validation set), position error of the identified model against the truth",
+           "validation": f"the scene's {scene.validation.count or 30} validation poses ({scene.validation.kind}, new "
+                         "each draw) over the workspace",
            "seeds": f"run_synthetic seed {SEED_OFFSET} + k, k = 0..{draws - 1} (the same for every pose set)",
            "counts": [int(n) for n in counts], "rows": rows, "given": None}
     if given is not None:

@@ -132,18 +132,19 @@ def _acc_table(pred: dict, given_label: str | None = None) -> str:
 
 def _poses_table(res: dict) -> str:
     rows, classes = [], []
+    problems = any(p.get("problem") for p in res["poses"])
     for p in res["poses"]:
         v = p["view"]
-        rows.append([esc(p["id"]), esc(", ".join(f"{a:.1f}" for a in p["joints_deg"])),
+        rows.append([esc(p["id"]), esc(" ".join(f"{a:.1f}" for a in p["joints_deg"])),
                      num(None if p.get("clearance_m") is None else p["clearance_m"] * 1e3, ".1f", "-"),
                      esc(" / ".join(p.get("closest") or []) or "-"),
                      num(None if v["distance_m"] is None else v["distance_m"] * 1e3, ".0f"),
                      num(v["incidence_deg"], ".1f"), num(v["square_px"], ".1f"), num(v["margin_px"], ".0f"),
-                     num(p.get("leverage"), ".2f", "-"), esc(p.get("problem", ""))])
+                     num(p.get("leverage"), ".2f", "-")] + ([esc(p.get("problem", ""))] if problems else []))
         classes.append("bad" if p.get("problem") else "")
     return table(["pose", "joints [deg]", "clearance [mm]", "closest", "distance [mm]", "incidence [deg]",
-                  "smallest square [px]", "margin [px]", "leverage", "problem"], rows, left=(1, 3, 9),
-                 row_classes=classes)
+                  "smallest square [px]", "margin [px]", "leverage"] + (["problem"] if problems else []), rows,
+                 left=(3, 9), row_classes=classes)
 
 
 def plan_html(res: dict, out_dir) -> str:
@@ -174,8 +175,9 @@ def plan_html(res: dict, out_dir) -> str:
     out.append("<h2>Predicted accuracy</h2>")
     if pred:
         out.append(f"<p>identify-synthetic Monte Carlo at the cell's noise (pose {pred['noise']['sigma_mm']:.3g} mm, "
-                   f"{pred['noise']['sigma_deg']:.3g} deg per component; method {esc(pred['method'])}): position error "
-                   f"of the identified robot on {esc(pred['validation'])}, pooled over {pred['draws']} draws "
+                   f"{pred['noise']['sigma_deg']:.3g} deg per component, the scene's measurement.sigma_mm / sigma_deg; "
+                   f"method {esc(pred['method'])}): position error of the identified robot against the truth on "
+                   f"{esc(pred['validation'])}, pooled over {pred['draws']} draws "
                    f"({esc(pred['seeds'])}). Random sets: new measurable collision-free poses each draw.</p>")
         out.append(_acc_table(pred, "your list (usable poses)" if check else None))
         out.append("<p class=\"muted\">simulate over exactly these poses (a scene with <code>poses: {kind: file, "
