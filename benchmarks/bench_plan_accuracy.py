@@ -43,7 +43,7 @@ def _pose_scene(plan_dir: Path, name: str, joints: np.ndarray) -> Path:
         w.writerow([f"{i:03d}"] + [repr(float(v)) for v in q])
     (plan_dir / f"{name}.csv").write_text(buf.getvalue())
     doc = yaml.safe_load((plan_dir / "simulate_plan.yaml").read_text())
-    doc["poses"] = {"kind": "file", "path": f"{name}.csv", "units": {"angle": "rad"}}
+    doc["poses"] = {**doc["poses"], "path": f"{name}.csv"}  # the region keys stay: the same validation poses
     doc["name"] = name
     p = plan_dir / f"{name}.yaml"
     p.write_text(yaml.safe_dump(doc, sort_keys=False))

@@ -10,7 +10,8 @@ Where the bodies come from:
   mesh gets its primitive capsule instead (named in the notes);
 - else primitives: a capsule from each joint origin to the next (the base: from the base frame to joint 1; the last
   link: to the flange; a zero-length link is a sphere), radius per link from the scene (``planning.link_radii``)
-  or :data:`DEFAULT_LINK_RADII_M` for the shipped robots (0.05 m otherwise);
+  or :data:`DEFAULT_LINK_RADII_M` for the shipped robots (otherwise :data:`FALLBACK_RADIUS_FRACTION` of the longest
+  link, at most :data:`DEFAULT_RADIUS_M`, named in the notes);
 - always: the tool on the flange, a capsule from the flange to the right mount (the camera of an eye-in-hand cell,
   the target of a fixed camera) of radius ``planning.tool_radius`` (default 0.04 m); a target on the flange is also
   a thin box of the board's outline.
@@ -42,9 +43,10 @@ from ..rig.cell import Obstacle
 DEFAULT_LINK_RADII_M = {
     "ur5e": (0.08, 0.075, 0.06, 0.05, 0.045, 0.045),
     "rx90": (0.12, 0.10, 0.08, 0.07, 0.05, 0.04),
-    "thesis_arm": (0.12, 0.10, 0.08, 0.07, 0.05, 0.04),
 }
 DEFAULT_RADIUS_M = 0.05
+#: the radius of every link of a robot without defaults: this fraction of its longest link (a slender arm)
+FALLBACK_RADIUS_FRACTION = 0.1
 DEFAULT_TOOL_RADIUS_M = 0.04
 #: thickness [m] of a board on the flange (fixed camera) or on the table (eye-in-hand) as a body / obstacle
 BOARD_THICKNESS_M = 0.005
@@ -316,9 +318,11 @@ def build_model(scene, setup, rng: np.random.Generator | None = None) -> RobotMo
     if radii is None:
         radii = DEFAULT_LINK_RADII_M.get(setup.robot_name)
         if radii is None or len(radii) != n:
-            radii = (DEFAULT_RADIUS_M,) * n
-            notes.append(f"link radii: {DEFAULT_RADIUS_M} m for every link (no default for robot "
-                         f"{setup.robot_name!r}: give planning.link_radii in the scene)")
+            longest = float(np.max(np.linalg.norm(np.diff(frames_ref[:n + 1, :3, 3], axis=0), axis=1)))
+            r = min(DEFAULT_RADIUS_M, FALLBACK_RADIUS_FRACTION * longest)
+            radii = (r,) * n
+            notes.append(f"link radii: {r:.3g} m for every link ({100 * FALLBACK_RADIUS_FRACTION:.0f} % of the longest "
+                         f"link; no default for robot {setup.robot_name!r}: give planning.link_radii in the scene)")
     prim = primitive_bodies(setup, frames_ref, radii)
     bodies, source = prim, "primitives: capsules between consecutive joint origins (link radii " + \
         ", ".join(f"{r:.3g}" for r in radii) + " m)"
