@@ -651,11 +651,15 @@ def _summary_plan(res: dict, out) -> str:
     if clear:
         lines.append(f"smallest clearance: {min(clear) * 1e3:.1f} mm")
     pred = res.get("predicted_accuracy")
+    def mm(f):
+        v = f["rms_median_mm"]
+        return f"{v:.3g} mm" if v is not None else f"n/a ({f['failed_draws']} draws failed: {f['first_error']})"
+
     for r in (pred or {}).get("rows", []):
-        lines.append(f"predicted validation position RMS, {r['count']} poses: plan {r['plan']['rms_median_mm']:.3g} mm, "
-                     f"random {r['random']['rms_median_mm']:.3g} mm (median of {pred['draws']} draws)")
+        lines.append(f"predicted validation position RMS, {r['count']} poses: plan {mm(r['plan'])}, random "
+                     f"{mm(r['random'])} (median of {pred['draws']} draws)")
     if pred and pred.get("given"):
-        lines.append(f"predicted validation position RMS of your list: {pred['given']['rms_median_mm']:.3g} mm")
+        lines.append(f"predicted validation position RMS of your list: {mm(pred['given'])}")
     lines += [f"note: {n}" for n in res["notes"]]
     lines.append(f"wrote {', '.join(str(Path(out) / f) for f in res.get('files', {}).values())}")
     return "\n".join(lines)

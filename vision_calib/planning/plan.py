@@ -319,6 +319,10 @@ def plan_cell(scene, n_poses: int, out_dir=None, seed: int = 0, n_candidates: in
         pred["seconds"] = time.perf_counter() - t_pred
     tb = _tour_block(tour, ids, joints)
     warnings = []
+    mine = next((r["plan"] for r in (pred or {}).get("rows", []) if r["count"] == n), None)
+    if mine is not None and mine["failed_draws"]:
+        warnings.append(f"the synthetic identification of the {n} planned poses failed in {mine['failed_draws']} of "
+                        f"{draws} draws ({mine['first_error']}): plan more poses")
     for a, b, (w, frac) in tour["colliding"]:
         ia, ib = order.index(a), order.index(b)
         k = min(ia, ib)

@@ -24,29 +24,31 @@ DRAWS = 10
 SEED_OFFSET = 1000
 
 
-def _stats(errs: list[np.ndarray], rms: list[float], failed: int) -> dict:
+def _stats(errs: list[np.ndarray], rms: list[float], failed: int, error: str | None = None) -> dict:
     e = np.concatenate(errs) if errs else np.zeros(0)
     return {"median_mm": float(np.median(e)) if e.size else None,
             "p95_mm": float(np.percentile(e, 95)) if e.size else None,
             "rms_median_mm": float(np.median(rms)) if rms else None,
-            "rms_per_draw_mm": [float(v) for v in rms], "draws": len(rms), "failed_draws": failed}
+            "rms_per_draw_mm": [float(v) for v in rms], "draws": len(rms), "failed_draws": failed,
+            "first_error": error}
 
 
 def monte_carlo(scene, poses_of_draw: Callable[[int], np.ndarray], base: np.ndarray, draws: int = DRAWS) -> dict:
     """Validation position error figures (module docstring) of the pose sets ``poses_of_draw(k)`` (k = 0..draws-1),
     identified with the scene's base mask ``base`` (n_params,) bool. A draw whose identification fails (an error
     of the package: too few usable equations...) is counted in ``failed_draws``."""
-    errs, rms, failed = [], [], 0
+    errs, rms, failed, first = [], [], 0, None
     for k in range(draws):
         try:
             run = run_synthetic(scene, poses=poses_of_draw(k), seed=SEED_OFFSET + k, base=base)
-        except VisionCalibError:
+        except VisionCalibError as exc:
             failed += 1
+            first = first or str(exc)
             continue
         e = run.after.position_errors_mm
         errs.append(e)
         rms.append(float(np.sqrt(np.mean(e**2))))
-    return _stats(errs, rms, failed)
+    return _stats(errs, rms, failed, first)
 
 
 def predicted_accuracy(scene, plan_of_count: Callable[[int], np.ndarray], pool: np.ndarray, counts, base: np.ndarray,
