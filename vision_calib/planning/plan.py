@@ -335,6 +335,8 @@ def plan_cell(scene, n_poses: int, out_dir=None, seed: int = 0, n_candidates: in
                                             "and reachability only"]
     if model is not None:
         notes += list(model.notes)
+        notes.append("the move from the robot's current joint values to the first pose is not checked: start from a "
+                     "pose near it, or jog there")
     plan = {
         "format": FORMAT, "kind": "plan",
         "scene": {"name": scene.name, "path": str(scene.path), "robot_kind": setup.kind, "mount": setup.mount},
