@@ -38,6 +38,12 @@ DEFAULT_CANDIDATES = 20000
 #: candidates per screening block (memory: link frames of a block ~ block x (n + 2) x 128 bytes)
 SCREEN_BLOCK = 20000
 H4_NOTE = "no collision model for the H4: checked visibility and reachability (inverse model) only"
+
+
+def no_collision_note(setup) -> str:
+    """The plan's note for a robot kind without a collision model (the H4: :data:`H4_NOTE`)."""
+    return (f"no collision model for the {setup.kind.upper()}: checked visibility and reachability "
+            f"({setup.reach_check}) only")
 #: random designs whose D criterion the plan's is compared with (D-efficiency)
 EFFICIENCY_DRAWS = 20
 
@@ -330,9 +336,7 @@ def plan_cell(scene, n_poses: int, out_dir=None, seed: int = 0, n_candidates: in
         tb["moves"][k]["why"] = f"{contact_words(w)} at {100 * frac:.0f} % of the move"
         warnings.append(f"move {ids[k]} -> {ids[k + 1]} collides: {tb['moves'][k]['why']} (no order avoids it: "
                         "insert a via point, or plan again with another seed)")
-    notes = [] if checker is not None else [H4_NOTE if setup.kind == "h4" else
-                                            f"no collision model for the {setup.kind} robot kind: checked visibility "
-                                            "and reachability only"]
+    notes = [] if checker is not None else [no_collision_note(setup)]
     if model is not None:
         notes += list(model.notes)
         notes.append("the move from the robot's current joint values to the first pose is not checked: start from a "
@@ -406,7 +410,7 @@ def check_poses(scene, csv_path, out_dir=None, seed: int = 0, n_candidates: int 
     for i, pid in enumerate(ids):
         why = []
         if not lim[i]:
-            why.append("outside the joint limits" if isinstance(setup, ArmFrames) else "unreachable by the inverse model")
+            why.append(f"not reachable ({setup.reach_check})")
         else:
             if not col_ok[i]:
                 why.append(f"collides: {contact_words(col_why[i])}")
@@ -479,8 +483,7 @@ def check_poses(scene, csv_path, out_dir=None, seed: int = 0, n_candidates: int 
             r["problem"] = problems[r["id"]]
         if out_design and r["id"] in out_design["leverage"]:
             r["leverage"] = out_design["leverage"][r["id"]]
-    notes = [] if checker is not None else [H4_NOTE if setup.kind == "h4" else
-                                            f"no collision model for the {setup.kind} robot kind"]
+    notes = [] if checker is not None else [no_collision_note(setup)]
     if model is not None:
         notes += list(model.notes)
     notes.append(f"joint values read in the unit of {units_from}")

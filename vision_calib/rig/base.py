@@ -254,6 +254,8 @@ class Setup:
     #: criteria of :meth:`evaluate` computed from validation measurements (H4: V1_rad, V2_rad); none: the
     #: pipelines need not measure the validation poses
     measured_criteria: ClassVar[tuple[str, ...]] = ()
+    #: what :meth:`reachable` checks, in words (the planner's notes)
+    reach_check: ClassVar[str] = "nothing"
 
     # ------------------------------------------------------------------ to implement
     @property

@@ -58,6 +58,7 @@ class H4Setup(Setup):
     scene_keys: ClassVar[tuple[str, ...]] = ("model", "variant")
     truth_keys: ClassVar[tuple[str, ...]] = ("model", "tilt_deg")
     measured_criteria: ClassVar[tuple[str, ...]] = ("V1_rad", "V2_rad")
+    reach_check: ClassVar[str] = "inverse model"
 
     @property
     def n_joints(self) -> int:

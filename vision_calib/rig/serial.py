@@ -80,6 +80,7 @@ class SerialSetup(Setup):
     mounts: ClassVar[tuple[str, ...]] = ("eye_in_hand", "fixed")
     scene_keys: ClassVar[tuple[str, ...]] = ("mounts",)
     pose_keys: ClassVar[tuple[str, ...]] = ("center", "spread")
+    reach_check: ClassVar[str] = "joint limits"
 
     # ------------------------------------------------------------------ protocol
     @property
