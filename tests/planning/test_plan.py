@@ -107,3 +107,28 @@ def test_cli_plan_and_check(tmp_path, capsys):
     assert "broken.csv: line 2 (pose 'a')" in capsys.readouterr().err
     assert main(["plan", str(CELL), "--poses", "2", "--out", str(tmp_path / "c4"), "--candidates", "500"]) == 2
     assert "plan at least 5 poses" in capsys.readouterr().err
+
+
+def test_candidate_sources(tmp_path):
+    from vision_calib.errors import ConfigError
+    from vision_calib.planning.plan import CandidateSource, candidate_poses
+
+    sc = load_scene(CELL)
+    setup = sc.setup
+    rng = np.random.default_rng(0)
+    home = np.radians([0, -90, 90, -90, -90, 0])
+    q = candidate_poses(sc, CandidateSource("around", start_rad=tuple(home), delta_rad=np.radians(10)), 500, rng)
+    assert q.shape == (500, 6) and np.all(np.abs(q - home) <= np.radians(10) + 1e-12)
+    lo, hi = (0.35, -0.1, 0.3), (0.6, 0.3, 0.7)
+    q = candidate_poses(sc, CandidateSource("box", box_lo_m=lo, box_hi_m=hi), 2000, rng)
+    p = setup.end_point(q)
+    assert 0 < len(q) < 2000 and np.all((p >= lo) & (p <= hi))
+    with pytest.raises(ConfigError, match="--box"):
+        candidate_poses(sc, CandidateSource("box", box_lo_m=(5, 5, 5), box_hi_m=(6, 6, 6)), 200, rng)
+    (tmp_path / "l.csv").write_text("pose_id,q1,q2,q3,q4,q5,q6\na,0,-90,90,-90,-90,0\nb,5,-90,90,-90,-90,0\n")
+    q = candidate_poses(sc, CandidateSource("list", path=tmp_path / "l.csv"), 0, rng)  # the scene's deg
+    assert np.allclose(q[1], home + np.radians([5, 0, 0, 0, 0, 0]))
+    h4 = load_scene(SCENES_DIR / "h4_vision.yaml")  # around a joint set: mapped to nacelle poses by the forward model
+    q0 = h4.setup.joints(h4.setup.robot.pose_grid()[:1], h4.setup.params.nominal)[0]
+    X = candidate_poses(h4, CandidateSource("around", start_rad=tuple(q0), delta_rad=np.radians(3)), 50, rng)
+    assert X.shape[1] == 4 and len(X) > 40
