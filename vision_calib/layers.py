@@ -13,6 +13,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("cli",),
     ("study",),
     ("sim",),
+    ("planning",),
     ("experiment",),
     ("deploy",),
     ("io",),

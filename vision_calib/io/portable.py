@@ -7,6 +7,7 @@ Layout of a copied scene (:func:`copy_scene_bundle`, e.g. FOLDER = ``recording/s
     FOLDER/<scene stem>.yaml          the scene, its ``robot`` and ``target`` pointing at the copies below
     FOLDER/robot/<robot file name>
     FOLDER/target/<target file name>  (when the scene names a target)
+    FOLDER/poses/<pose file name>     (when the scene's poses come from a file: ``poses: {kind: file}``)
 """
 
 from __future__ import annotations
@@ -60,6 +61,12 @@ def copy_scene_bundle(scene, folder) -> Path:
     if scene.target_path is not None:
         tp = Path(scene.target_path)
         doc["target"] = relative_ref(copy_file(tp, folder / "target" / tp.name), folder)
+    if scene.poses.path is not None and isinstance(doc.get("poses"), dict):  # poses: {kind: file, path: ...}
+        pp = Path(scene.poses.path)
+        doc["poses"] = {**doc["poses"], "path": relative_ref(copy_file(pp, folder / "poses" / pp.name), folder)}
+        if "units" not in doc["poses"] and pp.parent.joinpath("recording.yaml").is_file():
+            # the unit came from the recording.yaml beside the file, which is not copied: write it down
+            doc["poses"]["units"] = {"angle": "rad" if abs(scene.poses.angle_factor - 1.0) < 1e-15 else "deg"}
     head = (f"# scene {scene.name!r} as used for this folder (copied by vision_calib: robot and target name the "
             "copies next to it)\n")
     return write_text_atomic(folder / Path(scene.path).name, head + yaml.safe_dump(doc, sort_keys=False))

@@ -8,7 +8,7 @@ problem from :class:`Measurements`, and evaluates a parameter vector on validati
 :class:`Evaluation`. Kinds are registered in :mod:`vision_calib.rig.registry` (the one place to touch
 when adding a robot kind). Kind-specific capabilities are optional interfaces (``Protocol`` classes checked
 with ``isinstance`` where they are used): :class:`ChainMeasured`, :class:`ModelVariants`,
-:class:`NamedConfigurations`, :class:`NamedTrials`, :class:`PoseGrids`, :class:`TiltsFromAxis`.
+:class:`NamedConfigurations`, :class:`NamedTrials`, :class:`PoseGrids`, :class:`TiltsFromAxis`, :class:`ArmFrames`.
 """
 
 from __future__ import annotations
@@ -208,6 +208,23 @@ class TiltsFromAxis(Protocol):
     def with_tilts(self, tilts_rad: ArrayLike, prior_std_rad: ArrayLike | None = None) -> "Setup": ...
 
 
+@runtime_checkable
+class ArmFrames(Protocol):
+    """Optional capability of a setup: a serial arm whose links the planner checks for collisions
+    (``vision_calib.planning``). ``link_frames(poses, x=None) -> (N, n_joints + 2, 4, 4)`` [m] in the robot base
+    frame: the base, the frame after each movable joint 1..n-1 (origin on its axis), the tip link (flange) and the
+    right mount (camera or target on the flange), at parameters x (default nominal); ``link_names() -> tuple`` of
+    the n_joints + 2 names of those frames (URDF link names for a URDF robot); ``robot_name``: the robot file's
+    robot name; ``robot_file``: its path."""
+
+    robot_name: str
+    robot_file: str
+
+    def link_frames(self, poses: ArrayLike, x: ArrayLike | None = None) -> np.ndarray: ...
+
+    def link_names(self) -> tuple[str, ...]: ...
+
+
 @dataclass(frozen=True)
 class Setup:
     """Common interface of every robot kind (see the module docstring). ``params`` is the full
@@ -237,6 +254,8 @@ class Setup:
     #: criteria of :meth:`evaluate` computed from validation measurements (H4: V1_rad, V2_rad); none: the
     #: pipelines need not measure the validation poses
     measured_criteria: ClassVar[tuple[str, ...]] = ()
+    #: what :meth:`reachable` checks, in words (the planner's notes)
+    reach_check: ClassVar[str] = "nothing"
 
     # ------------------------------------------------------------------ to implement
     @property
@@ -288,6 +307,21 @@ class Setup:
     def generic_poses(self, rng: np.random.Generator, n: int) -> np.ndarray:
         """n varied commanded poses for the structural identifiability of the kind (no view check)."""
         return self.sample_poses(rng, n, check_view=False)
+
+    def commanded_from_joints(self, joints: ArrayLike, x: ArrayLike | None = None) -> np.ndarray:
+        """Commanded poses (N, .) that joint values (N, n_joints) rad command under parameters x (default nominal):
+        the inverse of :meth:`joints`. Default: commanded poses are joint sets (serial kinds)."""
+        return np.array(joints, float)
+
+    def reachable(self, poses: ArrayLike, x: ArrayLike | None = None) -> np.ndarray:
+        """(N,) bool: the robot can take each commanded pose under parameters x (default nominal). Default: all
+        (kinds add joint limits, closure of the inverse model...)."""
+        return np.ones(len(np.asarray(poses)), dtype=bool)
+
+    def end_point(self, poses: ArrayLike, x: ArrayLike | None = None) -> np.ndarray:
+        """(N, 3) [m] position of the robot's end (serial: the flange; H4: the nacelle point) in the robot base
+        frame, at parameters x (default nominal): what a workspace box of the planner bounds."""
+        raise NotImplementedError(f"{self.kind} setups give no end point")
 
     def export_model_files(self, out_dir: str | Path, x: ArrayLike) -> dict:
         """Write kind-specific calibrated-model files (e.g. a URDF) into out_dir for parameters x (n,);

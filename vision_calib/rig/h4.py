@@ -58,6 +58,7 @@ class H4Setup(Setup):
     scene_keys: ClassVar[tuple[str, ...]] = ("model", "variant")
     truth_keys: ClassVar[tuple[str, ...]] = ("model", "tilt_deg")
     measured_criteria: ClassVar[tuple[str, ...]] = ("V1_rad", "V2_rad")
+    reach_check: ClassVar[str] = "inverse model"
 
     @property
     def n_joints(self) -> int:
@@ -72,6 +73,20 @@ class H4Setup(Setup):
 
     def joints(self, poses: ArrayLike, x: ArrayLike) -> np.ndarray:
         return self.robot.igm(poses, x)
+
+    def commanded_from_joints(self, joints: ArrayLike, x: ArrayLike | None = None) -> np.ndarray:
+        """Nacelle poses X (N, 4) of joint values (N, 4) rad by the forward model (Newton on the IGM) at x."""
+        return self.robot.fgm(joints, self.params.nominal if x is None else x)
+
+    def reachable(self, poses: ArrayLike, x: ArrayLike | None = None, min_margin_rad: float = 0.0) -> np.ndarray:
+        """(N,) bool: every chain closes by the inverse model at poses X (N, 4), at least ``min_margin_rad`` from its
+        serial singularity (``H4Robot.reach_margin``)."""
+        m = self.robot.reach_margin(poses, x)
+        return np.all(np.isfinite(m) & (m >= min_margin_rad), axis=1)
+
+    def end_point(self, poses: ArrayLike, x: ArrayLike | None = None) -> np.ndarray:
+        """(N, 3) [m] nacelle point of poses X (N, 4) in the base frame."""
+        return np.array(np.asarray(poses, float)[:, :3])
 
     def predict_from_joints(self, joints: ArrayLike, x: ArrayLike) -> np.ndarray:
         """Camera view of the nacelle poses the forward model (Newton on the IGM) gives for joints (N, 4)."""

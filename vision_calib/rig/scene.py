@@ -14,10 +14,13 @@ that unit). Unknown keys are errors (with the closest known key suggested)::
     effects: {noise_grey: 2.0, blur_px: 0.6, ...}   # sensor effects (vision_calib.sensor.SensorEffects)
     render: {supersample: 2}         # anti-aliasing: render at s x resolution, box-average
     truth: {seed: 1, sigma_length_mm: 0.5, sigma_angle_deg: 0.05, deviations: {name: value}, trial: name}
-    poses: {kind: random | configurations | <grid of the kind>, count: 81, configurations: name, ...}
+    poses: {kind: random | configurations | file | <grid of the kind>, count: 81, configurations: name, ...}
+                                     # file: {kind: file, path: poses.csv, units: {angle: deg}} (rig.pose_file)
     validation: {kind: random | configurations, count: 50, configurations: name}
     measurement: {frames: 10, averaging: corners|poses, sigma_mm: 0.2, sigma_deg: 0.03, sigma_q_deg: 0}
     identification: {method: ..., residual: ..., fix: [names], free: [names]}
+    obstacles: [{kind: plane | box | cylinder | sphere, ...}]   # the cell, for the planner (rig.cell)
+    planning: {clearance: 0.02, distance: [0.2, 1.5], max_incidence: 50, ...}  # the planner's settings (rig.cell)
     # kind-specific keys: serial: mounts, poses.center, poses.spread; h4: model, variant
 
 ``measurement.sigma_mm`` / ``sigma_deg`` are the pose noise of the *synthetic* (no image) mode; image
@@ -38,7 +41,8 @@ from ..config import Section, load_yaml, transform_from
 from ..errors import ConfigError, ParameterError
 from ..shipped import scenes_dir, shipped_path
 from ..kinematics.params import ParameterSet
-from .base import NamedConfigurations, NamedTrials, PoseGrids, Setup, pose_grid_names
+from .base import ArmFrames, NamedConfigurations, NamedTrials, PoseGrids, Setup, pose_grid_names
+from .cell import Obstacle, PlanningSettings, read_obstacles, read_planning
 from .registry import kind_of_robot_file
 
 if TYPE_CHECKING:  # annotations only
@@ -47,7 +51,7 @@ if TYPE_CHECKING:  # annotations only
 
 SCENES_DIR = scenes_dir()  # the installed package's shipped scenes (package data)
 TOP_KEYS = ("name", "robot", "mount", "units", "camera", "target", "effects", "render", "truth", "poses",
-            "validation", "measurement", "identification")
+            "validation", "measurement", "identification", "obstacles", "planning")
 #: scene effect names -> SensorEffects field names (short forms accepted in scenes and studies)
 EFFECT_ALIASES = {"noise_grey": "read_noise_grey", "blur_px": "blur_sigma_px"}
 
@@ -69,12 +73,17 @@ class TruthSettings:
 
 @dataclass(frozen=True)
 class PoseSettings:
-    """A pose set: ``kind`` random | configurations | a pose grid of the robot kind; ``count`` poses
-    (None: all of a grid / set); ``configurations``: the robot file's named joint set."""
+    """A pose set: ``kind`` random | configurations | file | a pose grid of the robot kind; ``count`` poses
+    (None: all of a grid / set / file); ``configurations``: the robot file's named joint set; ``path``: the joint
+    file of kind ``file`` (:mod:`.pose_file`), read with ``angle_factor`` to rad (``units_from``: where that unit
+    came from)."""
 
     kind: str = "random"
     count: int | None = None
     configurations: str | None = None
+    path: Path | None = None
+    angle_factor: float = 1.0
+    units_from: str = ""
 
 
 @dataclass(frozen=True)
@@ -153,6 +162,9 @@ class Scene:
     identification: IdentificationSettings
     supersample: int = 2
     raw: dict = field(repr=False, default_factory=dict)
+    #: the cell's static obstacles (robot base frame) and the planner's settings (:mod:`.cell`)
+    obstacles: tuple[Obstacle, ...] = ()
+    planning: PlanningSettings = field(default_factory=PlanningSettings)
 
     @property
     def kind(self) -> str:
@@ -184,9 +196,20 @@ def _effects(sec: Section):
     return SensorEffects.from_dict(d, where=sec.where())
 
 
-def _pose_settings(sec: Section, kinds, extra_keys=()) -> PoseSettings:
+def _pose_settings(sec: Section, kinds, extra_keys=(), Lf: float = 1.0, Af: float = 1.0) -> PoseSettings:
+    kind = sec.get("kind", str, "random", choices=kinds)
+    if kind == "file":
+        from .pose_file import pose_file_units
+
+        sec.check_known(("kind", "count", "path", "units") + tuple(extra_keys))  # kind keys: the random region
+        path = sec.path_value("path")
+        if not path.is_file():
+            raise sec.error("path", f"not a file: {path} (a poses.csv: pose_id,q1..qn)")
+        _, af, where = pose_file_units(path, Lf, Af, sec.section("units") if "units" in sec else None)
+        return PoseSettings(kind=kind, count=sec.positive("count", int, None), path=path, angle_factor=af,
+                            units_from=where)
     sec.check_known(("kind", "count", "configurations") + tuple(extra_keys))
-    return PoseSettings(kind=sec.get("kind", str, "random", choices=kinds), count=sec.positive("count", int, None),
+    return PoseSettings(kind=kind, count=sec.positive("count", int, None),
                         configurations=sec.get("configurations", str, None))
 
 
@@ -259,15 +282,18 @@ def scene_from_section(top: Section) -> Scene:
             raise ident.error("residual", f"method {method!r} minimises {setup.residual_for(method, residual)!r} "
                                           f"residuals, not {residual!r} (leave residual out)")
         residual = setup.residual_for(method, residual)
-    pose_kinds = ("random", "configurations") + pose_grid_names(setup)
+    pose_kinds = ("random", "configurations", "file") + pose_grid_names(setup)
+    arm = isinstance(setup, ArmFrames)
     return Scene(
         path=path, name=name, setup=setup, target_path=target_path,
         effects=_effects(top.section("effects", default={})),
         truth=_truth(top.section("truth", default={}), setup, Lf, Af),
-        poses=_pose_settings(top.section("poses", default={}), pose_kinds, kind.pose_keys),
+        poses=_pose_settings(top.section("poses", default={}), pose_kinds, kind.pose_keys, Lf, Af),
         validation=_pose_settings(top.section("validation", default={}), ("random", "configurations")),
         measurement=measurement, identification=IdentificationSettings(method, residual),
         supersample=rs.positive("supersample", int, 2), raw=top.data,
+        obstacles=read_obstacles(top, Lf, Af, arm, setup.kind),
+        planning=read_planning(top, Lf, Af, setup.n_joints if arm else None, setup.kind),
     )
 
 
@@ -295,8 +321,26 @@ def scene_poses(scene: Scene, rng: np.random.Generator, n: int | None = None, wh
             raise ConfigError(f"{scene.path}: {which}: {n} poses asked, configuration set "
                               f"{spec.configurations!r} has {len(q)}")
         return q if n is None else q[:n]
+    if spec.kind == "file":
+        return file_poses(scene, n, which)
     # validation poses are evaluated through the kinematics only: they need not see the target
     return setup.sample_poses(rng, n or 30, check_view=(which == "poses"))
+
+
+def file_poses(scene: Scene, n: int | None = None, which: str = "poses") -> np.ndarray:
+    """Commanded poses of the scene's pose file (``poses: {kind: file}``): its joint sets, checked against the
+    robot (joint count, limits), mapped to commanded poses by the nominal model (``Setup.commanded_from_joints``:
+    the same joints for a serial arm, the forward model for the H4); the first n when n is given."""
+    from .pose_file import read_joint_file
+
+    spec = scene.poses
+    setup = scene.setup
+    ids, q = read_joint_file(spec.path, setup.n_joints, spec.angle_factor)
+    setup.check_joints(q, f"{spec.path} (angles read with {spec.units_from})", ids)
+    if n is not None and n > len(q):
+        raise ConfigError(f"{scene.path}: {which}: {n} poses asked, the pose file {spec.path} has {len(q)}")
+    q = q if n is None else q[:n]
+    return setup.commanded_from_joints(q)
 
 
 def true_parameters(scene: Scene, rng: np.random.Generator, base_free: ArrayLike | None = None) -> np.ndarray:

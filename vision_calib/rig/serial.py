@@ -80,6 +80,7 @@ class SerialSetup(Setup):
     mounts: ClassVar[tuple[str, ...]] = ("eye_in_hand", "fixed")
     scene_keys: ClassVar[tuple[str, ...]] = ("mounts",)
     pose_keys: ClassVar[tuple[str, ...]] = ("center", "spread")
+    reach_check: ClassVar[str] = "joint limits"
 
     # ------------------------------------------------------------------ protocol
     @property
@@ -92,6 +93,34 @@ class SerialSetup(Setup):
 
     def joints(self, poses: ArrayLike, x: ArrayLike) -> np.ndarray:
         return np.asarray(poses, float).copy()
+
+    def reachable(self, poses: ArrayLike, x: ArrayLike | None = None) -> np.ndarray:
+        """(N,) bool: every joint of the joint sets (N, n) rad within the robot's joint limits."""
+        return self.chain.within_limits(poses)
+
+    def end_point(self, poses: ArrayLike, x: ArrayLike | None = None) -> np.ndarray:
+        """(N, 3) [m] flange position in the robot base frame."""
+        return self.chain.flange(poses, x)[:, :3, 3]
+
+    # ------------------------------------------------------------------ rig.base.ArmFrames (planning)
+    @property
+    def robot_name(self) -> str:
+        return str(self.chain.name)
+
+    @property
+    def robot_file(self) -> str:
+        return str(self.meta.get("robot_path", ""))
+
+    def link_frames(self, poses: ArrayLike, x: ArrayLike | None = None) -> np.ndarray:
+        """(N, n + 2, 4, 4) [m] in the robot base frame: base, frames after joints 1..n-1, flange, right mount."""
+        frames = self.chain.forward_all(poses, x)
+        T_left_base = self.chain.nominal_transforms(x)[0]
+        return F.inv_T(T_left_base) @ frames
+
+    def link_names(self) -> tuple[str, ...]:
+        """Names of the :meth:`link_frames`: base, link1..link<n-1>, flange, the right mount (e.g. T_flange_cam)."""
+        n = self.n_joints
+        return ("base",) + tuple(f"link{i}" for i in range(1, n)) + ("flange", self.chain.right)
 
     def chain_measurements(self, meas: Measurements) -> tuple[np.ndarray, np.ndarray]:
         """Measured chain poses T_left_right (N, 4, 4) and their covariances (N, 6, 6)."""

@@ -84,6 +84,15 @@ class URDFSetup(SerialSetup):
         """The URDF names of the chain's movable joints, base to tip."""
         return tuple(self.chain.meta["joint_names"])
 
+    def link_names(self) -> tuple[str, ...]:
+        """URDF names of the :meth:`link_frames`: base_link, the child links of movable joints 1..n-1, tip_link, and
+        the right mount (e.g. T_flange_cam)."""
+        from ..kinematics.urdf_file import read_urdf
+
+        m = self.chain.meta
+        child = {j.name: j.child for j in read_urdf(Path(m["file"])).joints}
+        return ((m["base_link"],) + tuple(child[j] for j in m["joint_names"][:-1]) + (m["tip_link"], self.chain.right))
+
     def model_dict(self) -> dict:
         m = self.chain.meta
         return {**super().model_dict(), "urdf": {"base_link": m["base_link"], "tip_link": m["tip_link"]}}

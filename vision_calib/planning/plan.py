@@ -1,0 +1,538 @@
+"""``vision-calib plan CELL --poses N --out DIR``: the joint values to command for a calibration, and
+``plan CELL --check poses.csv``: the same figures for a user's own list.
+
+Steps of a plan (figures and seeds in ``plan.json``):
+
+1. candidates (:func:`candidate_poses`): the scene's pose sampling region (default; serial: q_center +- q_spread
+   within the joint limits; H4: the workspace box), a user's list (a ``poses.csv``), the region's poses whose end
+   point (flange / nacelle) lies in a workspace box, or joint sets within +-delta of a start joint set;
+2. screening (:func:`screen`): reachable (joint limits; H4: the inverse model closes), the target measurable
+   (:mod:`.view`), collision-free with the clearance (:mod:`.collision`; arms only);
+3. D-optimal selection of N poses for the base parameters at the cell's noise (:mod:`.design`);
+4. the tour (:mod:`.tour`): short in joint-space travel time, its moves checked for collisions;
+5. clearance, view figures and leverage per pose, identifiability, and the predicted accuracy of the plan against
+   random measurable poses (:mod:`.predict`);
+6. outputs (:mod:`.report`): ``poses.csv``, ``recording.yaml`` and ``images/<pose_id>/`` (a recording to fill),
+   ``plan.json``, ``report.html``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ConfigError, DataError, VisionCalibError
+from ..rig import Scene, load_scene
+from ..rig.base import ArmFrames
+from . import design as D
+from .predict import DRAWS, predicted_accuracy
+from .tour import plan_tour
+from .view import FIGURES, MIN_SQUARE_PX, ViewLimits, measurable, view_figures
+
+FORMAT = "vision_calib.plan/1"
+#: candidates drawn by default (screening 20 000 takes a few seconds on one core; benchmarks/bench_plan.py)
+DEFAULT_CANDIDATES = 20000
+#: candidates per screening block (memory: link frames of a block ~ block x (n + 2) x 128 bytes)
+SCREEN_BLOCK = 20000
+H4_NOTE = "no collision model for the H4: checked visibility and reachability (inverse model) only"
+
+
+def no_collision_note(setup) -> str:
+    """The plan's note for a robot kind without a collision model (the H4: :data:`H4_NOTE`)."""
+    return (f"no collision model for the {setup.kind.upper()}: checked visibility and reachability "
+            f"({setup.reach_check}) only")
+#: random designs whose D criterion the plan's is compared with (D-efficiency)
+EFFICIENCY_DRAWS = 20
+
+
+@dataclass(frozen=True)
+class CandidateSource:
+    """Where the candidates come from: kind "region" (the scene's pose sampling region), "list" (``path``: a
+    poses.csv, its angles read with ``angle_factor`` to rad), "box" (the region's poses whose end point lies in
+    [box_lo_m, box_hi_m] (3,) each, robot base frame) or "around" (joint sets ``start_rad`` (n,) +- ``delta_rad``)."""
+
+    kind: str = "region"
+    path: Path | None = None
+    angle_factor: float | None = None
+    box_lo_m: tuple | None = None
+    box_hi_m: tuple | None = None
+    start_rad: tuple | None = None
+    delta_rad: float | None = None
+
+    def describe(self) -> str:
+        if self.kind == "list":
+            return f"the poses of {self.path}"
+        if self.kind == "box":
+            return (f"the scene's pose region, end point in the box [{', '.join(f'{v:.4g}' for v in self.box_lo_m)}] .. "
+                    f"[{', '.join(f'{v:.4g}' for v in self.box_hi_m)}] m (robot base frame)")
+        if self.kind == "around":
+            return (f"joint sets within +-{np.degrees(self.delta_rad):.4g} deg of "
+                    f"[{', '.join(f'{np.degrees(v):.4g}' for v in self.start_rad)}] deg")
+        return "the scene's pose sampling region"
+
+
+def _load(scene) -> Scene:
+    scene = scene if isinstance(scene, Scene) else load_scene(scene)
+    if scene.setup.camera is None or scene.target_path is None:
+        raise ConfigError(f"{scene.path}: planning needs a camera and a target in the scene (the view checks)")
+    return scene
+
+
+def _commanded(setup, q: np.ndarray, block: int = 256) -> tuple[np.ndarray, np.ndarray]:
+    """(commanded poses of the joint sets q (K, n) that the nominal model maps, their indices): blocks, and joint set
+    by joint set in a block whose mapping fails (H4: the forward model's Newton iteration)."""
+    out, ok = [], []
+    for s in range(0, len(q), block):
+        qb = q[s:s + block]
+        try:
+            out.append(setup.commanded_from_joints(qb))
+            ok.extend(range(s, s + len(qb)))
+        except VisionCalibError:
+            for i, qi in enumerate(qb):
+                try:
+                    out.append(setup.commanded_from_joints(qi[None]))
+                    ok.append(s + i)
+                except VisionCalibError:
+                    pass
+    if not out:
+        return np.zeros((0, 0)), np.zeros(0, int)
+    return np.concatenate(out), np.array(ok, int)
+
+
+def read_pose_list(scene: Scene, path, angle_factor: float | None = None) -> tuple[list[str], np.ndarray, np.ndarray, str]:
+    """(pose ids, joint sets (N, n) rad, commanded poses (N, .), where the angle unit came from) of a user's
+    poses.csv (``rig.pose_file``: its unit from ``angle_factor``, else the recording.yaml beside it, else the
+    scene's). DataError naming the file and pose when the nominal model cannot map a joint set to a pose."""
+    from ..config import Section
+    from ..rig.pose_file import pose_file_units, read_joint_file
+
+    path = Path(path)
+    if angle_factor is None:
+        Lf, Af = Section(scene.raw, scene.path).units(default_length="m", default_angle="deg")
+        _, af, where = pose_file_units(path, Lf, Af)
+    else:
+        af, where = angle_factor, "the command line"
+    ids, q = read_joint_file(path, scene.setup.n_joints, af)
+    # joint limits are a finding of the check (screen), not an input error
+    poses, ok = _commanded(scene.setup, q)
+    if len(ok) < len(q):
+        bad = sorted(set(range(len(q))) - set(ok.tolist()))
+        raise DataError(f"{path}: pose {ids[bad[0]]!r}: the nominal model cannot map these joint values to a pose "
+                        f"({len(bad)} such poses)")
+    return ids, q, poses, where
+
+
+def candidate_poses(scene: Scene, source: CandidateSource, n: int, rng: np.random.Generator) -> np.ndarray:
+    """(K, .) candidate commanded poses (module docstring, step 1)."""
+    setup = scene.setup
+    if source.kind == "list":
+        return read_pose_list(scene, source.path, source.angle_factor)[2]
+    if source.kind == "around":
+        start = np.asarray(source.start_rad, float)
+        if start.shape != (setup.n_joints,):
+            raise ConfigError(f"--around: {start.size} joint values, the robot has {setup.n_joints}")
+        q = start + rng.uniform(-1, 1, size=(n, setup.n_joints)) * source.delta_rad
+        return _commanded(setup, q)[0]
+    poses = setup.sample_poses(rng, n, check_view=False)
+    if source.kind == "box":
+        p = setup.end_point(poses)
+        lo, hi = np.asarray(source.box_lo_m, float), np.asarray(source.box_hi_m, float)
+        poses = poses[np.all((p >= lo) & (p <= hi), axis=1)]
+        if not len(poses):
+            raise ConfigError(f"--box: none of {n} candidates of the scene's pose region has its end point in the box "
+                              f"{lo.tolist()} .. {hi.tolist()} m (robot base frame)")
+    return poses
+
+
+def screen(scene: Scene, poses: np.ndarray, checker=None, limits: ViewLimits | None = None) -> dict:
+    """Screen candidate poses (K, .): {kept (k,) indices, figures {name: (K,) float, NaN where not computed},
+    clearance_ok (K,) bool, counts {candidates, unreachable, not_measurable {reason: count}, colliding, kept},
+    collision_why {index: (body, other, m)}, seconds, fcl_queries}. Vectorised in blocks; collisions are checked on
+    the measurable poses only."""
+    from ..targets import load_target
+
+    t0 = time.perf_counter()
+    setup = scene.setup
+    limits = limits or ViewLimits.of_scene(scene)
+    target = load_target(scene.target_path)
+    K = len(poses)
+    figs = {k: np.full(K, np.nan) for k in FIGURES}
+    reach = np.zeros(K, bool)
+    meas_ok = np.zeros(K, bool)
+    col_ok = np.zeros(K, bool)
+    reasons = {}
+    why = {}
+    n_fcl0 = checker.n_fcl if checker is not None else 0
+    for s in range(0, K, SCREEN_BLOCK):
+        P = poses[s:s + SCREEN_BLOCK]
+        r = setup.reachable(P)
+        reach[s:s + len(P)] = r
+        ir = np.flatnonzero(r)
+        if not ir.size:
+            continue
+        f = view_figures(setup.T_cam_target(P[ir], setup.params.nominal), setup.camera, target)
+        for k in FIGURES:
+            figs[k][s + ir] = f[k]
+        ok, fails = measurable(f, limits)
+        for k, v in fails.items():
+            reasons[k] = reasons.get(k, 0) + int(np.sum(v))
+        im = ir[ok]
+        meas_ok[s + im] = True
+        if checker is None:
+            col_ok[s + im] = True
+            continue
+        if im.size:
+            c_ok, c_why = checker.screen(setup.link_frames(P[im]))
+            col_ok[s + im] = c_ok
+            for j in np.flatnonzero(~c_ok):
+                why[int(s + im[j])] = c_why[j]
+    kept = np.flatnonzero(reach & meas_ok & col_ok)
+    counts = {"candidates": int(K), "unreachable": int(K - reach.sum()),
+              "not_measurable": int(reach.sum() - meas_ok.sum()), "not_measurable_by_reason": reasons,
+              "colliding": int(meas_ok.sum() - (meas_ok & col_ok).sum()) if checker is not None else None,
+              "kept": int(kept.size)}
+    seconds = time.perf_counter() - t0
+    return {"kept": kept, "figures": figs, "reachable": reach, "measurable": meas_ok,
+            "collision_free": col_ok if checker is not None else None, "counts": counts, "collision_why": why,
+            "seconds": seconds, "rate_per_s": K / seconds if seconds > 0 else None,
+            "fcl_queries": (checker.n_fcl - n_fcl0) if checker is not None else 0}
+
+
+def collision_setup(scene: Scene):
+    """(collision model, checker) of the scene's arm, (None, None) for a kind without one (H4)."""
+    if not isinstance(scene.setup, ArmFrames):
+        return None, None
+    from .bodies import build_model
+    from .collision import CollisionChecker
+
+    model = build_model(scene, scene.setup)
+    return model, CollisionChecker(model, scene.planning.clearance_m)
+
+
+def _pose_rows(scene, ids, poses, joints, figs, clear, lev) -> list[dict]:
+    setup = scene.setup
+    rows = []
+    for i, pid in enumerate(ids):
+        r = {"id": pid, "joints_rad": [float(v) for v in joints[i]], "joints_deg": [float(np.degrees(v)) for v in joints[i]],
+             "view": {k: (None if not np.isfinite(figs[k][i]) else float(figs[k][i])) for k in FIGURES},
+             "leverage": None if lev is None else float(lev[i])}
+        if poses.shape != joints.shape or not np.allclose(poses[i], joints[i]):
+            r["commanded"] = [float(v) for v in poses[i]]
+        if clear is not None:
+            r.update(clear[i])
+        rows.append(r)
+    return rows
+
+
+def _tour_block(tour: dict, ids, joints_ordered) -> dict:
+    moves = []
+    ids = list(ids)
+    for k in range(len(ids) - 1):
+        a, b = k, k + 1
+        m = {"from": ids[a], "to": ids[b], "time_s": tour["times_s"][k],
+             "largest_joint_change_deg": float(np.degrees(np.max(np.abs(joints_ordered[b] - joints_ordered[a]))))}
+        m["collides"] = None if not tour["moves_checked"] else False
+        moves.append(m)
+    return {"total_s": tour["total_s"], "length_deg": float(np.degrees(tour["length_rad"])), "moves": moves,
+            "moves_checked": tour["moves_checked"], "move_samples": tour["move_samples"], "reorder_rounds": tour["rounds"]}
+
+
+def _counts(n: int, n_min: int, n_max: int, counts=None) -> list[int]:
+    if counts is None:
+        counts = [max(n_min, n // 2), n, 2 * n]
+    return sorted({int(c) for c in counts if n_min <= c <= n_max} | {n})
+
+
+def _efficiency(A: np.ndarray, idx, rng: np.random.Generator, n: int) -> dict:
+    """D criterion of the design idx and its D-efficiency against EFFICIENCY_DRAWS random designs of n poses."""
+    crit = D.d_criterion(A, idx)
+    L = A.shape[2]
+    rand = [D.d_criterion(A, rng.choice(A.shape[0], n, replace=False))["logdet"] for _ in range(EFFICIENCY_DRAWS)]
+    eff = [D.d_efficiency(crit["logdet"], r, L) for r in rand]
+    return {**crit, "n_base_parameters": int(L),
+            "d_efficiency_vs_random": {"median": float(np.median(eff)), "min": float(np.min(eff)),
+                                       "max": float(np.max(eff)), "draws": EFFICIENCY_DRAWS,
+                                       "meaning": "exp((logdet M_plan - logdet M_random) / L): > 1, the plan's "
+                                                  "parameter-confidence volume is smaller"}}
+
+
+def _settings(scene: Scene, source: CandidateSource, n_candidates: int, seed: int) -> dict:
+    return {**scene.planning.to_dict(), "min_square_px": MIN_SQUARE_PX, "candidates": int(n_candidates),
+            "candidate_source": source.describe(), "seed": int(seed),
+            "noise": {"sigma_mm": scene.measurement.sigma_t_m * 1e3,
+                      "sigma_deg": float(np.degrees(scene.measurement.sigma_r_rad))}}
+
+
+def plan_cell(scene, n_poses: int, out_dir=None, seed: int = 0, n_candidates: int = DEFAULT_CANDIDATES,
+              source: CandidateSource | None = None, draws: int = DRAWS, counts=None, plots: bool = True) -> dict:
+    """Plan ``n_poses`` poses for the scene (module docstring); writes the outputs into ``out_dir`` when given and
+    returns plan.json's content. Seeded: the same seed gives the same plan. draws: Monte Carlo draws of the
+    predicted accuracy (0: none); counts: its pose counts (default N / 2, N, 2 N)."""
+    t0 = time.perf_counter()
+    scene = _load(scene)
+    setup = scene.setup
+    source = source or CandidateSource()
+    rng = np.random.default_rng([int(seed), 27])
+    if isinstance(n_poses, bool) or int(n_poses) < 1:
+        raise ConfigError(f"--poses: expected a positive number of poses, got {n_poses!r}")
+    n = int(n_poses)
+    cand = candidate_poses(scene, source, n_candidates, rng)
+    model, checker = collision_setup(scene)
+    scr = screen(scene, cand, checker)
+    kept = scr["kept"]
+    if kept.size < n:
+        raise DataError(f"{scene.path}: only {kept.size} of {len(cand)} candidates are reachable, measurable and "
+                        f"collision-free ({_screen_line(scr['counts'])}), fewer than the {n} poses asked: widen the "
+                        "region (poses.spread), relax planning limits, or ask for fewer poses")
+    pool = cand[kept]
+    sub = np.arange(len(pool)) if len(pool) <= D.MAX_INFO else np.sort(rng.choice(len(pool), D.MAX_INFO, replace=False))
+    base, rep0 = D.base_mask(scene, pool[sub], rng)
+    info = D.information(scene, pool[sub], base, rep0)
+    pick = D.select(scene, info, pool[sub], n, rng)
+    chosen = sub[pick]
+    P = pool[chosen]
+    joints = setup.joints(P, setup.params.nominal)
+    check = None
+    if checker is not None:
+        def check(qs):
+            return checker.screen(setup.link_frames(setup.commanded_from_joints(qs)))
+    tour = plan_tour(joints, scene.planning.max_joint_speed_rad_s, scene.planning.move_step_rad, check)
+    order = tour["order"]
+    P, joints, chosen, pick = P[order], joints[order], chosen[order], pick[order]
+    ids = [f"{i:03d}" for i in range(n)]  # the recording's pose ids (io.recording.write_recording), in tour order
+    figs = {k: scr["figures"][k][kept[chosen]] for k in FIGURES}
+    clear = checker.clearances(setup.link_frames(P)) if checker is not None else None
+    A_sel = info.A[pick]
+    lev = D.leverages(A_sel, D.info_matrix(A_sel))
+    design = _efficiency(info.A, pick, rng, n)
+    rep = D.identifiability(scene, P, base)
+    n_min = -(-info.A.shape[2] // info.A.shape[1])
+    cts = _counts(n, n_min, len(pool), counts)
+    memo = {n: P}
+
+    def plan_of_count(c):
+        if c not in memo:
+            memo[c] = pool[sub[D.select(scene, info, pool[sub], c, np.random.default_rng([int(seed), 27, c]))]]
+        return memo[c]
+
+    t_pred = time.perf_counter()
+    pred = None
+    if draws:  # 0: no prediction (tests)
+        pred = predicted_accuracy(scene, plan_of_count, pool, cts, base, draws, seed)
+        pred["seconds"] = time.perf_counter() - t_pred
+    tb = _tour_block(tour, ids, joints)
+    warnings = []
+    mine = next((r["plan"] for r in (pred or {}).get("rows", []) if r["count"] == n), None)
+    if mine is not None and mine["failed_draws"]:
+        warnings.append(f"the synthetic identification of the {n} planned poses failed in {mine['failed_draws']} of "
+                        f"{draws} draws ({mine['first_error']}): plan more poses")
+    for a, b, (w, frac) in tour["colliding"]:
+        ia, ib = order.index(a), order.index(b)
+        k = min(ia, ib)
+        tb["moves"][k]["collides"] = True
+        tb["moves"][k]["why"] = f"{contact_words(w)} at {100 * frac:.0f} % of the move"
+        warnings.append(f"move {ids[k]} -> {ids[k + 1]} collides: {tb['moves'][k]['why']} (no order avoids it: "
+                        "insert a via point, or plan again with another seed)")
+    notes = [] if checker is not None else [no_collision_note(setup)]
+    if model is not None:
+        notes += list(model.notes)
+        notes.append("the move from the robot's current joint values to the first pose is not checked: start from a "
+                     "pose near it, or jog there")
+    plan = {
+        "format": FORMAT, "kind": "plan",
+        "scene": {"name": scene.name, "path": str(scene.path), "robot_kind": setup.kind, "mount": setup.mount},
+        "settings": _settings(scene, source, len(cand), seed),
+        "screening": {**scr["counts"], "seconds": scr["seconds"], "rate_per_s": scr["rate_per_s"],
+                      "fcl_queries": scr["fcl_queries"]},
+        "collision_model": None if model is None else model.to_dict(),
+        "n_poses": n,
+        "poses": _pose_rows(scene, ids, P, joints, figs, clear, lev),
+        "tour": tb,
+        "design": {**design, "criterion": "D (log det of the base parameters' information at the cell's noise, "
+                                          "scaled units)", "base_parameters": list(info.names),
+                   "pool": f"{len(sub)} screened candidates; exchange on the {D.POOL_TOP} of largest leverage + "
+                           f"{D.POOL_RANDOM} random"},
+        "identifiability": _ident_block(rep, setup, base),
+        "predicted_accuracy": pred,
+        "notes": notes, "warnings": warnings,
+        "seconds": None,
+    }
+    plan["seconds"] = time.perf_counter() - t0
+    if out_dir is not None:
+        from .report import write_plan
+
+        write_plan(out_dir, scene, plan, P, joints, model, plots=plots)
+    return plan
+
+
+def _ident_block(rep, setup, base) -> dict:
+    """The identifiability of the poses for the base parameters, and the parameters no candidate identifies."""
+    d = rep.to_dict()
+    out = {k: d[k] for k in ("n_params", "n_obs", "rank", "condition_number", "condition_number_of",
+                             "non_identifiable", "base_parameters")}
+    out["not_in_base_set"] = [nm for nm, b, f in zip(setup.params.names, base, setup.params.free) if f and not b]
+    out["of"] = ("the base parameters (identifiable from the candidate region), whitened by the cell's noise; "
+                 "not_in_base_set: the scene's free parameters no pose of the region identifies (fixed at nominal)")
+    return out
+
+
+def _screen_line(c: dict) -> str:
+    parts = [f"{c['unreachable']} unreachable", f"{c['not_measurable']} target not measurable"]
+    if c.get("colliding") is not None:
+        parts.append(f"{c['colliding']} colliding")
+    return ", ".join(parts)
+
+
+def check_poses(scene, csv_path, out_dir=None, seed: int = 0, n_candidates: int = DEFAULT_CANDIDATES,
+                draws: int = DRAWS, angle_factor: float | None = None, plots: bool = True) -> dict:
+    """Report a user's own pose list (``poses.csv``, recording layout) the way a plan is reported: per pose joint
+    limits, collisions (clearance), view figures; the moves in the list's order; the D criterion against random
+    and D-optimal sets of as many poses from the scene's region; the predicted accuracy of the list's usable poses.
+    ``verdict``: ok when every pose is usable and no move collides."""
+    t0 = time.perf_counter()
+    scene = _load(scene)
+    setup = scene.setup
+    rng = np.random.default_rng([int(seed), 27])
+    ids, q, P, units_from = read_pose_list(scene, csv_path, angle_factor)
+    model, checker = collision_setup(scene)
+    own = screen(scene, P, checker)
+    usable = np.zeros(len(P), bool)
+    usable[own["kept"]] = True
+    figs = own["figures"]
+    clear = checker.clearances(setup.link_frames(P)) if checker is not None else None
+    problems = {}
+    lim = setup.reachable(P)
+    col_ok, col_why = (checker.screen(setup.link_frames(P)) if checker is not None
+                       else (np.ones(len(P), bool), [None] * len(P)))
+    for i, pid in enumerate(ids):
+        why = []
+        if not lim[i]:
+            why.append(f"not reachable ({setup.reach_check})")
+        else:
+            if not col_ok[i]:
+                why.append(f"collides: {contact_words(col_why[i])}")
+            if not own["measurable"][i]:
+                why.append(_view_why(figs, i, ViewLimits.of_scene(scene)))
+        if why:
+            problems[pid] = "; ".join(why)
+    check = None
+    if checker is not None:
+        def check(qs):
+            return checker.screen(setup.link_frames(setup.commanded_from_joints(qs)))
+    joints = np.asarray(q, float)
+    from .tour import move_samples, travel_times
+
+    C = travel_times(joints, scene.planning.max_joint_speed_rad_s)
+    moves, warnings = [], []
+    for k in range(len(ids) - 1):
+        m = {"from": ids[k], "to": ids[k + 1], "time_s": float(C[k, k + 1]),
+             "largest_joint_change_deg": float(np.degrees(np.max(np.abs(joints[k + 1] - joints[k])))),
+             "collides": None}
+        if check is not None and lim[k] and lim[k + 1]:
+            S = move_samples(joints[k], joints[k + 1], scene.planning.move_step_rad)
+            ok, why = check(S) if len(S) else (np.ones(0, bool), [])
+            m["collides"] = bool(not np.all(ok))
+            if m["collides"]:
+                j = int(np.flatnonzero(~ok)[0])
+                w = why[j]
+                m["why"] = f"{contact_words(w)} at {100 * (j + 1) / (len(S) + 1):.0f} % of the move"
+                warnings.append(f"move {ids[k]} -> {ids[k + 1]} collides: {m['why']}")
+        moves.append(m)
+    for pid, w in problems.items():
+        warnings.append(f"pose {pid}: {w}")
+    # the scene's region for the comparisons (random and D-optimal sets of as many poses)
+    region = candidate_poses(scene, CandidateSource(), n_candidates, rng)
+    scr = screen(scene, region, checker)
+    pool = region[scr["kept"]]
+    U = P[usable]
+    n = int(usable.sum())
+    out_design, pred, rep = None, None, None
+    if n and len(pool) >= n:
+        sub = np.arange(len(pool)) if len(pool) <= D.MAX_INFO else np.sort(rng.choice(len(pool), D.MAX_INFO, replace=False))
+        base, rep0 = D.base_mask(scene, pool[sub], rng)
+        both = np.concatenate([U, pool[sub]])
+        info = D.information(scene, both, base, rep0)
+        mine = np.arange(n)
+        others = np.arange(n, len(both))
+        crit = D.d_criterion(info.A, mine)
+        L = info.A.shape[2]
+        rand = [D.d_criterion(info.A, n + rng.choice(len(others), n, replace=False))["logdet"]
+                for _ in range(EFFICIENCY_DRAWS)]
+        out_design = {**crit, "n_base_parameters": int(L), "base_parameters": list(info.names),
+                      "d_efficiency_vs_random": float(np.median([D.d_efficiency(crit["logdet"], r, L) for r in rand])),
+                      "leverage": {pid: float(v) for pid, v in zip(np.array(ids)[usable],
+                                                                    D.leverages(info.A[mine], D.info_matrix(info.A, mine)))}}
+        n_min = -(-L // info.A.shape[1])
+        if n >= n_min:
+            opt = D.select(scene, info, both, n, rng, candidates=others)  # indices into both
+            opt_logdet = D.d_criterion(info.A, opt)["logdet"]
+            out_design["d_efficiency_vs_plan"] = D.d_efficiency(crit["logdet"], opt_logdet, L)
+            plan_n = both[opt]
+            pred = predicted_accuracy(scene, lambda c: plan_n, pool, [n], base, draws, seed, given=U) if draws else None
+            rep = _ident_block(D.identifiability(scene, U, base), setup, base)
+        else:
+            warnings.append(f"{n} usable poses give fewer equations than the {L} base parameters: nothing identifiable "
+                            f"to predict (at least {n_min} poses)")
+    rows = _pose_rows(scene, ids, P, joints, figs, clear, None)
+    for r in rows:
+        r["usable"] = r["id"] not in problems
+        if r["id"] in problems:
+            r["problem"] = problems[r["id"]]
+        if out_design and r["id"] in out_design["leverage"]:
+            r["leverage"] = out_design["leverage"][r["id"]]
+    notes = [] if checker is not None else [no_collision_note(setup)]
+    if model is not None:
+        notes += list(model.notes)
+    notes.append(f"joint values read in the unit of {units_from}")
+    res = {
+        "format": FORMAT, "kind": "check",
+        "scene": {"name": scene.name, "path": str(scene.path), "robot_kind": setup.kind, "mount": setup.mount},
+        "source": {"file": str(csv_path)},
+        "settings": _settings(scene, CandidateSource(), n_candidates, seed),
+        "verdict": {"ok": not problems and not any(m.get("collides") for m in moves),
+                    "usable_poses": n, "n_poses": len(ids),
+                    "message": "every pose usable, no move collides" if not warnings else "; ".join(warnings[:3])
+                               + (f" (+{len(warnings) - 3} more)" if len(warnings) > 3 else "")},
+        "screening": {**scr["counts"], "seconds": scr["seconds"], "rate_per_s": scr["rate_per_s"],
+                      "fcl_queries": scr["fcl_queries"], "what": "the scene's region, for the comparisons"},
+        "collision_model": None if model is None else model.to_dict(),
+        "n_poses": len(ids), "poses": rows,
+        "tour": {"total_s": float(sum(m["time_s"] for m in moves)), "moves": moves,
+                 "moves_checked": check is not None, "order": "as given"},
+        "design": out_design, "identifiability": rep, "predicted_accuracy": pred,
+        "notes": notes, "warnings": warnings, "seconds": time.perf_counter() - t0,
+    }
+    if out_dir is not None:
+        from .report import write_plan
+
+        write_plan(out_dir, scene, res, P, joints, model, plots=plots, recording=False)
+    return res
+
+
+def contact_words(w) -> str:
+    """A collision finding (body, other, distance m) in words: "a within 6.3 mm of b" or "a 12.0 mm into b"."""
+    a, b, d = w
+    return f"{a} within {d * 1e3:.1f} mm of {b}" if d >= 0 else f"{a} {-d * 1e3:.1f} mm into {b}"
+
+
+def _view_why(figs, i, lim: ViewLimits) -> str:
+    f = {k: figs[k][i] for k in FIGURES}
+    if not np.isfinite(f["margin_px"]):
+        return "target behind the camera or seen from its back"
+    out = []
+    if not f["margin_px"] >= lim.margin_px:
+        out.append(f"board {f['margin_px']:.0f} px from the image border (< {lim.margin_px:g})")
+    if not lim.distance_m[0] <= f["distance_m"] <= lim.distance_m[1]:
+        out.append(f"distance {f['distance_m']:.3f} m outside [{lim.distance_m[0]:g}, {lim.distance_m[1]:g}]")
+    if f["incidence_deg"] > np.degrees(lim.max_incidence_rad):
+        out.append(f"incidence {f['incidence_deg']:.1f} deg > {np.degrees(lim.max_incidence_rad):g}")
+    if not f["square_px"] >= lim.min_square_px:
+        out.append(f"squares {f['square_px']:.1f} px < {lim.min_square_px:g}")
+    return "target not measurable: " + ", ".join(out)
+
+
+__all__ = ["plan_cell", "check_poses", "CandidateSource", "screen", "candidate_poses", "read_pose_list",
+           "DEFAULT_CANDIDATES", "H4_NOTE"]
