@@ -89,10 +89,10 @@ def test_restarts_from_a_closed_form_when_it_is_cheaper(monkeypatch):
     d = simulate_handeye(TRIPOD, 12, 4)
     real_irls, calls = hf._irls, []
 
-    def planted_irls(base, x0, theta, estimate, max_iter=50):
+    def planted_irls(base, x0, theta, estimate, max_iter=50, theta_start=None):
         calls.append(x0)
         if len(calls) > 1:
-            return real_irls(base, x0, theta, estimate, max_iter)
+            return real_irls(base, x0, theta, estimate, max_iter, theta_start)
         x_bad = x0 + np.r_[0.03, 0, 0, 0.1, 0, 0, 0, 0, 0, 0, 0, 0]
         pb = hf.reweighted(base, x_bad, robot_pose_cov(*np.sqrt(np.maximum(theta, 0.0))))  # theta: variances
         return solve_lse(pb, x_bad, max_nfev=2), pb, theta, None, 1
