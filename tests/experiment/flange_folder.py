@@ -85,3 +85,18 @@ def measured_pose_file(path, scene_path, n: int = 30, seed: int = 8, folds: int 
     T = F.perturb_pose(scene.setup.T_cam_target(q, scene_truth(scene)), noise)
     return write_measured_poses(path, scene_path, [f"p{i:02d}" for i in range(n)], q, T, "T_cam_target",
                                 default_sigma=(1e-4, 3e-4), folds=folds)
+
+
+def simulated_flange_recording(d, seed: int, n_poses: int, robot_std_mm: float, robot_std_deg: float,
+                               flange_seed: int, scene: str = "scenes/rx90_eye_in_hand.yaml"):
+    """A simulated eye-in-hand recording of ``scene`` (one frame per pose, no plots) under ``d``/rec, rewritten as a
+    flange-pose recording ``d``/flange with a robot pose error (:func:`flange_pose_folder`, estimated by
+    ``process``); returns the flange folder."""
+    from vision_calib.experiment.simulate import run_simulation
+
+    d = Path(d)
+    run_simulation(scene, out_dir=d / "sim", seed=seed, n_poses=n_poses, frames=1, export_recording=d / "rec",
+                   workers=2, plots=False, reference=False)
+    folder, _, _ = flange_pose_folder(d / "rec", d / "flange", robot_std_mm=robot_std_mm, robot_std_deg=robot_std_deg,
+                                      seed=flange_seed)
+    return folder

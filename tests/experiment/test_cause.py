@@ -10,23 +10,16 @@ import shutil
 
 import pytest
 import yaml
-from flange_folder import flange_pose_folder
+from flange_folder import simulated_flange_recording
 
 from vision_calib.experiment.process import process_folder
 
 pytestmark = pytest.mark.slow
-RX90 = "scenes/rx90_eye_in_hand.yaml"
 
 
 @pytest.fixture(scope="module")
 def flange_rec(tmp_path_factory):
-    from vision_calib.experiment.simulate import run_simulation
-
-    d = tmp_path_factory.mktemp("cause")
-    run_simulation(RX90, out_dir=d / "sim", seed=4, n_poses=20, frames=1, export_recording=d / "rec", workers=2,
-                   plots=False, reference=False)
-    folder, _, _ = flange_pose_folder(d / "rec", d / "flange", robot_std_mm=0.05, robot_std_deg=0.005, seed=2)
-    return folder
+    return simulated_flange_recording(tmp_path_factory.mktemp("cause"), 4, 20, 0.05, 0.005, 2)
 
 
 def test_wrong_intrinsics_named_as_the_cause_and_refined(flange_rec, tmp_path):

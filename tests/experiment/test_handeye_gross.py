@@ -11,23 +11,16 @@ import shutil
 import numpy as np
 import pytest
 import yaml
-from flange_folder import flange_pose_folder
+from flange_folder import flange_pose_folder, simulated_flange_recording
 
 from vision_calib.cli import main
 
 pytestmark = pytest.mark.slow
-RX90 = "scenes/rx90_eye_in_hand.yaml"
 
 
 @pytest.fixture(scope="module")
 def flange_rec(tmp_path_factory):
-    from vision_calib.experiment.simulate import run_simulation
-
-    d = tmp_path_factory.mktemp("hegross")
-    run_simulation(RX90, out_dir=d / "sim", seed=5, n_poses=16, frames=1, export_recording=d / "rec", workers=2,
-                   plots=False, reference=False)
-    folder, _, _ = flange_pose_folder(d / "rec", d / "flange", robot_std_mm=0.1, robot_std_deg=0.01, seed=3)
-    return folder
+    return simulated_flange_recording(tmp_path_factory.mktemp("hegross"), 5, 16, 0.1, 0.01, 3)
 
 
 def _damaged(src, dst, edit_yaml=None, edit_csv=None):

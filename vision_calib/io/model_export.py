@@ -287,12 +287,5 @@ def read_calibrated_model(path) -> CalibratedModel:
 
 def load_calibrated_model(path):
     """The robot of a calibrated-model file (its kind's robot object, e.g. SerialChain or H4Robot)
-    with the file's parameter values as nominal."""
-    path = Path(path)
-    top = Section(load_yaml(path), path)
-    fmt = top.get("format", str)
-    if fmt not in READ_FORMATS:
-        raise top.error("format", f"expected one of {', '.join(READ_FORMATS)}, got {fmt!r}")
-    ps_sec = top.section("parameters")
-    values = {str(name): ps_sec.section(name).get("value", float) for name in ps_sec.keys()}
-    return _robots(top, top.path_value("robot"), values)[0]
+    with the file's parameter values as nominal (:func:`read_calibrated_model`'s ``robot``)."""
+    return read_calibrated_model(path).robot
