@@ -169,12 +169,23 @@ def rosi_frame(data: bytes):
     return build
 
 
+def _frames(ctx, n: int) -> list:
+    """n distinct frames of one static view: the session recording's first pose, each with its own grey noise."""
+    import cv2
+
+    base = cv2.imread(str(ctx["rec"] / "images" / "000" / "00.png"), cv2.IMREAD_GRAYSCALE).astype(float)
+    rng = np.random.default_rng(7)
+    return [np.clip(base + rng.normal(scale=2.0, size=base.shape), 0, 255).astype(np.uint8) for _ in range(n)]
+
+
 def _noise_set(tmp: Path, ctx, n=4, cx=515.3) -> Path:
-    """A ROS-I noise-qualification set of n frames (copies of one pose's two frames: they differ by noise)."""
+    """A ROS-I noise-qualification set of n frames of one static view (distinct by their noise)."""
+    import cv2
+
     d = tmp / "noise"
     (d / "images").mkdir(parents=True)
-    for k in range(n):
-        shutil.copyfile(ctx["rec"] / "images" / "000" / f"0{k % 2}.png", d / "images" / f"{k}.png")
+    for k, img in enumerate(_frames(ctx, n)):
+        cv2.imwrite(str(d / "images" / f"{k}.png"), img)
     doc = {"data": [{"image": f"images/{k}.png"} for k in range(n)],
            "intrinsics": {"fx": 1100.0, "fy": 1100.0, "cx": cx, "cy": 380.2},
            "target_finder": {"type": "CharucoGridTargetFinder", "rows": 5, "cols": 7, "chessboard_dim": 0.025,
@@ -258,11 +269,14 @@ def calib_symlink(target: str):
 
 def noise_symlink(tmp, ctx):
     """A plain image folder (--target, --camera) with a frame linked to a file outside it."""
+    import cv2
+
     d = tmp / "frames"
     d.mkdir()
+    imgs = _frames(ctx, 4)
     for k in range(3):
-        shutil.copyfile(ctx["rec"] / "images" / "000" / f"0{k % 2}.png", d / f"{k}.png")
-    shutil.copyfile(ctx["rec"] / "images" / "000" / "01.png", tmp / "outside" / "secret.png")
+        cv2.imwrite(str(d / f"{k}.png"), imgs[k])
+    cv2.imwrite(str(tmp / "outside" / "secret.png"), imgs[3])
     (d / "3.png").symlink_to(tmp / "outside" / "secret.png")
     cam = {"format": "vision_calib.camera/1", "width": 1024, "height": 768, "fx": 1100.0, "fy": 1100.0, "cx": 515.3,
            "cy": 380.2, "dist": [-0.05, 0.02, 0.0, 0.0, 0.0]}
@@ -491,6 +505,8 @@ def urdf_meshes(tmp, ctx):
 
 
 ERR, OK, WARN = "error", "correct", "warned"
+#: the child waits 2 s (not study.run.WORKER_WAIT_S) for a Dask worker
+WAIT_2S = "import importlib\nimportlib.import_module(\"vision_calib.study.run\").WORKER_WAIT_S = 2.0\n"
 LIMIT = r"exceeds the limit of 50 Mpx"
 
 CASES = [
@@ -527,10 +543,10 @@ CASES = [
             r"Dask scheduler tcp://127.0.0.1:9 \(from .*sched.json\): cannot connect", timeout=90, on_timeout="hang"),
     Hostile("study-scheduler-no-workers", study_with_scheduler("no-workers"), ERR,
             r"Dask scheduler tcp://127.0.0.1:\d+: no worker connected within 2 s", timeout=60, on_timeout="hang",
-            env={"VISION_CALIB_WORKER_WAIT_S": "2"}),
+            prelude=WAIT_2S),
     Hostile("study-scheduler-file-no-workers", study_with_scheduler("file-no-workers"), ERR,
             r"Dask scheduler tcp://127.0.0.1:\d+ \(from .*\.json\): no worker connected within 2 s", timeout=60,
-            on_timeout="hang", env={"VISION_CALIB_WORKER_WAIT_S": "2"}),
+            on_timeout="hang", prelude=WAIT_2S),
     Hostile("study-1e6-runs", study_runs(1_000_000), ERR,
             r"1000000 runs: estimated .* h .*--yes", timeout=60),
     Hostile("study-1e6-runs-bound-too-low", study_runs(1_000_000, max_hours=2), ERR,
