@@ -85,14 +85,14 @@ def test_an_unreachable_scheduler_is_named(tmp_path, monkeypatch):
 
 
 def test_a_study_beyond_the_machine_stops_with_its_estimate(tmp_path, monkeypatch):
-    monkeypatch.setattr(B, "CONFIRM_HOURS", 0.01)  # 36 s: 1000 runs of ~0.34 s on 2 workers exceed it
+    monkeypatch.setattr(B, "CONFIRM_HOURS", 0.01)  # 36 s: 1000 runs of ~0.16 s on 2 workers exceed it
     p = _spec(tmp_path, reps=1000)
     with pytest.raises(ConfigError, match=r"s.yaml: 1000 runs: estimated 0.0\d+ h on 2 workers .*of run files .*"
                                           r"more than 0.01 h: give --yes"):
         run_study(p, tmp_path / "out", workers=2, plots=False)
     assert not (tmp_path / "out" / "runs").exists()
     est = B.check_study(load_study(p), 1000, 2, tmp_path / "out", yes=True)
-    assert est["seconds"] == pytest.approx(1000 * (B.SYNTH_RUN_S + 12 * B.SYNTH_S_PER_POSE) / 2)
+    assert est["seconds"] == pytest.approx(1000 * (B.STUDY_RUN_S + 12 * B.STUDY_S_PER_POSE) / 2)
     assert est["disk_bytes"] == 1000 * B.RUN_FILE_BYTES
     # the study file's bound: a longer one lets it run, a shorter one names it
     B.check_study(load_study(_spec(tmp_path, reps=1000, max_hours=1)), 1000, 2, tmp_path / "out")
@@ -121,7 +121,8 @@ def test_pose_counts_beyond_the_machine(capsys):
     assert B.check_pose_count("identify-synthetic", 10**8, yes=True)["bytes"] > 1e12
     assert B.check_pose_count("identifiability", 1000)["seconds"] < 2
     assert B.check_pose_count("identify-synthetic", None) == {}
-    with pytest.raises(ConfigError, match=r"simulate --poses 100000: .* \(90 ms per image"):
-        B.check_pose_count("simulate", 10**5, frames=2, workers=2)
+    with pytest.raises(ConfigError, match=r"simulate --poses 1000000: .* \(28 kB and 34 ms per pose of 2 frames on 2 "
+                                          r"workers"):
+        B.check_pose_count("simulate", 10**6, frames=2, workers=2)
     assert main(["identifiability", str(ROOT / "scenes" / "rx90_eye_in_hand.yaml"), "--poses", "100000000"]) == 2
     assert "give --yes to run it anyway, or fewer poses" in capsys.readouterr().err

@@ -125,23 +125,29 @@ def budget_text(spec: StudySpec, rows: list[dict]) -> list[str]:
 # (MEMORY_SHARE of the physical memory, os.sysconf; the free disk space of the output folder), the command stops
 # with exit 2 and the estimate unless ``--yes`` is given.
 #
-# Cost model: measured once on the development machine (2 cores, shared; Python 3.11, numpy 2, OpenBLAS 1 thread)
-# and written down here, not timed in tests:
-#   identify-synthetic rx90_eye_in_hand --poses 5000 / 20000 / 40000: 12.8 / 61.9 / 113 s, peak RSS 293 / 691 /
-#     1208 MB  -> slope 3.3 ms and 26.5 kB per pose (SYNTH_*);
-#   identifiability rx90_eye_in_hand --poses 5000 / 20000: 3.3 / 20.3 s, 201 / 367 MB -> 1.1 ms, 11 kB per pose;
-#   study runs (run_study, workers=1, 3 repetitions): synthetic h4_vision 12 / 81 poses 0.65 / 0.46 s per run,
-#     rx90 12 / 100 poses 0.33 / 0.54 s; images h4_vision 12 / 40 poses x 1 frame 7.5 / 10.0 s per run
-#     -> 0.3 s + 3.3 ms per pose (synthetic), 6.5 s + 0.09 s per image (images); runs/<key>.json 2.9-3.6 kB.
-#   (Rounded up; the measuring script: ``python -c`` over identify_synthetic_json / identifiability_json /
-#   run_study with resource.getrusage(RUSAGE_SELF).ru_maxrss.)
+# Cost model: measured once on the development machine (2 cores shared with other jobs; Python 3.11, numpy 2,
+# OpenBLAS 1 thread) and written down here, never timed in tests:
+#   identify-synthetic rx90_eye_in_hand --poses 5000 / 20000 (/ 40000): 15.8 / 64.1 (/ 113) s, peak RSS 293 / 698
+#     (/ 1208) MB -> slope 3.2 ms and 27 kB per pose (SYNTH_*, rounded up);
+#   identifiability rx90_eye_in_hand --poses 5000 / 20000: 4.4 / 24.4 s, 201 / 367 MB -> 1.3 ms, 11 kB per pose;
+#   study runs (study.cells.run_cell after one warm-up run, mean of 3): synthetic rx90 12 / 100 / 400 poses 0.135 /
+#     0.179 / 0.530 s, h4_vision 15 / 71 poses 0.082 / 0.099 s -> 0.15 s + 1.2 ms per pose (STUDY_*); images
+#     h4_vision 20 x 1 / 40 x 1 / 20 x 10 poses x frames 8.6 / 9.2 / 8.2 s -> 8 s + 0.03 s per pose (rendered) +
+#     2 ms per frame (the resolution of the measurement: 180 more frames changed a run by < 0.4 s) (IMAGES_RUN_S,
+#     POSE_RENDER_S, FRAME_S); the shipped h4_image_noise study (540 runs) took 28 min on 2 workers, this model
+#     says 44;
+#   runs/<key>.json: 2.9-3.6 kB.
+#   (How: ``python -c`` over identify_synthetic_json / identifiability_json / run_cell, time.perf_counter and
+#   resource.getrusage(RUSAGE_SELF).ru_maxrss, each in a fresh process.)
 SYNTH_S_PER_POSE = 3.5e-3
 SYNTH_BYTES_PER_POSE = 28e3
-IDENT_S_PER_POSE = 1.2e-3
+IDENT_S_PER_POSE = 1.4e-3
 IDENT_BYTES_PER_POSE = 12e3
-SYNTH_RUN_S = 0.3
-IMAGES_RUN_S = 6.5
-IMAGE_S = 0.09
+STUDY_RUN_S = 0.15
+STUDY_S_PER_POSE = 1.2e-3
+IMAGES_RUN_S = 8.0
+POSE_RENDER_S = 0.03
+FRAME_S = 2e-3
 #: one run's file (runs/<key>.json), and its row kept in memory until the tables are written (a dict of ~60 floats)
 RUN_FILE_BYTES = 4e3
 RUN_ROW_BYTES = 8e3
@@ -151,10 +157,10 @@ BASE_BYTES = 250e6
 CONFIRM_HOURS = 1.0
 #: an estimate above this share of the machine's physical memory asks for --yes
 MEMORY_SHARE = 0.5
-#: pose counts per command: (seconds, bytes) per pose; images: per image (frames x poses)
+#: pose counts per command: (seconds, bytes) per pose (simulate: the render, frames come on top: FRAME_S each)
 POSE_COSTS = {"identify-synthetic": (SYNTH_S_PER_POSE, SYNTH_BYTES_PER_POSE),
               "identifiability": (IDENT_S_PER_POSE, IDENT_BYTES_PER_POSE),
-              "simulate": (IMAGE_S, SYNTH_BYTES_PER_POSE)}
+              "simulate": (POSE_RENDER_S, SYNTH_BYTES_PER_POSE)}
 
 
 def _gb(b: float) -> str:
@@ -207,14 +213,18 @@ def check_pose_count(command: str, n_poses: int | None, frames: int | None = 1, 
 
         frames = int(load_scene(scene).measurement.frames) if scene is not None else 1
     s_per, b_per = POSE_COSTS[command]
-    units = n_poses * (frames if command == "simulate" else 1)
-    seconds = units * s_per / (max(workers, 1) if command == "simulate" else 1)
+    if command == "simulate":  # rendered and measured on the workers
+        s_per = s_per + frames * FRAME_S
+        seconds = n_poses * s_per / max(workers, 1)
+    else:
+        seconds = n_poses * s_per
     memory = BASE_BYTES + n_poses * b_per
     est = {"seconds": seconds, "bytes": memory}
     over = _over(seconds, memory, None, None)
     if over and not yes:
-        per = (f"{s_per * 1e3:.3g} ms per image" if command == "simulate" else
-               f"{b_per / 1e3:.3g} kB and {s_per * 1e3:.3g} ms per pose")
+        per = (f"{b_per / 1e3:.3g} kB and {s_per * 1e3:.3g} ms per pose"
+               + (f" of {frames} frame{'s' if frames > 1 else ''} on {max(workers, 1)} workers"
+                  if command == "simulate" else ""))
         raise ConfigError(f"{command} --poses {n_poses}: estimated {_gb(memory)} of memory and {_hours(seconds)} "
                           f"({per}, measured: vision_calib/study/budget.py), {' and '.join(over)}: give --yes to "
                           "run it anyway, or fewer poses")
@@ -237,9 +247,9 @@ def study_estimate(spec: StudySpec, n_runs: int, workers: int, n_rows: int | Non
         n = int(s.get("n_poses") or defaults["n_poses"])
         if spec.mode == "images":
             f = int(s.get("frames") or defaults["frames"])
-            cpu += IMAGES_RUN_S + IMAGE_S * n * f
+            cpu += IMAGES_RUN_S + n * (POSE_RENDER_S + f * FRAME_S)
         else:
-            cpu += SYNTH_RUN_S + SYNTH_S_PER_POSE * n
+            cpu += STUDY_RUN_S + STUDY_S_PER_POSE * n
         peak = max(peak, n * SYNTH_BYTES_PER_POSE)
     per_run = cpu / max(len(cells), 1)
     w = max(int(workers), 1)
