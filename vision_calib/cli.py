@@ -92,7 +92,14 @@ def _scheduler(text: str) -> str:
     if text.startswith(("http://", "https://")):
         raise argparse.ArgumentTypeError(f"{text!r} looks like the Dask dashboard (http); give the scheduler "
                                          "address tcp://host:port (default port 8786)")
-    if "://" not in text and Path(text).is_file():
+    if "://" not in text and Path(text).is_file():  # a scheduler file: its JSON "address" is read (study/run.py)
+        from .errors import ConfigError
+        from .study.run import scheduler_address
+
+        try:
+            scheduler_address(text)
+        except ConfigError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
         return text
     raise argparse.ArgumentTypeError(f"expected tcp://host:port or an existing scheduler file (JSON written by "
                                      f"dask-scheduler --scheduler-file), got {text!r}")
@@ -108,8 +115,14 @@ def _add_common(p, poses=True):
     p.add_argument("scene", help="scene YAML file (see scenes/)")
     if poses:
         p.add_argument("--poses", type=_count, default=None, help="number of identification poses (default: scene's)")
+        _add_yes(p)
     p.add_argument("--seed", type=_seed, default=None, help="random seed (default: scene's, else 0)")
     _add_json(p)
+
+
+def _add_yes(p):
+    p.add_argument("--yes", action="store_true", help="run even when the estimated time or memory exceeds this "
+                                                      "machine's (otherwise: exit 2 with the estimate)")
 
 
 def _add_json(p):
@@ -254,6 +267,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scheduler", type=_scheduler, default=None,
                    help="Dask scheduler address (tcp://host:port) or scheduler file")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    _add_yes(p)
     _add_json(p)
 
     p = _command(sub, "import-visp", "convert a ViSP hand-eye folder into a recorded folder", """
@@ -374,10 +388,20 @@ def _positional_out(args, parser) -> None:
 
 
 # --------------------------------------------------------------------------------------------- the commands
+def _check_size(args) -> None:
+    """--poses against the machine (study/budget.py check_pose_count): exit 2 with the estimate unless --yes."""
+    from .study.budget import check_pose_count
+
+    check_pose_count(args.command, getattr(args, "poses", None), getattr(args, "frames", None),
+                     getattr(args, "workers", None) or os.cpu_count() or 1, getattr(args, "yes", False),
+                     scene=getattr(args, "scene", None))
+
+
 def _cmd_identifiability(args) -> int:
     from .experiment.synthetic import identifiability_json
     from .serialize import to_json
 
+    _check_size(args)
     out = identifiability_json(args.scene, residual=args.residual, n_poses=args.poses, seed=args.seed,
                                all_params=args.all_params)
     print(to_json(out) if args.json else _summary_identifiability(out))
@@ -388,6 +412,7 @@ def _cmd_identify_synthetic(args) -> int:
     from .experiment.synthetic import identify_synthetic_json
     from .serialize import to_json
 
+    _check_size(args)
     out = identify_synthetic_json(
         args.scene, method=args.method, residual=args.residual, n_poses=args.poses,
         sigma_mm=args.sigma_mm, sigma_deg=args.sigma_deg, seed=args.seed,
@@ -400,6 +425,7 @@ def _cmd_simulate(args) -> int:
     """simulate and demo (demo: the default scene, no --poses / --frames / --workers)."""
     from .experiment.image_chain import start_fork_server
 
+    _check_size(args)
     start_fork_server()  # the image workers' imports run beside ours (issue 11: demo wall time)
     from .experiment.simulate import run_simulation, DEFAULT_SCENE
 
@@ -457,7 +483,7 @@ def _cmd_study(args) -> int:
     from .study import run_study
 
     res = run_study(args.spec, out_dir=args.out, workers=args.workers, scheduler=args.scheduler,
-                    progress=not args.json, plots=not args.no_plots)
+                    progress=not args.json, plots=not args.no_plots, yes=args.yes)
     print(to_json(res) if args.json else res["summary_text"])
     return 0
 

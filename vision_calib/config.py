@@ -38,6 +38,11 @@ from .shipped import data_dir, shipped_tree_of
 
 #: folders the user allowed explicitly (``--allow-path DIR`` of every command sets it; os.pathsep-separated)
 ALLOW_ENV = "VISION_CALIB_ALLOW_PATHS"
+#: the user's pixel limit of an image file, in megapixels (:func:`max_image_pixels`)
+MAX_IMAGE_ENV = "VISION_CALIB_MAX_IMAGE_MPX"
+#: default pixel limit of an image file [Mpx]: 50 Mpx is above every machine-vision camera we calibrate with
+#: (8K = 33 Mpx) and decodes in 50 MB grey; the detectors then take a few hundred MB
+DEFAULT_MAX_IMAGE_MPX = 50.0
 
 LENGTH_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
 ANGLE_UNITS = {"rad": 1.0, "deg": 3.141592653589793 / 180.0}
@@ -90,6 +95,31 @@ def allowed_dirs() -> tuple[Path, ...]:
     set by ``--allow-path``), resolved."""
     extra = tuple(Path(p).resolve() for p in os.environ.get(ALLOW_ENV, "").split(os.pathsep) if p)
     return (data_dir().resolve(),) + extra
+
+
+def max_image_pixels() -> int:
+    """The largest image (width x height, px) any reader decodes: :data:`DEFAULT_MAX_IMAGE_MPX`, or the user's
+    :data:`MAX_IMAGE_ENV` (megapixels, > 0; through the environment so that worker processes inherit it).
+    ConfigError naming the variable when its value is not a positive number."""
+    text = os.environ.get(MAX_IMAGE_ENV, "").strip()
+    if not text:
+        return int(DEFAULT_MAX_IMAGE_MPX * 1e6)
+    try:
+        v = float(text)
+        if not (0 < v < 1e6):
+            raise ValueError
+    except ValueError:
+        raise ConfigError(f"environment variable {MAX_IMAGE_ENV}={text!r}: expected a number of megapixels > 0 "
+                          f"(default {DEFAULT_MAX_IMAGE_MPX:g})") from None
+    return int(v * 1e6)
+
+
+def machine_memory_bytes() -> int:
+    """This machine's physical memory [bytes] (``os.sysconf``), 0 where it cannot be read."""
+    try:
+        return int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):
+        return 0
 
 
 @contextmanager

@@ -3,6 +3,7 @@
 simulator with the fitted settings gives the measured corner and pose scatter; the error cases; the real photo."""
 
 import json
+import re
 import os
 from pathlib import Path
 
@@ -141,8 +142,11 @@ def test_input_errors_name_the_image(tmp_path):
         run(a / "images")
     b = tmp_path / "sizes"
     _write_frames(b, [imgs[0], imgs[1], cv2.resize(imgs[2], (320, 240))])
-    with pytest.raises(DataError, match=r"frame 2: .*2\.png: image size 320x240 differs from the first image"):
-        run(b / "images")
+    res = measure_noise(b / "images", tmp_path / "out_b", target=CHARUCO, camera=cam, sim_frames=2)
+    assert res["n_frames"] == 2 and len(res["skipped_frames"]) == 1  # the odd one skipped, named (issue 28)
+    assert re.search(r"2\.png: image size 320x240 differs from the majority 640x480 \(2 of 3 frames\)",
+                     res["skipped_frames"][0])
+    assert "warning: frame skipped: " in res["summary_text"]
     c = tmp_path / "blank"
     _write_frames(c, [imgs[0], np.full_like(imgs[1], 128), imgs[2]])
     with pytest.raises(DataError, match=r"frame 1: .*1\.png: target not detected"):

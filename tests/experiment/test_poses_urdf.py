@@ -88,7 +88,7 @@ def test_urdf_robot_processed_from_a_minimal_scene(tmp_path, capsys, how):
     assert len(rows) == 30  # 4 per revolute joint + 6 (Everett, Driels & Mooring)
     z = np.array([(r["identified"] - x_true[names.index(r["name"])]) / r["std"] for r in rows])
     assert np.all(np.abs(z) < 4.5) and 0.4 < np.sqrt(np.mean(z**2)) < 1.8, z
-    kf = rep["kfold"]["overall"]
+    kf = rep["holdout"]["overall"]
     assert kf["n_poses"] == 40 and kf["after"]["position_rms_mm"] < 0.3 * kf["before"]["position_rms_mm"]
 
 

@@ -114,20 +114,98 @@ def check_motion(setup: Setup, meas: Measurements, where: str, scale_hint: str) 
     return out
 
 
-def duplicate_poses(meas: Measurements) -> list[str]:
-    """Warnings naming the poses whose joint readings and measured pose both equal another pose's (to 1e-12):
-    one measurement under several ids (a copied row or image folder), which the fit would count several times."""
-    groups: dict = {}
-    for k, lab in enumerate(meas.labels or range(len(meas.joints))):
-        key = (np.round(np.asarray(meas.joints[k], float), 12).tobytes(),
-               np.round(np.asarray(meas.T_cam_target[k], float), 12).tobytes())
-        groups.setdefault(key, []).append(str(lab))
-    dup = [g for g in groups.values() if len(g) > 1]
-    if not dup:
-        return []
-    shown = "; ".join(", ".join(g) for g in dup[:5]) + ("; ..." if len(dup) > 5 else "")
-    return [f"{sum(len(g) - 1 for g in dup)} poses repeat another's joints and measured pose exactly (the same "
-            f"measurement under another id, counted twice by the fit): {shown}"]
+#: joint readings that differ by at most this on every joint [rad, or m for a prismatic joint] are "the same
+#: joints" (an encoder count of a 20-bit encoder is 6e-6 rad; a re-commanded pose reads within a few counts)
+SAME_JOINTS_TOL = 1e-4
+#: a pose at the same joints as an earlier one whose measured pose differs from it by less than this Mahalanobis^2
+#: (difference whitened by the sum of both covariances) is a *copy* of it, not a second measurement: two independent
+#: measurements differ by about sqrt(2) x their noise (chi-square, 6 dof; below 0.01 with probability 2e-8,
+#: 3 dof: 6e-5), a copied row or image folder (even with rounding or 1e-6 jitter) by nothing
+COPY_CHI2 = 0.01
+#: the start of the rejection reason of a copy (:func:`drop_copies`; :func:`duplicate_poses` finds them by it)
+COPY_REASON = "a copy of pose"
+
+
+def same_joint_groups(meas: Measurements, tol: float = SAME_JOINTS_TOL) -> np.ndarray:
+    """(N,) int: one group number per pose, shared by the poses whose joint readings all agree within ``tol``
+    (transitively): repeated measurements of one robot pose. The held-out folds keep a group together
+    (``holdout.fold_indices``): a repeat in the training set would flatter its twin's held-out error."""
+    J = np.asarray(meas.joints, float).reshape(len(meas.joints), -1)
+    n = len(J)
+    parent = list(range(n))
+
+    def root(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    if n and J.shape[1]:
+        order = np.argsort(J[:, 0], kind="stable")
+        first = J[order, 0]
+        for a in range(n):
+            b = a + 1
+            while b < n and first[b] - first[a] <= tol:
+                i, j = order[a], order[b]
+                if np.max(np.abs(J[i] - J[j])) <= tol:
+                    parent[root(max(i, j))] = root(min(i, j))
+                b += 1
+    roots = [root(i) for i in range(n)]
+    ids = {r: k for k, r in enumerate(dict.fromkeys(roots))}
+    return np.array([ids[r] for r in roots], int)
+
+
+def _copy_chi2(meas: Measurements, i: int, j: int) -> float:
+    d = F.pose_error(meas.T_cam_target[i], meas.T_cam_target[j])
+    C = np.asarray(meas.cov[i], float) + np.asarray(meas.cov[j], float)
+    return float(d @ np.linalg.pinv(C) @ d)
+
+
+def drop_copies(meas: Measurements) -> tuple[Measurements, list[tuple[str, str]]]:
+    """(the measurements with every *copy* removed, [(label, reason)] of the copies): a pose whose joints equal an
+    earlier pose's (:data:`SAME_JOINTS_TOL`) and whose measured pose equals it within a small fraction of the noise
+    (:data:`COPY_CHI2`) is one measurement under two ids (a copied row or image folder, with or without jitter); the
+    fit would count it twice and report a std 1/sqrt(2) too small, and the held-out validation would predict it
+    from its own copy. The first of each set is kept."""
+    groups = same_joint_groups(meas)
+    labels = meas.labels or tuple(str(k) for k in range(len(groups)))
+    kept, copies = [], []
+    members: dict = {}
+    for i, g in enumerate(groups):
+        orig = next((k for k in members.get(g, ()) if _copy_chi2(meas, k, i) < COPY_CHI2), None)
+        if orig is None:
+            kept.append(i)
+            members.setdefault(g, []).append(i)
+        else:
+            copies.append((str(labels[i]), f"{COPY_REASON} {labels[orig]} (the same joints and measured pose, within "
+                                           f"{np.sqrt(_copy_chi2(meas, orig, i)):.2g} sigma): one measurement under "
+                                           "two ids, counted once"))
+    if not copies:
+        return meas, []
+    return meas.subset(kept), copies
+
+
+def duplicate_poses(meas: Measurements, rejected=()) -> list[str]:
+    """Warnings naming (1) the copies :func:`drop_copies` removed (found among ``rejected`` [(label, reason)]) and
+    (2) the poses of ``meas`` measured again at the same joints (genuine repeats: kept, each set in one held-out
+    fold)."""
+    out = []
+    copies = [(lab, why) for lab, why in rejected if str(why).startswith(COPY_REASON)]
+    if copies:
+        shown = "; ".join(f"{lab} = {why[len(COPY_REASON) + 1:].split(' ', 1)[0]}" for lab, why in copies[:8])
+        out.append(f"{len(copies)} pose{'s are copies' if len(copies) > 1 else ' is a copy'} of another pose (the same "
+                   f"joints and measured pose, within a fraction of the noise: the same measurement under another "
+                   f"id), counted once: {shown}" + ("; ..." if len(copies) > 8 else ""))
+    groups = same_joint_groups(meas)
+    labels = meas.labels or tuple(str(k) for k in range(len(groups)))
+    sets = [[str(labels[i]) for i in np.flatnonzero(groups == g)] for g in np.unique(groups)]
+    sets = [s for s in sets if len(s) > 1]
+    if sets:
+        shown = "; ".join(", ".join(s) for s in sets[:5]) + ("; ..." if len(sets) > 5 else "")
+        out.append(f"{sum(len(s) - 1 for s in sets)} poses were measured again at the same joints as another "
+                   f"(within {SAME_JOINTS_TOL:g} rad): kept as repeated measurements, each set in one held-out fold: "
+                   f"{shown}")
+    return out
 
 
 def drop_degenerate(meas: Measurements) -> tuple[Measurements, list]:

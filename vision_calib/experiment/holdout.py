@@ -41,10 +41,21 @@ INTERVAL_LEVEL = 0.95
 FD_STEP = 1e-4
 
 
-def fold_indices(n: int, folds: int, seed: int) -> list[np.ndarray]:
-    """k sorted index arrays partitioning range(n) (seeded permutation, sizes differing by at most 1)."""
+def fold_indices(n: int, folds: int, seed: int, groups=None) -> list[np.ndarray]:
+    """k sorted index arrays partitioning range(n) (seeded permutation, sizes differing by at most 1).
+    groups: (n,) a group number per index (``checks.same_joint_groups``: poses measured at the same joints); the
+    members of a group always share a fold (a repeat in the training set would flatter its twin's held-out error):
+    the groups in the order the permutation first meets them, each into the fold with the fewest indices so far.
+    Without groups, or with n distinct ones, the split is the ungrouped one (the same folds for the same seed)."""
     perm = np.random.default_rng(int(seed)).permutation(n)
-    return [np.sort(p) for p in np.array_split(perm, folds)]
+    if groups is None or len(set(np.asarray(groups).tolist())) == n:
+        return [np.sort(p) for p in np.array_split(perm, folds)]
+    groups = np.asarray(groups)
+    parts: list[list[int]] = [[] for _ in range(folds)]
+    for g in dict.fromkeys(groups[perm].tolist()):
+        f = min(range(folds), key=lambda k: len(parts[k]))
+        parts[f] += np.flatnonzero(groups == g).tolist()
+    return [np.sort(np.array(p, int)) for p in parts]
 
 
 def error_stats(dp_mm: np.ndarray, dr_deg: np.ndarray | None) -> dict:
@@ -161,14 +172,17 @@ def holdout_validation(setup: Setup, meas: Measurements, method: str, residual: 
     if unknown:
         raise ValueError(f"held-out validation: outliers {sorted(unknown)} are not poses of the data")
     n = len(labels)
-    k = int(min(folds or DEFAULT_FOLDS, n))
+    from .checks import same_joint_groups
+
+    groups = same_joint_groups(meas)  # repeats at the same joints share a fold
+    k = int(min(folds or DEFAULT_FOLDS, len(set(groups.tolist()))))
     kind = _eval_kind(setup)
     fitted_setup = fitted_setup or setup
     base = set(analysis.base_parameters)  # (a prepared setup may have more: the H4's measured tilts)
     params = setup.params.only_free([nm for nm in setup.params.names if nm in base])
     per_fold, fails = [], []
     rb, ra, tb, ta, idx_all = [], [], [], [], []
-    parts = fold_indices(n, k, seed) if k >= 2 else []
+    parts = fold_indices(n, k, seed, groups) if k >= 2 else []
     for f, test in enumerate(parts):
         train = np.array(sorted(i for j, p in enumerate(parts) if j != f for i in p if labels[i] not in flagged), int)
         rec = {"fold": f + 1, "n_train": int(len(train)), "n_test": int(len(test)),

@@ -199,7 +199,11 @@ def pose_job(state: dict, job: tuple) -> tuple[int, PoseMeasurement, dict]:
         d.mkdir(parents=True, exist_ok=True)
         for k, fr in enumerate(frames):
             ok, buf = cv2.imencode(".png", fr)
-            (d / f"{k:02d}.png").write_bytes(buf.tobytes())
+            f = d / f"{k:02d}.png"
+            try:
+                f.write_bytes(buf.tobytes())
+            except OSError as exc:  # ENOSPC from write() names no file: name the frame that could not be written
+                raise OSError(exc.errno, exc.strerror or str(exc), str(f)) from exc
     t3 = clock()
     pm, _ = measure_images(frames, state["target"], state["intr"], pose_id=pose_id, config=MeasureConfig(mode=averaging))
     t4 = clock()

@@ -51,12 +51,14 @@ _CI = f"ci{int(LEVEL * 100)}"
 
 @dataclass(frozen=True)
 class NoiseInput:
-    """images: frame files in order; camera; target (TargetSpec); source: what was read (for messages)."""
+    """images: frame files in order; camera; target (TargetSpec); source: what was read (for messages); skipped:
+    the reasons of the frames left out (another size than the majority's: ``io.images.folder_sizes``)."""
 
     images: tuple
     camera: CameraIntrinsics
     target: TargetSpec
     source: str
+    skipped: tuple = ()
 
 
 def read_noise_input(folder: str | Path, target: str | Path | None = None, camera: str | Path | None = None,
@@ -64,7 +66,7 @@ def read_noise_input(folder: str | Path, target: str | Path | None = None, camer
     """The frames, camera and target of a noise set (module docstring). target / camera: paths of a target YAML /
     camera.yaml (calibrate-camera's) overriding the ROS-I file's, required for a plain image folder."""
     from ..io.camera_file import load_camera_for_images
-    from ..io.images import image_size
+    from ..io.images import check_principal_point, folder_sizes
     from ..measure.intrinsics import find_images
     from ..targets import load_target
     from ..targets.spec import target_from_dict
@@ -81,20 +83,44 @@ def read_noise_input(folder: str | Path, target: str | Path | None = None, camer
         if target is None or camera is None:
             raise ConfigError(f"{folder}: no cal_data.yaml (ROS-I noise-qualification layout): give the target and "
                               "the camera: --target TARGET.yaml --camera CAMERA.yaml")
-        images, source, spec = find_images(folder), str(folder), load_target(target)
-    size = image_size(images[0])
+        images = find_images(folder, allow_symlinks, hint="--allow-symlinks, or --allow-path DIR")
+        source, spec = str(folder), load_target(target)
+    size, sizes, odd = folder_sizes(images, "frames")  # headers only: a frame beyond the pixel limit is refused
     if size is None:
         raise DataError(f"{images[0]}: unreadable image (not an image file, or corrupt)")
+    images = [p for p in images if sizes.get(p, size) == size]  # the odd-sized frames skipped (named)
     if camera is not None:
         cam = load_camera_for_images(camera, size, "--camera")
     else:
         k = s["intrinsics"]
+        check_principal_point(k, size, s["intrinsics_where"])
         cam = CameraIntrinsics(size[0], size[1], k["fx"], k["fy"], k["cx"], k["cy"], tuple(s["dist"]))
-    return NoiseInput(tuple(Path(p) for p in images), cam, spec, source)
+    _check_memory(len(images), size)
+    return NoiseInput(tuple(Path(p) for p in images), cam, spec, source, tuple(odd))
+
+
+#: bytes per pixel the noise measurement holds at once besides the frames (uint8 each): the pixel accumulator's
+#: float64 sum, sum of squares and mean, the mean frame and rendered images of the fit (counted from the code:
+#: 3 + 2 float64 arrays = 40 B/px, rounded up)
+NOISE_BYTES_PER_PIXEL = 48
+
+
+def _check_memory(n_frames: int, size) -> None:
+    """DataError when the frames (decoded at once) and the measurement's working arrays need more than half this
+    machine's memory (``config.machine_memory_bytes``)."""
+    from ..config import machine_memory_bytes
+
+    need = size[0] * size[1] * (n_frames + NOISE_BYTES_PER_PIXEL)
+    have = machine_memory_bytes()
+    if have and need > have / 2:
+        raise DataError(f"noise: {n_frames} frames of {size[0]}x{size[1]} px need about {need / 2**30:.3g} GiB of "
+                        f"memory, more than half of this machine's {have / 2**30:.3g} GiB: give fewer or smaller "
+                        "frames")
 
 
 def _load_frames(inp: NoiseInput) -> list:
-    """(H, W) uint8 frames; DataError naming an unreadable image or one of another size than the first."""
+    """(H, W) uint8 frames; DataError naming an unreadable image or one of another size than the camera's
+    (their headers were checked by :func:`read_noise_input`: nothing beyond the pixel limit is decoded)."""
     out = []
     for i, p in enumerate(inp.images):
         img, why = load_gray(p)
@@ -176,7 +202,7 @@ def measure_noise(folder: str | Path, out_dir: str | Path, target: str | Path | 
     dets = detect_batch(imgs, inp.target, inp.camera, detect_config)
     ids_all = inp.target.corner_points()[0]
     doc = {"format": FORMAT, "source": relative_ref(inp.source, out_dir), "camera": inp.camera.to_dict(),
-           "target": inp.target.to_dict(), "n_frames": len(imgs),
+           "target": inp.target.to_dict(), "n_frames": len(imgs), "skipped_frames": list(inp.skipped),
            "frames": [{"image": relative_ref(p, out_dir), "valid": bool(d.valid), "reason": d.reason,
                        "n_corners": d.n_corners} for p, d in zip(inp.images, dets)]}
     bad = [d for d in dets if not d.valid]
@@ -336,7 +362,8 @@ def _fmt_scatter(d: dict) -> str:
 def summary_text(doc: dict, inp: NoiseInput) -> str:
     """The printed summary of a noise.json dict."""
     c, pn, fb, sim = doc["corner_noise"], doc["pixel_noise"], doc["image_fit"], doc["simulator"]
-    lines = [f"noise: {doc['n_frames']} frames of {inp.source} ({inp.camera.width}x{inp.camera.height}, target "
+    lines = [f"warning: frame skipped: {w}" for w in doc.get("skipped_frames") or ()]
+    lines += [f"noise: {doc['n_frames']} frames of {inp.source} ({inp.camera.width}x{inp.camera.height}, target "
              f"{inp.target.kind} {inp.target.cols}x{inp.target.rows}, {c['n_corners']} points in every frame)",
              f"corner noise about each point's mean [px, {_CI[2:]} % CI]: x {_fmt_scatter(c['x'])}, y "
              f"{_fmt_scatter(c['y'])} (dof {c['x']['dof']} each); per point median "

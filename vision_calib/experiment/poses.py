@@ -20,7 +20,7 @@ import numpy as np
 from ..errors import ConfigError, DataError, VisionCalibError
 from ..io.measured_poses import PosePairs, chain_direction, misreadings, read_measured_poses
 from ..io.report import build_report, parameters_table, residual_stats, write_report
-from .checks import drop_inconsistent, duplicate_poses, motion_verdict
+from .checks import drop_copies, drop_inconsistent, duplicate_poses, motion_verdict
 from .gross import gross_failure
 from .holdout import flagged_labels, holdout_failure, holdout_lines, holdout_validation
 from .steps import check_method, identify_measurements
@@ -30,14 +30,15 @@ from .steps import check_method, identify_measurements
 SCALE_HINT = "the x,y,z columns of the CSV against the scene's robot lengths"
 
 
-def screen_motions(setup, mp):
+def screen_motions(setup, mp, meas=None):
     """The motion-consistency check of ``process`` on a measured-pose file (``checks.motion_verdict``; full
     poses only: position rows carry no rotation). Never raises: a refusal goes to the gross-error diagnosis
     (``gross.gross_failure``), which also runs the check on each alternative reading of the file.
     Returns (measurements without the poses whose motion does not follow their joints, [(label, reason)] of
     those, the check's record (None for positions), the refusal or None, the check as
-    ``f(Measurements) -> refusal | None`` (None for positions))."""
-    meas = mp.measurements
+    ``f(Measurements) -> refusal | None`` (None for positions)). meas: the file's measurements to check (default
+    all of them)."""
+    meas = mp.measurements if meas is None else meas
     if mp.position_only:
         return meas, [], None, None, None
 
@@ -74,7 +75,8 @@ def process_poses(path: str | Path, out_dir: str | Path | None, method: str | No
         raise ConfigError(f"{mp.path}: folds: {folds} folds need 2 <= folds <= {len(mp.ids)} (the number of poses)")
     residual = setup.residual_for(method, mp.residual)
     where = str(mp.path)
-    screened, inconsistent, motion, refusal, check = screen_motions(setup, mp)
+    meas, copies = drop_copies(meas)  # one measurement under two pose ids (a copied row): counted once
+    screened, inconsistent, motion, refusal, check = screen_motions(setup, mp, meas)
     ident = identify_measurements(setup, screened, method, residual, where=where,
                                   fix_unidentifiable=fix_unidentifiable, rejected=inconsistent)
     result, problem, rep, setup = ident.result, ident.problem, ident.analysis, ident.setup
@@ -96,10 +98,11 @@ def process_poses(path: str | Path, out_dir: str | Path | None, method: str | No
         settings={"poses": n, "frames": None, "method": method, "residual": residual, "measured": mp.measured,
                   "residual_of": chain_direction(setup), "units": mp.units, "noise": mp.sigma_source,
                   "folds": folds, "fold_seed": mp.seed},
-        measurements={"n_poses": n, "n_valid": n, "n_rejected": 0, "rejected": [], "measured": mp.measured,
+        measurements={"n_poses": n, "n_valid": n - len(copies), "n_rejected": len(copies),
+                      "rejected": [{"pose_id": lab, "reason": why} for lab, why in copies], "measured": mp.measured,
                       "noise": mp.sigma_source, "pose_ids": list(mp.ids)},
         identifiability=rep, parameters=parameters_table(ps.names, ps.nominal, None, result, ps.kinds), result=result,
-        identified=ident, warnings=duplicate_poses(meas), motion=motion,
+        identified=ident, warnings=duplicate_poses(meas, copies), motion=motion,
         residuals=residual_stats(result.residuals, problem.residual_kind), extra={"holdout": hold},
         timings={"identify": t_id, "total": time.perf_counter() - t0}, failure=failure)
     report["summary_text"] += "\n" + "\n".join(holdout_lines(hold))

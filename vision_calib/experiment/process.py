@@ -22,7 +22,7 @@ from ..io.recording import Recording, read_recording
 from ..io.report import (REPORT_VERSION, build_report, measurements_block, parameters_table, residual_stats,
                          write_report)
 from ..rig import Measurements, load_scene
-from .checks import duplicate_poses, screen_measurements
+from .checks import drop_copies, duplicate_poses, screen_measurements
 from .gross import gross_failure
 from .holdout import flagged_labels, holdout_failure, holdout_lines, holdout_validation
 from .steps import check_method, identify_measurements, rejection_summary
@@ -144,6 +144,7 @@ def process_once(folder: str | Path, out_dir: str | Path | None, method: str | N
                                    f"({rejection_summary(pms)}); identification needs more")
     t1 = time.perf_counter()
     where = str(rec.folder)
+    meas, copies = drop_copies(meas)  # one measurement under two pose ids (a copied image folder): counted once
     meas, inconsistent, motion = screen_measurements(
         setup, meas, where, "the recording's target.square_m (or marker/tag size), camera.fx/fy, and units.length "
         "of poses.csv")
@@ -181,7 +182,7 @@ def process_once(folder: str | Path, out_dir: str | Path | None, method: str | N
         settings={"poses": len(pms), "frames": rec.frames_per_pose, "method": method, "residual": residual,
                   "camera": rec.camera.to_dict()},
         measurements=mblock, warnings=[*rec.notes, *intr["warnings"], *([sens["warning"]] if sens["warning"] else []),
-                                       *duplicate_poses(meas), *([rwarn] if rwarn else [])],
+                                       *duplicate_poses(meas, copies), *([rwarn] if rwarn else [])],
         identifiability=rep,
         parameters=parameters_table(ps.names, ps.nominal, None, result, ps.kinds), result=result, identified=ident,
         motion=motion,

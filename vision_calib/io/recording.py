@@ -345,7 +345,7 @@ def read_recording(folder, allow_symlinks: bool = False) -> Recording:
     ids, poses = _read_poses_csv(cpath, pose_kind, Lf, Af)
     images, extra = _find_images(folder, ids, frames, allow_symlinks)
     camera, size = _recording_camera(cam_data, top.section("camera", {}), images)
-    if size is not None:  # every image header against the declared (or first image's) size
+    if size is not None:  # every image header against the declared (or the majority's) size
         from types import SimpleNamespace
 
         check_image_sizes([f for pid in ids for f in images.get(pid, ())], SimpleNamespace(width=size[0], height=size[1]),
@@ -367,17 +367,13 @@ def read_recording(folder, allow_symlinks: bool = False) -> Recording:
 
 
 def _recording_camera(d: dict, sec: Section, images: dict) -> tuple[CameraIntrinsics | None, tuple | None]:
-    """(intrinsics or None when no fx/fy/cx/cy are given, (width, height) of the first readable image).
-    width/height default to the images' size; a given size that differs is a ConfigError naming the key
-    and the image."""
-    from ..measure.detect import load_gray
+    """(intrinsics or None when no fx/fy/cx/cy are given, (width, height) of the images: the size most image
+    headers declare, nothing decoded). width/height default to the images' size; a given size that differs is a
+    ConfigError naming the key and an image of that size. An image beyond the pixel limit: DataError naming it."""
+    from .images import folder_sizes
 
-    size, first = None, None
-    for f in (f for files in images.values() for f in files):
-        img, _ = load_gray(f)
-        if img is not None:
-            size, first = (int(img.shape[1]), int(img.shape[0])), f
-            break
+    size, sizes, _ = folder_sizes([f for files in images.values() for f in files])
+    first = next((f for f, s in sizes.items() if s == size), None)
     for i, key in enumerate(("width", "height")):
         v = d.get(key)
         if v is not None and (isinstance(v, bool) or not isinstance(v, int) or v <= 0):

@@ -525,48 +525,95 @@ def write_report(out_dir, report: dict, setup=None, result=None, problem=None, e
     """report.json + summary.txt + report.html (+ calibrated_model.yaml with a setup; + residuals.png,
     parameters.png, and error_map.png with ``evaluations`` = {"before": Evaluation, "after": Evaluation}).
     overlays: an ``io.overlay.OverlaySource`` (the images of the run's poses): report.html then shows what the
-    detector found on the rejected and the worst poses. A failing plot, overlay or page costs a warning, never
-    the report."""
+    detector found on the rejected and the worst poses. A plot, overlay or page that fails to be *drawn* costs a
+    warning (in report.json and the printed summary), never the report. An output that cannot be *written* (an
+    OSError: a full disk, a read-only folder) is an error, never a warning: the calibrated model files of this run
+    are removed (no model without its report), report.json is still written when it can be (with the failure
+    among its warnings), and an OSError naming the file that could not be written is raised (exit 2)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     report["source"] = relative_source(report["source"], out)  # paths relative to report.json (io.portable)
     files = {"report": "report.json"}
-    if setup is not None and report["verdict"].get("usable", report["verdict"]["ok"]):  # never from a failed fit
-        files["model"] = "calibrated_model.yaml"
-        write_calibrated_model(out / files["model"], setup, result.identified, result.std, result.free,
-                               result, problem, report.get("identifiability"))
-        files.update(setup.export_model_files(out, result.identified))
-        _add_joint_offsets(report, out / files["model"])
-    else:  # a calibrated model left by an earlier run into the same folder must not pass for this run's
-        for stale in out.glob("calibrated_model.*"):
-            stale.unlink()
-    if plots and setup is not None:
-        try:
-            files.update(_write_plots(out, report, setup, result, problem, evaluations))
-        except Exception as exc:  # a plot must never cost the report
-            report.setdefault("warnings", []).append(f"plotting failed: {exc}")
-    shown = None
-    if overlays is not None:
-        try:
-            from .overlay import build_overlays
-
-            shown = build_overlays(report, overlays)
-        except Exception as exc:  # an overlay must never cost the report
-            report.setdefault("warnings", []).append(f"overlay images failed: {exc}")
-    files["html"] = "report.html"
-    report["files"] = files
-    table = parameter_table_text(report.get("parameters") or [])
-    write_text_atomic(out / "summary.txt", report.get("summary_text", "") + "\n" + (f"\n{table}\n" if table else ""))
+    models: list[Path] = []
     try:
-        from .report_html import write_report_html
+        if setup is not None and report["verdict"].get("usable", report["verdict"]["ok"]):  # never from a failed fit
+            files["model"] = "calibrated_model.yaml"
+            models.append(out / files["model"])
+            write_calibrated_model(out / files["model"], setup, result.identified, result.std, result.free,
+                                   result, problem, report.get("identifiability"))
+            exported = setup.export_model_files(out, result.identified)
+            models += [out / name for name in exported.values()]
+            files.update(exported)
+            _add_joint_offsets(report, out / files["model"])
+        else:  # a calibrated model left by an earlier run into the same folder must not pass for this run's
+            for stale in out.glob("calibrated_model.*"):
+                stale.unlink()
+        if plots and setup is not None:
+            try:
+                files.update(_write_plots(out, report, setup, result, problem, evaluations))
+            except OSError:
+                raise
+            except Exception as exc:  # a plot that cannot be drawn must never cost the report
+                _late_warning(report, f"plotting failed: {exc}")
+        shown = None
+        if overlays is not None:
+            try:
+                from .overlay import build_overlays
 
-        write_report_html(out, report, shown)
-    except Exception as exc:  # the page must never cost report.json
-        files.pop("html")
-        (out / "report.html").unlink(missing_ok=True)  # not an earlier run's page
-        report.setdefault("warnings", []).append(f"report.html failed: {exc}")
-    write_json_atomic(out / files["report"], on_disk(report, out))
+                shown = build_overlays(report, overlays)
+            except OSError:
+                raise
+            except Exception as exc:  # an overlay must never cost the report
+                _late_warning(report, f"overlay images failed: {exc}")
+        files["html"] = "report.html"
+        report["files"] = files
+        table = parameter_table_text(report.get("parameters") or [])
+        write_text_atomic(out / "summary.txt", report.get("summary_text", "") + "\n" + (f"\n{table}\n" if table else ""))
+        try:
+            from .report_html import write_report_html
+
+            write_report_html(out, report, shown)
+        except OSError:
+            raise
+        except Exception as exc:  # a page that cannot be built must never cost report.json
+            files.pop("html")
+            (out / "report.html").unlink(missing_ok=True)  # not an earlier run's page
+            _late_warning(report, f"report.html failed: {exc}")
+        write_json_atomic(out / files["report"], on_disk(report, out))
+    except OSError as exc:
+        _abandon(out, report, files, models, exc)
     return out / files["report"]
+
+
+def _late_warning(report: dict, text: str) -> None:
+    """A warning found while writing the outputs: in report.json and in the printed summary (not hidden)."""
+    report.setdefault("warnings", []).append(text)
+    if "summary_text" in report:
+        report["summary_text"] += f"\nwarning: {text}"
+
+
+def _abandon(out: Path, report: dict, files: dict, models: list, exc: OSError):
+    """An output could not be written: remove this run's calibrated model files and report.html (it shows them; or
+    it is an earlier run's), keep report.json when it can still be written (the failure in its warnings,
+    ``files`` without them), and raise the OSError naming the file."""
+    for m in models:
+        m.unlink(missing_ok=True)
+    for key in [k for k, v in files.items() if k not in ("report", "html") and (out / v) in models]:
+        files.pop(key)
+    files.pop("html", None)  # this run's page (when written) shows a model that is not kept; an earlier run's is stale
+    (out / "report.html").unlink(missing_ok=True)
+    path = exc.filename or "an output file"
+    why = exc.strerror or str(exc)
+    report["files"] = files
+    report.setdefault("warnings", []).append(f"{path}: could not be written ({why}): the outputs are incomplete, no "
+                                             "calibrated model kept")
+    if Path(str(path)).name != files.get("report"):
+        try:
+            write_json_atomic(out / files["report"], on_disk(report, out))
+        except OSError:
+            pass
+    raise OSError(exc.errno, f"{why} (the outputs in {out} are incomplete: no calibrated model kept; free some space "
+                             "or choose another --out, and run again)", str(path)) from exc
 
 
 #: file beside report.json holding the per-pose measurements (written before identification)
@@ -590,8 +637,22 @@ def on_disk(report: dict, out: Path) -> dict:
     return {**report, "measurements": {**{k: v for k, v in m.items() if k != "poses"}, "poses_file": MEASUREMENTS_FILE}}
 
 
+def _named(plot):
+    """``plot(path, ...)`` whose OSError (e.g. ENOSPC from savefig's write, which names no file) names ``path``."""
+    def run(path, *args):
+        try:
+            return plot(path, *args)
+        except OSError as exc:
+            if exc.filename is None:
+                raise OSError(exc.errno, exc.strerror or str(exc), str(path)) from exc
+            raise
+    return run
+
+
 def _write_plots(out: Path, report: dict, setup, result, problem, evaluations) -> dict:
     from .plots import draw_all, plot_error_map, plot_parameters, plot_residuals
+
+    plot_error_map, plot_parameters, plot_residuals = map(_named, (plot_error_map, plot_parameters, plot_residuals))
 
     jobs, files = [], {}
     jobs.append((plot_residuals, (out / "residuals.png", problem.residual(setup.params.nominal), result.residuals,

@@ -68,7 +68,7 @@ import yaml
 
 from ..errors import ConfigError, DataError
 from ..serialize import write_text_atomic
-from .images import check_image_sizes, image_size, is_image
+from .images import check_principal_point, folder_sizes, is_image
 from .recording import FORMAT, MAX_ABS_POSITION_M, check_inside
 
 POSE_KEYS = ("x", "y", "z", "qw", "qx", "qy", "qz")
@@ -278,12 +278,15 @@ def import_rosi(src, dst, allow_symlinks: bool = False) -> Path:
             pid = f"{pid}_{i}"
         poses.setdefault(pid, (pose, []))[1].append(img)
 
-    first = next(iter(poses.values()))[1][0]
-    size = image_size(first)
+    paths = [p for _, imgs in poses.values() for p in imgs]
+    size, sizes, odd = folder_sizes(paths)  # headers only: a file beyond the pixel limit is refused here
     if size is None:
-        raise DataError(f"{first}: unreadable image (its size gives the camera width x height)")
+        raise DataError(f"{paths[0]}: unreadable image (the images' size gives the camera width x height)")
+    if odd:
+        raise DataError(f"{odd[0]}" + (f" (and {len(odd) - 1} more)" if len(odd) > 1 else "") + "; every image of "
+                        "a data set comes from one camera at one resolution: remove or fix it")
+    check_principal_point(k, size, where_i)
     camera = CameraIntrinsics(size[0], size[1], k["fx"], k["fy"], k["cx"], k["cy"], tuple(float(v) for v in dist))
-    check_image_sizes([p for _, imgs in poses.values() for p in imgs], camera, f"the first image {first}")
     T = {pid: read_rosi_pose(p) for pid, (p, _) in poses.items()}
 
     dst = Path(dst)
@@ -414,7 +417,8 @@ def read_rosi_image_set(src, allow_symlinks: bool = False, with_target: bool = T
             raise DataError(f"{where}: file not found: {img}")
         check_inside(img, folder, allow_symlinks)
         images.append(img)
-    return {"index": index, "images": images, "intrinsics": k, "dist": [float(v) for v in dist], "target": target}
+    return {"index": index, "images": images, "intrinsics": k, "intrinsics_where": where_i,
+            "dist": [float(v) for v in dist], "target": target}
 
 
 __all__ = ["import_rosi", "export_rosi", "read_rosi_pose", "read_rosi_image_set"]

@@ -105,9 +105,11 @@ def read_visp_pose_yaml(path) -> np.ndarray:
 def _detect_tag_id(image_path, dictionary: str) -> int:
     import cv2
 
-    img = cv2.imread(str(image_path), cv2.IMREAD_GRAYSCALE)
+    from ..measure.detect import load_gray  # the one decoder: header and pixel limit checked first
+
+    img, why = load_gray(image_path)
     if img is None:
-        raise DataError(f"{image_path}: unreadable image")
+        raise DataError(f"{image_path}: unreadable image ({why})")
     det = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dictionary)))
     _, ids, _ = det.detectMarkers(img)
     if ids is None or len(ids) != 1:
@@ -338,9 +340,11 @@ def import_visp_chessboard(src, dst, inner_cols: int, inner_rows: int, square_m:
     intr, poses, images = _collect(src, allow_symlinks)
     if images:
         first = images[min(images)]
-        img = cv2.imread(str(first), cv2.IMREAD_GRAYSCALE)
+        from ..measure.detect import load_gray  # the one decoder: header and pixel limit checked first
+
+        img, why = load_gray(first)
         if img is None:
-            raise DataError(f"{first}: unreadable image")
+            raise DataError(f"{first}: unreadable image ({why})")
         from ..targets.kinds.chessboard import CLASSIC_FLAGS, SB_FLAGS  # the chessboard kind's detectors
 
         size = (int(inner_cols), int(inner_rows))

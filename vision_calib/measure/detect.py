@@ -138,13 +138,24 @@ def load_gray(image) -> tuple[np.ndarray | None, str]:
     top part and leave the rest grey) is refused. 16-bit images are scaled by their *used* bit depth,
     ``b = max(8, bit_length(max pixel))``: ``img >> (b - 8)``, so a 12-bit camera in a 16-bit container
     (max <= 4095) keeps its full contrast (>> 4) and a full-range 16-bit image gets >> 8; the brightest
-    pixel never clips. Float arrays are rounded and clipped to 0..255."""
+    pixel never clips. Float arrays are rounded and clipped to 0..255.
+    A file is decoded only once its header was read (:func:`vision_calib.measure.image_header.header_size`) and
+    its width x height is within the pixel limit (``config.max_image_pixels``): a file declaring more is refused
+    with the reason, never decoded; so is one whose header no reader understands."""
     src = ""
     try:
         if isinstance(image, (str, Path)):
+            from .image_header import header_size, pixel_refusal
+
             src = str(image)
             if not Path(src).is_file():
                 return None, f"image file not found: {src}"
+            size = header_size(src)
+            if size is None:
+                return None, f"unreadable or corrupt image file: {src}"
+            too_big = pixel_refusal(src, size)
+            if too_big:
+                return None, too_big
             data = np.fromfile(src, dtype=np.uint8)
             # JPEG (starts FF D8) must hold its end-of-image marker FF D9 (some writers pad after it)
             if data.size >= 2 and data[0] == 0xFF and data[1] == 0xD8 and b"\xff\xd9" not in data[-64:].tobytes():
@@ -200,6 +211,14 @@ def load_checked(image, intrinsics, frame_index):
     """A frame loaded grey and checked against the intrinsics' size: (grey image, size (w, h) px, source, None),
     or (None, size, source, invalid Detection) naming why."""
     source = str(image) if isinstance(image, (str, Path)) else "array"
+    if intrinsics is not None and isinstance(image, (str, Path)):  # the header's size first: nothing decoded
+        from .image_header import header_size
+
+        size = header_size(image)
+        if size is not None and size != intrinsics.size:
+            return None, size, source, _invalid(f"image size {size[0]}x{size[1]} does not match the camera "
+                                                f"intrinsics {intrinsics.width}x{intrinsics.height} ({source})",
+                                                frame_index, size, source=source)
     img, why = load_gray(image)
     if img is None:
         return None, None, source, _invalid(why, frame_index, source=source)

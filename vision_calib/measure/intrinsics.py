@@ -18,7 +18,7 @@ coordinate it is RMS / sqrt(2)).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import cv2
@@ -300,13 +300,16 @@ def calibrate_intrinsics(detections, names, target, image_size=None,
                          config: CalibrationConfig = CalibrationConfig()) -> IntrinsicsResult:
     """Calibrate from per-view detections (``measure.detect.Detection``; invalid ones are rejected with
     their reason). names: one label per detection (file or pose id). image_size: (width, height) px;
-    default: the first valid detection's; views of another size are rejected.
+    default: the size most valid detections have (the majority, not the first); views of another size are
+    rejected.
     Raises DataError (too few usable views; OpenCV failure; focal length / principal point not
     determined: std > ``config.max_std_frac`` x width, typical of views all fronto-parallel)."""
     ids3, p3 = target.corner_points()
     lookup = {int(i): k for k, i in enumerate(ids3)}
-    size = tuple(int(v) for v in image_size) if image_size is not None else next(
-        (tuple(d.image_size) for d in detections if d.valid and d.image_size is not None), None)
+    from .image_header import majority_size
+
+    size = tuple(int(v) for v in image_size) if image_size is not None else majority_size(
+        [tuple(d.image_size) for d in detections if d.valid and d.image_size is not None])[0]
     views, data = [], []  # data: index into views -> (obj, img)
     for det, name in zip(detections, names):
         if not det.valid:
@@ -371,15 +374,21 @@ def calibrate_intrinsics(detections, names, target, image_size=None,
                             cov, dist_u)
 
 
-def find_images(folder) -> list[Path]:
+def find_images(folder, allow_symlinks: bool = False, hint: str = "--allow-path DIR") -> list[Path]:
     """Image files under folder, recursively (IMAGE_SUFFIXES, case-insensitive), sorted; DataError naming
-    the folder when it is missing or holds none."""
+    the folder when it is missing or holds none, and naming a file that is a symbolic link leading out of the
+    folder (``config.confine``, the one rule for paths; ``allow_symlinks``: the user's explicit allowance, ``hint``
+    the option that gives it): nothing outside the folder is ever opened."""
+    from ..config import confine
+
     folder = Path(folder)
     if not folder.is_dir():
         raise DataError(f"{folder}: image folder not found")
     files = sorted(p for p in folder.rglob("*") if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)
     if not files:
         raise DataError(f"{folder}: no images ({', '.join(IMAGE_SUFFIXES)}) in the folder or below it")
+    for p in files:
+        confine(p, folder, str(p), DataError, allow=allow_symlinks, hint=hint)
     return files
 
 
@@ -387,18 +396,43 @@ def calibrate_from_images(paths, target, image_size=None, names=None, config: Ca
                           progress: bool = False) -> IntrinsicsResult:
     """Detect the target in every image (paths; unreadable ones are rejected views, read with
     ``measure.detect.load_gray``) and calibrate (:func:`calibrate_intrinsics`). names: view labels
-    (default: the paths)."""
-    from .detect import DetectConfig, detect
+    (default: the paths). Before anything is decoded, every file's header size is read
+    (:mod:`.image_header`): a file beyond the pixel limit, and one whose size differs from ``image_size`` (default:
+    the size most of the files have -- the majority wins, not the first file), is a rejected view named in the
+    result's warnings, never decoded."""
+    from .detect import DetectConfig, Detection, detect
+    from .image_header import header_size, majority_size, pixel_refusal
 
     paths = list(paths)
-    it = paths
+    names = names or [str(p) for p in paths]
+    heads = [header_size(p) for p in paths]
+    skip = {}
+    for i, s in enumerate(heads):
+        why = None if s is None else pixel_refusal(None, s)
+        if why:
+            skip[i] = why
+    fits = [s for i, s in enumerate(heads) if i not in skip and s is not None]
+    size, count = (tuple(int(v) for v in image_size), None) if image_size is not None else majority_size(fits)
+    for i, s in enumerate(heads):
+        if i not in skip and s is not None and size is not None and s != size:
+            skip[i] = (f"image size {s[0]}x{s[1]} differs from " + (f"the majority {size[0]}x{size[1]} ({count} of "
+                       f"{len(fits)} images)" if count else f"the given {size[0]}x{size[1]}"))
+    todo = [i for i in range(len(paths)) if i not in skip]
+    it = todo
     if progress:
         from tqdm import tqdm
 
-        it = tqdm(paths, desc="calibrate camera: detect", unit="image", leave=False)
+        it = tqdm(todo, desc="calibrate camera: detect", unit="image", leave=False)
     dcfg = DetectConfig(min_corners=4, batch="per_frame")
-    dets = [detect(str(p), target, None, config=dcfg) for p in it]
-    return calibrate_intrinsics(dets, names or [str(p) for p in paths], target, image_size, config)
+    found = {i: detect(str(paths[i]), target, None, config=dcfg) for i in it}
+    dets = [found[i] if i in found else Detection(False, skip[i], np.zeros(0, int), np.zeros((0, 2)), heads[i])
+            for i in range(len(paths))]
+    res = calibrate_intrinsics(dets, names, target, size, config)
+    if not skip:
+        return res
+    shown = "; ".join(f"{names[i]}: {skip[i]}" for i in sorted(skip)[:10]) + ("; ..." if len(skip) > 10 else "")
+    return replace(res, warnings=(f"{len(skip)} image{'s' if len(skip) > 1 else ''} of {len(paths)} skipped, not "
+                                  f"decoded: {shown}",) + tuple(res.warnings))
 
 
 __all__ = ["CalibrationConfig", "IntrinsicsResult", "ViewInfo", "calibrate_intrinsics", "calibrate_from_images",

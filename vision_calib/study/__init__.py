@@ -25,6 +25,9 @@ Spec file (YAML; paths relative to the spec file)::
     parameters: [h4.L, h4.l]         # optional: parameters recorded in the table (default: all)
     target: {position_rms_mm: 0.1}   # optional: accuracy targets after calibration (position_rms_mm,
                                      # position_max_mm, rotation_rms_deg, V2_rad, V3_m) -> budget.csv
+    max_hours: 20                    # optional: the wall time [h] this study may take; a study estimated
+                                     # longer (or beyond the machine's memory / free disk) stops before
+                                     # any run unless --yes (study/budget.py; default bound 1 h)
 
 Sweep/settings keys: ``n_poses`` (int > 0: subset drawn at random from the scene's poses),
 ``sigma_mm``, ``sigma_deg`` (pose noise per component, >= 0), ``method`` (lse|ekf|igm; igm = H4

@@ -117,3 +117,162 @@ def budget_text(spec: StudySpec, rows: list[dict]) -> list[str]:
             lines.append(f"  {cond}: {r['metric']} <= {r['target']:g}: not reached (best p95 {p95} with {what}, "
                          f"{r['n_runs']} runs)")
     return lines
+
+
+# ----------------------------------------------------------------------------- what a run will cost (issue 28)
+# A pose count or a study is checked against the machine before anything runs: when its estimated wall time exceeds
+# CONFIRM_HOURS (or a study's own ``max_hours``), or its memory / run files exceed this machine's
+# (MEMORY_SHARE of the physical memory, os.sysconf; the free disk space of the output folder), the command stops
+# with exit 2 and the estimate unless ``--yes`` is given.
+#
+# Cost model: measured once on the development machine (2 cores shared with other jobs; Python 3.11, numpy 2,
+# OpenBLAS 1 thread) and written down here, never timed in tests:
+#   identify-synthetic rx90_eye_in_hand --poses 5000 / 20000 (/ 40000): 15.8 / 64.1 (/ 113) s, peak RSS 293 / 698
+#     (/ 1208) MB -> slope 3.2 ms and 27 kB per pose (SYNTH_*, rounded up);
+#   identifiability rx90_eye_in_hand --poses 5000 / 20000: 4.4 / 24.4 s, 201 / 367 MB -> 1.3 ms, 11 kB per pose;
+#   study runs (study.cells.run_cell after one warm-up run, mean of 3): synthetic rx90 12 / 100 / 400 poses 0.135 /
+#     0.179 / 0.530 s, h4_vision 15 / 71 poses 0.082 / 0.099 s -> 0.15 s + 1.2 ms per pose (STUDY_*); images
+#     h4_vision 20 x 1 / 40 x 1 / 20 x 10 poses x frames 8.6 / 9.2 / 8.2 s -> 8 s + 0.03 s per pose (rendered) +
+#     2 ms per frame (the resolution of the measurement: 180 more frames changed a run by < 0.4 s) (IMAGES_RUN_S,
+#     POSE_RENDER_S, FRAME_S); the shipped h4_image_noise study (540 runs) took 28 min on 2 workers, this model
+#     says 44;
+#   runs/<key>.json: 2.9-3.6 kB.
+#   (How: ``python -c`` over identify_synthetic_json / identifiability_json / run_cell, time.perf_counter and
+#   resource.getrusage(RUSAGE_SELF).ru_maxrss, each in a fresh process.)
+SYNTH_S_PER_POSE = 3.5e-3
+SYNTH_BYTES_PER_POSE = 28e3
+IDENT_S_PER_POSE = 1.4e-3
+IDENT_BYTES_PER_POSE = 12e3
+STUDY_RUN_S = 0.15
+STUDY_S_PER_POSE = 1.2e-3
+IMAGES_RUN_S = 8.0
+POSE_RENDER_S = 0.03
+FRAME_S = 2e-3
+#: one run's file (runs/<key>.json), and its row kept in memory until the tables are written (a dict of ~60 floats)
+RUN_FILE_BYTES = 4e3
+RUN_ROW_BYTES = 8e3
+#: a process's own memory before any pose (interpreter, numpy, scipy, OpenCV)
+BASE_BYTES = 250e6
+#: an estimate above this wall time asks for --yes
+CONFIRM_HOURS = 1.0
+#: an estimate above this share of the machine's physical memory asks for --yes
+MEMORY_SHARE = 0.5
+#: pose counts per command: (seconds, bytes) per pose (simulate: the render, frames come on top: FRAME_S each)
+POSE_COSTS = {"identify-synthetic": (SYNTH_S_PER_POSE, SYNTH_BYTES_PER_POSE),
+              "identifiability": (IDENT_S_PER_POSE, IDENT_BYTES_PER_POSE),
+              "simulate": (POSE_RENDER_S, SYNTH_BYTES_PER_POSE)}
+
+
+def _gb(b: float) -> str:
+    return f"{b / 1e9:.3g} GB"
+
+
+def _hours(s: float) -> str:
+    return f"{s / 3600:.3g} h"
+
+
+def _over(seconds: float, memory: float, disk: float | None, max_hours: float | None, out_dir=None) -> list[str]:
+    """What the estimate exceeds: ["more than 1 h", "more than half of this machine's 16 GB of memory", ...]."""
+    from ..config import machine_memory_bytes
+
+    over = []
+    limit_h = CONFIRM_HOURS if max_hours is None else max_hours
+    if seconds > limit_h * 3600:
+        over.append(f"more than the study file's max_hours: {max_hours:g}" if max_hours is not None
+                    else f"more than {CONFIRM_HOURS:g} h")
+    have = machine_memory_bytes()
+    if have and memory > MEMORY_SHARE * have:
+        over.append(f"more than {MEMORY_SHARE:.0%} of this machine's {_gb(have)} of memory")
+    if disk is not None and out_dir is not None:
+        import shutil
+
+        probe = Path(out_dir).resolve()
+        while not probe.exists() and probe != probe.parent:
+            probe = probe.parent
+        try:
+            free = shutil.disk_usage(probe).free
+        except OSError:
+            free = None
+        if free is not None and disk > free:
+            over.append(f"more than the {_gb(free)} free on the disk of {out_dir}")
+    return over
+
+
+def check_pose_count(command: str, n_poses: int | None, frames: int | None = 1, workers: int = 1, yes: bool = False,
+                     scene=None) -> dict:
+    """The estimate {seconds, bytes} of ``command`` (:data:`POSE_COSTS`) with ``n_poses`` (x ``frames`` images for
+    simulate, default: the ``scene`` file's frames per pose; on ``workers`` processes); ConfigError (exit 2) with
+    the estimate when it exceeds the machine (:data:`CONFIRM_HOURS`, :data:`MEMORY_SHARE`) and ``yes`` is not
+    given. None poses: nothing to check."""
+    from ..errors import ConfigError
+
+    if n_poses is None or command not in POSE_COSTS:
+        return {}
+    if frames is None:
+        from ..rig import load_scene
+
+        frames = int(load_scene(scene).measurement.frames) if scene is not None else 1
+    s_per, b_per = POSE_COSTS[command]
+    if command == "simulate":  # rendered and measured on the workers
+        s_per = s_per + frames * FRAME_S
+        seconds = n_poses * s_per / max(workers, 1)
+    else:
+        seconds = n_poses * s_per
+    memory = BASE_BYTES + n_poses * b_per
+    est = {"seconds": seconds, "bytes": memory}
+    over = _over(seconds, memory, None, None)
+    if over and not yes:
+        per = (f"{b_per / 1e3:.3g} kB and {s_per * 1e3:.3g} ms per pose"
+               + (f" of {frames} frame{'s' if frames > 1 else ''} on {max(workers, 1)} workers"
+                  if command == "simulate" else ""))
+        raise ConfigError(f"{command} --poses {n_poses}: estimated {_gb(memory)} of memory and {_hours(seconds)} "
+                          f"({per}, measured: vision_calib/study/budget.py), {' and '.join(over)}: give --yes to "
+                          "run it anyway, or fewer poses")
+    return est
+
+
+def study_estimate(spec: StudySpec, n_runs: int, workers: int, n_rows: int | None = None) -> dict:
+    """{seconds (wall, on ``workers``), cpu_seconds, bytes (memory), disk_bytes (run files)} of ``n_runs`` runs of
+    ``spec`` still to compute (each cell's n_poses and frames; the scene's when the spec does not set them), with
+    ``n_rows`` rows (default n_runs: those reused too) held in memory until the tables are written."""
+    from .spec import study_cells
+
+    cells = study_cells(spec)
+    defaults = None
+    cpu, peak = 0.0, 0.0
+    for c in cells:
+        s = {**spec.settings, **c}
+        if "n_poses" not in s or (spec.mode == "images" and "frames" not in s):
+            defaults = defaults or _defaults(spec)
+        n = int(s.get("n_poses") or defaults["n_poses"])
+        if spec.mode == "images":
+            f = int(s.get("frames") or defaults["frames"])
+            cpu += IMAGES_RUN_S + n * (POSE_RENDER_S + f * FRAME_S)
+        else:
+            cpu += STUDY_RUN_S + STUDY_S_PER_POSE * n
+        peak = max(peak, n * SYNTH_BYTES_PER_POSE)
+    per_run = cpu / max(len(cells), 1)
+    w = max(int(workers), 1)
+    return {"cpu_seconds": per_run * n_runs, "seconds": per_run * n_runs / w,
+            "bytes": (BASE_BYTES + peak) * w + RUN_ROW_BYTES * (n_runs if n_rows is None else n_rows),
+            "disk_bytes": RUN_FILE_BYTES * n_runs, "workers": w}
+
+
+def check_study(spec: StudySpec, n_runs: int, workers: int, out_dir, yes: bool = False, where: str = "",
+                n_rows: int | None = None) -> dict:
+    """:func:`study_estimate`; ConfigError (exit 2) naming the spec with the estimate when it exceeds the machine or
+    the spec's ``max_hours`` and ``yes`` is not given. where: said after the worker count (e.g. " of the Dask
+    cluster")."""
+    from ..errors import ConfigError
+
+    est = study_estimate(spec, n_runs, workers, n_rows)
+    max_hours = getattr(spec, "max_hours", None)
+    over = _over(est["seconds"], est["bytes"], est["disk_bytes"], max_hours, out_dir)
+    if over and not yes:
+        raise ConfigError(
+            f"{spec.path}: {n_runs} runs: estimated {_hours(est['seconds'])} on {est['workers']} worker"
+            f"{'s' if est['workers'] > 1 else ''}{where} ({_hours(est['cpu_seconds'])} of CPU), {_gb(est['bytes'])} of "
+            f"memory and {_gb(est['disk_bytes'])} of run files (cost model: vision_calib/study/budget.py), "
+            f"{' and '.join(over)}: give --yes to run it anyway, bound it in the study file (max_hours: H), or use "
+            "fewer repetitions or cells")
+    return est

@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 
 from ..serialize import write_json_atomic
-from .budget import budget_table, budget_text, write_budget
+from .budget import budget_table, budget_text, check_study, write_budget
 from .page import write_index
 from .cells import run_cell
 from .spec import RUN_FORMAT, StudySpec, cell_key, load_study, study_cells
@@ -40,15 +40,73 @@ def _local_worker_init(main_pid: int) -> None:
     study_worker_settings()
 
 
-def _execute_dask(spec, todo, scheduler, on_done):
+#: seconds a study waits to connect to a Dask scheduler, then for its first worker, before it stops with an error
+#: naming the scheduler (a scheduler with no worker would otherwise keep the study at 0/N without a word)
+CONNECT_TIMEOUT_S = 10.0
+WORKER_WAIT_S = 10.0
+
+
+def scheduler_address(text: str) -> tuple[str, str | None]:
+    """(address, the scheduler file it was read from or None) of ``--scheduler``: an address ``tcp://host:port``
+    (tls://, ...) as given, or a scheduler file as ``dask scheduler --scheduler-file FILE`` writes it (JSON with an
+    ``address``). ConfigError naming the file when it is not one."""
+    from ..errors import ConfigError
+
+    if "://" in text:
+        return text, None
+    path = Path(text)
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise ConfigError(f"{path}: not a Dask scheduler file (JSON with an 'address', written by `dask scheduler "
+                          f"--scheduler-file {path}`): {exc}") from None
+    addr = doc.get("address") if isinstance(doc, dict) else None
+    if not isinstance(addr, str) or "://" not in addr:
+        raise ConfigError(f"{path}: not a Dask scheduler file (JSON with an 'address', written by `dask scheduler "
+                          f"--scheduler-file {path}`): no 'address' tcp://host:port in it")
+    return addr, str(path)
+
+
+def _connect(distributed, scheduler):
+    """(client, whether we own it, the scheduler's name for messages): a connection to ``scheduler`` (an address,
+    a scheduler file or a Client) with at least one worker; ConfigError naming the scheduler (and its file) when it
+    cannot be reached within CONNECT_TIMEOUT_S, or has no worker after WORKER_WAIT_S."""
+    from ..errors import ConfigError
+
+    if isinstance(scheduler, distributed.Client):
+        client, own, name = scheduler, False, "the Dask scheduler"
+    else:
+        addr, file = scheduler_address(str(scheduler))
+        name = f"Dask scheduler {addr}" + (f" (from {file})" if file else "")
+        try:
+            client = distributed.Client(addr, timeout=CONNECT_TIMEOUT_S)
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise ConfigError(f"{name}: cannot connect within {CONNECT_TIMEOUT_S:g} s ({str(exc).splitlines()[0]}): "
+                              "is the scheduler running and reachable from here?") from None
+        own = True
+    try:
+        client.wait_for_workers(1, timeout=WORKER_WAIT_S)
+    except TimeoutError:  # (distributed's WorkerStartTimeoutError is one)
+        addr = getattr(client.scheduler, "address", None) or "SCHEDULER"
+        if own:
+            client.close()
+        raise ConfigError(f"{name}: no worker connected within {WORKER_WAIT_S:g} s: start workers (`dask worker "
+                          f"{addr}`), then run the study again (finished runs are kept)") from None
+    return client, own, name
+
+
+def _execute_dask(spec, todo, scheduler, on_done, check=None):
+    """``todo`` on the Dask cluster; ``check(n_threads)``: called once connected with the cluster's total thread
+    count (the study's resource check)."""
     from ..errors import import_extra
 
     distributed = import_extra("distributed", "cluster", "a study on a Dask cluster (--scheduler)")
-    Client, as_completed = distributed.Client, distributed.as_completed
+    as_completed = distributed.as_completed
 
-    own = not isinstance(scheduler, Client)
-    client = Client(scheduler) if own else scheduler
+    client, own, _ = _connect(distributed, scheduler)
     try:
+        if check is not None:
+            check(sum(client.nthreads().values()) or 1)
         futs = [client.submit(_run_task, spec, c, r, True, pure=False) for c, r in todo]
         try:
             for fut in as_completed(futs):
@@ -90,13 +148,17 @@ def _execute_local(spec, todo, workers, on_done):
                 p.join()
 
 
-def _execute(spec, todo, workers, scheduler, on_done):
+def _execute(spec, todo, workers, scheduler, on_done, check=None):
     """Run ``todo`` [(cell, rep)] and call on_done(cell, rep, row) as each finishes (in this process): on the Dask
     cluster ``scheduler``, on ``workers`` local processes, or here (``workers`` 1). In every case an images-mode
-    run renders and measures in the process (thread) that runs it, never in a pool of its own."""
+    run renders and measures in the process (thread) that runs it, never in a pool of its own. ``check(workers)``:
+    the resource check, called before the first run with the number of workers that will run them."""
     if scheduler is not None:
-        _execute_dask(spec, todo, scheduler, on_done)
-    elif workers <= 1 or len(todo) <= 1:
+        _execute_dask(spec, todo, scheduler, on_done, check)
+        return
+    if check is not None:
+        check(min(workers, max(len(todo), 1)))
+    if workers <= 1 or len(todo) <= 1:
         for c, r in todo:
             on_done(*_run_task(spec, c, r))
     else:
@@ -114,25 +176,28 @@ def _load_run(path: Path, spec_hash: str):
 
 
 def run_study(spec, out_dir, workers: int | None = None, scheduler=None, progress: bool = False,
-              plots: bool = True) -> dict:
+              plots: bool = True, yes: bool = False) -> dict:
     """Run (or resume) a study and write its outputs in ``out_dir`` (see the module docstring).
 
     spec: StudySpec or path of the study file. workers: local processes (default: CPU count;
-    1 = in this process). scheduler: Dask scheduler address (or a ``distributed.Client``): runs
-    go to the cluster instead. plots: write the PNG plots. Returns {name, spec_hash, out_dir, n_runs, n_computed, n_reused,
+    1 = in this process). scheduler: Dask scheduler address, scheduler file (:func:`scheduler_address`) or a
+    ``distributed.Client``: runs go to the cluster instead (ConfigError naming it when it cannot be reached or has
+    no worker within seconds). plots: write the PNG plots. yes: run even when the estimated time, memory or run
+    files exceed the machine or the spec's ``max_hours`` (``budget.check_study``; otherwise ConfigError with the
+    estimate, before any run). Returns {name, spec_hash, out_dir, n_runs, n_computed, n_reused,
     n_failed, files, summary (per cell: axes + {metric: {mean, std}}), summary_text}.
     """
     spec = spec if isinstance(spec, StudySpec) else load_study(spec)
     out = Path(out_dir)
     runs_dir = out / "runs"
-    runs_dir.mkdir(parents=True, exist_ok=True)
     cells = study_cells(spec)
     plan = [(c, r) for c in cells for r in range(spec.repetitions)]
     rows = {}
     todo = []
+    existing = {p.name for p in runs_dir.iterdir()} if runs_dir.is_dir() else set()  # one listing, not an open() per run
     for c, r in plan:
         k = cell_key(c, r)
-        row = _load_run(runs_dir / f"{k}.json", spec.hash)
+        row = _load_run(runs_dir / f"{k}.json", spec.hash) if f"{k}.json" in existing else None
         if row is None:
             todo.append((c, r))
         else:
@@ -140,10 +205,6 @@ def run_study(spec, out_dir, workers: int | None = None, scheduler=None, progres
     n_reused = len(rows)
     t0 = time.perf_counter()
     bar = None
-    if progress and todo:
-        from tqdm import tqdm
-
-        bar = tqdm(total=len(todo), desc=spec.name, unit="run", file=sys.stderr)
 
     def on_done(c, r, row):
         k = cell_key(c, r)
@@ -152,8 +213,19 @@ def run_study(spec, out_dir, workers: int | None = None, scheduler=None, progres
         if bar is not None:
             bar.update(1)
 
+    def check(n_workers):  # before the first run: the estimate against the machine, then the progress bar
+        nonlocal bar
+        if todo:
+            check_study(spec, len(todo), n_workers, out, yes, " of the Dask cluster" if scheduler is not None else "",
+                        n_rows=len(plan))
+        runs_dir.mkdir(parents=True, exist_ok=True)
+        if progress and todo:
+            from tqdm import tqdm
+
+            bar = tqdm(total=len(todo), desc=spec.name, unit="run", file=sys.stderr)
+
     try:
-        _execute(spec, todo, workers or os.cpu_count() or 1, scheduler, on_done)
+        _execute(spec, todo, workers or os.cpu_count() or 1, scheduler, on_done, check)
     finally:
         if bar is not None:
             bar.close()

@@ -61,6 +61,9 @@ class StudySpec:
     truth_variant: str | None = None
     #: accuracy targets {figure: threshold} (``TARGET_KEYS``; SI-suffixed units as named) for the budget table
     target: dict | None = None
+    #: the wall time [h] the user accepts for this study (``max_hours``): a longer estimate stops it
+    #: (study/budget.py check_study; default: budget.CONFIRM_HOURS, then --yes)
+    max_hours: float | None = None
     hash: str = ""
     raw: dict = field(default_factory=dict, repr=False, compare=False)
 
@@ -147,7 +150,7 @@ def load_study(path) -> StudySpec:
     path = Path(path)
     top = Section(load_yaml(path), path)
     known = {"name", "scene", "mode", "repetitions", "seed", "truth", "settings", "sweep", "outputs", "parameters",
-             "description", "truth_variant", "target"}
+             "description", "truth_variant", "target", "max_hours"}
     for k in top.keys():
         if k not in known:
             raise top.error(k, f"unknown key (known: {', '.join(sorted(known))})")
@@ -196,10 +199,11 @@ def load_study(path) -> StudySpec:
         if mode != "synthetic":
             raise top.error("truth_variant", "only mode: synthetic supports another truth model")
     target = _target(top, outputs)
+    max_hours = top.number("max_hours", float, None, min=0.0, min_open=True, unit="h") if "max_hours" in top else None
     spec = StudySpec(path=path, name=name, scene_path=scene_path, mode=mode, repetitions=reps, seed=seed,
                      truth=truth, settings=settings, sweep=tuple(sweep), outputs=tuple(outputs),
                      parameters=None if params is None else tuple(str(p) for p in params), truth_variant=tv,
-                     target=target, raw=top.data)
+                     target=target, max_hours=max_hours, raw=top.data)
     _check_cells(spec)
     key = {"format": RUN_FORMAT, "mode": mode, "seed": seed, "truth": truth, "truth_variant": tv, "settings": settings,
            "outputs": sorted(outputs), "parameters": spec.parameters, "files": _file_digest(_scene_files(scene_path))}
