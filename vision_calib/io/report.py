@@ -229,10 +229,8 @@ def verdict(result, measurements: dict | None = None, identified: IdentifiedFit 
     n_all = (measurements or {}).get("n_poses", 0)
     n_rej = (measurements or {}).get("n_rejected", 0) + n_out
     many = bool(n_all) and n_rej > MAX_REJECTED_FRACTION * n_all  # detection failures count as rejected views
-    status = "failed" if not usable else ("warning" if adq == "too large" or lof or many or tail.get("significant")
-                                          else "ok")
+    status = "failed" if not usable else ("warning" if adq == "too large" or lof or many else "ok")
     why = ([misfit_message(adequacy)] if adq == "too large" else []) + ([lack_of_fit["message"]] if lof else [])
-    why += [tail["message"]] if tail.get("significant") else []
     why += [f"{n_rej} of {n_all} poses rejected (more than {MAX_REJECTED_FRACTION:.0%}; measurement and outliers): "
             "the result rests on the views that were easy to measure"] if many else []
     message = getattr(result, "message", "") if not usable else "; ".join(why)
@@ -245,6 +243,9 @@ def verdict(result, measurements: dict | None = None, identified: IdentifiedFit 
            "warnings": len(set(warnings) | set(result.warnings))}  # a warning given by both: counted once
     if failure is not None:
         out["failure"] = failure["kind"]
+    if tail.get("significant"):  # named, not a verdict: measured on clean H4 scenes it fires on most seeds (the
+        # image-measured poses' covariance misses some views' error), which a warning would teach users to ignore
+        out["note"] = tail["message"]
     if adq == "too small":
         lo, hi = adequacy.get("expected_chi2_dof") or (float("nan"), float("nan"))
         out["note"] = (f"chi2/dof {adequacy['chi2_dof']:.3g} below its expected {lo:.2f}-{hi:.2f} (two-sided p "
