@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import yaml
 
-from vision_calib.experiment.process import (REPROJECTION_K, label_points, process_folder,
+from vision_calib.experiment.process import (REPROJECTION_K, label_points, process_folder, process_once,
                                              reprojection_noise_check, used_corners)
 from vision_calib.measure.detect import Detection
 from vision_calib.measure.reprojection import chain_reprojection
@@ -114,12 +114,16 @@ def test_wrong_given_focal_length_warns_and_points_to_refine(recording, tmp_path
     doc["camera"]["fx"] *= 1.02
     doc["camera"]["fy"] *= 1.02
     (bad / "recording.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
-    rep = process_folder(bad, tmp_path / "fx", plots=False)
+    rep = process_once(bad, tmp_path / "fx", plots=False)  # the given intrinsics alone
     chk = rep["reprojection"]["noise_check"]
     assert chk["ratio"] > REPROJECTION_K
     warn = [w for w in rep["warnings"] if w.startswith("reprojection RMS")]
     assert len(warn) == 1 and f"{chk['ratio']:.1f} x what the noise model predicts" in warn[0]
     assert "the intrinsics were given (recording.yaml), not refined" in warn[0] and "--refine-intrinsics" in warn[0]
+    # process tests that cause (experiment/cause.py): the refined intrinsics win decisively and are applied
+    full = process_folder(bad, tmp_path / "fx2", plots=False)
+    assert full["cause"]["chosen"] == "refined" and full["intrinsics"]["source"] == "calibrated from the recording"
+    assert full["reprojection"]["noise_check"]["ratio"] < chk["ratio"] / 2
 
 
 @pytest.mark.skipif(not REAL.is_dir(), reason="real ViSP data not available")
