@@ -355,3 +355,15 @@ def test_recording_corner_noise_px_is_checked(tmp_path, value):
     (rec / "recording.yaml").write_text(yaml.safe_dump(doc))
     with pytest.raises((ConfigError, DataError), match="corner_noise_px"):
         read_recording(rec)
+
+
+def test_visp_theta_u_in_degrees_is_refused(tmp_path):
+    """A ViSP pose file with theta-u written in degrees (|theta-u| up to 175) is refused naming the file (a rotation
+    vector's angle is at most pi), never read as a rotation of 175 rad."""
+    from vision_calib.errors import DataError
+    from vision_calib.io.visp import read_visp_pose_yaml
+
+    p = tmp_path / "pose_rPe_1.yaml"
+    p.write_text("rows: 6\ncols: 1\ndata:\n  - [0.1]\n  - [0.2]\n  - [0.3]\n  - [170.0]\n  - [5.0]\n  - [-20.0]\n")
+    with pytest.raises(DataError, match=r"pose_rPe_1.yaml: theta-u .* more than pi"):
+        read_visp_pose_yaml(p)

@@ -99,6 +99,10 @@ def read_visp_pose_yaml(path) -> np.ndarray:
     if v.size != 6:
         raise DataError(f"{path}: key 'data' must hold 6 numbers (t [m], theta-u [rad]), got {v.size}")
     frames.check_finite(f"{path}: data", v)
+    angle = float(np.linalg.norm(v[3:]))
+    if angle > np.pi + 1e-6:  # a rotation vector's angle is at most pi: a larger one is in degrees (or garbage)
+        raise DataError(f"{path}: theta-u (data[3:6]) has angle {angle:.4g}, more than pi rad: ViSP writes theta-u in "
+                        f"radians (degrees would be {np.radians(angle):.4g} rad)")
     return frames.T_from_xyz_rotvec(v)
 
 
