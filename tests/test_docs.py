@@ -131,7 +131,7 @@ def _options(parser) -> dict:
 
 def test_cli_flags_in_docs_exist():
     """A flag after ``vision-calib SUB`` (or in a code span starting with SUB; continuation lines of a fenced
-    command included) is one of SUB's options; any other flag in a code span that is not a python / pytest / pip
+    command included) is one of SUB's options; any other flag in a code span that is not a python / pytest / pip / dask
     command is an option of some subcommand."""
     opts = _options(build_parser())
     every = set().union(*opts.values())
@@ -151,7 +151,7 @@ def test_cli_flags_in_docs_exist():
                     elif re.fullmatch(r"--[a-z][\w-]*", w):
                         if sub is not None:
                             ok = w in opts[sub] or w in opts[""]
-                        elif re.match(r"\s*(\$\s*)?(\S*python\S*|pytest|pip|\S*pip|OMP_\S+|LP_\S+|bash)\b", line):
+                        elif re.match(r"\s*(\$\s*)?(PYTHONPATH=\S*\s+)?(\S*python\S*|pytest|pip|\S*pip|OMP_\S+|LP_\S+|bash|dask)\b", line):
                             ok = True  # a benchmark's or a tool's own option
                         else:
                             ok = w in every
