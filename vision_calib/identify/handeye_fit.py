@@ -14,9 +14,11 @@ response to the flange pose error at the current estimate, ``robot_cov = diag(s_
    ``theta = (s_t^2, s_r^2)`` are estimated at each step with the camera covariance known: the maximum of the
    REML likelihood of the model linearised at x, ``-0.5 (log|C| + log|J^T C^-1 J| + r^T P r)``,
    ``C = camera + s_t^2 V_t + s_r^2 V_r``, ``V_t = D_t D_t^T``, ``V_r = D_r D_r^T`` the blocks of the translation
-   and rotation columns of D, ``P = W - W J (J^T W J)^-1 J^T W``, ``W = C^-1``, searched over the whole box
-   :data:`THETA_BOUNDS` (log grid + bounded refinement: a global maximum, so no collapse to 0 and no runaway
-   of a local Fisher-scoring fixed point); their covariance ``2 (tr(P V_i P V_j))^-1``;
+   and rotation columns of D, ``P = W - W J (J^T W J)^-1 J^T W``, ``W = C^-1``, penalised by the
+   boundary-avoiding prior ``log s_t + log s_r`` (Chung et al. 2013: where the data resolve the robot's error the
+   prior is negligible; where they do not, the estimate stays about one standard error above 0 instead of
+   collapsing onto it), searched over the whole box :data:`THETA_BOUNDS` (log grid + bounded refinement: a global
+   maximum, no runaway of a local Fisher-scoring fixed point); their covariance ``2 (tr(P V_i P V_j))^-1``;
 4. never worse than a candidate: every candidate's cost under the final weights; when one is below
    ours (another local minimum), the iteration restarts from it and the lower cost is kept.
 
@@ -104,10 +106,15 @@ def _reml_terms(problem: IdentificationProblem, x):
     return J, r, np.asarray(problem.meta["camera_cov"], float), Vt, Vr
 
 
-def _reml_negll(theta, J, r, cam, Vt, Vr) -> float:
-    """-REML log-likelihood (up to a constant) of theta = (s_t^2, s_r^2) for the model linearised at x:
-    0.5 (log|C| + log|J^T C^-1 J| + r^T P r), C = blockdiag(cam_k + s_t^2 Vt_k + s_r^2 Vr_k)."""
-    C = cam + theta[0] * Vt + theta[1] * Vr
+def _reml_negll(theta, J, r, known, blocks) -> float:
+    """-penalised REML log-likelihood (up to a constant) of the variances theta (k,) for the model linearised at x:
+    0.5 (log|C| + log|J^T C^-1 J| + r^T P r) - 0.5 sum_i log theta_i, C = blockdiag(known_k + sum_i theta_i
+    blocks_i,k); J (N, m, p), r (N, m), known (N, m, m), blocks (k, N, m, m). The last term is the
+    boundary-avoiding prior of Chung et al. (2013, Psychometrika 78: a Gamma(2, rate -> 0) density on each std,
+    ``log s_i``): it vanishes against the likelihood where the data resolve a component and keeps its estimate
+    off 0 (about one standard error above it) where they do not."""
+    theta = np.asarray(theta, float)
+    C = known + np.einsum("i,inab->nab", theta, blocks)
     try:
         L = np.linalg.cholesky(C)
     except np.linalg.LinAlgError:
@@ -121,99 +128,73 @@ def _reml_negll(theta, J, r, cam, Vt, Vr) -> float:
     if sign <= 0:
         return np.inf
     rPr = float(np.sum(rw**2) - g @ np.linalg.solve(A, g))
-    return 0.5 * (2.0 * np.sum(np.log(np.diagonal(L, axis1=1, axis2=2))) + logdetA + rPr)
+    prior = 0.5 * float(np.sum(np.log(np.maximum(theta, 1e-300))))
+    return 0.5 * (2.0 * np.sum(np.log(np.diagonal(L, axis1=1, axis2=2))) + logdetA + rPr) - prior
+
+
+def _reml_max(J, r, known, blocks, bounds, start=None, grid_axes=None):
+    """theta (k,): the variances maximising the penalised REML likelihood (:func:`_reml_negll`) over the box
+    ``bounds`` ((lo, hi) std per component, squared here), searched in log theta from the best point of a log grid
+    (17 points per axis) over the components ``grid_axes`` (default: all when no ``start``, none with one), the
+    other components at ``start`` (k,) or at the geometric middle of their bounds; then a bounded quasi-Newton
+    refinement."""
+    from itertools import product
+
+    from scipy.optimize import minimize
+
+    lo = np.log([b[0] ** 2 for b in bounds])
+    hi = np.log([b[1] ** 2 for b in bounds])
+
+    def f(u):
+        return _reml_negll(np.exp(u), J, r, known, blocks)
+
+    if start is not None:
+        base = np.clip(np.log(np.maximum(np.asarray(start, float), 1e-300)), lo, hi)
+        axes = [] if grid_axes is None else list(grid_axes)
+    else:
+        base = 0.5 * (lo + hi)
+        axes = list(range(len(bounds))) if grid_axes is None else list(grid_axes)
+    u0, f0 = base, f(base)
+    for pt in product(*[np.linspace(lo[i], hi[i], 17) for i in axes]) if axes else ():
+        u = base.copy()
+        u[axes] = pt
+        fu = f(u)
+        if fu < f0:
+            u0, f0 = u, fu
+    opt = minimize(f, u0, method="L-BFGS-B", bounds=list(zip(lo, hi)))
+    u = opt.x if np.isfinite(opt.fun) and opt.fun <= f0 else u0
+    return np.exp(u)
 
 
 def _reml_step(problem: IdentificationProblem, result: IdentificationResult, start=None):
-    """(theta (2,), cov (2, 2)): the robot's variances maximising the REML likelihood of the model linearised at
-    the result's x (camera covariance known), searched over the whole box :data:`THETA_BOUNDS` (a log grid, then
-    a bounded quasi-Newton refinement from its best point): the maximum is global on the box, so the estimate
-    neither collapses to 0 nor runs away where the likelihood does not; its covariance is the inverse Fisher
-    information 2 (tr(P V_i P V_j))^-1 at the maximum. A component at its lower bound is reported as 0. ``start``:
-    variances (2,) near the maximum (e.g. the fit of a superset of the poses): a local refinement from there, no
-    grid."""
-    from scipy.optimize import minimize
-
-    terms = _reml_terms(problem, result.identified)
-    lo = np.log([b[0] ** 2 for b in THETA_BOUNDS])
-    hi = np.log([b[1] ** 2 for b in THETA_BOUNDS])
-    if start is not None:
-        u0 = np.clip(np.log(np.maximum(np.asarray(start, float), 1e-300)), lo, hi)
-        f0 = _reml_negll(np.exp(u0), *terms)
-    else:
-        grid = [np.linspace(lo[i], hi[i], 17) for i in range(2)]
-        vals = np.array([[_reml_negll(np.exp([u, v]), *terms) for v in grid[1]] for u in grid[0]])
-        i, j = np.unravel_index(np.argmin(vals), vals.shape)
-        u0, f0 = np.array([grid[0][i], grid[1][j]]), vals[i, j]
-    opt = minimize(lambda u: _reml_negll(np.exp(u), *terms), u0, method="L-BFGS-B", bounds=list(zip(lo, hi)))
-    u = opt.x if np.isfinite(opt.fun) and opt.fun <= f0 else u0
-    theta = np.exp(u)
-    theta[u <= lo + 1e-6] = 0.0  # at the lower bound: no robot error visible along that component
-    return theta, _theta_cov(problem, terms, theta)
+    """(theta (2,), cov (2, 2)): the robot's variances maximising the penalised REML likelihood
+    (:func:`_reml_negll`) of the model linearised at the result's x (camera covariance known), searched over the
+    whole box :data:`THETA_BOUNDS` (:func:`_reml_max`: a log grid, then a bounded quasi-Newton refinement from its
+    best point): the maximum is global on the box, so the estimate neither runs away nor, with the
+    boundary-avoiding prior, collapses to 0; its covariance is the inverse Fisher information
+    2 (tr(P V_i P V_j))^-1 at the maximum. ``start``: variances (2,) near the maximum (e.g. the fit of a superset
+    of the poses): a local refinement from there, no grid."""
+    J, r, cam, Vt, Vr = _reml_terms(problem, result.identified)
+    theta = _reml_max(J, r, cam, np.stack([Vt, Vr]), THETA_BOUNDS, start)
+    return theta, _variance_cov(J, cam, np.stack([Vt, Vr]), theta)
 
 
-def _theta_cov(problem, terms, theta) -> np.ndarray:
-    """2 (tr(P V_i P V_j))^-1 over the robot's two variances at theta (pseudo-inverse: an unseen one is inf-free 0)."""
-    J, r, cam, Vt, Vr = terms
-    n_obs, m = r.shape
-    C = cam + theta[0] * Vt + theta[1] * Vr
+def _variance_cov(J, known, blocks, theta) -> np.ndarray:
+    """2 (tr(P V_i P V_j))^-1 (k, k) over the variances theta (k,) of the blocks (k, N, m, m) (pseudo-inverse: an
+    unseen component gets 0, not inf)."""
+    n_obs, m = known.shape[:2]
+    C = known + np.einsum("i,inab->nab", np.asarray(theta, float), blocks)
     Winv = np.linalg.inv(C)
-    W = np.zeros((n_obs * m, n_obs * m))
-    Vs = [np.zeros_like(W), np.zeros_like(W)]
-    for k in range(n_obs):
-        sl = slice(k * m, (k + 1) * m)
-        W[sl, sl] = Winv[k]
-        Vs[0][sl, sl], Vs[1][sl, sl] = Vt[k], Vr[k]
-    Jf = J.reshape(n_obs * m, -1)
-    WJ = W @ Jf
-    P = W - WJ @ np.linalg.pinv(Jf.T @ WJ) @ WJ.T
-    PV = [P @ V for V in Vs]
-    T = np.array([[np.sum(PV[i] * PV[j].T) for j in range(2)] for i in range(2)])
-    return 2.0 * np.linalg.pinv(T)
-
-def _block_products(P: np.ndarray, V: np.ndarray, n_obs: int, m: int) -> np.ndarray:
-    """P @ blockdiag(V) for P (n_obs m, n_obs m) and V (n_obs, m, m), without forming the block diagonal."""
-    return np.einsum("ank,nkl->anl", P.reshape(n_obs * m, n_obs, m), V).reshape(n_obs * m, n_obs * m)
-
-
-def _reml(problem: IdentificationProblem, result: IdentificationResult, known, blocks):
-    """(theta (k,), cov (k, k)): one REML Fisher-scoring step (module docstring) for the variances theta of the
-    covariance components ``blocks`` (k, N, 6, 6) at the result's x with the problem's current weights; ``known``
-    (N, 6, 6) the known part of the covariance (None: none). A component the data do not see (tr ~ 0), or that
-    comes out negative, is 0 (boundary theta >= 0); the system is solved in the least-squares sense (components
-    the data cannot tell apart share their total)."""
-    x = result.identified
-    n_obs, m = problem.n_obs, problem.m
-    free = np.asarray(result.free, bool)
-    J = np.asarray(problem.jacobian(x), float)[:, :, free].reshape(n_obs * m, -1)
-    r = np.asarray(problem.residual(x), float).reshape(-1)
-    Winv = np.linalg.inv(problem.obs_cov)
     W = np.zeros((n_obs * m, n_obs * m))
     for k in range(n_obs):
         W[k * m:(k + 1) * m, k * m:(k + 1) * m] = Winv[k]
-    WJ = W @ J
-    P = W - WJ @ np.linalg.pinv(J.T @ WJ) @ WJ.T
-    PV = [_block_products(P, V, n_obs, m) for V in blocks]
+    Jf = J.reshape(n_obs * m, -1)
+    WJ = W @ Jf
+    P = W - WJ @ np.linalg.pinv(Jf.T @ WJ) @ WJ.T
+    PV = [np.einsum("ank,nkl->anl", P.reshape(n_obs * m, n_obs, m), V).reshape(n_obs * m, n_obs * m)
+          for V in blocks]
     T = np.array([[np.sum(PV[i] * PV[j].T) for j in range(len(PV))] for i in range(len(PV))])
-    Wr = (W @ r).reshape(n_obs, m)
-    q = np.array([np.einsum("nk,nkl,nl->", Wr, V, Wr) for V in blocks])
-    rhs = q.copy()
-    if known is not None:
-        PK = _block_products(P, np.asarray(known, float), n_obs, m)
-        rhs -= np.array([np.sum(PVi * PK.T) for PVi in PV])
-    theta = np.zeros(len(blocks))
-    seen = np.diag(T) > 1e-12 * max(np.max(np.abs(T)), 1e-300)
-    for _ in range(len(blocks) + 1):  # solve, then drop the components that come out negative
-        if not seen.any():
-            break
-        idx = np.flatnonzero(seen)
-        sol = np.linalg.lstsq(T[np.ix_(idx, idx)], rhs[idx], rcond=1e-12)[0]
-        theta[:] = 0.0
-        theta[idx] = sol
-        if np.all(sol >= 0):
-            break
-        seen[idx[sol < 0]] = False
-    return np.maximum(theta, 0.0), 2.0 * np.linalg.pinv(T)
+    return 2.0 * np.linalg.pinv(T)
 
 
 def _robot_blocks(problem: IdentificationProblem, x) -> tuple[np.ndarray, np.ndarray]:
@@ -360,6 +341,9 @@ NOISE_FRAMES = ("target", "camera")
 NOISE_FLOOR_REL = 1e-6
 #: ... and at least this [m^2 for translations, rad^2 for rotations]
 NOISE_FLOOR_ABS = 1e-14
+#: bounds of the measured poses' estimated std per axis in the REML search: translation x, y, z [m], rotation x, y,
+#: z [rad] (as :data:`THETA_BOUNDS`)
+NOISE_BOUNDS = 3 * (THETA_BOUNDS[0],) + 3 * (THETA_BOUNDS[1],)
 ROBOT_TRANSLATION_NOT_SEPARABLE = (
     "not separable from the measured poses' translation noise: an isotropic flange translation error is an "
     "isotropic error of the measured translation, whatever its frame; it is part of their estimated std")
@@ -409,12 +393,19 @@ def _noise_irls(base, x0, Vc, theta_cam, s_robot, est_robot: bool, max_iter: int
     for it in range(1, max_iter + 1):
         old = np.r_[th_c, th_r[1]]
         Vt, Vr = _robot_blocks(pb, res.identified)
+        free = np.asarray(res.free, bool)
+        J = np.asarray(pb.jacobian(res.identified), float)[:, :, free]
+        r = np.asarray(pb.residual(res.identified), float)
         if est_robot:
-            th, tcov = _reml(pb, res, None, [*Vc, Vr])
+            blocks, known = np.stack([*Vc, Vr]), np.zeros_like(Vr)
+            th = _reml_max(J, r, known, blocks, NOISE_BOUNDS + (THETA_BOUNDS[1],), np.r_[th_c, th_r[1]],
+                           grid_axes=[6] if it == 1 else None)
             th_c, th_r = _floored(th[:6]), np.array([0.0, th[6]])
         else:
-            th, tcov = _reml(pb, res, th_r[0] * Vt + th_r[1] * Vr, list(Vc))
+            blocks, known = np.stack(list(Vc)), th_r[0] * Vt + th_r[1] * Vr
+            th = _reml_max(J, r, known, blocks, NOISE_BOUNDS, th_c)
             th_c = _floored(th)
+        tcov = _variance_cov(J, known, blocks, th)
         pb = _noise_weights(base, res.identified, Vc, th_c, _robot_cov(th_r))
         new = solve_lse(pb, res.identified)
         free = np.asarray(new.free, bool)
@@ -481,7 +472,7 @@ def fit_estimated_noise(T_base_flange: np.ndarray, T_cam_target: np.ndarray, mou
     dg = np.diag(tcov) if tcov is not None else np.full(7, np.nan)
     sc = _std_of_std(th_c, dg[:6])
     noise = {"source": "estimated", "frame": frame,
-             "method": "REML (Fisher scoring) of the variance per axis of the measured poses' error"
+             "method": "penalised REML (boundary-avoiding prior) of the variance per axis of the measured poses' error"
                        + (", with the robot's rotation variance" if est_robot else ", the robot's std given"),
              "translation_mm": (1e3 * np.sqrt(th_c[:3])).tolist(),
              "rotation_deg": np.degrees(np.sqrt(th_c[3:])).tolist(),
@@ -491,7 +482,7 @@ def fit_estimated_noise(T_base_flange: np.ndarray, T_cam_target: np.ndarray, mou
         robot = {"source": "estimated", "translation_mm": None, "rotation_deg": float(np.degrees(np.sqrt(th_r[1]))),
                  "std_translation_mm": None, "std_rotation_deg": float(np.degrees(sr[0])),
                  "translation": ROBOT_TRANSLATION_NOT_SEPARABLE,
-                 "method": "REML (Fisher scoring) with the measured poses' per-axis variances"}
+                 "method": "penalised REML (boundary-avoiding prior) with the measured poses' per-axis variances"}
     else:
         robot = {"source": "given" if robot_std is not None else "none",
                  "translation_mm": 1e3 * float(np.sqrt(s_robot[0])),
