@@ -107,6 +107,7 @@ def bench(poses, seeds, robot_mm, robot_deg, pnp_scale) -> None:
             Zs = np.concatenate([o[f"z_{k}"] for nm, _, _, o in rows if nm == name])
             print(f"    {name}: z RMS {np.sqrt(np.mean(Zs**2)):.2f}")
     print("RMS over seeds (t mm / r deg):")
+    ratios = []
     for name in SCENES:
         for n in poses:
             sel = [o for nm, nn, _, o in rows if nm == name and nn == n]
@@ -114,6 +115,16 @@ def bench(poses, seeds, robot_mm, robot_deg, pnp_scale) -> None:
                                       axis=0)) for h in hdr if all(h in ("before", "given", "est") or h in o["cf"]
                                                                    for o in sel)}
             print(f"  {name:18s} N={n:3d} " + "  ".join(f"{h} {v[0]:.3f}/{v[1]:.4f}" for h, v in rms.items()))
+            best = np.min([v for h, v in rms.items() if h not in ("before", "given", "est")], axis=0)
+            ratio = rms["est"] / best
+            ratios.append(ratio)
+            print(f"  {'':18s}        est / best closed form of the cell (t, r): {ratio[0]:.3f} / {ratio[1]:.3f}")
+    print(f"largest est / best closed form over the cells (t, r): {np.max(ratios, axis=0)[0]:.3f} / "
+          f"{np.max(ratios, axis=0)[1]:.3f} (limit 1.1)")
+    est = np.array([o["robot_est"] for *_, o in rows], float)
+    print(f"robot error estimated (REML) at 0: {int(np.sum(est[:, 0] <= 0))} runs in translation, "
+          f"{int(np.sum(est[:, 1] <= 0))} in rotation, of {len(rows)}; smallest estimates {est[:, 0].min():.3g} mm, "
+          f"{est[:, 1].min():.3g} deg (truth {robot_mm} mm / {robot_deg} deg)")
     print(f"mean time of one identify_handeye: {np.mean([o['seconds'] for *_, o in rows]):.2f} s")
 
 
