@@ -62,6 +62,8 @@ def main() -> None:
                      f"{acc['after']['position_rms_mm']:.3f} mm")
             if v.get("failure"):
                 line += f"; FAILED: {rep['failure']['message'][:160]}"
+            elif v["status"] != "ok":
+                line += f"; WARNING: {v['message'][:300]}"
             print(line, flush=True)
         print(f"== {name}: {sum(kinds.values())} runs, {dict(kinds)}; held-out observed/predicted median "
               f"{np.median(ratios) if ratios else float('nan'):.2f} (range {min(ratios, default=np.nan):.2f}-"
