@@ -1,7 +1,7 @@
 """The simulated image chain of one run: render -> sensor effects -> (write PNGs) -> measure, per
 pose, in worker processes.
 
-This module is an *edge*: its worker initialiser is the one place (with ``cli.py``) that sets the
+This module is an *edge*: its worker initialiser is the one place (with ``cli/__init__.py``) that sets the
 OpenGL platform and thread environment of a process. Workers hold one OpenGL context and one OpenCV
 (and, if the torch effects are used, torch) thread each. Per-pose seeds derive from the run seed, so
 results do not depend on the worker count. Neither the main process nor the workers import torch for the

@@ -1,0 +1,5 @@
+"""``python -m vision_calib.cli ...``: the ``vision-calib`` command."""
+
+from . import run
+
+run()

@@ -1,0 +1,110 @@
+"""Using a result on the robot: compensate, inverse, export, and the ``--export NAME`` option of the runs."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from ..errors import VisionCalibError
+from .options import add_command, add_json, tcp
+
+
+#: the export formats (``io.controller_export.FORMATS``, named here so that parsing imports nothing)
+EXPORT_FORMATS = ("urdf", "dh", "ur_yaml", "ros_tf")
+#: the runs that take ``--export NAME`` (the export runs on their output folder after them)
+EXPORTING_RUNS = ("simulate", "process", "process-poses")
+
+
+def add_deploy_parsers(sub) -> None:
+    """Subcommands compensate, inverse, export, and the ``--export NAME`` option of :data:`EXPORTING_RUNS`."""
+    result_help = "result folder (or its calibrated_model.yaml) of simulate / process / process-poses"
+    p = add_command(sub, "compensate", "joint commands meant for the nominal model -> joints that put the tool "
+                    "there on the calibrated model", """
+  vision-calib compensate out/run joints.csv --out corrected.csv
+  (joints.csv: pose_id,q1_deg,...,q6_deg or q1_rad..; corrected.csv: the same columns and units)""")
+    p.add_argument("result", metavar="RESULT", help=result_help)
+    p.add_argument("joints", metavar="JOINTS_CSV", help="joint table: [pose_id,]q1_<rad|deg>,..,qn_<unit> (m|mm for "
+                   "prismatic joints), one row per joint set")
+    p.add_argument("--out", required=True, metavar="FILE", dest="out_file", help="corrected joint table to write")
+    p = add_command(sub, "inverse", "tool poses -> joint values on the calibrated model (inverse kinematics)", """
+  vision-calib inverse out/run poses.csv --out joints.csv
+  vision-calib inverse out/run poses.csv --out joints.csv --tcp 0 0 0.12 --unit deg
+  (poses.csv: pose_id,x_m,y_m,z_m,qx,qy,qz,qw: the tool in the model's base frame, quaternion scalar last)""")
+    p.add_argument("result", metavar="RESULT", help=result_help)
+    p.add_argument("poses", metavar="POSES_CSV", help="pose table: [pose_id,]x_<m|mm|cm>,y_..,z_..,qx,qy,qz,qw")
+    p.add_argument("--out", required=True, metavar="FILE", dest="out_file", help="joint table to write")
+    p.add_argument("--tcp", type=tcp, default=None, metavar="X,Y,Z",
+                   help="tool centre point in the flange frame [m] (default 0 0 0: the flange)")
+    p.add_argument("--unit", choices=("rad", "deg"), default="rad", help="angle unit of the joint table (default rad)")
+    p = add_command(sub, "export", "write a calibration result in a format a controller reads", """
+  vision-calib export out/run --format urdf --out robot.urdf
+  vision-calib export out/run --format dh --out dh.csv
+  vision-calib export out/ur5e --format ur_yaml --out my_robot_calibration.yaml
+  vision-calib export out/handeye --format ros_tf --out camera_tf.yaml""",
+                    description="Write a calibration result in a format a controller reads: urdf (the calibrated "
+                                "arm), dh (modified-DH table CSV), ur_yaml (ur_description kinematics YAML), ros_tf "
+                                "(ROS static transforms of the identified mounts, also from hand-eye results).")
+    p.add_argument("result", metavar="RESULT", help=result_help + ", or a hand-eye result (ros_tf)")
+    p.add_argument("--format", required=True, choices=EXPORT_FORMATS, dest="fmt", help="what to write")
+    p.add_argument("--out", required=True, metavar="FILE", dest="out_file", help="file to write")
+    add_json(p)
+    for name in EXPORTING_RUNS:
+        sub.choices[name].add_argument(
+            "--export", choices=EXPORT_FORMATS, default=None, metavar="NAME",
+            help=f"after the run, also export the result ({', '.join(EXPORT_FORMATS)}) into the output folder "
+                 "(the file names of `vision-calib export`)")
+
+
+def cmd_compensate(args) -> int:
+    from ..deploy.files import compensate_file
+
+    out = compensate_file(args.result, args.joints, args.out_file)
+    m = out["max_correction"]
+    print(f"wrote {out['out']} ({out['rows']} joint sets; largest correction {m['value']:+.4g} {m['unit']} on "
+          f"{m['joint']}, {m['row']})")
+    return 0
+
+
+def cmd_inverse(args) -> int:
+    from ..deploy.files import inverse_file
+
+    out = inverse_file(args.result, args.poses, args.out_file, tcp=args.tcp, angle_unit=args.unit)
+    print(f"wrote {out['out']} ({out['rows']} joint sets)")
+    return 0
+
+
+def cmd_export(args) -> int:
+    from ..config import check_output_apart
+    from ..io.controller_export import export
+    from ..serialize import to_json
+
+    r = Path(args.result)
+    check_output_apart(args.out_file, [(r, "folder" if r.is_dir() else "file")])
+    path = export(args.result, args.fmt, args.out_file)
+    print(to_json({"format": args.fmt, "out": str(path)}) if args.json else f"wrote {path} ({args.fmt})")
+    return 0
+
+
+def exporting(run):
+    """``run`` followed by ``--export NAME`` on its output folder (when the run ended with exit code 0)."""
+
+    def run_then_export(args) -> int:
+        code = run(args)
+        fmt = getattr(args, "export", None)
+        if fmt is None:
+            return code
+        if code != 0:
+            print(f"vision-calib: warning: --export {fmt} skipped: the run did not give a usable result", file=sys.stderr)
+            return code
+        from ..io.controller_export import FORMATS, export
+
+        try:
+            path = export(args.out, fmt, Path(args.out) / FORMATS[fmt].file)
+        except VisionCalibError as exc:
+            print(f"vision-calib: error: --export {fmt}: {exc} (the run's outputs in {args.out} are kept)",
+                  file=sys.stderr)
+            return exc.exit_code
+        print(f"vision-calib: exported {path} ({fmt})", file=sys.stderr)
+        return code
+
+    return run_then_export
