@@ -65,6 +65,54 @@ def _scalar_first(line):
     return ",".join(f[:4] + [f[7], f[4], f[5], f[6]])
 
 
+def _rows_edit(edit):
+    """An edit of poses.csv's data rows as a whole (a function of the list of rows)."""
+    def apply(src, dst):
+        shutil.copytree(src, dst)
+        lines = (dst / "poses.csv").read_text().splitlines()
+        (dst / "poses.csv").write_text("\n".join([lines[0]] + edit(lines[1:])) + "\n")
+        return dst
+    return apply
+
+
+def _shifted(rows):  # each pose id gets the NEXT row's flange pose; the last row is dropped
+    vals = [r.split(",", 1)[1] for r in rows]
+    return [f"{r.split(',', 1)[0]},{v}" for r, v in zip(rows[:-1], vals[1:])]
+
+
+def _one_scalar_first(rows):
+    return [_scalar_first(r) if i == 3 else r for i, r in enumerate(rows)]
+
+
+def _two_swapped(rows):
+    a, b = rows[4].split(",", 1), rows[9].split(",", 1)
+    return [f"{a[0]},{b[1]}" if i == 4 else f"{b[0]},{a[1]}" if i == 9 else r for i, r in enumerate(rows)]
+
+
+def test_pairing_off_by_one_named(flange_rec, tmp_path, capsys):
+    """poses.csv one row off against the images: not read as a 55 mm robot error, named as the pairing."""
+    folder = _rows_edit(_shifted)(flange_rec, tmp_path / "bad")
+    rc, err, rep = _run(folder, tmp_path / "out", capsys)
+    assert rc == 3, err
+    hits = [t["candidate"] for t in rep["failure"]["tests"] if t["fits"]]
+    assert hits and hits[0].startswith("the images paired one row off (each with the PREVIOUS"), hits
+    assert not (tmp_path / "out" / "calibrated_model.yaml").exists()
+
+
+@pytest.mark.parametrize("edit, bad", [(_one_scalar_first, {"003"}), (_two_swapped, {"004", "009"})],
+                         ids=["one quaternion scalar-first", "two rows swapped"])
+def test_single_bad_rows_named_as_outliers(flange_rec, tmp_path, capsys, edit, bad):
+    """One or two damaged rows among 16: each named as an outlier (tested against the fit without it), the
+    others kept, the mounts within their std of the truth."""
+    from flange_folder import assert_mounts_within_std, true_mounts
+
+    folder = _rows_edit(edit)(flange_rec, tmp_path / "bad")
+    rc, err, rep = _run(folder, tmp_path / "out", capsys)
+    assert rc == 0, err
+    assert {o["pose_id"] for o in rep["outliers"]} == bad, rep["outliers"]
+    assert_mounts_within_std(rep["handeye"]["transforms"], true_mounts(flange_rec.parent / "rec"))
+
+
 @pytest.mark.parametrize("damage, needle", [
     (dict(edit_yaml=_scale), "the board's size off by 2"),
     (dict(edit_csv=_scalar_first), "the flange quaternions read scalar-first"),

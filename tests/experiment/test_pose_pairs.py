@@ -88,6 +88,18 @@ def _pair_file(tmp_path, d, **kw):
     return write_pose_pairs(tmp_path / "pairs.yaml", d.labels, d.T_base_flange, d.T_cam_target, d.mount, **kw)
 
 
+def test_pose_pairs_one_row_off_named(tmp_path, capsys):
+    """The camera poses one row off against the flange poses (a logger that wrote the image of pose k+1 beside pose
+    k): exit 3, the pairing named (not absorbed into the estimated noise), no calibrated model."""
+    d = simulate_pose_pairs(30, 4, "fixed")
+    path = write_pose_pairs(tmp_path / "pairs.yaml", d.labels[:-1], d.T_base_flange[:-1], d.T_cam_target[1:], "fixed")
+    assert main(["process-poses", str(path), "--out", str(tmp_path / "out"), "--no-plots"]) == 3
+    rep = json.loads((tmp_path / "out" / "report.json").read_text())
+    hits = [t["candidate"] for t in rep["failure"]["tests"] if t["fits"]]
+    assert hits and hits[0].startswith("the measured poses paired one row off (each with the NEXT"), rep["failure"]
+    assert not (tmp_path / "out" / "calibrated_model.yaml").exists()
+
+
 def test_process_poses_on_pose_pairs_end_to_end(tmp_path, capsys):
     """A 30-pair file with one gross pair (5 cm): exit 0, the pair named as an outlier and held out of every
     training fold, the held-out block against the closed form, the noise block, a report valid for the schema."""

@@ -13,7 +13,12 @@ reading of the input and its translation misfit ``RMS |t(A G_k B) - t(M_k)|`` (n
 - **other readings** the caller can build from its raw input (e.g. flange quaternions scalar-first, the other
   camera mount): each refitted the same way; one whose misfit is :data:`FIT_GAIN` times lower, and below the
   misfit the estimated robot error explains, is a failure naming it;
-- **a fit far beyond its noise** (``gross.GROSS_CHI2_DOF``) is a failure by itself (robot error given or exact).
+- **a fit far beyond its noise** (``gross.GROSS_CHI2_DOF``) is a failure by itself (robot error given or exact),
+  and so is an estimated robot pose error above :data:`IMPLAUSIBLE_MM` / :data:`IMPLAUSIBLE_DEG` per axis.
+
+:func:`alternative_readings` builds the readings both routes test (``process`` of a flange-pose recording,
+``process-poses`` of pose pairs): scalar-first quaternions, rotation vectors in degrees, the other mount, the
+images paired one row off.
 
 Only run when something is suspicious: chi2/dof above ``GROSS_CHI2_DOF``, or an estimated robot pose error above
 :data:`SUSPECT_MM` / :data:`SUSPECT_DEG` per axis (industrial arms: tenths of a mm; a few mm when uncalibrated).
@@ -33,6 +38,9 @@ SCALE_TOL = 0.05
 FIT_GAIN = 5.0
 #: an estimated robot pose error above these (per axis) makes the diagnosis run
 SUSPECT_MM, SUSPECT_DEG = 2.0, 0.5
+#: ... and above these it is a failure by itself: no arm reports its flange that far off (uncalibrated arms: a few
+#: mm, a few tenths of a degree); the data do not pair the images with their flange poses as the model reads them
+IMPLAUSIBLE_MM, IMPLAUSIBLE_DEG = 50.0, 10.0
 
 
 def translation_misfit(F: np.ndarray, M: np.ndarray, mount: str) -> float:
@@ -78,8 +86,12 @@ def handeye_gross_failure(F, M, mount: str, ident, where: str, alternatives: dic
     F, M = np.asarray(F, float), np.asarray(M, float)
     chi2 = float(ident.result.chi2_dof)
     robot = ident.fit.robot
-    suspect = (np.isfinite(chi2) and chi2 > GROSS_CHI2_DOF) or (
-        robot.get("source") == "estimated" and (robot["translation_mm"] > SUSPECT_MM or robot["rotation_deg"] > SUSPECT_DEG))
+    est = robot.get("source") == "estimated"
+    t_mm, r_deg = (robot.get("translation_mm") or 0.0, robot.get("rotation_deg") or 0.0) if est else (0.0, 0.0)
+    noise = ident.fit.noise or {}  # pose pairs: the measured poses' estimated per-axis noise swallows as much
+    n_mm, n_deg = max(noise.get("translation_mm") or [0.0]), max(noise.get("rotation_deg") or [0.0])
+    suspect = ((np.isfinite(chi2) and chi2 > GROSS_CHI2_DOF) or max(t_mm, n_mm) > SUSPECT_MM
+               or max(r_deg, n_deg) > SUSPECT_DEG)
     if not suspect:
         return None
     base = translation_misfit(F, M, mount)
@@ -97,22 +109,55 @@ def handeye_gross_failure(F, M, mount: str, ident, where: str, alternatives: dic
                       "fits": bool(np.isfinite(c) and c * FIT_GAIN < base)})
     hits = [t for t in tests if t["fits"]]
     gross = np.isfinite(chi2) and chi2 > GROSS_CHI2_DOF
-    if not hits and not gross:
+    absurd = t_mm > IMPLAUSIBLE_MM or r_deg > IMPLAUSIBLE_DEG
+    if not hits and not gross and not absurd:
         return None
     shown = "; ".join(f"{t['candidate']}: misfit {t['misfit_mm']:.3g} mm" + (" -- this fits" if t["fits"] else "")
                       if t["misfit_mm"] is not None else f"{t['candidate']}: no closed form" for t in tests)
-    rob = (f", read by the fit as a robot pose error of {robot['translation_mm']:.3g} mm / {robot['rotation_deg']:.3g} "
-           "deg per axis" if robot.get("source") == "estimated" else "")
+    rob = (f", read by the fit as a robot pose error of {t_mm:.3g} mm / {r_deg:.3g} deg per axis" if est else "")
     if hits:
         head = (f"{where}: {hits[0]['candidate']}: that reading of the input fits (translation misfit "
                 f"{hits[0]['misfit_mm']:.3g} mm against {base * 1e3:.3g} mm as read{rob}): a gross error in the input, "
                 "not a calibration")
-    else:
+    elif gross:
         head = (f"{where}: the hand-eye fit is far beyond the noise model: chi2/dof {chi2:.3g} (above "
                 f"{GROSS_CHI2_DOF:g}): a gross error in the input, not a calibration")
+    else:
+        head = (f"{where}: the fit reads the data as a robot pose error of {t_mm:.3g} mm / "
+                f"{r_deg:.3g} deg per axis (above {IMPLAUSIBLE_MM:g} mm / {IMPLAUSIBLE_DEG:g} deg: no "
+                "arm reports its flange that far off): the images and the flange poses do not belong together as "
+                "read (pairing, units, frames), not a calibration")
     return {"kind": "gross input error (hand-eye)", "chi2_dof": chi2 if np.isfinite(chi2) else None,
             "translation_misfit_mm": base * 1e3, "tests": tests,
             "message": f"{head}. Readings tested with their closed form: {shown}" + ("" if hits else " (none fits)")}
+
+
+def rotation_vectors_in_degrees(F: np.ndarray) -> np.ndarray:
+    """The flange poses F (N, 4, 4) re-read as if their rotation vectors (theta-u, as ViSP and many pose files
+    write them) had been written in degrees and read as radians: each rotation vector scaled by pi / 180."""
+    from scipy.spatial.transform import Rotation
+
+    out = F.copy()
+    out[:, :3, :3] = Rotation.from_rotvec(np.radians(Rotation.from_matrix(F[:, :3, :3]).as_rotvec())).as_matrix()
+    return out
+
+
+def alternative_readings(F: np.ndarray, M: np.ndarray, mount: str, mount_source: str, measured: str = "images") -> dict:
+    """{what: (F, M, mount)}: the other readings of a hand-eye input that users' damage produces
+    (:func:`handeye_gross_failure`'s ``alternatives``): flange quaternions scalar-first, rotation vectors in
+    degrees, the other camera mount (``mount_source``: where the mount was declared, named in the text), and the
+    images (``measured``: what the camera side is called) paired one row off with the flange poses (each with the
+    next / the previous row's pose)."""
+    other = "fixed" if mount == "eye_in_hand" else "eye_in_hand"
+    out = {"the flange quaternions read scalar-first (w, x, y, z written under qx, qy, qz, qw)":
+           (quaternion_scalar_first(F), M, mount),
+           "the flange rotation vectors read as degrees (theta-u written in degrees)":
+           (rotation_vectors_in_degrees(F), M, mount),
+           f"the camera mount {other} (read as {mount} from {mount_source})": (F, M, other)}
+    if len(F) >= 4:
+        for side, Fa, Ma in (("NEXT", F[1:], M[:-1]), ("PREVIOUS", F[:-1], M[1:])):
+            out[f"the {measured} paired one row off (each with the {side} row's flange pose)"] = (Fa, Ma, mount)
+    return out
 
 
 def quaternion_scalar_first(F: np.ndarray) -> np.ndarray:
@@ -125,4 +170,5 @@ def quaternion_scalar_first(F: np.ndarray) -> np.ndarray:
     return out
 
 
-__all__ = ["handeye_gross_failure", "board_scale", "translation_misfit", "quaternion_scalar_first", "SCALE_TOL"]
+__all__ = ["handeye_gross_failure", "board_scale", "translation_misfit", "quaternion_scalar_first",
+           "rotation_vectors_in_degrees", "alternative_readings", "SCALE_TOL", "IMPLAUSIBLE_MM", "IMPLAUSIBLE_DEG"]

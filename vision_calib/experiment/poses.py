@@ -235,6 +235,7 @@ def process_pose_pairs(pp: PosePairs, out_dir, folds: int | None = None, plots: 
     ``process_pose_pairs``: the ``handeye`` block with the measured poses' estimated noise, ``holdout``),
     summary.txt, report.html. folds: k of the held-out validation (default the file's)."""
     from ..io.report_handeye import handeye_report
+    from .handeye_gross import alternative_readings, handeye_gross_failure
     from .handeye_step import handeye_blocks, identify_handeye
     from .holdout import holdout_failure
 
@@ -251,6 +252,9 @@ def process_pose_pairs(pp: PosePairs, out_dir, folds: int | None = None, plots: 
     he.update(handeye_blocks(ident))
     t_id = time.perf_counter() - t0
     hold = pair_holdout(pp, folds, pp.seed, outliers=[lab for lab, _ in ident.rejected])
+    failure = handeye_gross_failure(pp.T_base_flange, pp.T_cam_target, pp.mount, ident, str(pp.path),
+                                    alternatives=alternative_readings(pp.T_base_flange, pp.T_cam_target, pp.mount,
+                                                                      "the pose-pair file", "measured poses"))
     report = build_report(
         "process_pose_pairs",
         source={"file": str(pp.path), "csv": str(pp.csv_path), "flange_csv": str(pp.flange_path)},
@@ -260,7 +264,8 @@ def process_pose_pairs(pp: PosePairs, out_dir, folds: int | None = None, plots: 
                       "noise": pp.sigma_source, "pose_ids": list(pp.ids)},
         result=result, identified=ident, residuals=residual_stats(result.residuals, "pose"),
         extra={"handeye": he, "holdout": hold},
-        timings={"identify": t_id, "total": time.perf_counter() - t0}, failure=holdout_failure(hold))
+        timings={"identify": t_id, "total": time.perf_counter() - t0},
+        failure=failure or holdout_failure(hold))
     report["summary_text"] += "\n" + "\n".join(pair_holdout_lines(hold))
     write_report(Path(out_dir), report, plots=plots)
     return report

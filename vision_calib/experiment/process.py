@@ -240,7 +240,7 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None, cause=No
     from ..identify.handeye_problem import handeye_problem, stack_measurements
     from ..io.report_handeye import handeye_report
     from .camera_step import SOURCE_CAMERA_FILE, fitted_camera, intrinsics_directions, residual_response
-    from .handeye_gross import handeye_gross_failure, quaternion_scalar_first
+    from .handeye_gross import alternative_readings, handeye_gross_failure
     from .handeye_step import handeye_blocks, identify_handeye
 
     ok = [i for i, pm in enumerate(pms) if pm.valid]
@@ -264,11 +264,8 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None, cause=No
     ident = identify_handeye(rec.poses[ok], T, mount, cov, labels, rec.robot_pose_std,
                              nuisance=nuisance if dirs else None, where=str(rec.folder), cov_scale=IMAGE_COV_SCALE)
     result, A, B, problem = ident.result, ident.A, ident.B, ident.problem
-    other = "fixed" if mount == "eye_in_hand" else "eye_in_hand"
-    failure = handeye_gross_failure(rec.poses[ok], T, mount, ident, str(rec.folder), alternatives={
-        "the flange quaternions read scalar-first (w, x, y, z written under qx, qy, qz, qw)":
-            (quaternion_scalar_first(rec.poses[ok]), T, mount),
-        f"the camera mount {other} (recording.yaml camera_mount: {rec.camera_mount})": (rec.poses[ok], T, other)})
+    failure = handeye_gross_failure(rec.poses[ok], T, mount, ident, str(rec.folder), alternatives=alternative_readings(
+        rec.poses[ok], T, mount, "recording.yaml camera_mount"))
     cam_fit = None
     if ident.nuisance is not None:
         cam_fit = fitted_camera(rec.camera, used, ident.nuisance["coefficients"])
