@@ -103,6 +103,11 @@ def identify_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: s
             rejected = list(out)
             fit = fit_handeye(F[keep], M[keep], mount, None if C is None else C[keep], [labels[k] for k in keep],
                               robot_std, candidates=closed_forms(F[keep], M[keep], mount), noise_frame=noise_frame)
+    stability = []
+    if deletion is not None and rejected:
+        bad = {lab for lab, _ in rejected}
+        stability = decision_stability(F, M, mount, C, labels, keep, [k for k, lab in enumerate(labels)
+                                                                       if str(lab) in bad], deletion, robot_std, fit)
     result, pb, nz = fit.result, fit.problem, None
     if nuisance is not None:
         result, nz = _with_shared_error(fit, nuisance)
@@ -120,11 +125,16 @@ def identify_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: s
                                  + (", measured poses' std estimated per axis" if fit.noise else "") + ")"),)
     if rejected:
         extra += (f"{len(rejected)} outlier poses rejected: " + "; ".join(f"{lab}: {why}" for lab, why in rejected[:5]),)
+    for st in stability:
+        if st["kept_when_left_out"]:
+            extra += (f"the rejection of pose {st['pose_id']} is unstable: it would be kept in {len(st['kept_when_left_out'])}"
+                      f" of {st['of']} leave-one-out runs (leaving out {', '.join(st['kept_when_left_out'][:5])}); the "
+                      "std include those runs' fits (jackknife)",)
     if extra:
         result = replace(result, warnings=tuple(result.warnings) + extra)
     A, B = transforms_from_x(pb, result.identified)
     return HandeyeIdentified(result, A, B, pb, tuple(rejected), adequacy, max(factor, 1.0), fit, nz,
-                             deletion=None if deletion is None else _deletion_block(deletion, result))
+                             deletion=None if deletion is None else _deletion_block(deletion, result, stability))
 
 
 #: more poses failing the deletion test than this fraction: the model or the measurement is wrong
@@ -153,12 +163,14 @@ def deletion_test(F, M, mount: str, C, labels: Sequence[str], robot_std, fit: Ha
     n = len(labels)
     d, xs = np.full(n, np.inf), np.zeros((n, 12))
     theta = np.square(_theta(fit))
+    fits = []  # per k: (x, parameter covariance of the free ones, free mask, robot variances) of the fit without k
     for k in range(n):
         rest = [j for j in range(n) if j != k]
         _, rk, th = deletion_fit(F[rest], M[rest], mount, C[rest], [labels[j] for j in rest], fit.A, fit.B, theta,
                                  robot_std is None and fit.robot["source"] == "estimated")
         x = rk.identified
         xs[k] = x
+        fits.append((x, rk.covariance, np.asarray(rk.free, bool), th))
         allp = handeye_problem(F, M, mount, fit.A, fit.B, C, labels=list(labels),
                                robot_cov=robot_pose_cov(*np.sqrt(th)))
         one = reweighted(allp, x).subset([k])  # pose k at the fit without it
@@ -172,7 +184,50 @@ def deletion_test(F, M, mount: str, C, labels: Sequence[str], robot_std, fit: Ha
             d[k] = np.inf
     thr = float(chi2.isf(OUTLIER_LEVEL / n, 6))
     thr = max(thr, OUTLIER_MIN_RATIO**2 * float(np.median(d[np.isfinite(d)]))) if np.isfinite(d).any() else thr
-    return {"d": d, "threshold": thr, "x_loo": xs, "labels": [str(lab) for lab in labels]}
+    return {"d": d, "threshold": thr, "x_loo": xs, "labels": [str(lab) for lab in labels], "fits": fits}
+
+
+def pose_statistic(F, M, mount: str, C, idx: int, A, B, fit_k) -> float:
+    """The deletion statistic of pose ``idx`` of (F, M (N, 4, 4), C (N, 6, 6); N >= 3) under a fit that does not
+    contain it (``fit_k`` = (x, covariance, free, robot variances) of :func:`deletion_test`'s ``fits``)."""
+    from ..identify.handeye_problem import handeye_problem, reweighted, robot_pose_cov
+
+    x, cov, free, th = fit_k
+    allp = handeye_problem(F, M, mount, A, B, C, labels=[str(k) for k in range(len(F))],
+                           robot_cov=robot_pose_cov(*np.sqrt(th)))
+    one = reweighted(allp, x).subset([idx])
+    r = np.asarray(one.residual(x), float)[0]
+    J = np.asarray(one.jacobian(x), float)[0][:, free]
+    try:
+        return float(r @ np.linalg.solve(one.obs_cov[0] + J @ cov @ J.T, r))
+    except np.linalg.LinAlgError:
+        return float("inf")
+
+
+def decision_stability(F, M, mount: str, C, labels, keep: list, rejected_idx: list, deletion: dict, robot_std,
+                       fit: HandeyeFit) -> list[dict]:
+    """Does each rejection hold in every leave-one-out run? For each rejected pose r and each kept pose k: r's
+    deletion statistic under the fit without k (and without r) against the threshold. Where it passes (the run
+    without k would keep r), that run's fit is redone with r (``deletion["x_loo"][k]`` replaced), so that the
+    jackknife std carry the instability. Returns [{pose_id, same_decision (count), of, kept_when_left_out
+    [labels]}] per rejected pose."""
+    from ..identify.handeye_fit import deletion_fit
+
+    out = []
+    theta = np.square(_theta(fit))
+    est = robot_std is None and fit.robot["source"] == "estimated"
+    for r in rejected_idx:
+        flips = []
+        for i, k in enumerate(keep):
+            if pose_statistic(F, M, mount, C, r, fit.A, fit.B, deletion["fits"][i]) <= deletion["threshold"]:
+                flips.append(str(labels[k]))
+                sub = [j for j in keep if j != k] + [r]
+                _, rk, _ = deletion_fit(F[sub], M[sub], mount, C[sub], [labels[j] for j in sub], fit.A, fit.B,
+                                        theta, est)
+                deletion["x_loo"][i] = rk.identified
+        out.append({"pose_id": str(labels[r]), "same_decision": len(keep) - len(flips), "of": len(keep),
+                    "kept_when_left_out": flips})
+    return out
 
 
 def _with_jackknife(result: IdentificationResult, deletion: dict):
@@ -198,12 +253,12 @@ def _with_jackknife(result: IdentificationResult, deletion: dict):
     return replace(result, std=std, covariance=cov), line
 
 
-def _deletion_block(deletion: dict, result: IdentificationResult) -> dict:
+def _deletion_block(deletion: dict, result: IdentificationResult, stability=()) -> dict:
     """The report's ``deletion`` block: per pose its deletion statistic, the threshold, the jackknife / reported
-    std ratio per identified parameter."""
+    std ratio per identified parameter, the stability of each rejection (:func:`decision_stability`)."""
     free = np.asarray(result.free, bool)
     return {"how": "each pose against the fit without it (robot pose error re-estimated without it)",
-            "threshold": float(deletion["threshold"]),
+            "threshold": float(deletion["threshold"]), "rejections": list(stability),
             "poses": [{"pose_id": lab, "d": float(v) if np.isfinite(v) else None}
                       for lab, v in zip(deletion["labels"], deletion["d"])],
             "jackknife_ratio": {n: float(r) for n, r, f in zip(result.names, deletion.get("ratio", []), free) if f}}
