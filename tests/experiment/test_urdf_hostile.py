@@ -10,42 +10,22 @@ import io
 import os
 from pathlib import Path
 
-import numpy as np
 import pytest
 
-from vision_calib import frames as F
-from vision_calib.cli import main
-from vision_calib.config import Section
-from vision_calib.errors import ConfigError
-from vision_calib.experiment.steps import scene_truth
-from vision_calib.io.measured_poses import write_measured_poses
-from vision_calib.kinematics.urdf_file import read_urdf
-from vision_calib.rig.scene import scene_from_section
+from urdf_arm import measured_pose_cell
+from urdf_arm import urdf_text as arm_urdf
 
-ST, SR = 1e-4, float(np.radians(0.02))
-JOINTS = [([0, 0, 0.30], [0, 0, 0]), ([0, 0.12, 0], [-np.pi / 2, 0, 0]), ([0.40, 0, 0], [0, 0, 0]),
-          ([0.05, -0.35, 0], [np.pi / 2, 0, 0]), ([0, 0, 0], [-np.pi / 2, 0, 0]), ([0, 0.09, 0], [np.pi / 2, 0, 0])]
+from vision_calib.cli import main
+from vision_calib.errors import ConfigError
+from vision_calib.kinematics.urdf_file import read_urdf
+
 HOSTILE = ("/etc/passwd", "../../../../etc/shadow", "file:///etc/passwd", "package://x/../../../../etc/passwd",
            "/nonexistent_vc_mesh/arm.stl", "package://vc_robot/meshes/../../../../nonexistent_vc_mesh.dae")
 MARKERS = ("passwd", "shadow", "nonexistent_vc_mesh", "package:", "file:")
 
 
-def urdf_text(meshes=HOSTILE, extra="", flange_xyz="0 0 0.02", j3_parent=True) -> str:
-    links = ["base_link", *(f"l{i}" for i in range(1, 7)), "tool0"]
-    out = ['<?xml version="1.0"?>', '<robot name="arm6">']
-    for k, lk in enumerate(links):
-        m = meshes[k % len(meshes)] if meshes else None
-        geo = f'<geometry><mesh filename="{m}" scale="1 1 1"/></geometry>' if m else ""
-        out.append(f'  <link name="{lk}"><visual>{geo}</visual><collision>{geo}</collision></link>' if m
-                   else f'  <link name="{lk}"/>')
-    for i, (xyz, rpy) in enumerate(JOINTS, 1):
-        par = f'<parent link="{links[i - 1]}"/>' if j3_parent or i != 3 else ""
-        out.append(f'  <joint name="j{i}" type="revolute">{par}<child link="l{i}"/>'
-                   f'<origin xyz="{" ".join(map(str, xyz))}" rpy="{" ".join(map(str, rpy))}"/><axis xyz="0 0 1"/>'
-                   '<limit lower="-3" upper="3" effort="1" velocity="1"/></joint>')
-    out.append(f'  <joint name="flange" type="fixed"><parent link="l6"/><child link="tool0"/>'
-               f'<origin xyz="{flange_xyz}" rpy="0 0 0"/></joint>')
-    return "\n".join(out + [extra, "</robot>"]) + "\n"
+def urdf_text(meshes=HOSTILE, **kw) -> str:
+    return arm_urdf(meshes=meshes, **kw)
 
 
 @pytest.mark.parametrize("kw,msg", [
@@ -81,18 +61,7 @@ class Touches:
 
 def test_mesh_paths_are_never_touched_by_reading_identifying_or_exporting(tmp_path, monkeypatch, capsys):
     d = tmp_path / "cell"
-    d.mkdir()
-    (d / "arm.urdf").write_text(urdf_text())
-    scene = {"robot": "arm.urdf", "mount": "eye_in_hand",
-             "mounts": {"target_in_base": {"xyz": [0.6, 0.0, -0.1], "rpy": [180.0, 0.0, 0.0]},
-                        "camera_in_flange": {"xyz": [0.0, 0.05, 0.08], "rpy": [0.0, 0.0, 90.0]}}}
-    sc = scene_from_section(Section(scene, d / "m.yaml", "scene"))
-    rng = np.random.default_rng(3)
-    q = sc.setup.sample_poses(rng, 30, check_view=False)
-    dd = np.concatenate([rng.normal(scale=ST, size=(30, 3)), rng.normal(scale=SR, size=(30, 3))], axis=1)
-    T = F.perturb_pose(sc.setup.T_cam_target(q, scene_truth(sc)), dd)
-    p = write_measured_poses(d / "m.yaml", scene, [f"p{i:02d}" for i in range(30)], q, T, "T_cam_target",
-                             units={"length": "mm", "angle": "deg"}, default_sigma=(ST, SR))
+    p = measured_pose_cell(d, HOSTILE)
     touches = Touches(monkeypatch)
     code = main(["process-poses", str(p), "--out", str(tmp_path / "out"), "--no-plots"])
     code_init = main(["init", str(tmp_path / "new_cell"), "--urdf", str(d / "arm.urdf")])

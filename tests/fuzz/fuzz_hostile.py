@@ -34,6 +34,7 @@ import numpy as np
 import yaml
 
 from fuzz_inputs import REPO, RX90, ST, SR, _mp, _rosi  # noqa: F401  (shared builders)
+from urdf_arm import measured_pose_cell, urdf_text
 
 #: the child's data segment limit (RLIMIT_DATA): a run that needs more is a runaway (the fuzzing session saw
 #: 12-24 GB); every well-behaved case here stays far below
@@ -436,31 +437,7 @@ def study_disk_full(tmp, ctx):
     return ["study", str(_study(tmp, 2)), "--out", str(tmp / "out"), "--no-plots", "--workers", "1"], None
 
 
-# --- URDF
-_H = float(np.pi / 2)
-_JOINTS = [([0, 0, 0.30], [0, 0, 0]), ([0, 0.12, 0], [-_H, 0, 0]), ([0.40, 0, 0], [0, 0, 0]),
-           ([0.05, -0.35, 0], [_H, 0, 0]), ([0, 0, 0], [-_H, 0, 0]), ([0, 0.09, 0], [_H, 0, 0])]
-
-
-def urdf_text(extra_joint="", xyz3="0 0 0.02", parent=True, meshes=()) -> str:
-    """A 6R arm base_link -> l1..l6 -> tool0 (fixed), optionally with an extra joint, a flange origin, no parent on
-    joint j3, and <mesh filename=...> visuals on the links."""
-    links = ["base_link", *(f"l{i}" for i in range(1, 7)), "tool0"]
-    out = ['<?xml version="1.0"?>', '<robot name="arm6">']
-    for k, lk in enumerate(links):
-        mesh = meshes[k % len(meshes)] if meshes else None
-        out.append(f'  <link name="{lk}">' + (f'<visual><geometry><mesh filename="{mesh}"/></geometry></visual>'
-                                              f'<collision><geometry><mesh filename="{mesh}"/></geometry></collision>'
-                                              if mesh else "") + "</link>")
-    for i, (xyz, rpy) in enumerate(_JOINTS, 1):
-        par = f'<parent link="{links[i - 1]}"/>' if parent or i != 3 else ""
-        out.append(f'  <joint name="j{i}" type="revolute">{par}<child link="l{i}"/>'
-                   f'<origin xyz="{" ".join(map(str, xyz))}" rpy="{" ".join(map(str, rpy))}"/><axis xyz="0 0 1"/>'
-                   '<limit lower="-3" upper="3" effort="1" velocity="1"/></joint>')
-    out.append(f'  <joint name="flange" type="fixed"><parent link="l6"/><child link="tool0"/>'
-               f'<origin xyz="{xyz3}" rpy="0 0 0"/></joint>')
-    out.append(extra_joint)
-    return "\n".join(out + ["</robot>"]) + "\n"
+# --- URDF (the arm: tests/urdf_arm.py)
 
 
 def urdf_init(text: str):
@@ -476,28 +453,10 @@ HOSTILE_MESHES = ("/etc/passwd", "../../../../etc/shadow", "file:///etc/passwd",
 def urdf_meshes(tmp, ctx):
     """process-poses on a URDF robot whose meshes name files outside (the watched folder among them, by an
     absolute and a relative path): the calibrated URDF is written, its mesh paths unchanged, nothing opened."""
-    from vision_calib import frames as F
-    from vision_calib.config import Section
-    from vision_calib.experiment.steps import scene_truth
-    from vision_calib.io.measured_poses import write_measured_poses
-    from vision_calib.rig.scene import scene_from_section
-
     (tmp / "outside" / "mesh.stl").write_bytes(b"solid x\nendsolid x\n")
     meshes = HOSTILE_MESHES + (str(tmp / "outside" / "mesh.stl"), "../outside/mesh.stl",
                                f"file://{tmp}/outside/mesh.stl")
-    d = tmp / "cell"
-    d.mkdir()
-    (d / "arm.urdf").write_text(urdf_text(meshes=meshes))
-    scene = {"robot": "arm.urdf", "mount": "eye_in_hand",
-             "mounts": {"target_in_base": {"xyz": [0.6, 0.0, -0.1], "rpy": [180.0, 0.0, 0.0]},
-                        "camera_in_flange": {"xyz": [0.0, 0.05, 0.08], "rpy": [0.0, 0.0, 90.0]}}}
-    sc = scene_from_section(Section(scene, d / "m.yaml", "scene"))
-    rng = np.random.default_rng(3)
-    q = sc.setup.sample_poses(rng, 30, check_view=False)
-    dd = np.concatenate([rng.normal(scale=ST, size=(30, 3)), rng.normal(scale=SR, size=(30, 3))], axis=1)
-    T = F.perturb_pose(sc.setup.T_cam_target(q, scene_truth(sc)), dd)
-    p = write_measured_poses(d / "m.yaml", scene, [f"p{i:02d}" for i in range(30)], q, T, "T_cam_target",
-                             units={"length": "mm", "angle": "deg"}, default_sigma=(ST, SR))
+    p = measured_pose_cell(tmp / "cell", meshes)
 
     def check(tmp):
         out = list((tmp / "out").glob("*.urdf"))
@@ -568,11 +527,11 @@ CASES = [
             prelude=enospc_prelude("summary.csv")),
     # --- URDF: one tree, exact numbers, and no file it names ever touched
     Hostile("urdf-cycle-tool0-base", urdf_init(urdf_text(
-        '  <joint name="loop" type="fixed"><parent link="tool0"/><child link="base_link"/></joint>')), ERR,
+        extra='  <joint name="loop" type="fixed"><parent link="tool0"/><child link="base_link"/></joint>')), ERR,
         r"arm.urdf: .*(one root link|loop)"),
-    Hostile("urdf-xyz-4-values", urdf_init(urdf_text(xyz3="0 0 0.02 1")), ERR,
+    Hostile("urdf-xyz-4-values", urdf_init(urdf_text(flange_xyz="0 0 0.02 1")), ERR,
             r"arm.urdf: joint 'flange': origin xyz='0 0 0.02 1' must hold exactly 3 numbers, got 4"),
-    Hostile("urdf-joint-without-parent", urdf_init(urdf_text(parent=False)), ERR,
+    Hostile("urdf-joint-without-parent", urdf_init(urdf_text(j3_parent=False)), ERR,
             r"arm.urdf: joint 'j3': needs <parent link=...>"),
     Hostile("urdf-hostile-mesh-paths", urdf_meshes, OK),
 ]
