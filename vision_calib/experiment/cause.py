@@ -9,7 +9,8 @@ and compared on what both predict: the image corners. Each hypothesis h gives a 
 RMS ``rms_h`` over n corners; its Gaussian log-likelihood of the 2n coordinates and its parameter count p_h (the
 model's free parameters, + the intrinsics refined) give ``BIC_h = -2 log L_h + p_h log(2n)``. The refined
 hypothesis is applied when its BIC is lower by more than :data:`DECISIVE_BIC` ("very strong" evidence, Kass &
-Raftery 1995), else the given intrinsics stay, and the report shows both.
+Raftery 1995) and its k-fold held-out prediction (the runs' ``holdout`` blocks: each hypothesis against its own
+measurements) is not worse, else the given intrinsics stay, and the report shows both.
 """
 
 from __future__ import annotations
@@ -23,8 +24,9 @@ DECISIVE_BIC = 10.0
 def cause_test_applies(report: dict) -> bool:
     """Whether ``report`` (a ``process`` run with intrinsics given) calls for the test (module docstring)."""
     nc = (report.get("reprojection") or {}).get("noise_check") or {}
-    if not report["verdict"].get("usable") or not nc.get("intrinsics_given"):
-        return False
+    v = report["verdict"]
+    if not (v.get("converged") and v.get("finite", True)) or not nc.get("intrinsics_given"):
+        return False  # a run that failed on its held-out prediction still calls for it: wrong intrinsics do that
     robot = ((report.get("handeye") or {}).get("robot_pose_std") or {})
     k = float(nc.get("limit") or np.inf)
     return bool(nc.get("ratio", 0) > k or (robot.get("source") == "estimated" and nc.get("ratio_corner_noise", 0) > k))
@@ -53,6 +55,11 @@ def hypothesis(report: dict, name: str) -> dict:
            "bic": float(nll2 + p * np.log(max(m2, 2)))}
     if robot.get("source") == "estimated":
         out["robot_pose_std"] = {"translation_mm": robot.get("translation_mm"), "rotation_deg": robot.get("rotation_deg")}
+    o = (report.get("holdout") or {}).get("overall")
+    if o:  # k-fold held-out prediction of each hypothesis' own measurements
+        out["holdout"] = {"residual_of": report["holdout"].get("residual_of") or report["holdout"].get("residual_kind"),
+                          "position_rms_mm": o["after"]["position_rms_mm"],
+                          "rotation_rms_deg": o["after"].get("rotation_rms_deg")}
     return out
 
 
@@ -65,17 +72,24 @@ def compare(given: dict, refined: dict | None, refined_error: str | None = None)
                 "message": f"the cause could not be tested: the views cannot calibrate the intrinsics ({refined_error})"}
     r = hypothesis(refined, "intrinsics refined from these images + robot pose error")
     d = g["bic"] - r["bic"]
-    chosen = "refined" if d > DECISIVE_BIC else "given"
+    hg, hr = g.get("holdout"), r.get("holdout")
+    held = None if not (hg and hr) else hr["position_rms_mm"] <= hg["position_rms_mm"]
+    chosen = "refined" if d > DECISIVE_BIC and held is not False else "given"
     def rob(h):
         s = h.get("robot_pose_std")
         return f", robot pose error {s['translation_mm']:.3g} mm / {s['rotation_deg']:.3g} deg per axis" if s else ""
     msg = (f"cause tested: reprojection {g['rms_px']:.3g} px with the given intrinsics{rob(g)} against "
            f"{r['rms_px']:.3g} px with {r['n_intrinsics_refined']} intrinsics refined from these images{rob(r)}; "
-           f"BIC {g['bic']:.1f} vs {r['bic']:.1f} (difference {d:+.1f}; decisive above {DECISIVE_BIC:g}): ")
-    msg += ("the intrinsics were wrong: the refined ones are applied (the result below)" if chosen == "refined" else
-            "the evidence does not favour refining the intrinsics decisively: the given ones are kept")
+           f"BIC {g['bic']:.1f} vs {r['bic']:.1f} (difference {d:+.1f}; decisive above {DECISIVE_BIC:g})")
+    if held is not None:
+        msg += (f"; held-out position RMS {hg['position_rms_mm']:.3g} vs {hr['position_rms_mm']:.3g} mm "
+                f"(k-fold, each against its own measurements)")
+    msg += ": " + ("the intrinsics were wrong: the refined ones are applied (the result below)" if chosen == "refined"
+                   else "the held-out prediction contradicts the likelihood: the given intrinsics are kept"
+                   if d > DECISIVE_BIC else
+                   "the evidence does not favour refining the intrinsics decisively: the given ones are kept")
     return {"hypotheses": [g, r], "chosen": chosen, "decisive": bool(abs(d) > DECISIVE_BIC), "delta_bic": float(d),
-            "message": msg}
+            "holdout_agrees": held, "message": msg}
 
 
 __all__ = ["DECISIVE_BIC", "cause_test_applies", "hypothesis", "compare"]

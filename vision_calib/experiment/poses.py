@@ -120,7 +120,9 @@ def _pair_errors(A, B, F, M, mount: str) -> np.ndarray:
 
 
 def pair_holdout(pp: PosePairs, folds: int, seed: int, outliers=()) -> dict:
-    """k-fold held-out validation of a pose-pair fit: the poses split by ``holdout.fold_indices``; each fold's
+    """k-fold held-out validation of a pose-pair fit (``pp``: a PosePairs, or any object with its ids,
+    T_base_flange, T_cam_target, cov, noise_frame, mount, robot_std and path): the poses split by
+    ``holdout.fold_indices``; each fold's
     model identified on the other folds (the whole-data outliers in no training set; the fit of
     ``handeye_step.identify_handeye`` without its outlier test) predicts the held-out poses ("after"), beside the
     OpenCV closed form that fold's fit started from ("before"). Errors of T_cam_target, position [mm] and rotation

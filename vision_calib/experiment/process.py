@@ -135,7 +135,7 @@ def process_once(folder: str | Path, out_dir: str | Path | None, method: str | N
                       {"version": REPORT_VERSION, "folder": relative_ref(rec.folder, out), **mblock})
     t_meas = time.perf_counter() - t0
     if scene is None:
-        return _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets, cause)
+        return _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets, cause, folds)
 
     meas, ok = Measurements.from_pose_measurements(rec.poses, rec.poses, pms)
     residual = setup.residual_for(method, scene.identification.residual)
@@ -233,10 +233,11 @@ def _chain_reprojection(setup, meas, problem, result, dets, rec, fitted=None) ->
     return reprojection_with(T, dets, [meas.labels[k] for k in idx], rec.target, rec.camera, fitted)
 
 
-def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None, cause=None) -> dict:
+def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None, cause=None, folds=None) -> dict:
     """Flange poses known: identify the camera mount and the target mount only (``handeye_step``: the robot's
     pose error in the weights, given by recording.yaml ``robot_pose_std`` or estimated; closed-form start;
-    outlier test, adequacy test and variance factor as the robot-chain path)."""
+    outlier test, adequacy test and variance factor as the robot-chain path); k-fold held-out prediction of the
+    measured poses (``poses.pair_holdout``, ``folds``: default ``holdout.DEFAULT_FOLDS``)."""
     from ..identify.handeye_problem import handeye_problem, stack_measurements
     from ..io.report_handeye import handeye_report
     from .camera_step import SOURCE_CAMERA_FILE, fitted_camera, intrinsics_directions, residual_response
@@ -266,6 +267,18 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None, cause=No
     result, A, B, problem = ident.result, ident.A, ident.B, ident.problem
     failure = handeye_gross_failure(rec.poses[ok], T, mount, ident, str(rec.folder), alternatives=alternative_readings(
         rec.poses[ok], T, mount, "recording.yaml camera_mount"))
+    hold = None
+    if failure is None:
+        from types import SimpleNamespace
+
+        from .holdout import DEFAULT_FOLDS
+        from .poses import pair_holdout
+
+        pairs = SimpleNamespace(ids=tuple(str(lab) for lab in labels), T_base_flange=rec.poses[ok], T_cam_target=T,
+                                cov=cov, noise_frame=None, mount=mount, robot_std=rec.robot_pose_std, path=rec.folder)
+        hold = pair_holdout(pairs, int(min(folds or DEFAULT_FOLDS, len(ok))), 0,
+                            outliers=[lab for lab, _ in ident.rejected])
+        failure = holdout_failure(hold)
     cam_fit = None
     if ident.nuisance is not None:
         cam_fit = fitted_camera(rec.camera, used, ident.nuisance["coefficients"])
@@ -297,9 +310,14 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None, cause=No
         measurements=mblock, warnings=[*rec.notes, *intr["warnings"], *([rwarn] if rwarn else [])], result=result,
         identified=ident,
         residuals=residual_stats(result.residuals, "pose"),
-        extra={"handeye": he, "intrinsics": intr, "reprojection": he["reprojection"], "cause": cause},
+        extra={"handeye": he, "intrinsics": intr, "reprojection": he["reprojection"], "cause": cause,
+               **({"holdout": hold} if hold is not None else {})},
         timings={"total": time.perf_counter() - t0}, failure=failure)
     report["summary_text"] += points_line(report.get("reprojection")) + ("\n" + cause["message"] if cause else "")
+    if hold is not None:
+        from .poses import pair_holdout_lines
+
+        report["summary_text"] += "\n" + "\n".join(pair_holdout_lines(hold))
     write_report(out, report, plots=plots, overlays=_overlay_source(rec, dets) if plots else None)
     return report
 
