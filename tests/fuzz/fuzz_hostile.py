@@ -464,6 +464,56 @@ def urdf_meshes(tmp, ctx):
     return ["process-poses", str(p), "--out", str(tmp / "out"), "--no-plots"], check
 
 
+# --- hand-eye route (flange poses known; issue 28 item 3): the session recording as a flange-pose recording
+def _flange(tmp, ctx, csv_edit=None, yaml_edit=None) -> Path:
+    """The session recording rewritten with its true flange poses + 0.1 mm / 0.01 deg per axis
+    (tests/flange_folder.py), then poses.csv's data rows edited (``csv_edit``: rows -> rows) and recording.yaml
+    edited in place (``yaml_edit``: doc -> None)."""
+    from flange_folder import flange_pose_folder
+
+    rec, _, _ = flange_pose_folder(ctx["rec"], tmp / "flange", robot_std_mm=0.1, robot_std_deg=0.01, seed=2)
+    if csv_edit is not None:
+        lines = (rec / "poses.csv").read_text().splitlines()
+        (rec / "poses.csv").write_text("\n".join([lines[0]] + csv_edit(lines[1:])) + "\n")
+    if yaml_edit is not None:
+        doc = yaml.safe_load((rec / "recording.yaml").read_text())
+        yaml_edit(doc)
+        (rec / "recording.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
+    return rec
+
+
+def _wxyz(row: str) -> str:  # qx,qy,qz,qw columns holding w,x,y,z: a scalar-first writer
+    f = row.split(",")
+    return ",".join(f[:4] + [f[7], f[4], f[5], f[6]])
+
+
+def _board_x2(doc):
+    doc["target"]["square_m"] *= 2
+    doc["target"]["marker_m"] *= 2
+
+
+def _swap_rows(rows, a=2, b=6):
+    x, y = rows[a].split(",", 1), rows[b].split(",", 1)
+    return [f"{x[0]},{y[1]}" if i == a else f"{y[0]},{x[1]}" if i == b else r for i, r in enumerate(rows)]
+
+
+def _one_row_off(rows):  # each pose id with the NEXT row's flange pose
+    return [f"{r.split(',', 1)[0]},{n.split(',', 1)[1]}" for r, n in zip(rows[:-1], rows[1:])]
+
+
+def flange_damage(csv_edit=None, yaml_edit=None, named=()):
+    """``process`` of the damaged flange-pose recording; named: the pose ids the report must name as outliers
+    (a result that is correct only with them rejected)."""
+    def build(tmp, ctx):
+        rec = _flange(tmp, ctx, csv_edit, yaml_edit)
+
+        def check(tmp):
+            rep = json.loads((tmp / "out" / "report.json").read_text())
+            return {o["pose_id"] for o in rep.get("outliers", [])} == set(named)
+        return ["process", str(rec), "--out", str(tmp / "out"), "--no-plots"], check
+    return build
+
+
 ERR, OK, WARN = "error", "correct", "warned"
 #: the child waits 2 s (not study.run.WORKER_WAIT_S) for a Dask worker
 WAIT_2S = "import importlib\nimportlib.import_module(\"vision_calib.study.run\").WORKER_WAIT_S = 2.0\n"
@@ -534,4 +584,16 @@ CASES = [
     Hostile("urdf-joint-without-parent", urdf_init(urdf_text(j3_parent=False)), ERR,
             r"arm.urdf: joint 'j3': needs <parent link=...>"),
     Hostile("urdf-hostile-mesh-paths", urdf_meshes, OK),
+    # --- hand-eye route: each damage named as the reading that fits, or the bad rows named as outliers
+    Hostile("handeye-clean", flange_damage(), OK),
+    Hostile("handeye-quaternions-scalar-first", flange_damage(lambda rows: [_wxyz(r) for r in rows]), ERR,
+            r"the flange quaternions read scalar-first .*: that reading of the input fits"),
+    Hostile("handeye-mount-declared-fixed", flange_damage(yaml_edit=lambda d: d.update(camera_mount="fixed")), ERR,
+            r"the camera mount eye_in_hand .*: that reading of the input fits"),
+    Hostile("handeye-board-size-x2", flange_damage(yaml_edit=_board_x2), ERR, r"the board's size off by 2"),
+    Hostile("handeye-rows-one-off", flange_damage(_one_row_off), ERR,
+            r"the images paired one row off \(each with the PREVIOUS row's flange pose\): that reading of the input fits"),
+    Hostile("handeye-one-row-scalar-first", flange_damage(lambda rows: [_wxyz(r) if i == 4 else r
+                                                                        for i, r in enumerate(rows)], named={"004"}), OK),
+    Hostile("handeye-two-rows-swapped", flange_damage(_swap_rows, named={"002", "006"}), OK),
 ]
