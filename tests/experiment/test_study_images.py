@@ -157,9 +157,12 @@ def test_ctrl_c_stops_promptly_then_resume_is_exact(reference, tmp_path):
     gate.touch()
     script = tmp_path / "gated_study.py"
     script.write_text(_GATED_STUDY)
+    # SIGINT as a terminal delivers it: a test runner started in the background (``cmd &`` in a script) hands its
+    # children SIGINT *ignored*, and Python then installs no KeyboardInterrupt handler: restore the default first
     p = subprocess.Popen([sys.executable, str(script), "study", str(spec8), "--out", str(out), "--workers", "2",
                           "--no-plots", "--json"], cwd=ROOT, env={**_env(), "VC_TEST_GATE": str(gate)},
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         deadline = time.time() + HANG_GUARD_S
         while p.poll() is None and time.time() < deadline and not (
