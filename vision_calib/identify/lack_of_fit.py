@@ -213,12 +213,14 @@ def lack_of_fit(problem: IdentificationProblem, result: IdentificationResult, jo
     target's distance along the optical axis. level: family-wise false-alarm level. test: "F" or "chi2".
 
     Returns a JSON-ready dict: test, level, n_tests, p_threshold (= level / n_tests), dof_residual,
-    significant (bool), groups [{name, kind, term, dof, statistic, p_value, significant, ...}] (joint groups:
+    significant (bool), groups [{name, kind, term, dof, statistic, p_value (the larger of p_model and p_robust),
+    p_model, p_robust (None: test="chi2" or too few poses), significant, ...}] (joint groups:
     joint (1-based), harmonics [{order, amplitude_deg, amplitude_std_deg, phase_deg, statistic,
     p_value, detectable_amplitude_deg [best, worst phase]}] from the fit of that order's sin/cos pair alone
     (order 0: the constant, when no parameter absorbs it; the detectable amplitude: flagged with probability
-    DETECT_POWER by the group test; None where no amplitude is meaningful: a phase the parameters absorb, or one
-    above MAX_DETECTABLE_DEG), best_order; other groups: effect_rms_sigma
+    DETECT_POWER by the group's model F test -- the decision also needs the cluster-robust test, so it is a lower
+    bound; None where no amplitude is meaningful: a phase the parameters absorb, or one above
+    MAX_DETECTABLE_DEG), best_order; other groups: effect_rms_sigma
     (RMS per pose of the fitted effect, noise std units) and coefficients (SI per unit regressor, per
     component)), overall {dof, statistic, p_value, significant}, message (empty when nothing is flagged).
     """
