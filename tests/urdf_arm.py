@@ -9,15 +9,22 @@ import numpy as np
 #: per-axis noise of the simulated measured poses [m, rad]
 ST, SR = 1e-4, float(np.radians(0.02))
 _H = float(np.pi / 2)
-#: (xyz [m], rpy [rad]) of the six revolute joints
-JOINTS = [([0, 0, 0.30], [0, 0, 0]), ([0, 0.12, 0], [-_H, 0, 0]), ([0.40, 0, 0], [0, 0, 0]),
-          ([0.05, -0.35, 0], [_H, 0, 0]), ([0, 0, 0], [-_H, 0, 0]), ([0, 0.09, 0], [_H, 0, 0])]
 
 
-def urdf_text(meshes=(), extra="", flange_xyz="0 0 0.02", j3_parent=True) -> str:
+def joints(right: float = _H) -> list:
+    """(xyz [m], rpy [rad]) of the six revolute joints, their right angles written as ``right``."""
+    return [([0, 0, 0.30], [0, 0, 0]), ([0, 0.12, 0], [-right, 0, 0]), ([0.40, 0, 0], [0, 0, 0]),
+            ([0.05, -0.35, 0], [right, 0, 0]), ([0, 0, 0], [-right, 0, 0]), ([0, 0.09, 0], [right, 0, 0])]
+
+
+JOINTS = joints()
+
+
+def urdf_text(meshes=(), extra="", flange_xyz="0 0 0.02", j3_parent=True, right: float = _H) -> str:
     """A 6R arm base_link -> l1..l6 -> tool0 (fixed flange joint at ``flange_xyz``), each link with
     <mesh filename=...> visual and collision geometry taken in turn from ``meshes`` (none: bare links); ``extra``
-    XML appended inside <robot>; ``j3_parent`` False drops joint j3's parent."""
+    XML appended inside <robot>; ``j3_parent`` False drops joint j3's parent; ``right``: how its right angles
+    are written (CAD exports round pi / 2)."""
     links = ["base_link", *(f"l{i}" for i in range(1, 7)), "tool0"]
     out = ['<?xml version="1.0"?>', '<robot name="arm6">']
     for k, lk in enumerate(links):
@@ -25,7 +32,7 @@ def urdf_text(meshes=(), extra="", flange_xyz="0 0 0.02", j3_parent=True) -> str
         geo = f'<geometry><mesh filename="{m}" scale="1 1 1"/></geometry>' if m else ""
         out.append(f'  <link name="{lk}"><visual>{geo}</visual><collision>{geo}</collision></link>' if m
                    else f'  <link name="{lk}"/>')
-    for i, (xyz, rpy) in enumerate(JOINTS, 1):
+    for i, (xyz, rpy) in enumerate(joints(right), 1):
         par = f'<parent link="{links[i - 1]}"/>' if j3_parent or i != 3 else ""
         out.append(f'  <joint name="j{i}" type="revolute">{par}<child link="l{i}"/>'
                    f'<origin xyz="{" ".join(map(str, xyz))}" rpy="{" ".join(map(str, rpy))}"/><axis xyz="0 0 1"/>'
@@ -35,8 +42,8 @@ def urdf_text(meshes=(), extra="", flange_xyz="0 0 0.02", j3_parent=True) -> str
     return "\n".join(out + [extra, "</robot>"]) + "\n"
 
 
-def measured_pose_cell(d: Path, meshes=(), n: int = 30) -> Path:
-    """Write ``d``/arm.urdf (:func:`urdf_text` with ``meshes``) and ``d``/m.yaml: a process-poses file of n
+def measured_pose_cell(d: Path, meshes=(), n: int = 30, right: float = _H) -> Path:
+    """Write ``d``/arm.urdf (:func:`urdf_text` with ``meshes`` and ``right``) and ``d``/m.yaml: a process-poses file of n
     eye-in-hand poses of that arm (seeded joints, true T_cam_target perturbed by ST / SR per axis). Returns the
     m.yaml path."""
     from vision_calib import frames as F
@@ -46,7 +53,7 @@ def measured_pose_cell(d: Path, meshes=(), n: int = 30) -> Path:
     from vision_calib.rig.scene import scene_from_section
 
     d.mkdir(parents=True, exist_ok=True)
-    (d / "arm.urdf").write_text(urdf_text(meshes=meshes))
+    (d / "arm.urdf").write_text(urdf_text(meshes=meshes, right=right))
     scene = {"robot": "arm.urdf", "mount": "eye_in_hand",
              "mounts": {"target_in_base": {"xyz": [0.6, 0.0, -0.1], "rpy": [180.0, 0.0, 0.0]},
                         "camera_in_flange": {"xyz": [0.0, 0.05, 0.08], "rpy": [0.0, 0.0, 90.0]}}}

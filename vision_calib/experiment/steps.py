@@ -293,7 +293,8 @@ def lack_of_fit_of(setup: Setup, meas: Measurements, problem: IdentificationProb
     """``identify.lack_of_fit`` of ``result`` (fit of ``problem``, whose labels pick the poses of ``meas``): the
     joint groups use the measured joints with each pose's residual response to a true joint error (central
     difference of ``setup.problem`` in the reported joints), the image groups the target origin's normalised
-    image coordinates and depth from the measured T_cam_target. {"significant": False, "error": why} when the
+    image coordinates and depth from the measured T_cam_target (left out when a pose's target is not in front of
+    the "camera": poses measured by a tracker). {"significant": False, "error": why} when the
     tests cannot be computed (a diagnostic: it never stops the pipeline)."""
     from ..errors import VisionCalibError
     from ..identify.lack_of_fit import DEFAULT_LEVEL, lack_of_fit
@@ -310,8 +311,10 @@ def lack_of_fit_of(setup: Setup, meas: Measurements, problem: IdentificationProb
                       .residual(x) for s in (1.0, -1.0))
             G[:, :, j] = -(rp - rm) / (2 * JOINT_STEP_RAD)  # residual = measured - model(reported joints)
         T = np.asarray(sub.T_cam_target, float)
-        return lack_of_fit(problem, result, joints=q, joint_response=G, image_xy=T[:, :2, 3] / T[:, 2:3, 3],
-                           depth=T[:, 2, 3], level=DEFAULT_LEVEL if level is None else level)
+        seen = bool(np.all(T[:, 2, 3] > 0))  # a camera in front of the target; a tracker's frame need not be
+        return lack_of_fit(problem, result, joints=q, joint_response=G,
+                           image_xy=T[:, :2, 3] / T[:, 2:3, 3] if seen else None, depth=T[:, 2, 3] if seen else None,
+                           level=DEFAULT_LEVEL if level is None else level)
     except (VisionCalibError, KeyError, np.linalg.LinAlgError) as exc:
         return {"significant": False, "error": f"lack-of-fit tests not computed: {exc}"}
 

@@ -220,8 +220,12 @@ def observability_indices(s: np.ndarray, n_poses: int) -> dict[str, float]:
     }
 
 
-def _select_base(A: np.ndarray, rank: int, tol_abs: float, selection: str) -> np.ndarray:
-    """Indices of kept columns (sorted)."""
+def _select_base(A: np.ndarray, rank: int, tol_abs: float, selection: str, s_weakest: float = 0.0) -> np.ndarray:
+    """Indices of kept columns (sorted). ``s_weakest``: the smallest singular value counted in the rank; with
+    ``selection="order"`` a column is kept when its part outside the kept columns' span exceeds
+    :data:`BASE_KEEP_REL` of it (a nearly dependent column -- a right angle written 1.5707963 in a URDF -- would
+    make a basis of the right size whose conditioning is not the rank's: a parameter of std ~1e7 x the others');
+    columns left short of ``rank`` are then filled at the rank tolerance."""
     n = A.shape[1]
     if selection == "pivot":
         _, _, piv = scipy.linalg.qr(A, mode="economic", pivoting=True)
@@ -229,16 +233,24 @@ def _select_base(A: np.ndarray, rank: int, tol_abs: float, selection: str) -> np
     if selection == "order":
         kept: list[int] = []
         Q = np.zeros((A.shape[0], 0))
-        for j in range(n):
-            a = A[:, j]
-            resid = a - Q @ (Q.T @ a)
-            resid = resid - Q @ (Q.T @ resid)  # re-orthogonalise
-            nr = np.linalg.norm(resid)
-            if nr > tol_abs and len(kept) < rank:
-                kept.append(j)
-                Q = np.column_stack([Q, resid / nr])
-        return np.array(kept, dtype=int)
+        for tol in dict.fromkeys((max(tol_abs, BASE_KEEP_REL * s_weakest), tol_abs)):
+            for j in range(n):
+                if j in kept or len(kept) >= rank:
+                    continue
+                a = A[:, j]
+                resid = a - Q @ (Q.T @ a)
+                resid = resid - Q @ (Q.T @ resid)  # re-orthogonalise
+                nr = np.linalg.norm(resid)
+                if nr > tol:
+                    kept.append(j)
+                    Q = np.column_stack([Q, resid / nr])
+        return np.array(sorted(kept), dtype=int)
     raise ParameterError(f"unknown base selection {selection!r} (expected 'pivot' or 'order')")
+
+
+#: ``selection="order"``: a column joins the base when its part outside the kept columns' span exceeds this
+#: fraction of the smallest singular value counted in the rank (scaled, whitened units)
+BASE_KEEP_REL = 1e-3
 
 
 # ----------------------------------------------------------------------------- main API
@@ -308,7 +320,7 @@ def analyze(
     rank = int(np.sum(s > tol_abs)) if s_max > 0 else 0
     null_space = Vt[rank:].T.copy()
 
-    base_idx = _select_base(A, rank, tol_abs, selection) if rank > 0 else np.zeros(0, int)
+    base_idx = _select_base(A, rank, tol_abs, selection, float(s[rank - 1])) if rank > 0 else np.zeros(0, int)
     drop_idx = np.setdiff1d(np.arange(n), base_idx)
     A_base = A[:, base_idx]
     couplings = []
