@@ -158,7 +158,6 @@ def deletion_test(F, M, mount: str, C, labels: Sequence[str], robot_std, fit: Ha
     from scipy.stats import chi2
 
     from ..identify.handeye_fit import deletion_fit
-    from ..identify.handeye_problem import handeye_problem, reweighted, robot_pose_cov
 
     n = len(labels)
     d, xs = np.full(n, np.inf), np.zeros((n, 12))
@@ -168,20 +167,9 @@ def deletion_test(F, M, mount: str, C, labels: Sequence[str], robot_std, fit: Ha
         rest = [j for j in range(n) if j != k]
         _, rk, th = deletion_fit(F[rest], M[rest], mount, C[rest], [labels[j] for j in rest], fit.A, fit.B, theta,
                                  robot_std is None and fit.robot["source"] == "estimated")
-        x = rk.identified
-        xs[k] = x
-        fits.append((x, rk.covariance, np.asarray(rk.free, bool), th))
-        allp = handeye_problem(F, M, mount, fit.A, fit.B, C, labels=list(labels),
-                               robot_cov=robot_pose_cov(*np.sqrt(th)))
-        one = reweighted(allp, x).subset([k])  # pose k at the fit without it
-        free = np.asarray(rk.free, bool)
-        r = np.asarray(one.residual(x), float)[0]
-        J = np.asarray(one.jacobian(x), float)[0][:, free]
-        S = one.obs_cov[0] + J @ rk.covariance @ J.T
-        try:
-            d[k] = float(r @ np.linalg.solve(S, r))
-        except np.linalg.LinAlgError:
-            d[k] = np.inf
+        xs[k] = rk.identified
+        fits.append((rk.identified, rk.covariance, np.asarray(rk.free, bool), th))
+        d[k] = pose_statistic(F, M, mount, C, k, fit.A, fit.B, fits[-1])  # pose k at the fit without it
     thr = float(chi2.isf(OUTLIER_LEVEL / n, 6))
     thr = max(thr, OUTLIER_MIN_RATIO**2 * float(np.median(d[np.isfinite(d)]))) if np.isfinite(d).any() else thr
     return {"d": d, "threshold": thr, "x_loo": xs, "labels": [str(lab) for lab in labels], "fits": fits}

@@ -240,7 +240,7 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None, cause=No
     measured poses (``poses.pair_holdout``, ``folds``: default ``holdout.DEFAULT_FOLDS``)."""
     from ..identify.handeye_problem import handeye_problem, stack_measurements
     from ..io.report_handeye import handeye_report
-    from .camera_step import SOURCE_CAMERA_FILE, fitted_camera, intrinsics_directions, residual_response
+    from .camera_step import fitted_camera, intrinsics_directions, residual_response
     from .handeye_gross import alternative_readings, handeye_gross_failure
     from .handeye_step import handeye_blocks, identify_handeye
 
