@@ -97,13 +97,10 @@ THETA_BOUNDS = ((1e-7, 0.5), (1e-8, 0.5))
 def _reml_terms(problem: IdentificationProblem, x):
     """(J (N, m, p) free columns, r (N, m), camera cov (N, m, m), V_t, V_r (N, m, m)) at x: what the REML
     likelihood of the robot's variances needs (module docstring)."""
-    D = flange_error_map(problem, x)  # (N, 6, 6)
     free = problem.params.free
     J = np.asarray(problem.jacobian(x), float)[:, :, free]
     r = np.asarray(problem.residual(x), float)
-    Vt = D[:, :, :3] @ np.swapaxes(D[:, :, :3], 1, 2)
-    Vr = D[:, :, 3:] @ np.swapaxes(D[:, :, 3:], 1, 2)
-    return J, r, np.asarray(problem.meta["camera_cov"], float), Vt, Vr
+    return (J, r, np.asarray(problem.meta["camera_cov"], float), *_robot_blocks(problem, x))
 
 
 def _reml_negll(theta, J, r, known, blocks) -> float:
