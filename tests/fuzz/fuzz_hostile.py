@@ -24,7 +24,6 @@ import json
 import os
 import shutil
 import struct
-import sys
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -33,7 +32,7 @@ from typing import Callable
 import numpy as np
 import yaml
 
-from fuzz_inputs import REPO, RX90, ST, SR, _mp, _rosi  # noqa: F401  (shared builders)
+from fuzz_inputs import REPO, RX90, ST, SR, _mp, _rosi, visp_folder  # noqa: F401  (shared builders)
 from urdf_arm import measured_pose_cell, urdf_text
 
 #: the child's data segment limit (RLIMIT_DATA): a run that needs more is a runaway (the fuzzing session saw
@@ -145,18 +144,7 @@ def process_frame(data: bytes):
 
 def visp_frame(data: bytes):
     def build(tmp, ctx):
-        import cv2
-
-        d = tmp / "visp"
-        d.mkdir()
-        (d / "camera.xml").write_text(
-            "<root><camera><name>Camera</name><image_width>320</image_width><image_height>240</image_height>"
-            "<model><type>perspectiveProjWithoutDistortion</type><px>300</px><py>300</py><u0>160</u0><v0>120</v0>"
-            "</model></camera></root>")
-        for i in range(1, 4):
-            (d / f"pose_fPe_{i}.yaml").write_text("rows: 6\ncols: 1\ndata:\n" + "".join(
-                f"  - [{v}]\n" for v in (0.3, 0.1 * i, 0.5, 0.0, 0.1 * i, 0.0)))
-            cv2.imwrite(str(d / f"image-{i}.png"), np.full((240, 320), 128, np.uint8))
+        d = visp_folder(tmp / "visp", np.full((240, 320), 128, np.uint8))
         (d / "image-1.png").write_bytes(data)
         return ["import-visp", str(d), "--out", str(tmp / "rec"), "--chessboard", "9x6", "--square-m", "0.02"], None
     return build

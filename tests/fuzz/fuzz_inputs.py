@@ -294,23 +294,29 @@ def huge_target(tmp, ctx):
     return ["target", str(tmp / "t.yaml"), "--out", str(tmp / "t.png"), "--dpi", "1"], None
 
 
+def visp_folder(d: Path, image: np.ndarray) -> Path:
+    """A ViSP eye-to-hand folder ``d``: camera.xml (320x240, px = py = 300, no distortion), three pose_fPe_N.yaml
+    (theta-u poses) and three image-N.png of ``image``."""
+    d.mkdir()
+    (d / "camera.xml").write_text(
+        "<root><camera><name>Camera</name><image_width>320</image_width><image_height>240</image_height>"
+        "<model><type>perspectiveProjWithoutDistortion</type><px>300</px><py>300</py><u0>160</u0><v0>120</v0>"
+        "</model></camera></root>")
+    for i in range(1, 4):
+        (d / f"pose_fPe_{i}.yaml").write_text("rows: 6\ncols: 1\ndata:\n" + "".join(
+            f"  - [{v}]\n" for v in (0.3, 0.1 * i, 0.5, 0.0, 0.1 * i, 0.0)))
+        cv2.imwrite(str(d / f"image-{i}.png"), image)
+    return d
+
+
 def visp_chessboard(size):
     def build(tmp, ctx):
-        d = tmp / "visp"
-        d.mkdir()
-        (d / "camera.xml").write_text(
-            "<root><camera><name>Camera</name><image_width>320</image_width><image_height>240</image_height>"
-            "<model><type>perspectiveProjWithoutDistortion</type><px>300</px><py>300</py><u0>160</u0><v0>120</v0>"
-            "</model></camera></root>")
         img = np.full((240, 320), 255, np.uint8)
         for r in range(7):  # 9 x 6 inner corners: 10 x 7 squares of 20 px, the long side along the image width
             for c in range(10):
                 if (r + c) % 2 == 0:
                     img[40 + r * 20:60 + r * 20, 40 + c * 20:60 + c * 20] = 0
-        for i in range(1, 4):
-            (d / f"pose_fPe_{i}.yaml").write_text("rows: 6\ncols: 1\ndata:\n" + "".join(
-                f"  - [{v}]\n" for v in (0.3, 0.1 * i, 0.5, 0.0, 0.1 * i, 0.0)))
-            cv2.imwrite(str(d / f"image-{i}.png"), cv2.GaussianBlur(img, (3, 3), 0.8))
+        d = visp_folder(tmp / "visp", cv2.GaussianBlur(img, (3, 3), 0.8))
         return ["import-visp", str(d), "--out", str(tmp / "rec"), "--chessboard", size, "--square-m", "0.02"], \
             (lambda tmp: (tmp / "rec" / "recording.yaml").is_file())
     return build
