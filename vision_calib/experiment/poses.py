@@ -23,7 +23,7 @@ from ..io.report import build_report, parameters_table, residual_stats, write_re
 from .checks import drop_copies, drop_inconsistent, duplicate_poses, motion_verdict
 from .gross import gross_failure
 from .holdout import flagged_labels, holdout_failure, holdout_lines, holdout_validation
-from .steps import check_method, identify_measurements
+from .steps import check_method, identify_measurements, inconsistency_failure
 
 
 #: what sets the length scale of a measured-pose file (named by the motion check's scale refusal)
@@ -88,7 +88,7 @@ def process_poses(path: str | Path, out_dir: str | Path | None, method: str | No
     hold = None if failure else holdout_validation(
         mp.scene.setup, meas, method, residual, rep, folds, mp.seed, outliers=flagged_labels(meas, ident.rejected),
         tcp=tcp, result=result, fitted_setup=setup)
-    failure = failure or holdout_failure(hold)
+    failure = failure or inconsistency_failure(ident) or holdout_failure(hold)
     ps = setup.params
     n = len(mp.ids)
     report = build_report(

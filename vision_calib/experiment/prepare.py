@@ -10,10 +10,12 @@ camera tilts, through the camera distance), the target tilts (second order in th
 value and its std, and the std and the verdict of the fit carry the axis' uncertainty. No rule decides whether
 to free them: the prior leaves the degrees of freedom of the adequacy test unchanged. "axis": the paper's step
 alone (tilts fixed at the axis value: their uncertainty is then NOT carried, the info says so); "off": nominal
-tilts kept. Nothing is applied when the rotations contradict a fixed axis
-(``CameraAxisEstimate.consistency`` against the measured rotation covariance: p < AXIS_LEVEL and
-chi2/dof > AXIS_MAX_VARIANCE_RATIO); the info dict (report's ``prepared`` block) has the estimates, the axis
-test, and then a ``warning``.
+tilts kept. When the rotations contradict a fixed axis (``CameraAxisEstimate.consistency`` against the measured
+rotation covariance: p < AXIS_LEVEL and chi2/dof > AXIS_MAX_VARIANCE_RATIO: rotation noise above the
+covariance, e.g. one frame per pose, or a nacelle / mount that moves) the tilts are never left at a value the
+data reject: they are identified with the axis prior (its std from the axis fit's residual scatter) in either
+mode, and the full fit's adequacy test judges the model; the info dict (report's ``prepared`` block) has the
+estimates, the axis test, and then a ``warning``.
 """
 
 from __future__ import annotations
@@ -75,10 +77,13 @@ def tilts_from_axis(setup: TiltsFromAxis, meas: Measurements) -> tuple[Setup, di
                  and axis_test["chi2_dof"] > AXIS_MAX_VARIANCE_RATIO)
     vals = np.concatenate([est.tilt_cam_rad, est.tilt_target_rad])
     axis_std = np.concatenate([est.tilt_cam_std_rad, est.tilt_target_std_rad])
-    usable = bool(fixed and np.all(np.isfinite(vals)) and np.all(np.isfinite(axis_std)))
+    usable = bool(np.all(np.isfinite(vals)) and np.all(np.isfinite(axis_std)))
     # exact rotations (noise-free synthetic data) give an exact axis: fixed at it, with its zero std
-    exact = bool(usable and np.max(axis_std) < EXACT_AXIS_STD_RAD)
-    identify = usable and mode == "identify" and not exact
+    exact = bool(usable and fixed and np.max(axis_std) < EXACT_AXIS_STD_RAD)
+    # a failed axis test never leaves the tilts at a value the data reject (nominal, or the axis value fixed):
+    # they are identified in the full fit, the axis estimate (std from the axis fit's own residual scatter)
+    # entering as their prior, and the full fit's adequacy test judges the model
+    identify = usable and (mode == "identify" or not fixed) and not exact
     out = setup.with_tilts(vals if usable else np.zeros(4), axis_std if identify else None)
     names = tuple(setup.tilt_names)
     sd_c, sd_t = np.sqrt(np.diag(est.cov_tilt_cam)), np.sqrt(np.diag(est.cov_tilt_target))
@@ -97,17 +102,23 @@ def tilts_from_axis(setup: TiltsFromAxis, meas: Measurements) -> tuple[Setup, di
                          "tilt std carry it" if identify else
                          "tilts fixed at the axis value (tilt_mode 'axis', the paper's step): their std is not "
                          "carried into the other parameters' std")
-                      + "; none applied when the rotations do not share one fixed axis within the noise (axis_test: "
-                      f"chi2 of the axis fit's residuals against the rotation covariance, level {AXIS_LEVEL}, "
-                      f"chi2/dof > {AXIS_MAX_VARIANCE_RATIO})"}
-    if not fixed:
+                      + "; when the rotations do not share one fixed axis within the noise (axis_test: chi2 of the "
+                      f"axis fit's residuals against the rotation covariance, level {AXIS_LEVEL}, chi2/dof > "
+                      f"{AXIS_MAX_VARIANCE_RATIO}) the tilts are identified with the axis prior whatever the "
+                      "tilt_mode"}
+    if not usable:
+        info["warning"] = ("the rotation axis estimate is not finite: the camera/target tilts stay nominal, their "
+                           "uncertainty not carried (record poses that differ in theta by several degrees)")
+    elif not fixed:
         info["warning"] = (
-            f"the measured rotations do not share one fixed rotation axis within the noise (axis fit chi2/dof "
-            f"{axis_test['chi2_dof']:.3g}, p {axis_test['p_value']:.2g}, rotation residual RMS "
-            f"{np.degrees(est.rms_residual_rad):.3g} deg): the camera/target tilts are not measured from it and "
-            "stay nominal (the nacelle or a mount moves with the pose: the model does not hold)")
-    elif not usable:
-        info["warning"] = "the rotation axis estimate is not finite: the camera/target tilts stay nominal"
+            f"the measured rotations do not share one fixed rotation axis within their predicted noise (axis fit "
+            f"chi2/dof {axis_test['chi2_dof']:.3g}, p {axis_test['p_value']:.2g}, rotation residual RMS "
+            f"{np.degrees(est.rms_residual_rad):.3g} deg): either the rotation noise is larger than the "
+            "measurement's covariance says (few frames per pose) or the nacelle or a mount moves with the pose; "
+            "the camera/target tilts are identified in the full fit with the axis estimate as their prior (std "
+            "from the axis fit's residual scatter"
+            + (", tilt_mode 'axis' overridden: a fixed axis value is rejected by the data" if mode == "axis" else "")
+            + "), and the full fit's adequacy test judges whether the model holds")
     elif mode == "axis":
         info["note"] = ("tilt_mode 'axis': camera/target tilts fixed at the rotation-axis estimate (std "
                         f"{', '.join(f'{np.degrees(s):.3g}' for s in axis_std)} deg), not carried into the std")

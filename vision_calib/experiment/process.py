@@ -25,7 +25,7 @@ from ..rig import Measurements, load_scene
 from .checks import drop_copies, duplicate_poses, screen_measurements
 from .gross import gross_failure
 from .holdout import flagged_labels, holdout_failure, holdout_lines, holdout_validation
-from .steps import check_method, identify_measurements, rejection_summary
+from .steps import check_method, identify_measurements, inconsistency_failure, rejection_summary
 
 if TYPE_CHECKING:  # the measure package is imported where poses are measured
     from ..measure import PoseMeasurement
@@ -160,7 +160,7 @@ def process_once(folder: str | Path, out_dir: str | Path | None, method: str | N
     hold = None if failure else holdout_validation(nominal, meas, method, residual, rep, folds, 0,
                                                    outliers=flagged_labels(meas, ident.rejected), tcp=tcp, result=result,
                                                    fitted_setup=setup)
-    failure = failure or holdout_failure(hold)
+    failure = failure or inconsistency_failure(ident) or holdout_failure(hold)
     cam_fit = None
     if ident.nuisance is not None:
         cam_fit = fitted_camera(rec.camera, used, ident.nuisance["coefficients"])

@@ -27,8 +27,8 @@ from ..rig import Measurements, Scene, SCENES_DIR, load_scene, scene_poses
 from .image_chain import ImageChain, ImagePool, InlineImagePool, measure_poses, start_fork_server
 from .checks import screen_measurements
 from .holdout import flagged_labels, holdout_failure, holdout_lines, holdout_validation
-from .steps import (check_method, identify_measurements, rejection_summary, rngs, run_analysis_and_truth,
-                    shared_truth, unmodelled_truth)
+from .steps import (check_method, identify_measurements, inconsistency_failure, rejection_summary, rngs,
+                    run_analysis_and_truth, shared_truth, unmodelled_truth)
 from .synthetic import run_synthetic
 
 DEFAULT_SCENE = SCENES_DIR / "h4_vision.yaml"
@@ -343,7 +343,7 @@ def run_simulation(scene: Scene | str | Path, out_dir: str | Path | None = None,
         measurements=mblock, identifiability=ident.analysis, parameters=parameters_table(
             ps.names, ps.nominal, shared_truth(setup, truth or scene.setup, x_true), result, ps.kinds),
         result=result, identified=ident, motion=motion, accuracy=evals, timings=timings,
-        extra={**extra, "holdout": hold}, failure=holdout_failure(hold) or truth_failure(evals))
+        extra={**extra, "holdout": hold}, failure=inconsistency_failure(ident) or holdout_failure(hold) or truth_failure(evals))
     report["summary_text"] += "\n" + "\n".join(holdout_lines(hold))
     if out_dir is not None:
         preloading.join()
