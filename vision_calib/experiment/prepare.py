@@ -69,7 +69,10 @@ def tilts_from_axis(setup: TiltsFromAxis, meas: Measurements) -> tuple[Setup, di
     try:
         est = estimate_camera_axis(meas.T_cam_target, R_BC0=R_BC0, R_ME0=R_ME0)
     except DataError as exc:  # e.g. all poses at one theta: the axis is not determined, keep the nominal
-        return setup, {"applied": False, "reason": str(exc)}
+        # (not a value the data reject: they cannot measure it; the full fit's adequacy test still judges it)
+        return setup, {"applied": False, "reason": str(exc),
+                       "warning": f"the camera/target tilts are not measured ({exc}): they stay nominal, their "
+                                  "uncertainty not carried; record poses that differ in theta by several degrees"}
     q = [_chi2_2(w, c) for w, c in ((est.tilt_cam_rad, est.cov_tilt_cam),
                                    (est.tilt_target_rad, est.cov_tilt_target))]
     axis_test = est.consistency(meas.cov[:, 3:, 3:])

@@ -130,10 +130,12 @@ def base_problem(setup: Setup, meas: Measurements, residual: str | None, base: A
     measurements; IdentifiabilityError when the usable poses give fewer equations than that."""
     params = setup.params.only_free([n for n, b in zip(setup.params.names, base) if b])
     problem = setup.problem(meas, residual, params=params)
-    if problem.n_obs * problem.m < params.n_free:
+    n_prior = problem.n_prior  # a prior is one equation each (the H4 tilts' axis prior)
+    if problem.n_obs * problem.m + n_prior < params.n_free:
         raise IdentifiabilityError(
-            f"{setup.name}: only {problem.n_obs} usable poses ({problem.n_obs * problem.m} equations) for "
-            f"{params.n_free} identifiable parameters: need at least {int(np.ceil(params.n_free / problem.m))} poses"
+            f"{setup.name}: only {problem.n_obs} usable poses ({problem.n_obs * problem.m} equations"
+            + (f" + {n_prior} prior rows" if n_prior else "") + f") for {params.n_free} identifiable parameters: "
+            f"need at least {int(np.ceil((params.n_free - n_prior) / problem.m))} poses"
             + (f" ({context})" if context else ""))
     return problem, params
 
@@ -234,6 +236,10 @@ def identify_measurements(setup: Setup, meas: Measurements, method: str, residua
     where = where or setup.name
     setup, prepared, reanalysis = prepare_measured(setup, meas, residual, where, context)
     rep = reanalysis if reanalysis is not None else analysis
+    if rep is not None and not set(rep.base_parameters) <= set(setup.params.names):
+        # an analysis made for another preparation (e.g. a held-out fold whose poses do not determine the H4
+        # camera axis the whole data did): it does not apply to this setup, analyse these poses afresh
+        rep = None
     if rep is None:
         rep = analyse_measurements(setup, meas, residual, where, context)
     structural_rank_check(setup, rep, residual, where, accept=fix_unidentifiable)
