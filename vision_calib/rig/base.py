@@ -13,6 +13,7 @@ with ``isinstance`` where they are used): :class:`ChainMeasured`, :class:`ModelV
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import ClassVar, Protocol, Sequence, runtime_checkable
@@ -25,6 +26,9 @@ from ..camera import CameraIntrinsics
 from ..errors import ConfigError, DataError
 from ..identify.problem import IdentificationProblem
 from ..kinematics.params import ParameterSet
+
+#: a mounting transform's name (``T_a_b``, ``A_T_B``) before the dot of a parameter name
+_MOUNT_NAME = re.compile(r"(^|_)T_")
 
 
 @dataclass(frozen=True)
@@ -345,6 +349,13 @@ class Setup:
         """Names of the joints in the order of the joint columns (what a ROS ``JointState`` calls them):
         ``q1..qn`` by default; kinds whose robot file names its joints (URDF) give those names."""
         return tuple(f"q{j + 1}" for j in range(self.n_joints))
+
+    def is_mount_parameter(self, name: str) -> bool:
+        """Whether parameter ``name`` belongs to a mounting transform (camera, target, base frame: what a robot
+        that is exactly nominal still needs calibrated), by the naming convention of DESIGN.md: a transform's
+        name before the dot (``T_flange_cam.tx``, ``B_T_C.theta``, ``M_T_E.tilt_x``); kinds with other names
+        override it."""
+        return bool(_MOUNT_NAME.search(name.split(".", 1)[0])) if "." in name else False
 
     def fixed_note(self, name: str) -> str:
         """Why parameter ``name`` is fixed (for tables)."""
