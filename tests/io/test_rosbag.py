@@ -349,3 +349,31 @@ def test_urdf_cells_name_their_joints():
     assert setup.joint_names() == ("shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint",
                                    "wrist_2_joint", "wrist_3_joint")
     assert load_scene(SCENE).setup.joint_names() == tuple(f"q{j + 1}" for j in range(6))
+
+
+def test_a_tolerance_that_merges_motion_is_named(tmp_path, capsys):
+    """--still-speed 1e9 makes the whole bag one standstill: exit 2 naming the standstill, the joint and the
+    setting (it was one pose of median joints, exit 0, no warning); at the default the same bag imports."""
+    bag = write_example_bag(tmp_path / "rec.bag", "ros1", moving_image=False)
+    assert _run(tmp_path, bag, "--still-speed", "1e9") == 2
+    err = capsys.readouterr().err
+    _, Q, _ = timeline(example_poses()[1])
+    span = Q.max(axis=0) - Q.min(axis=0)  # the one standstill spans the whole motion
+    assert f"spans {span.max():.4g} on joint q{int(np.argmax(span)) + 1}" in err, err
+    assert "standstill 0 (" in err and "the robot moved during it" in err and "lower --still-speed" in err
+    assert "--still-speed 1e+09 x --still-window 0.5 s" in err
+
+
+def test_too_few_standstills_in_a_moving_bag_are_noted():
+    """Two standstills in joint states that move: a note naming the settings; three: none."""
+    from vision_calib.io.rosbag import check_standstills
+
+    _, q = example_poses()
+    names = [f"q{j + 1}" for j in range(6)]
+    for n, noted in ((2, True), (3, False)):
+        stamps, Q, _ = timeline(q[:n])
+        st = standstills(np.array(stamps), Q, StillSettings())
+        note = check_standstills(st, np.array(stamps), Q, names, StillSettings(), "b.bag")
+        assert (note is not None) == noted, note
+        if noted:
+            assert note.startswith("only 2 standstill(s) in a bag whose joints move up to") and "--still-speed" in note

@@ -16,7 +16,9 @@ Time: every message's ``header.stamp`` (the bag's log time for a topic whose fir
 Standstills (:func:`standstills`): a joint-state sample is *still* when, over the samples within +-window/2 of
 it, every joint's range (max - min) is at most ``speed x window`` (a mean speed below ``speed`` [rad/s or m/s]
 over the window). A run of still samples is one pose: its interval spans the runs' windows, its joints are the
-median of the samples in it. An image whose stamp falls in a pose's interval is a frame of that pose; other
+median of the samples in it. A tolerance so loose that a standstill spans motion (more than
+:data:`MAX_STILL_SPAN` on a joint) is a DataError naming ``--still-speed``; fewer than 3 standstills in a bag
+whose joints move, a note naming it (:func:`check_standstills`). An image whose stamp falls in a pose's interval is a frame of that pose; other
 images (robot moving, or outside the joint-state span) are dropped and counted.
 
 Damaged bags (DataError naming the bag, the topic and the time or message; exit 2): a missing topic (the
@@ -67,14 +69,22 @@ class StillSettings:
             raise DataError(f"max_frames must be >= 1, got {self.max_frames}")
 
 
+#: a standstill whose samples span more than this on one joint [rad, or m for a prismatic joint] holds motion:
+#: the tolerance (``--still-speed`` x ``--still-window``) is too loose for the bag, and moving data would be merged
+#: into one pose (a robot at rest holds its joints within a few encoder counts, ~1e-5 rad)
+MAX_STILL_SPAN = 0.01
+
+
 @dataclass(frozen=True)
 class Standstill:
-    """One pose: interval [t0_ns, t1_ns] of stamps, joints (n,) [rad, m] (median of its samples), n_samples."""
+    """One pose: interval [t0_ns, t1_ns] of stamps, joints (n,) [rad, m] (median of its samples), n_samples,
+    span (n,) [rad, m]: each joint's range (max - min) over its samples."""
 
     t0_ns: int
     t1_ns: int
     joints: np.ndarray
     n_samples: int
+    span: np.ndarray | None = field(default=None, compare=False)
 
 
 @dataclass(frozen=True)
@@ -228,8 +238,34 @@ def standstills(t_ns, Q, settings: StillSettings) -> list[Standstill]:
     edges = np.flatnonzero(np.diff(np.r_[0, still.astype(int), 0]))
     for a, b in zip(edges[::2], edges[1::2]):  # still samples a..b-1
         i0, i1 = int(lo[a]), int(hi[b - 1])
-        out.append(Standstill(int(t_ns[i0]), int(t_ns[i1 - 1]), np.median(Q[i0:i1], axis=0), i1 - i0))
+        seg = Q[i0:i1]
+        out.append(Standstill(int(t_ns[i0]), int(t_ns[i1 - 1]), np.median(seg, axis=0), i1 - i0,
+                              seg.max(axis=0) - seg.min(axis=0)))
     return out
+
+
+def check_standstills(stills, t_ns, Q, names, settings: StillSettings, bag) -> str | None:
+    """DataError naming ``--still-speed`` / ``--still-window`` when a standstill spans more than
+    :data:`MAX_STILL_SPAN` on a joint (the tolerance merges moving data into one pose); a note (or None) when
+    the bag's joints move by more than that but hold fewer than 3 standstills (too few poses to calibrate)."""
+    def setting() -> str:
+        return (f"--still-speed {settings.speed:g} x --still-window {settings.window_s:g} s lets the joints move "
+                f"{settings.speed * settings.window_s:.3g} per window (default {StillSettings.speed:g} x "
+                f"{StillSettings.window_s:g} s)")
+
+    for k, st in enumerate(stills):
+        j = int(np.argmax(st.span))
+        if st.span[j] > MAX_STILL_SPAN:
+            t0 = (st.t0_ns - int(t_ns[0])) * 1e-9
+            raise DataError(f"{bag}: standstill {k} ({t0:.3f}-{t0 + (st.t1_ns - st.t0_ns) * 1e-9:.3f} s into the "
+                            f"joint states, {st.n_samples} samples) spans {st.span[j]:.4g} on joint {names[j]} (more "
+                            f"than {MAX_STILL_SPAN:g} rad or m): the robot moved during it, and its images would be "
+                            f"merged into one pose; {setting()}: lower --still-speed")
+    moved = np.max(Q, axis=0) - np.min(Q, axis=0) if len(Q) else np.zeros(0)
+    if len(stills) < 3 and moved.size and float(moved.max()) > MAX_STILL_SPAN:
+        return (f"only {len(stills)} standstill(s) in a bag whose joints move up to {float(moved.max()):.3g} "
+                f"(joint {names[int(np.argmax(moved))]}): a calibration needs many poses; {setting()}")
+    return None
 
 
 # ---------------------------------------------------------------------------------------------- images
@@ -364,6 +400,8 @@ def import_bag(bag, scene, image_topic: str, joints_topic: str, out, camera_info
             check_clock([s for s, _, _ in jm], bag, joints_topic, settings.max_gap_s)
             t_j, Q = joint_matrix(jm, names, bag, joints_topic)
             stills = standstills(t_j, Q, settings)
+            few = check_standstills(stills, t_j, Q, names, settings, bag)
+            notes += [few] if few else []
             frames, n_img, n_moving, stamps, size = {}, 0, 0, [], None
             for k, (s, _, m) in enumerate(_messages(reader, iconns)):
                 stamps.append(s)
@@ -415,5 +453,5 @@ def import_bag(bag, scene, image_topic: str, joints_topic: str, out, camera_info
 
 
 __all__ = ["StillSettings", "Standstill", "BagImport", "RAW_ENCODINGS", "open_bag", "topic_connections",
-           "check_clock", "joint_matrix", "standstills", "check_encoding", "decode_image", "camera_from_info",
+           "check_clock", "joint_matrix", "standstills", "check_standstills", "check_encoding", "decode_image", "camera_from_info",
            "import_bag"]
