@@ -462,7 +462,9 @@ def _intrinsics_line(block: dict) -> str:
     prop = block.get("propagated") or {}
     how = (f"; their uncertainty {'is included in the fit' if prop.get('in_fit') else 'is added to the std'} "
            f"({prop['n_directions']} directions)") if prop else ""
-    return (f"intrinsics ({block['source']}, {block['n_views_used']} views, RMS {block['rms_px']:.3f} px): "
+    views = (f", {block['n_views_used']} views, RMS {block['rms_px']:.3f} px"
+             if block.get("n_views_used") is not None and block.get("rms_px") is not None else "")
+    return (f"intrinsics ({block['source']}{views}): "
             + ", ".join(f"{k} {v[k]:.2f} ± {fmt_sig(s[k])}" for k in names[:4]) + " px; dist "
             + ", ".join(f"{k} {v[k]:.4g} ± {fmt_sig(s[k])}" for k in names[4:]) + how)
 
