@@ -377,3 +377,50 @@ def test_too_few_standstills_in_a_moving_bag_are_noted():
         assert (note is not None) == noted, note
         if noted:
             assert note.startswith("only 2 standstill(s) in a bag whose joints move up to") and "--still-speed" in note
+
+
+def _png_declaring(width: int, height: int) -> bytes:
+    """A grey PNG whose header declares width x height px with almost no pixel data."""
+    import struct
+    import zlib
+
+    def chunk(kind, data):
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(b"\x00" * 16)) + chunk(b"IEND", b"")
+
+
+@pytest.mark.parametrize("first, message", [
+    (lambda: _png_declaring(30000, 30000), "message 0 (stamp {t}): image 30000x30000 px (900 Mpx) exceeds the limit"),
+    (lambda: cv2.imencode(".png", np.zeros((600, 800), np.uint8))[1].tobytes(),
+     "message 0 (stamp {t}): image size 800x600 px, but the intrinsics (camera info /camera/camera_info (K, D)) are "
+     "for 640x480"),
+])
+def test_image_sizes_read_from_headers_before_decoding(tmp_path, capsys, first, message):
+    """The first image of the first standstill declares 30000 x 30000 px (a 69-byte PNG: refused from its header,
+    nothing decoded) or is 800 x 600: the odd image is the one named, against the intrinsics' size (the bag's
+    other images, 640 x 480, are not blamed)."""
+    data = first()
+    stamp = {}
+
+    def odd_first(bw, stamps, Q):
+        stamp["t"] = stamps[20]  # 0.4 s into the first standstill, before its own image
+        bw.compressed("/camera/image/compressed", stamps[20], data, fmt="png")
+
+    bag = write_example_bag(tmp_path / "rec.bag", "ros1", edit=odd_first, moving_image=False)
+    assert _run(tmp_path, bag, "--camera-info-topic", "/camera/camera_info") == 2
+    err = capsys.readouterr().err
+    assert message.format(t=f"{stamp['t'] * 1e-9:.6f} s") in err, err
+
+
+def test_image_message_beyond_the_pixel_limit_refused_before_deserializing(tmp_path, capsys, monkeypatch):
+    """With the pixel limit at 0.01 Mpx, a raw 640 x 480 bgr8 message (0.92 MB) is longer than any image within it
+    may take (0.01 Mpx x 6 bytes + 64 kB): refused from its length, naming the message, before it is
+    deserialized."""
+    monkeypatch.setenv("VISION_CALIB_MAX_IMAGE_MPX", "0.01")
+    bag = write_example_bag(tmp_path / "rec.bag", "ros1", images="bgr8", moving_image=False)
+    assert main(["import-bag", str(bag), "--scene", str(SCENE), "--image-topic", "/camera/image_raw",
+                 "--joints-topic", "/joint_states", "--out", str(tmp_path / "rec")]) == 2
+    err = capsys.readouterr().err
+    assert "topic '/camera/image_raw' message 0: 0.92" in err and "MB, more than any image within the pixel limit" in err

@@ -148,12 +148,18 @@ def _stamp_ns(msg) -> int:
     return int(s.sec) * 1_000_000_000 + int(s.nanosec)
 
 
-def _messages(reader, conns):
+def _messages(reader, conns, max_bytes: int | None = None, where: str = ""):
     """(stamp ns, log time ns, message) of the connections, in the bag's order, one at a time (an image bag does
     not fit in memory): header stamps, or the log times when the topic's first message has a zero stamp (a
-    driver that does not stamp)."""
+    driver that does not stamp). max_bytes: a message longer than this is a DataError naming ``where`` and its
+    index before it is deserialized (an image message beyond the pixel limit)."""
     use_log = None
-    for c, t, raw in reader.messages(connections=conns):
+    for k, (c, t, raw) in enumerate(reader.messages(connections=conns)):
+        if max_bytes is not None and len(raw) > max_bytes:
+            raise DataError(f"{where} message {k}: {len(raw) / 1e6:.4g} MB, more than any image within the pixel "
+                            f"limit takes ({max_bytes / 1e6:.4g} MB: the limit x 3 channels x 2 bytes + 64 kB); a "
+                            "damaged or hostile bag, or a camera beyond the limit (raise it with the environment "
+                            "variable VISION_CALIB_MAX_IMAGE_MPX=MPX)")
         m = reader.deserialize(raw, c.msgtype)
         s = _stamp_ns(m)
         if use_log is None:
@@ -269,6 +275,23 @@ def check_standstills(stills, t_ns, Q, names, settings: StillSettings, bag) -> s
 
 
 # ---------------------------------------------------------------------------------------------- images
+def max_image_bytes() -> int:
+    """the pixel limit x 3 channels x 2 bytes + 64 kB of header: the longest image message read"""
+    from ..config import max_image_pixels
+
+    return int(max_image_pixels()) * 6 + 2**16
+
+
+def message_size(msg, msgtype: str) -> tuple[int, int] | None:
+    """(width, height) [px] an image message declares, without decoding: a raw Image's width and height fields,
+    a CompressedImage's PNG / JPEG header (``measure.image_header.buffer_size``; None when unreadable)."""
+    from ..measure.image_header import buffer_size
+
+    if msgtype.endswith("CompressedImage"):
+        return buffer_size(msg.data)
+    return int(msg.width), int(msg.height)
+
+
 def check_encoding(msg, msgtype: str, where: str) -> str:
     """The image's encoding (RAW_ENCODINGS) or compressed kind (COMPRESSED_FORMATS key), without decoding;
     DataError naming ``where`` for one not supported."""
@@ -362,6 +385,19 @@ def _camera(reader, info_topic, setup, bag, notes: list):
     return first, f"camera info {info_topic} (K, D)"
 
 
+def _check_declared(size, camera, cam_source: str, where: str) -> None:
+    """DataError naming the image ``where`` when its declared (width, height) exceeds the pixel limit or differs
+    from the intrinsics' (the odd image is the one named, whichever comes first)."""
+    from ..measure.image_header import pixel_refusal
+
+    why = pixel_refusal(None, size)
+    if why:
+        raise DataError(f"{where}: {why}")
+    if tuple(size) != camera.size:
+        raise DataError(f"{where}: image size {size[0]}x{size[1]} px, but the intrinsics ({cam_source}) are for "
+                        f"{camera.width}x{camera.height}")
+
+
 def import_bag(bag, scene, image_topic: str, joints_topic: str, out, camera_info_topic: str | None = None,
                joint_names=None, settings: StillSettings | None = None) -> BagImport:
     """Write the recorded folder ``out`` (recording.yaml, poses.csv, images/<pose_id>/<frame>.png; the cell's
@@ -403,7 +439,8 @@ def import_bag(bag, scene, image_topic: str, joints_topic: str, out, camera_info
             few = check_standstills(stills, t_j, Q, names, settings, bag)
             notes += [few] if few else []
             frames, n_img, n_moving, stamps, size = {}, 0, 0, [], None
-            for k, (s, _, m) in enumerate(_messages(reader, iconns)):
+            for k, (s, _, m) in enumerate(_messages(reader, iconns, max_image_bytes(), f"{bag}: topic "
+                                                                                          f"{image_topic!r}")):
                 stamps.append(s)
                 n_img += 1
                 where = f"{bag}: topic {image_topic!r} message {k} (stamp {s * 1e-9:.6f} s)"
@@ -412,6 +449,9 @@ def import_bag(bag, scene, image_topic: str, joints_topic: str, out, camera_info
                 if hit is None:
                     n_moving += 1
                     continue
+                declared = message_size(m, m.__msgtype__)  # before decoding: the pixel limit, the camera's size
+                if declared is not None:
+                    _check_declared(declared, camera, cam_source, where)
                 img = decode_image(m, m.__msgtype__, where)
                 shape = (int(img.shape[1]), int(img.shape[0]))
                 if size is None:
@@ -453,5 +493,6 @@ def import_bag(bag, scene, image_topic: str, joints_topic: str, out, camera_info
 
 
 __all__ = ["StillSettings", "Standstill", "BagImport", "RAW_ENCODINGS", "open_bag", "topic_connections",
-           "check_clock", "joint_matrix", "standstills", "check_standstills", "check_encoding", "decode_image", "camera_from_info",
+           "check_clock", "joint_matrix", "standstills", "check_standstills", "max_image_bytes", "message_size",
+           "check_encoding", "decode_image", "camera_from_info",
            "import_bag"]
