@@ -343,6 +343,8 @@ def verdict_line(v: dict) -> str:
         state = "WARNING: " + v["message"] if status == "warning" else "ok"
     adequacy = f"; model adequacy: {v['adequacy']}" if v.get("adequacy") else ""
     note = f" (note: {v['note']})" if v.get("note") else ""
+    if v.get("adequacy") == "consistent" and v.get("note"):  # which holds: the whole set; the note: some poses
+        adequacy, note = "; model adequacy: consistent over all poses (chi2/dof in its band)", f"; but {v['note']}"
     return (f"verdict: {state}; {v['n_rejected_poses']} poses rejected ({v.get('n_outliers', 0)} as outliers)"
             f"{adequacy}{note}; {v['warnings']} warnings" + (f" -- {v['message']}" if status == "failed" and
                                                              v.get("message") else ""))
