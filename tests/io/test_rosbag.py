@@ -424,3 +424,15 @@ def test_image_message_beyond_the_pixel_limit_refused_before_deserializing(tmp_p
                  "--joints-topic", "/joint_states", "--out", str(tmp_path / "rec")]) == 2
     err = capsys.readouterr().err
     assert "topic '/camera/image_raw' message 0: 0.92" in err and "MB, more than any image within the pixel limit" in err
+
+
+def test_ros2_metadata_alias_tree_refused_before_rosbags_reads_it(tmp_path, capsys):
+    """A ROS 2 bag folder whose metadata.yaml holds an alias tree (read by rosbags' own YAML loader): refused by
+    ours first, naming the file (config.BoundedLoader)."""
+    bag = write_example_bag(tmp_path / "b2", "ros2", moving_image=False)
+    meta = bag / "metadata.yaml"
+    tree = "[&a0 [" + ", ".join(['"x"'] * 9) + "]" + "".join(
+        f", &a{k} [" + ", ".join([f"*a{k - 1}"] * 9) + "]" for k in range(1, 9)) + "]"
+    meta.write_text(meta.read_text() + f"hostile: {tree}\n")
+    assert _run(tmp_path, bag) == 2
+    assert f"{meta}: invalid YAML in ROS 2 bag metadata (aliases expand beyond the limit" in capsys.readouterr().err

@@ -120,6 +120,11 @@ def open_bag(path):
     path = Path(path)
     if not path.exists():
         raise DataError(f"{path}: bag not found")
+    meta = path / "metadata.yaml" if path.is_dir() else path.parent / "metadata.yaml"
+    if path.suffix != ".bag" and meta.is_file():  # read by rosbags' own YAML loader: ours first (aliases bounded)
+        from ..config import parse_yaml
+
+        parse_yaml(meta, DataError, "ROS 2 bag metadata")
     ros1 = path.suffix == ".bag"
     try:
         reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE))
