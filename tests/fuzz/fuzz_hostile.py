@@ -523,6 +523,14 @@ def flange_copied(n_copies: int):
     return build
 
 
+def one_flange_pose(tmp, ctx):
+    """``process`` of the flange-pose recording with every row given the first row's flange pose: refused before
+    any fit, nothing written but measurements.json."""
+    rec = _flange(tmp, ctx, lambda rows: [f"{r.split(',', 1)[0]},{rows[0].split(',', 1)[1]}" for r in rows])
+    return ["process", str(rec), "--out", str(tmp / "out"), "--no-plots"], \
+        lambda tmp: not (tmp / "out" / "report.json").exists()
+
+
 def pairs_of(copies: int | None):
     """import-pairs + process-poses in one child (the CLI's ``main`` twice): 10 copies of one simulated pair
     (``copies=10``), or 20 pairs each written twice (``None``)."""
@@ -614,6 +622,8 @@ CASES = [
     Hostile("pairs-10-copies-of-one", pairs_of(10), ERR, r"degenerate motion: the 10 pose pairs hold 1 distinct"),
     Hostile("pairs-each-written-twice", pairs_of(None), WARN, r"20 poses are copies of another pose"),
     Hostile("handeye-3-pose-folders-copied", flange_copied(3), WARN, r"3 poses are copies of another pose"),
+    Hostile("handeye-one-flange-pose", one_flange_pose, ERR,
+            r"degenerate motion: the \d+ pose pairs hold 1 distinct flange pose"),
     # --- YAML alias trees in a key the loader knows: refused while composing (issue 32)
     Hostile("yaml-alias-tree-scene-name", yaml_alias("scene"), ERR, r"scene.yaml: invalid YAML \(aliases expand",
             timeout=30),
