@@ -574,7 +574,9 @@ def yaml_alias(what: str):
         text = text.replace("../targets/", f"{targets}/")
         key, orig = {"scene": ("name", None), "target": ("dictionary", targets / "charuco_a5.yaml"),
                      "robot": ("kind", scenes / "robots" / "h4.yaml")}[what]
-        tree = lambda t: re.sub(rf"^{key}:.*$", lambda m: f"{key}: {_alias_tree()}", t, count=1, flags=re.M)  # noqa: E731
+        def tree(t):
+            return re.sub(rf"^{key}:.*$", lambda m: f"{key}: {_alias_tree()}", t, count=1, flags=re.M)
+
         if orig is None:
             text = tree(text)
         else:

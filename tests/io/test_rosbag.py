@@ -388,7 +388,8 @@ def _png_declaring(width: int, height: int) -> bytes:
         return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
 
     ihdr = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
-    return b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(b"\x00" * 16)) + chunk(b"IEND", b"")
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(b"\x00" * 16))
+            + chunk(b"IEND", b""))
 
 
 @pytest.mark.parametrize("first, message", [
@@ -423,7 +424,8 @@ def test_image_message_beyond_the_pixel_limit_refused_before_deserializing(tmp_p
     assert main(["import-bag", str(bag), "--scene", str(SCENE), "--image-topic", "/camera/image_raw",
                  "--joints-topic", "/joint_states", "--out", str(tmp_path / "rec")]) == 2
     err = capsys.readouterr().err
-    assert "topic '/camera/image_raw' message 0: 0.92" in err and "MB, more than any image within the pixel limit" in err
+    assert "topic '/camera/image_raw' message 0: 0.92" in err
+    assert "MB, more than any image within the pixel limit" in err
 
 
 def test_ros2_metadata_alias_tree_refused_before_rosbags_reads_it(tmp_path, capsys):

@@ -241,8 +241,8 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None, cause=No
     from ..identify.handeye_problem import handeye_problem, stack_measurements
     from ..io.report_handeye import handeye_report
     from .camera_step import fitted_camera, intrinsics_directions, residual_response
-    from .handeye_gross import alternative_readings, handeye_gross_failure
     from .checks import copies_warning, handeye_motions, pair_copies
+    from .handeye_gross import alternative_readings, handeye_gross_failure
     from .handeye_step import handeye_blocks, identify_handeye
 
     ok = [i for i, pm in enumerate(pms) if pm.valid]

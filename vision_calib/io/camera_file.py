@@ -103,8 +103,10 @@ def load_camera_uncertainty(path) -> tuple[dict | None, np.ndarray | None]:
         C = np.array(c.get("matrix", list), float)
     except (TypeError, ValueError):
         raise c.error("matrix", "expected a 9 x 9 matrix of numbers") from None
-    if C.shape != (9, 9) or not np.all(np.isfinite(C)) or np.max(np.abs(C - C.T)) > 1e-9 * max(np.max(np.abs(C)), 1e-300):
-        raise c.error("matrix", f"expected a finite symmetric 9 x 9 matrix, got shape {C.shape}")
+    if C.shape != (9, 9) or not np.all(np.isfinite(C)):
+        raise c.error("matrix", f"expected a finite 9 x 9 matrix, got shape {C.shape}")
+    if np.max(np.abs(C - C.T)) > 1e-9 * max(float(np.max(np.abs(C))), 1e-300):
+        raise c.error("matrix", "not symmetric")
     if not np.allclose(np.sqrt(np.maximum(np.diag(C), 0.0)), v, rtol=1e-2, atol=1e-12):
         raise c.error("matrix", "its diagonal is not the square of std (a file edited by hand?)")
     return std, C

@@ -18,8 +18,11 @@ it, every joint's range (max - min) is at most ``speed x window`` (a mean speed 
 over the window). A run of still samples is one pose: its interval spans the runs' windows, its joints are the
 median of the samples in it. A tolerance so loose that a standstill spans motion (more than
 :data:`MAX_STILL_SPAN` on a joint) is a DataError naming ``--still-speed``; fewer than 3 standstills in a bag
-whose joints move, a note naming it (:func:`check_standstills`). An image whose stamp falls in a pose's interval is a frame of that pose; other
-images (robot moving, or outside the joint-state span) are dropped and counted.
+whose joints move, a note naming it (:func:`check_standstills`). An image whose stamp falls in a pose's interval
+is a frame of that pose; other images (robot moving, or outside the joint-state span) are dropped and counted.
+Each image's size is read from the message (a raw image's width and height, a compressed one's PNG / JPEG
+header) before it is decoded, against the pixel limit and the intrinsics' size; a message longer than any image
+within the limit is refused before it is deserialized.
 
 Damaged bags (DataError naming the bag, the topic and the time or message; exit 2): a missing topic (the
 topics present are listed), a topic of another message type, time going backwards or a gap longer than
