@@ -204,11 +204,77 @@ def read_text(path: str | os.PathLike, error=ConfigError, what: str = "file") ->
                     "save the file as UTF-8") from None
 
 
+#: a YAML file may use at most this many aliases (``*name``), standing for at most this many nodes in all (each
+#: alias counted as the size of the node it repeats): a hand-written file uses a few small ones; an alias tree
+#: ("billion laughs": 9 levels of 9) stands for 9^9 nodes and exhausts the memory of whatever prints or walks it
+MAX_YAML_ALIASES = 1000
+MAX_YAML_ALIAS_NODES = 100_000
+
+
+class BoundedLoader(yaml.SafeLoader):
+    """``yaml.SafeLoader`` that counts the aliases it resolves and the nodes they stand for
+    (:data:`MAX_YAML_ALIASES`, :data:`MAX_YAML_ALIAS_NODES`) and refuses an alias inside the node it names (a
+    recursive structure): a ``yaml.composer.ComposerError`` at the alias's line, while composing, before any
+    value is built. Every YAML file the package reads goes through it (:func:`safe_load`)."""
+
+    def __init__(self, stream):
+        super().__init__(stream)
+        self._aliases, self._alias_nodes = 0, 0
+        self._sizes: dict[int, int] = {}
+        self._open: list = []  # anchors of the collections being composed
+
+    def _refuse(self, problem: str, mark):
+        raise yaml.composer.ComposerError(None, None, problem, mark)
+
+    def _nodes(self, node) -> int:
+        """Nodes in ``node`` with every alias expanded (memoised per node)."""
+        n = self._sizes.get(id(node))
+        if n is None:
+            if isinstance(node, yaml.MappingNode):
+                n = 1 + sum(self._nodes(k) + self._nodes(v) for k, v in node.value)
+            elif isinstance(node, yaml.SequenceNode):
+                n = 1 + sum(self._nodes(v) for v in node.value)
+            else:
+                n = 1
+            self._sizes[id(node)] = n
+        return n
+
+    def compose_node(self, parent, index):
+        ev = self.peek_event()
+        if isinstance(ev, yaml.AliasEvent) and ev.anchor in self.anchors:
+            if ev.anchor in self._open:
+                self._refuse(f"the alias *{ev.anchor} is inside the node &{ev.anchor} it repeats (a recursive "
+                             "structure): refused", ev.start_mark)
+            self._aliases += 1
+            self._alias_nodes += self._nodes(self.anchors[ev.anchor])
+            if self._aliases > MAX_YAML_ALIASES or self._alias_nodes > MAX_YAML_ALIAS_NODES:
+                self._refuse(f"aliases expand beyond the limit ({self._aliases} aliases standing for "
+                             f"{self._alias_nodes} nodes by *{ev.anchor}; at most {MAX_YAML_ALIASES} aliases and "
+                             f"{MAX_YAML_ALIAS_NODES} nodes): an alias tree, refused before it is expanded",
+                             ev.start_mark)
+        if isinstance(ev, (yaml.SequenceStartEvent, yaml.MappingStartEvent)) and ev.anchor is not None:
+            self._open.append(ev.anchor)
+            try:
+                return super().compose_node(parent, index)
+            finally:
+                self._open.pop()
+        return super().compose_node(parent, index)
+
+
+def safe_load(text: str):
+    """``yaml.safe_load`` through :class:`BoundedLoader` (aliases bounded); yaml.YAMLError on a bad file."""
+    loader = BoundedLoader(text)
+    try:
+        return loader.get_single_data()
+    finally:
+        loader.dispose()
+
+
 def parse_yaml(path: str | os.PathLike, error=ConfigError, what: str = "file"):
     """Any YAML value of a file (:func:`read_text`); ``error`` naming the file on a syntax error."""
     text = read_text(path, error, what)
     try:
-        return yaml.safe_load(text)
+        return safe_load(text)
     except yaml.YAMLError as exc:
         raise error(f"{path}: invalid YAML in {what} ({' '.join(str(exc).split())})") from None
 
@@ -219,7 +285,7 @@ def load_yaml(path: str | os.PathLike) -> dict:
     p = Path(path)
     text = read_text(p, ConfigError)
     try:
-        data = yaml.safe_load(text)
+        data = safe_load(text)
     except yaml.YAMLError as exc:
         raise ConfigError(f"{p}: invalid YAML ({' '.join(str(exc).split())})") from None
     if not isinstance(data, dict):

@@ -1,5 +1,5 @@
-"""camera.yaml into process: ``process --camera`` and recording.yaml ``camera_file`` give the same result as
-the same intrinsics inline (round trip through calibrate-camera); an H4 recording (views near
+"""camera.yaml into process: ``process --camera`` and recording.yaml ``camera_file`` give the same result, the
+same intrinsics as inline (round trip through calibrate-camera) with the file's uncertainty carried into the fit; an H4 recording (views near
 fronto-parallel) without intrinsics is refused with the reason."""
 
 import shutil
@@ -80,10 +80,23 @@ def test_calibrate_camera_output_used_by_process_equals_the_same_intrinsics_inli
     # the camera file named relative to the report's folder (o1, o3 and cal are siblings)
     assert by_flag["intrinsics"]["source"] == by_key["intrinsics"]["source"] == "camera file ../cal/camera.yaml"
     assert inline["intrinsics"]["source"] == "recording.yaml"
+    sd0 = {p["name"]: p["std"] for p in inline["parameters"] if p["free"]}
     for rep in (by_flag, by_key):
         assert rep["intrinsics"]["values"] == inline["intrinsics"]["values"]
         assert rep["settings"]["camera"] == inline["settings"]["camera"]
-        assert _params(rep) == pytest.approx(_params(inline), rel=1e-9, abs=1e-12)
+        # the file's std and covariance carried into the fit, as on the --refine-intrinsics route (issue 32): the
+        # std reported, the fit's std larger than inline (no std there) where the intrinsics matter, the estimates
+        # within them
+        assert rep["intrinsics"]["std"]["fx"] == pytest.approx(std["fx"]) and rep["intrinsics"]["propagated"]["in_fit"]
+        assert not any("without uncertainty" in w for w in rep["warnings"])
+        sd = {p["name"]: p["std"] for p in rep["parameters"] if p["free"]}
+        # each run scales its std by its own variance factor (chi2/dof above 1): a few % either way where the
+        # intrinsics do not matter; up the chain where they do (the camera mount's depth, measured 1.3 x)
+        assert sd.keys() == sd0.keys() and all(sd[k] > 0.95 * sd0[k] for k in sd), [(k, sd[k], sd0[k]) for k in sd]
+        assert max(sd[k] / sd0[k] for k in sd) > 1.2  # the focal length's error matters on this cell
+        p, p0 = _params(rep), _params(inline)
+        assert all(abs(p[k] - p0[k]) < 3 * sd[k] for k in sd), [(k, p[k] - p0[k], sd[k]) for k in sd]
+    assert _params(by_flag) == pytest.approx(_params(by_key), rel=1e-9, abs=1e-12)
     assert inline["settings"]["camera"]["fx"] == cam.fx
 
 

@@ -154,3 +154,28 @@ def test_handeye_process_without_intrinsics_carries_their_uncertainty(recording,
     rp, rp0 = out["reprojection"], ref["reprojection"]
     assert rp is out["handeye"]["reprojection"] or rp == out["handeye"]["reprojection"]
     assert rp["rms_px"] < rp["with_calibrated_intrinsics"]["rms_px"] and rp["rms_px"] < 2 * rp0["rms_px"], (rp, rp0)
+
+
+def test_handeye_process_with_a_camera_file_carries_its_std(recording, tmp_path):
+    """Flange-pose folder processed with a camera.yaml holding the true intrinsics and a std (0.5 % of the focal
+    length, 2 px on the principal point, diagonal: no covariance): the file's std reported, its uncertainty in the
+    fit (nuisance directions, warned that the correlations are taken as zero), the mounts' std larger than with the
+    same intrinsics given without std, the mounts within them."""
+    from flange_folder import assert_mounts_within_std, flange_pose_folder, true_mounts  # tests/experiment helper
+
+    flange, _, _ = flange_pose_folder(recording / "rec", tmp_path / "flange", robot_std_mm=0.2, robot_std_deg=0.02,
+                                      declare_std=True)
+    cam = yaml.safe_load((flange / "recording.yaml").read_text())["camera"]
+    std = {"fx": 0.005 * cam["fx"], "fy": 0.005 * cam["fy"], "cx": 2.0, "cy": 2.0,
+           "dist": [0.005, 0.01, 1e-4, 1e-4, 0.01]}
+    cam_file = tmp_path / "camera.yaml"
+    cam_file.write_text(yaml.safe_dump({"format": "vision_calib.camera/1", **cam, "std": std}))
+    ref = process_folder(flange, tmp_path / "ref", plots=False)
+    out = process_folder(flange, tmp_path / "out", plots=False, camera_file=cam_file)
+    intr = out["intrinsics"]
+    assert intr["std"]["fx"] == pytest.approx(std["fx"]) and intr["propagated"]["in_fit"]
+    assert any("correlations are taken as zero" in w for w in out["warnings"])
+    a, b = ref["handeye"]["transforms"], out["handeye"]["transforms"]
+    assert_mounts_within_std(b, true_mounts(recording / "rec"))
+    ratio = max(max(np.array(b[k]["std_xyz_m"]) / np.array(a[k]["std_xyz_m"])) for k in a)
+    assert ratio > 1.3, ratio

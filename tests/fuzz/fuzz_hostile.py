@@ -502,6 +502,91 @@ def flange_damage(csv_edit=None, yaml_edit=None, named=()):
     return build
 
 
+def flange_copied(n_copies: int):
+    """``process`` of the flange-pose recording with its first ``n_copies`` pose folders copied under new ids
+    (``cK``: the row and the image folder): the copies named and counted once, no outlier."""
+    def build(tmp, ctx):
+        rec = _flange(tmp, ctx)
+        lines = (rec / "poses.csv").read_text().splitlines()
+        extra = []
+        for k, row in enumerate(lines[1:1 + n_copies]):
+            pid, rest = row.split(",", 1)
+            shutil.copytree(rec / "images" / pid, rec / "images" / f"c{k}")
+            extra.append(f"c{k},{rest}")
+        (rec / "poses.csv").write_text("\n".join(lines + extra) + "\n")
+
+        def check(tmp):
+            rep = json.loads((tmp / "out" / "report.json").read_text())
+            return ([c["pose_id"] for c in rep["measurements"].get("copies", [])] == [f"c{k}" for k in range(n_copies)]
+                    and not rep.get("outliers"))
+        return ["process", str(rec), "--out", str(tmp / "out"), "--no-plots"], check
+    return build
+
+
+def one_flange_pose(tmp, ctx):
+    """``process`` of the flange-pose recording with every row given the first row's flange pose: refused before
+    any fit, nothing written but measurements.json."""
+    rec = _flange(tmp, ctx, lambda rows: [f"{r.split(',', 1)[0]},{rows[0].split(',', 1)[1]}" for r in rows])
+    return ["process", str(rec), "--out", str(tmp / "out"), "--no-plots"], \
+        lambda tmp: not (tmp / "out" / "report.json").exists()
+
+
+def pairs_of(copies: int | None):
+    """import-pairs + process-poses in one child (the CLI's ``main`` twice): 10 copies of one simulated pair
+    (``copies=10``), or 20 pairs each written twice (``None``)."""
+    def build(tmp, ctx):
+        from vision_calib.experiment.handeye_sim import simulate_pose_pairs
+        from vision_calib.io.transform_pairs import write_transform_pairs
+
+        d = simulate_pose_pairs(20, 4, "fixed")
+        F, M = ((np.repeat(d.T_base_flange[:1], copies, 0), np.repeat(d.T_cam_target[:1], copies, 0)) if copies
+                else (np.concatenate([d.T_base_flange] * 2), np.concatenate([d.T_cam_target] * 2)))
+        src = write_transform_pairs(tmp / "pairs.yml", F, M)
+        from vision_calib.cli import main
+
+        assert main(["import-pairs", str(src), "--mount", "fixed", "--out", str(tmp / "pp" / "pairs.yaml")]) == 0
+
+        def check(tmp):
+            if copies:  # refused before any fit: nothing written
+                return not (tmp / "out" / "report.json").exists()
+            rep = json.loads((tmp / "out" / "report.json").read_text())
+            return len(rep["measurements"]["copies"]) == 20 and rep["measurements"]["n_poses"] == 20
+        return ["process-poses", str(tmp / "pp" / "pairs.yaml"), "--out", str(tmp / "out"), "--no-plots"], check
+    return build
+
+
+def _alias_tree(levels: int = 9, width: int = 9) -> str:
+    """A flow list &a0 [9 strings], &a1 [9 x *a0], ...: width^levels strings once expanded (a "billion laughs")."""
+    parts = ["&a0 [" + ", ".join(['"lol"'] * width) + "]"]
+    parts += [f"&a{k} [" + ", ".join([f"*a{k - 1}"] * width) + "]" for k in range(1, levels)]
+    return "[" + ", ".join(parts) + "]"
+
+
+def yaml_alias(what: str):
+    """identifiability on a scene whose ``name`` (what="scene"), target ``dictionary`` ("target") or robot
+    ``kind`` ("robot") holds :func:`_alias_tree`; the other files the shipped ones, by absolute path."""
+    import re
+
+    def build(tmp, ctx):
+        scenes, targets = REPO / "scenes", REPO / "targets"
+        src = scenes / ("h4_vision.yaml" if what == "robot" else "rx90_eye_in_hand.yaml")
+        text = re.sub(r"^robot: robots/", f"robot: {scenes}/robots/", src.read_text(), flags=re.M)
+        text = text.replace("../targets/", f"{targets}/")
+        key, orig = {"scene": ("name", None), "target": ("dictionary", targets / "charuco_a5.yaml"),
+                     "robot": ("kind", scenes / "robots" / "h4.yaml")}[what]
+        def tree(t):
+            return re.sub(rf"^{key}:.*$", lambda m: f"{key}: {_alias_tree()}", t, count=1, flags=re.M)
+
+        if orig is None:
+            text = tree(text)
+        else:
+            (tmp / f"{what}.yaml").write_text(tree(orig.read_text()))
+            text = text.replace(str(orig), str(tmp / f"{what}.yaml"))
+        (tmp / "scene.yaml").write_text(text)
+        return ["identifiability", str(tmp / "scene.yaml"), "--allow-path", str(REPO)], None
+    return build
+
+
 ERR, OK, WARN = "error", "correct", "warned"
 #: the child waits 2 s (not study.run.WORKER_WAIT_S) for a Dask worker
 WAIT_2S = "import importlib\nimportlib.import_module(\"vision_calib.study.run\").WORKER_WAIT_S = 2.0\n"
@@ -535,6 +620,19 @@ CASES = [
     Hostile("mp-all-rows-copied-1e-6-jitter", duplicated(1e-6), WARN, r"copies? of another pose"),
     Hostile("mp-5-rows-copied-exactly", duplicated(0.0, 5), WARN, r"copies? of another pose"),
     Hostile("mp-remeasured-same-joints", remeasured, OK),
+    # --- hand-eye sets without enough distinct motions, or copied (issue 32): named before any fit, counted once
+    Hostile("pairs-10-copies-of-one", pairs_of(10), ERR, r"degenerate motion: the 10 pose pairs hold 1 distinct"),
+    Hostile("pairs-each-written-twice", pairs_of(None), WARN, r"20 poses are copies of another pose"),
+    Hostile("handeye-3-pose-folders-copied", flange_copied(3), WARN, r"3 poses are copies of another pose"),
+    Hostile("handeye-one-flange-pose", one_flange_pose, ERR,
+            r"degenerate motion: the \d+ pose pairs hold 1 distinct flange pose"),
+    # --- YAML alias trees in a key the loader knows: refused while composing (issue 32)
+    Hostile("yaml-alias-tree-scene-name", yaml_alias("scene"), ERR, r"scene.yaml: invalid YAML \(aliases expand",
+            timeout=30),
+    Hostile("yaml-alias-tree-target-dictionary", yaml_alias("target"), ERR,
+            r"target.yaml: invalid YAML \(aliases expand", timeout=30),
+    Hostile("yaml-alias-tree-robot-kind", yaml_alias("robot"), ERR, r"robot.yaml: invalid YAML \(aliases expand",
+            timeout=30),
     # --- studies: scheduler files, schedulers without workers, runaway sizes
     Hostile("study-scheduler-file-garbage", study_with_scheduler("garbage"), ERR,
             r"--scheduler: .*sched.json: not a Dask scheduler file", timeout=60),

@@ -349,3 +349,92 @@ def test_urdf_cells_name_their_joints():
     assert setup.joint_names() == ("shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint",
                                    "wrist_2_joint", "wrist_3_joint")
     assert load_scene(SCENE).setup.joint_names() == tuple(f"q{j + 1}" for j in range(6))
+
+
+def test_a_tolerance_that_merges_motion_is_named(tmp_path, capsys):
+    """--still-speed 1e9 makes the whole bag one standstill: exit 2 naming the standstill, the joint and the
+    setting (it was one pose of median joints, exit 0, no warning); at the default the same bag imports."""
+    bag = write_example_bag(tmp_path / "rec.bag", "ros1", moving_image=False)
+    assert _run(tmp_path, bag, "--still-speed", "1e9") == 2
+    err = capsys.readouterr().err
+    _, Q, _ = timeline(example_poses()[1])
+    span = Q.max(axis=0) - Q.min(axis=0)  # the one standstill spans the whole motion
+    assert f"spans {span.max():.4g} on joint q{int(np.argmax(span)) + 1}" in err, err
+    assert "standstill 0 (" in err and "the robot moved during it" in err and "lower --still-speed" in err
+    assert "--still-speed 1e+09 x --still-window 0.5 s" in err
+
+
+def test_too_few_standstills_in_a_moving_bag_are_noted():
+    """Two standstills in joint states that move: a note naming the settings; three: none."""
+    from vision_calib.io.rosbag import check_standstills
+
+    _, q = example_poses()
+    names = [f"q{j + 1}" for j in range(6)]
+    for n, noted in ((2, True), (3, False)):
+        stamps, Q, _ = timeline(q[:n])
+        st = standstills(np.array(stamps), Q, StillSettings())
+        note = check_standstills(st, np.array(stamps), Q, names, StillSettings(), "b.bag")
+        assert (note is not None) == noted, note
+        if noted:
+            assert note.startswith("only 2 standstill(s) in a bag whose joints move up to") and "--still-speed" in note
+
+
+def _png_declaring(width: int, height: int) -> bytes:
+    """A grey PNG whose header declares width x height px with almost no pixel data."""
+    import struct
+    import zlib
+
+    def chunk(kind, data):
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(b"\x00" * 16))
+            + chunk(b"IEND", b""))
+
+
+@pytest.mark.parametrize("first, message", [
+    (lambda: _png_declaring(30000, 30000), "message 0 (stamp {t}): image 30000x30000 px (900 Mpx) exceeds the limit"),
+    (lambda: cv2.imencode(".png", np.zeros((600, 800), np.uint8))[1].tobytes(),
+     "message 0 (stamp {t}): image size 800x600 px, but the intrinsics (camera info /camera/camera_info (K, D)) are "
+     "for 640x480"),
+])
+def test_image_sizes_read_from_headers_before_decoding(tmp_path, capsys, first, message):
+    """The first image of the first standstill declares 30000 x 30000 px (a 69-byte PNG: refused from its header,
+    nothing decoded) or is 800 x 600: the odd image is the one named, against the intrinsics' size (the bag's
+    other images, 640 x 480, are not blamed)."""
+    data = first()
+    stamp = {}
+
+    def odd_first(bw, stamps, Q):
+        stamp["t"] = stamps[20]  # 0.4 s into the first standstill, before its own image
+        bw.compressed("/camera/image/compressed", stamps[20], data, fmt="png")
+
+    bag = write_example_bag(tmp_path / "rec.bag", "ros1", edit=odd_first, moving_image=False)
+    assert _run(tmp_path, bag, "--camera-info-topic", "/camera/camera_info") == 2
+    err = capsys.readouterr().err
+    assert message.format(t=f"{stamp['t'] * 1e-9:.6f} s") in err, err
+
+
+def test_image_message_beyond_the_pixel_limit_refused_before_deserializing(tmp_path, capsys, monkeypatch):
+    """With the pixel limit at 0.01 Mpx, a raw 640 x 480 bgr8 message (0.92 MB) is longer than any image within it
+    may take (0.01 Mpx x 6 bytes + 64 kB): refused from its length, naming the message, before it is
+    deserialized."""
+    monkeypatch.setenv("VISION_CALIB_MAX_IMAGE_MPX", "0.01")
+    bag = write_example_bag(tmp_path / "rec.bag", "ros1", images="bgr8", moving_image=False)
+    assert main(["import-bag", str(bag), "--scene", str(SCENE), "--image-topic", "/camera/image_raw",
+                 "--joints-topic", "/joint_states", "--out", str(tmp_path / "rec")]) == 2
+    err = capsys.readouterr().err
+    assert "topic '/camera/image_raw' message 0: 0.92" in err
+    assert "MB, more than any image within the pixel limit" in err
+
+
+def test_ros2_metadata_alias_tree_refused_before_rosbags_reads_it(tmp_path, capsys):
+    """A ROS 2 bag folder whose metadata.yaml holds an alias tree (read by rosbags' own YAML loader): refused by
+    ours first, naming the file (config.BoundedLoader)."""
+    bag = write_example_bag(tmp_path / "b2", "ros2", moving_image=False)
+    meta = bag / "metadata.yaml"
+    tree = "[&a0 [" + ", ".join(['"x"'] * 9) + "]" + "".join(
+        f", &a{k} [" + ", ".join([f"*a{k - 1}"] * 9) + "]" for k in range(1, 9)) + "]"
+    meta.write_text(meta.read_text() + f"hostile: {tree}\n")
+    assert _run(tmp_path, bag) == 2
+    assert f"{meta}: invalid YAML in ROS 2 bag metadata (aliases expand beyond the limit" in capsys.readouterr().err

@@ -115,8 +115,10 @@ def main(argv=None) -> int:
         where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
         print(f"vision-calib: error: {where}{exc.strerror or exc}", file=sys.stderr)
         return 2
-    except MemoryError:
-        print("vision-calib: error: out of memory (reduce the image size, dpi, poses or workers)", file=sys.stderr)
+    except MemoryError as exc:
+        from .exits import memory_message
+
+        print(f"vision-calib: error: {memory_message(exc, getattr(args, 'command', None))}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("vision-calib: interrupted (results already written are kept)", file=sys.stderr)

@@ -34,6 +34,8 @@ def recording_intrinsics(rec, refine: bool = False, progress: bool = False, came
         block = {"source": SOURCE_FILE if rec.camera_file is None else f"{SOURCE_CAMERA_FILE} {rec.camera_file}",
                  "values": dict(zip(PARAM_NAMES, (c.fx, c.fy, c.cx, c.cy, *c.dist))),
                  "std": None, "rms_px": None, "warnings": []}
+        if rec.camera_file is not None:  # calibrate-camera's std (and covariance): carried as on the refine route
+            block.update(_file_uncertainty(rec.camera_file))
         return rec, block
     pids = [pid for pid in rec.pose_ids if rec.images.get(pid)]
     try:
@@ -56,15 +58,33 @@ def recording_intrinsics(rec, refine: bool = False, progress: bool = False, came
 
 
 
+def _file_uncertainty(path) -> dict:
+    """{std, covariance, warnings} of a camera file's intrinsics (``io.camera_file.load_camera_uncertainty``):
+    its covariance, or diag(std^2) with a warning when it gives std only; {} when it gives none."""
+    import numpy as np
+
+    from ..io.camera_file import load_camera_uncertainty
+
+    std, cov = load_camera_uncertainty(path)
+    if std is None:
+        return {}
+    warn = []
+    if cov is None:
+        cov = np.diag(np.square([std[k] for k in PARAM_NAMES]))
+        warn = [f"camera intrinsics: {path} gives std without a covariance: their correlations are taken as zero"]
+    return {"std": std, "covariance": np.asarray(cov, float).tolist(), "warnings": warn}
+
+
 def intrinsics_directions(block: dict, camera):
-    """[(CameraIntrinsics moved by one std along an eigenvector of the intrinsics covariance)] for a
-    report block of intrinsics calibrated from the recording (``covariance`` (9, 9) of PARAM_NAMES), else []."""
+    """[(CameraIntrinsics moved by one std along an eigenvector of the intrinsics covariance)] for a report
+    block whose intrinsics carry a ``covariance`` (9, 9) of PARAM_NAMES (calibrated from the recording, or a
+    camera file's), else []."""
     import numpy as np
 
     from ..camera import CameraIntrinsics
 
     cov = block.get("covariance")
-    if block.get("source") != SOURCE_CALIBRATED or cov is None:
+    if cov is None:
         return []
     cov = np.asarray(cov, float)
     cov = np.where(np.isfinite(cov), cov, 0.0)
@@ -124,7 +144,7 @@ def intrinsics_response(dets: dict, rec, block: dict, used: list | None = None):
     re-measured from their detections, ``remeasure``), for ``steps.identify_measurements(nuisance=)``: their
     error is shared by all poses, so it enters the fit as nuisance coefficients (the measurement covariance
     becomes obs_cov + U U^T; first order, independent of the pose noise). A direction under which a pose is
-    no longer measurable is left out (None when all are). None when the intrinsics were given. used: a list
+    no longer measurable is left out (None when all are). None when the intrinsics carry no covariance. used: a list
     that each call refills with the directions (cameras) of U's columns (for :func:`fitted_camera`)."""
     import numpy as np
 

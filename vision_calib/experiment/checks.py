@@ -130,7 +130,12 @@ def same_joint_groups(meas: Measurements, tol: float = SAME_JOINTS_TOL) -> np.nd
     """(N,) int: one group number per pose, shared by the poses whose joint readings all agree within ``tol``
     (transitively): repeated measurements of one robot pose. The held-out folds keep a group together
     (``holdout.fold_indices``): a repeat in the training set would flatter its twin's held-out error."""
-    J = np.asarray(meas.joints, float).reshape(len(meas.joints), -1)
+    return close_groups(np.asarray(meas.joints, float).reshape(len(meas.joints), -1), tol)
+
+
+def close_groups(J: np.ndarray, tol: float) -> np.ndarray:
+    """(N,) int: one group number per row of J (N, d), shared by the rows that agree within ``tol`` on every
+    column (transitively), numbered in the order of their first row."""
     n = len(J)
     parent = list(range(n))
 
@@ -156,9 +161,14 @@ def same_joint_groups(meas: Measurements, tol: float = SAME_JOINTS_TOL) -> np.nd
 
 
 def _copy_chi2(meas: Measurements, i: int, j: int) -> float:
-    d = F.pose_error(meas.T_cam_target[i], meas.T_cam_target[j])
-    C = np.asarray(meas.cov[i], float) + np.asarray(meas.cov[j], float)
-    return float(d @ np.linalg.pinv(C) @ d)
+    return pose_chi2(meas.T_cam_target[i], meas.T_cam_target[j], meas.cov[i], meas.cov[j])
+
+
+def pose_chi2(Ta, Tb, Ca, Cb) -> float:
+    """Mahalanobis^2 of the difference of two measured poses (4, 4) whitened by the sum of their covariances
+    (6, 6) [m, rad]."""
+    d = F.pose_error(Ta, Tb)
+    return float(d @ np.linalg.pinv(np.asarray(Ca, float) + np.asarray(Cb, float)) @ d)
 
 
 def drop_copies(meas: Measurements) -> tuple[Measurements, list[tuple[str, str]]]:
@@ -185,17 +195,23 @@ def drop_copies(meas: Measurements) -> tuple[Measurements, list[tuple[str, str]]
     return meas.subset(kept), copies
 
 
+def copies_warning(rejected, same: str) -> list[str]:
+    """[one warning naming the copies among ``rejected`` [(label, reason)]] (reasons starting with
+    :data:`COPY_REASON`), or []; same: what the copies share besides the measured pose ("joints", "flange pose")."""
+    copies = [(lab, why) for lab, why in rejected if str(why).startswith(COPY_REASON)]
+    if not copies:
+        return []
+    shown = "; ".join(f"{lab} = {why[len(COPY_REASON) + 1:].split(' ', 1)[0]}" for lab, why in copies[:8])
+    return [f"{len(copies)} pose{'s are copies' if len(copies) > 1 else ' is a copy'} of another pose (the same "
+            f"{same} and measured pose, within a fraction of the noise: the same measurement under another "
+            f"id), counted once: {shown}" + ("; ..." if len(copies) > 8 else "")]
+
+
 def duplicate_poses(meas: Measurements, rejected=()) -> list[str]:
     """Warnings naming (1) the copies :func:`drop_copies` removed (found among ``rejected`` [(label, reason)]) and
     (2) the poses of ``meas`` measured again at the same joints (genuine repeats: kept, each set in one held-out
     fold)."""
-    out = []
-    copies = [(lab, why) for lab, why in rejected if str(why).startswith(COPY_REASON)]
-    if copies:
-        shown = "; ".join(f"{lab} = {why[len(COPY_REASON) + 1:].split(' ', 1)[0]}" for lab, why in copies[:8])
-        out.append(f"{len(copies)} pose{'s are copies' if len(copies) > 1 else ' is a copy'} of another pose (the same "
-                   f"joints and measured pose, within a fraction of the noise: the same measurement under another "
-                   f"id), counted once: {shown}" + ("; ..." if len(copies) > 8 else ""))
+    out = copies_warning(rejected, "joints")
     groups = same_joint_groups(meas)
     labels = meas.labels or tuple(str(k) for k in range(len(groups)))
     sets = [[str(labels[i]) for i in np.flatnonzero(groups == g)] for g in np.unique(groups)]
@@ -256,3 +272,104 @@ def screen_measurements(setup: Setup, meas: Measurements, where: str,
     motion = check_motion(setup, meas, where, scale_hint)
     meas, inconsistent = drop_inconsistent(meas, motion, where)
     return meas, degenerate + inconsistent, motion
+
+
+# ------------------------------------------------------------------ hand-eye (flange poses known, no joints)
+#: two flange poses within this translation [m] and rotation [rad] (every component) are the same robot pose
+SAME_FLANGE_M = 1e-4
+SAME_FLANGE_RAD = 1e-4
+#: without a covariance, two measured poses at the same flange pose within this [m], [rad] on every component are
+#: one measurement (a copy): a camera or tracker measures a pose to 1e-5 m and 1e-4 rad at best, so two genuine
+#: measurements differ by more; a copied row (printed to 6 decimals, or with 1e-6 jitter) by less
+COPY_M = 1e-5
+COPY_RAD = 1e-5
+#: the relative rotations between the distinct flange poses must turn at least this much [deg, RMS over the pairs
+#: of poses] about a second axis: below it the closed form's rotation system has rank < 2 at this resolution
+MIN_AXIS_SPREAD_DEG = 1.0
+#: the start of the error of a pose set without enough distinct motions (:func:`handeye_motions`)
+DEGENERATE_MOTION = "degenerate motion"
+
+
+def flange_groups(T_base_flange: np.ndarray) -> np.ndarray:
+    """(N,) int: one group number per flange pose (N, 4, 4) [m], shared by the poses within :data:`SAME_FLANGE_M`
+    and :data:`SAME_FLANGE_RAD` of one another (:func:`close_groups`): the same robot pose."""
+    T = np.asarray(T_base_flange, float)
+    return close_groups(np.concatenate([T[:, :3, 3] / SAME_FLANGE_M, T[:, :3, :3].reshape(len(T), 9)
+                                        / SAME_FLANGE_RAD], axis=1), 1.0)
+
+
+def pair_copies(T_base_flange, T_cam_target, cov, labels) -> tuple[list[int], list[tuple[str, str]]]:
+    """(indices kept, [(label, reason)] of the copies) of hand-eye pose pairs (flange poses, measured poses (N, 4, 4)
+    [m], their covariance (N, 6, 6) or None): a pair at the same flange pose as an earlier one (:func:`flange_groups`)
+    whose measured pose equals it within :data:`COPY_CHI2` (covariance given) or :data:`COPY_M` /
+    :data:`COPY_RAD` (none) is one measurement under two ids (the same rule as :func:`drop_copies`): counted once,
+    else the std come out 1/sqrt(2) too small. The first of each set is kept."""
+    M = np.asarray(T_cam_target, float)
+    kept, copies, members = [], [], {}
+
+    def gap(k, i) -> str | None:  # how close pair i is to pair k when it is a copy of it, else None
+        if cov is not None:
+            c2 = pose_chi2(M[k], M[i], cov[k], cov[i])
+            return f"{np.sqrt(c2):.2g} sigma" if c2 < COPY_CHI2 else None
+        d = np.abs(F.pose_error(M[k], M[i]))
+        if d[:3].max() <= COPY_M and d[3:].max() <= COPY_RAD:
+            return f"{d[:3].max() * 1e3:.2g} mm, {np.degrees(d[3:].max()):.2g} deg"
+        return None
+
+    for i, g in enumerate(flange_groups(T_base_flange)):
+        hit = next(((k, w) for k in members.get(g, ()) if (w := gap(k, i)) is not None), None)
+        if hit is None:
+            kept.append(i)
+            members.setdefault(g, []).append(i)
+        else:
+            copies.append((str(labels[i]), f"{COPY_REASON} {labels[hit[0]]} (the same flange pose and measured pose, "
+                                           f"within {hit[1]}): one measurement under two ids, counted once"))
+    return kept, copies
+
+
+def handeye_motions(T_base_flange, mount: str, labels, where: str) -> dict:
+    """The motion check of a hand-eye set before any fit: the distinct flange poses (:func:`flange_groups`: repeats
+    and copies count once), the relative rotations ``G_i^-1 G_j`` between them (``M_k = A G_k B``,
+    ``identify.handeye_problem.mount_G``), and the closed form's rank: the number of directions in which those
+    rotation vectors turn at least :data:`MIN_AXIS_SPREAD_DEG` RMS (eigenvalues of their scatter). Fewer than 3
+    distinct poses, or a rank below 2 (translations only; rotations about one axis) leave the mounts undetermined:
+    a DataError starting with :data:`DEGENERATE_MOTION` naming what is missing. Returns {n_pairs, distinct_poses,
+    largest_rotation_deg, rotation_rms_deg (3,) per direction, largest first, axis_spread_deg, rank}."""
+    from scipy.spatial.transform import Rotation
+
+    from ..identify.handeye_problem import mount_G
+
+    F_ = np.asarray(T_base_flange, float)
+    groups = flange_groups(F_)
+    first = [int(np.flatnonzero(groups == g)[0]) for g in range(int(groups.max()) + 1)] if len(groups) else []
+    need = ("a hand-eye calibration needs at least 3 distinct flange poses whose motions rotate about two "
+            "non-parallel axes (tilt the flange about a second axis)")
+    n = len(first)
+    if n < 3:
+        sets = [[str(labels[i]) for i in np.flatnonzero(groups == g)] for g in range(n)]
+        shown = "; ".join(f"{', '.join(s[:4])}{', ...' if len(s) > 4 else ''} ({len(s)} pairs)" for s in sets)
+        raise DataError(f"{where}: {DEGENERATE_MOTION}: the {len(F_)} pose pairs hold {n} distinct flange "
+                        f"pose{'s' if n != 1 else ''} ({shown}: within {SAME_FLANGE_M * 1e3:g} mm and "
+                        f"{SAME_FLANGE_RAD:g} rad); {need}")
+    R = mount_G(F_[first], mount)[:, :3, :3]
+    i, j = _pairs(n)
+    rv = Rotation.from_matrix(np.swapaxes(R[i], -1, -2) @ R[j]).as_rotvec()
+    w, V = np.linalg.eigh(rv.T @ rv / len(rv))
+    rms = np.degrees(np.sqrt(np.maximum(w[::-1], 0.0)))
+    rank = int(np.sum(rms >= MIN_AXIS_SPREAD_DEG))
+    out = {"n_pairs": int(len(F_)), "distinct_poses": n, "largest_rotation_deg": float(np.degrees(
+        np.linalg.norm(rv, axis=1).max())), "rotation_rms_deg": [float(v) for v in rms],
+        "axis_spread_deg": float(rms[1]), "rank": rank, "min_axis_spread_deg": MIN_AXIS_SPREAD_DEG}
+    if rank >= 2:
+        return out
+    if rank == 0:
+        what = (f"the {n} distinct flange poses differ by translations only (the largest rotation between two of "
+                f"them {out['largest_rotation_deg']:.3g} deg, RMS {rms[0]:.3g} deg)")
+    else:
+        frame = "flange" if mount == "fixed" else "base"
+        what = (f"every motion between the {n} distinct flange poses rotates about one axis ({np.round(V[:, 2], 3)} "
+                f"in the {frame} frame): the rotation about any other axis is {rms[1]:.3g} deg RMS over "
+                f"{len(rv)} pairs of poses")
+    raise DataError(f"{where}: {DEGENERATE_MOTION}: {what}, below {MIN_AXIS_SPREAD_DEG:g} deg: the closed form's "
+                    f"rotation system has rank {rank} of the 2 it needs, so the mounts' rotation and their translation "
+                    f"along the rotation axis are not determined; {need}")

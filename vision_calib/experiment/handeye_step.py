@@ -1,6 +1,8 @@
 """Hand-eye identification from measured data (flange poses known): the same steps as the robot-chain path
 (:func:`.steps.identify_measurements`) on :func:`vision_calib.identify.handeye_fit.fit_handeye`:
 
+0. the motion check (``checks.handeye_motions``): fewer than 3 distinct flange poses, or motions that do not
+   rotate about two non-parallel axes, are a DataError naming the degenerate motion, never a model;
 1. the fit with the robot's pose error in the weights (given std, or estimated), started from the best of
    OpenCV's closed forms (``measure.handeye.closed_forms``, passed to ``fit_handeye`` as its candidates);
 2. with redundancy (at least twice as many equations as parameters), the deletion outlier test
@@ -29,6 +31,7 @@ from ..identify.handeye_fit import HandeyeFit, closed_form_comparison, fit_hande
 from ..identify.handeye_problem import transforms_from_x
 from ..identify.problem import IdentificationProblem, IdentificationResult
 from ..measure.handeye import closed_forms
+from .checks import handeye_motions
 from .steps import NUISANCE_PREFIX, OUTLIER_LEVEL, OUTLIER_MIN_RATIO, misfit_warning
 
 
@@ -54,6 +57,8 @@ class HandeyeIdentified:
     method_check: dict | None = None
     #: the deletion outlier test and the leave-one-out scatter of the kept poses (:func:`deletion_test`)
     deletion: dict | None = None
+    #: the motion check before the fit (``checks.handeye_motions``: distinct poses, rotation axes' spread, rank)
+    motion: dict | None = None
 
 
 def identify_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: str, pose_cov: ArrayLike | None,
@@ -72,6 +77,7 @@ def identify_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: s
     F, M = (np.asarray(a, float) for a in (T_base_flange, T_cam_target))
     C = None if pose_cov is None else np.asarray(pose_cov, float)
     labels = list(labels)
+    motion = handeye_motions(F, mount, labels, where or "the hand-eye pose set")
     fit = fit_handeye(F, M, mount, C, labels, robot_std, candidates=closed_forms(F, M, mount), noise_frame=noise_frame)
     rejected, deletion = [], None
     if robust and noise_frame is None and fit.problem.n_obs * fit.problem.m >= 2 * int(np.sum(fit.result.free)):
@@ -134,7 +140,8 @@ def identify_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: s
         result = replace(result, warnings=tuple(result.warnings) + extra)
     A, B = transforms_from_x(pb, result.identified)
     return HandeyeIdentified(result, A, B, pb, tuple(rejected), adequacy, max(factor, 1.0), fit, nz,
-                             deletion=None if deletion is None else _deletion_block(deletion, result, stability))
+                             deletion=None if deletion is None else _deletion_block(deletion, result, stability),
+                             motion=motion)
 
 
 #: more poses failing the deletion test than this fraction: the model or the measurement is wrong
@@ -276,12 +283,13 @@ def handeye_blocks(ident: HandeyeIdentified) -> dict:
     """The report's hand-eye additions: ``robot_pose_std`` (given or estimated, mm / deg per axis, with the
     estimate's std), ``measured_noise`` (when the measured poses' std per axis was estimated) and
     ``closed_form_comparison`` (each OpenCV method's weighted cost and distance to the
-    final solution, under the final weights)."""
+    final solution, under the final weights), ``motion`` (the motion check before the fit)."""
     fit = ident.fit
     cf = fit.closed_forms
     if ident.nuisance is not None:  # the solution moved with the shared error: compare with the final one
         cf = closed_form_comparison(ident.problem, ident.result.identified, fit.candidates, cf["start"])
-    out = {"robot_pose_std": fit.robot, "closed_form_comparison": cf, "deletion_test": ident.deletion}
+    out = {"robot_pose_std": fit.robot, "closed_form_comparison": cf, "deletion_test": ident.deletion,
+           "motion": ident.motion}
     if fit.noise is not None:
         out["measured_noise"] = fit.noise
     return out

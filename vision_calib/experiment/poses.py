@@ -13,6 +13,7 @@ axis estimated when the file gives none, and a k-fold held-out validation of its
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +21,8 @@ import numpy as np
 from ..errors import ConfigError, DataError, VisionCalibError
 from ..io.measured_poses import PosePairs, chain_direction, misreadings, read_measured_poses
 from ..io.report import build_report, parameters_table, residual_stats, write_report
-from .checks import drop_copies, drop_inconsistent, duplicate_poses, motion_verdict
+from .checks import (copies_warning, drop_copies, drop_inconsistent, duplicate_poses, handeye_motions, motion_verdict,
+                     pair_copies)
 from .gross import gross_failure
 from .holdout import flagged_labels, holdout_failure, holdout_lines, holdout_validation
 from .steps import check_method, identify_measurements, inconsistency_failure
@@ -246,6 +248,13 @@ def process_pose_pairs(pp: PosePairs, out_dir, folds: int | None = None, plots: 
     folds = int(folds or pp.folds)
     if not 2 <= folds <= n:
         raise ConfigError(f"{pp.path}: folds: {folds} folds need 2 <= folds <= {n} (the number of pose pairs)")
+    handeye_motions(pp.T_base_flange, pp.mount, pp.ids, str(pp.path))  # degenerate motion named with its copies
+    keep, copies = pair_copies(pp.T_base_flange, pp.T_cam_target, pp.cov, pp.ids)  # a pair written twice: once
+    if copies:
+        pp = replace(pp, ids=tuple(pp.ids[k] for k in keep), T_base_flange=pp.T_base_flange[keep],
+                     T_meas=pp.T_meas[keep], T_cam_target=pp.T_cam_target[keep],
+                     cov=None if pp.cov is None else pp.cov[keep])
+        folds = min(folds, len(keep))  # as the flange-recording route: at most one pose per fold
     frame = pp.noise_frame if pp.cov is None else None
     ident = identify_handeye(pp.T_base_flange, pp.T_cam_target, pp.mount, pp.cov, list(pp.ids), pp.robot_std,
                              where=str(pp.path), noise_frame=frame)
@@ -262,8 +271,10 @@ def process_pose_pairs(pp: PosePairs, out_dir, folds: int | None = None, plots: 
         source={"file": str(pp.path), "csv": str(pp.csv_path), "flange_csv": str(pp.flange_path)},
         settings={"poses": n, "mount": pp.mount, "method": "lse", "measured": pp.measured, "units": pp.units,
                   "noise": pp.sigma_source, "folds": folds, "fold_seed": pp.seed},
-        measurements={"n_poses": n, "n_valid": n, "n_rejected": 0, "rejected": [], "measured": pp.measured,
-                      "noise": pp.sigma_source, "pose_ids": list(pp.ids)},
+        measurements={"n_poses": len(pp.ids), "n_valid": len(pp.ids), "n_rejected": 0, "rejected": [],
+                      "copies": [{"pose_id": lab, "reason": why} for lab, why in copies],  # not a rejected view
+                      "measured": pp.measured, "noise": pp.sigma_source, "pose_ids": list(pp.ids)},
+        warnings=copies_warning(copies, "flange pose"),
         result=result, identified=ident, residuals=residual_stats(result.residuals, "pose"),
         extra={"handeye": he, "holdout": hold},
         timings={"identify": t_id, "total": time.perf_counter() - t0},

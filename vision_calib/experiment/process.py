@@ -241,6 +241,7 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None, cause=No
     from ..identify.handeye_problem import handeye_problem, stack_measurements
     from ..io.report_handeye import handeye_report
     from .camera_step import fitted_camera, intrinsics_directions, residual_response
+    from .checks import copies_warning, handeye_motions, pair_copies
     from .handeye_gross import alternative_readings, handeye_gross_failure
     from .handeye_step import handeye_blocks, identify_handeye
 
@@ -251,6 +252,11 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None, cause=No
     # one image with few corners per pose: each pose's sigma_px is a poor estimate, pool it over the poses
     T, cov, labels, _ = stack_measurements([pms[i] for i in ok], pool_sigma=rec.frames_per_pose == 1)
     mount = "fixed" if rec.camera_mount in ("fixed", "base") else "eye_in_hand"
+    handeye_motions(rec.poses[ok], mount, labels, str(rec.folder))  # degenerate motion named before any fit
+    keep, copies = pair_copies(rec.poses[ok], T, cov, labels)  # a copied pose folder: counted once
+    ok, T, cov, labels = [ok[k] for k in keep], T[keep], cov[keep], [labels[k] for k in keep]
+    if copies:
+        mblock = {**mblock, "copies": [{"pose_id": lab, "reason": why} for lab, why in copies]}
     dirs = intrinsics_directions(intr, rec.camera) if dets else []
     used = []  # the cameras of the nuisance columns (refilled by residual_response)
 
@@ -307,7 +313,8 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None, cause=No
     report = build_report(
         "process_handeye", source={"folder": str(rec.folder)},
         settings={"poses": mblock["n_poses"], "mount": mount, "camera": rec.camera.to_dict(), "method": "lse"},
-        measurements=mblock, warnings=[*rec.notes, *intr["warnings"], *([rwarn] if rwarn else [])], result=result,
+        measurements=mblock, warnings=[*rec.notes, *intr["warnings"], *copies_warning(copies, "flange pose"),
+                                       *([rwarn] if rwarn else [])], result=result,
         identified=ident,
         residuals=residual_stats(result.residuals, "pose"),
         extra={"handeye": he, "intrinsics": intr, "reprojection": he["reprojection"], "cause": cause,

@@ -156,8 +156,8 @@ def pose_tail(pose_chi2: np.ndarray, m: int, labels=(), k_hi: float = 1.0, level
     sig = bool(pv < level)
     where = ("; clustered in " + ", ".join(f"{a}-{b} ({c} poses)" for a, b, c in clusters)) if clusters else ""
     msg = (f"{len(below)} of {n} poses have a residual with p < {POSE_TAIL_P:g} ({n * POSE_TAIL_P:.2g} expected at "
-           f"the measurement noise; binomial p {pv:.2g}){where}: the model or the measurement misses something at "
-           "those poses") if sig else ""
+           f"the measurement noise; binomial p {pv:.2g}){where}: those poses fit worse than their noise allows (an "
+           "error in their images or joint readings, or a model term that matters only there)") if sig else ""
     return {"threshold": POSE_TAIL_P, "n_poses": n, "n_below": int(len(below)), "expected": n * POSE_TAIL_P,
             "p_value": pv, "significant": sig, "clusters": clusters, "message": msg}
 

@@ -9,6 +9,7 @@ The keys width, height, fx, fy, cx, cy, dist are exactly the ``camera:`` block o
     fx: ..  fy: ..  cx: ..  cy: ..
     dist: [k1, k2, p1, p2, k3]
     std: {fx, fy, cx, cy, dist: [5]}     # 1-sigma, same units
+    covariance: {names: [fx, fy, cx, cy, k1, k2, p1, p2, k3], matrix: 9 x 9}   # of those (std^2 on its diagonal)
     rms_px: 0.06                         # reprojection RMS, 2-D error per corner [px]
     n_views_used: 20
     n_views_rejected: 1
@@ -21,6 +22,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import yaml
 
 from ..camera import CameraIntrinsics
@@ -30,7 +32,8 @@ from ..serialize import write_text_atomic
 
 FORMAT = "vision_calib.camera/1"
 _CAMERA_KEYS = ("width", "height", "fx", "fy", "cx", "cy", "dist")
-_SCHEMA = {"format": None, **{k: None for k in _CAMERA_KEYS}, "std": None, "distortion_px": None, "rms_px": None,
+_SCHEMA = {"format": None, **{k: None for k in _CAMERA_KEYS}, "std": None, "covariance": None, "distortion_px": None,
+           "rms_px": None,
            "n_views_used": None,
            "n_views_rejected": None, "coverage": None, "warnings": None, "views": None}
 
@@ -65,6 +68,48 @@ def load_camera_yaml(path) -> CameraIntrinsics:
         raise top.error("format", f"expected {FORMAT!r}, got {fmt!r}")
     return CameraIntrinsics.from_dict({k: top.data[k] for k in _CAMERA_KEYS if k in top.data},
                                       where=str(path), require_dist=True)
+
+
+def load_camera_uncertainty(path) -> tuple[dict | None, np.ndarray | None]:
+    """(std {fx, fy, cx, cy, k1, k2, p1, p2, k3} [px; dist unitless] or None when the file gives none, covariance
+    (9, 9) of those or None) of a camera.yaml; ConfigError naming the file and key for a std that is not a finite
+    number >= 0, or a covariance that is not a 9 x 9 symmetric matrix of those names with std^2 on its diagonal
+    (to 1 %)."""
+    from ..measure.intrinsics import PARAM_NAMES
+
+    path = Path(path)
+    top = Section(load_yaml(path), path)
+    if "std" not in top.data:
+        return None, None
+    s = top.section("std").only("fx", "fy", "cx", "cy", "dist")
+    vals = [s.get(k, float) for k in ("fx", "fy", "cx", "cy")]
+    dist = s.get("dist", list)
+    if len(dist) != 5:
+        raise s.error("dist", f"expected 5 numbers (k1, k2, p1, p2, k3), got {len(dist)}")
+    try:
+        vals += [float(v) for v in dist]
+    except (TypeError, ValueError):
+        raise s.error("dist", f"expected numbers, got {dist!r}") from None
+    v = np.array(vals, float)
+    if not np.all(np.isfinite(v) & (v >= 0)):
+        raise s.error(None, f"expected finite numbers >= 0, got {vals}")
+    std = dict(zip(PARAM_NAMES, (float(x) for x in v)))
+    if "covariance" not in top.data:
+        return std, None
+    c = top.section("covariance").only("names", "matrix")
+    if list(c.get("names", list)) != list(PARAM_NAMES):
+        raise c.error("names", f"expected {list(PARAM_NAMES)}")
+    try:
+        C = np.array(c.get("matrix", list), float)
+    except (TypeError, ValueError):
+        raise c.error("matrix", "expected a 9 x 9 matrix of numbers") from None
+    if C.shape != (9, 9) or not np.all(np.isfinite(C)):
+        raise c.error("matrix", f"expected a finite 9 x 9 matrix, got shape {C.shape}")
+    if np.max(np.abs(C - C.T)) > 1e-9 * max(float(np.max(np.abs(C))), 1e-300):
+        raise c.error("matrix", "not symmetric")
+    if not np.allclose(np.sqrt(np.maximum(np.diag(C), 0.0)), v, rtol=1e-2, atol=1e-12):
+        raise c.error("matrix", "its diagonal is not the square of std (a file edited by hand?)")
+    return std, C
 
 
 def load_camera_for_images(path, image_size, where: str) -> CameraIntrinsics:

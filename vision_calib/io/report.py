@@ -343,6 +343,8 @@ def verdict_line(v: dict) -> str:
         state = "WARNING: " + v["message"] if status == "warning" else "ok"
     adequacy = f"; model adequacy: {v['adequacy']}" if v.get("adequacy") else ""
     note = f" (note: {v['note']})" if v.get("note") else ""
+    if v.get("adequacy") == "consistent" and v.get("note"):  # which holds: the whole set; the note: some poses
+        adequacy, note = "; model adequacy: consistent over all poses (chi2/dof in its band)", f"; but {v['note']}"
     return (f"verdict: {state}; {v['n_rejected_poses']} poses rejected ({v.get('n_outliers', 0)} as outliers)"
             f"{adequacy}{note}; {v['warnings']} warnings" + (f" -- {v['message']}" if status == "failed" and
                                                              v.get("message") else ""))
@@ -462,7 +464,9 @@ def _intrinsics_line(block: dict) -> str:
     prop = block.get("propagated") or {}
     how = (f"; their uncertainty {'is included in the fit' if prop.get('in_fit') else 'is added to the std'} "
            f"({prop['n_directions']} directions)") if prop else ""
-    return (f"intrinsics ({block['source']}, {block['n_views_used']} views, RMS {block['rms_px']:.3f} px): "
+    views = (f", {block['n_views_used']} views, RMS {block['rms_px']:.3f} px"
+             if block.get("n_views_used") is not None and block.get("rms_px") is not None else "")
+    return (f"intrinsics ({block['source']}{views}): "
             + ", ".join(f"{k} {v[k]:.2f} ± {fmt_sig(s[k])}" for k in names[:4]) + " px; dist "
             + ", ".join(f"{k} {v[k]:.4g} ± {fmt_sig(s[k])}" for k in names[4:]) + how)
 

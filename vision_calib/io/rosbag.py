@@ -16,8 +16,13 @@ Time: every message's ``header.stamp`` (the bag's log time for a topic whose fir
 Standstills (:func:`standstills`): a joint-state sample is *still* when, over the samples within +-window/2 of
 it, every joint's range (max - min) is at most ``speed x window`` (a mean speed below ``speed`` [rad/s or m/s]
 over the window). A run of still samples is one pose: its interval spans the runs' windows, its joints are the
-median of the samples in it. An image whose stamp falls in a pose's interval is a frame of that pose; other
-images (robot moving, or outside the joint-state span) are dropped and counted.
+median of the samples in it. A tolerance so loose that a standstill spans motion (more than
+:data:`MAX_STILL_SPAN` on a joint) is a DataError naming ``--still-speed``; fewer than 3 standstills in a bag
+whose joints move, a note naming it (:func:`check_standstills`). An image whose stamp falls in a pose's interval
+is a frame of that pose; other images (robot moving, or outside the joint-state span) are dropped and counted.
+Each image's size is read from the message (a raw image's width and height, a compressed one's PNG / JPEG
+header) before it is decoded, against the pixel limit and the intrinsics' size; a message longer than any image
+within the limit is refused before it is deserialized.
 
 Damaged bags (DataError naming the bag, the topic and the time or message; exit 2): a missing topic (the
 topics present are listed), a topic of another message type, time going backwards or a gap longer than
@@ -67,14 +72,22 @@ class StillSettings:
             raise DataError(f"max_frames must be >= 1, got {self.max_frames}")
 
 
+#: a standstill whose samples span more than this on one joint [rad, or m for a prismatic joint] holds motion:
+#: the tolerance (``--still-speed`` x ``--still-window``) is too loose for the bag, and moving data would be merged
+#: into one pose (a robot at rest holds its joints within a few encoder counts, ~1e-5 rad)
+MAX_STILL_SPAN = 0.01
+
+
 @dataclass(frozen=True)
 class Standstill:
-    """One pose: interval [t0_ns, t1_ns] of stamps, joints (n,) [rad, m] (median of its samples), n_samples."""
+    """One pose: interval [t0_ns, t1_ns] of stamps, joints (n,) [rad, m] (median of its samples), n_samples,
+    span (n,) [rad, m]: each joint's range (max - min) over its samples."""
 
     t0_ns: int
     t1_ns: int
     joints: np.ndarray
     n_samples: int
+    span: np.ndarray | None = field(default=None, compare=False)
 
 
 @dataclass(frozen=True)
@@ -110,6 +123,11 @@ def open_bag(path):
     path = Path(path)
     if not path.exists():
         raise DataError(f"{path}: bag not found")
+    meta = path / "metadata.yaml" if path.is_dir() else path.parent / "metadata.yaml"
+    if path.suffix != ".bag" and meta.is_file():  # read by rosbags' own YAML loader: ours first (aliases bounded)
+        from ..config import parse_yaml
+
+        parse_yaml(meta, DataError, "ROS 2 bag metadata")
     ros1 = path.suffix == ".bag"
     try:
         reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE))
@@ -138,12 +156,18 @@ def _stamp_ns(msg) -> int:
     return int(s.sec) * 1_000_000_000 + int(s.nanosec)
 
 
-def _messages(reader, conns):
+def _messages(reader, conns, max_bytes: int | None = None, where: str = ""):
     """(stamp ns, log time ns, message) of the connections, in the bag's order, one at a time (an image bag does
     not fit in memory): header stamps, or the log times when the topic's first message has a zero stamp (a
-    driver that does not stamp)."""
+    driver that does not stamp). max_bytes: a message longer than this is a DataError naming ``where`` and its
+    index before it is deserialized (an image message beyond the pixel limit)."""
     use_log = None
-    for c, t, raw in reader.messages(connections=conns):
+    for k, (c, t, raw) in enumerate(reader.messages(connections=conns)):
+        if max_bytes is not None and len(raw) > max_bytes:
+            raise DataError(f"{where} message {k}: {len(raw) / 1e6:.4g} MB, more than any image within the pixel "
+                            f"limit takes ({max_bytes / 1e6:.4g} MB: the limit x 3 channels x 2 bytes + 64 kB); a "
+                            "damaged or hostile bag, or a camera beyond the limit (raise it with the environment "
+                            "variable VISION_CALIB_MAX_IMAGE_MPX=MPX)")
         m = reader.deserialize(raw, c.msgtype)
         s = _stamp_ns(m)
         if use_log is None:
@@ -228,11 +252,54 @@ def standstills(t_ns, Q, settings: StillSettings) -> list[Standstill]:
     edges = np.flatnonzero(np.diff(np.r_[0, still.astype(int), 0]))
     for a, b in zip(edges[::2], edges[1::2]):  # still samples a..b-1
         i0, i1 = int(lo[a]), int(hi[b - 1])
-        out.append(Standstill(int(t_ns[i0]), int(t_ns[i1 - 1]), np.median(Q[i0:i1], axis=0), i1 - i0))
+        seg = Q[i0:i1]
+        out.append(Standstill(int(t_ns[i0]), int(t_ns[i1 - 1]), np.median(seg, axis=0), i1 - i0,
+                              seg.max(axis=0) - seg.min(axis=0)))
     return out
 
 
+def check_standstills(stills, t_ns, Q, names, settings: StillSettings, bag) -> str | None:
+    """DataError naming ``--still-speed`` / ``--still-window`` when a standstill spans more than
+    :data:`MAX_STILL_SPAN` on a joint (the tolerance merges moving data into one pose); a note (or None) when
+    the bag's joints move by more than that but hold fewer than 3 standstills (too few poses to calibrate)."""
+    def setting() -> str:
+        return (f"--still-speed {settings.speed:g} x --still-window {settings.window_s:g} s lets the joints move "
+                f"{settings.speed * settings.window_s:.3g} per window (default {StillSettings.speed:g} x "
+                f"{StillSettings.window_s:g} s)")
+
+    for k, st in enumerate(stills):
+        j = int(np.argmax(st.span))
+        if st.span[j] > MAX_STILL_SPAN:
+            t0 = (st.t0_ns - int(t_ns[0])) * 1e-9
+            raise DataError(f"{bag}: standstill {k} ({t0:.3f}-{t0 + (st.t1_ns - st.t0_ns) * 1e-9:.3f} s into the "
+                            f"joint states, {st.n_samples} samples) spans {st.span[j]:.4g} on joint {names[j]} (more "
+                            f"than {MAX_STILL_SPAN:g} rad or m): the robot moved during it, and its images would be "
+                            f"merged into one pose; {setting()}: lower --still-speed")
+    moved = np.max(Q, axis=0) - np.min(Q, axis=0) if len(Q) else np.zeros(0)
+    if len(stills) < 3 and moved.size and float(moved.max()) > MAX_STILL_SPAN:
+        return (f"only {len(stills)} standstill(s) in a bag whose joints move up to {float(moved.max()):.3g} "
+                f"(joint {names[int(np.argmax(moved))]}): a calibration needs many poses; {setting()}")
+    return None
+
+
 # ---------------------------------------------------------------------------------------------- images
+def max_image_bytes() -> int:
+    """the pixel limit x 3 channels x 2 bytes + 64 kB of header: the longest image message read"""
+    from ..config import max_image_pixels
+
+    return int(max_image_pixels()) * 6 + 2**16
+
+
+def message_size(msg, msgtype: str) -> tuple[int, int] | None:
+    """(width, height) [px] an image message declares, without decoding: a raw Image's width and height fields,
+    a CompressedImage's PNG / JPEG header (``measure.image_header.buffer_size``; None when unreadable)."""
+    from ..measure.image_header import buffer_size
+
+    if msgtype.endswith("CompressedImage"):
+        return buffer_size(msg.data)
+    return int(msg.width), int(msg.height)
+
+
 def check_encoding(msg, msgtype: str, where: str) -> str:
     """The image's encoding (RAW_ENCODINGS) or compressed kind (COMPRESSED_FORMATS key), without decoding;
     DataError naming ``where`` for one not supported."""
@@ -326,6 +393,19 @@ def _camera(reader, info_topic, setup, bag, notes: list):
     return first, f"camera info {info_topic} (K, D)"
 
 
+def _check_declared(size, camera, cam_source: str, where: str) -> None:
+    """DataError naming the image ``where`` when its declared (width, height) exceeds the pixel limit or differs
+    from the intrinsics' (the odd image is the one named, whichever comes first)."""
+    from ..measure.image_header import pixel_refusal
+
+    why = pixel_refusal(None, size)
+    if why:
+        raise DataError(f"{where}: {why}")
+    if tuple(size) != camera.size:
+        raise DataError(f"{where}: image size {size[0]}x{size[1]} px, but the intrinsics ({cam_source}) are for "
+                        f"{camera.width}x{camera.height}")
+
+
 def import_bag(bag, scene, image_topic: str, joints_topic: str, out, camera_info_topic: str | None = None,
                joint_names=None, settings: StillSettings | None = None) -> BagImport:
     """Write the recorded folder ``out`` (recording.yaml, poses.csv, images/<pose_id>/<frame>.png; the cell's
@@ -364,8 +444,11 @@ def import_bag(bag, scene, image_topic: str, joints_topic: str, out, camera_info
             check_clock([s for s, _, _ in jm], bag, joints_topic, settings.max_gap_s)
             t_j, Q = joint_matrix(jm, names, bag, joints_topic)
             stills = standstills(t_j, Q, settings)
+            few = check_standstills(stills, t_j, Q, names, settings, bag)
+            notes += [few] if few else []
             frames, n_img, n_moving, stamps, size = {}, 0, 0, [], None
-            for k, (s, _, m) in enumerate(_messages(reader, iconns)):
+            for k, (s, _, m) in enumerate(_messages(reader, iconns, max_image_bytes(), f"{bag}: topic "
+                                                                                          f"{image_topic!r}")):
                 stamps.append(s)
                 n_img += 1
                 where = f"{bag}: topic {image_topic!r} message {k} (stamp {s * 1e-9:.6f} s)"
@@ -374,6 +457,9 @@ def import_bag(bag, scene, image_topic: str, joints_topic: str, out, camera_info
                 if hit is None:
                     n_moving += 1
                     continue
+                declared = message_size(m, m.__msgtype__)  # before decoding: the pixel limit, the camera's size
+                if declared is not None:
+                    _check_declared(declared, camera, cam_source, where)
                 img = decode_image(m, m.__msgtype__, where)
                 shape = (int(img.shape[1]), int(img.shape[0]))
                 if size is None:
@@ -415,5 +501,6 @@ def import_bag(bag, scene, image_topic: str, joints_topic: str, out, camera_info
 
 
 __all__ = ["StillSettings", "Standstill", "BagImport", "RAW_ENCODINGS", "open_bag", "topic_connections",
-           "check_clock", "joint_matrix", "standstills", "check_encoding", "decode_image", "camera_from_info",
+           "check_clock", "joint_matrix", "standstills", "check_standstills", "max_image_bytes", "message_size",
+           "check_encoding", "decode_image", "camera_from_info",
            "import_bag"]

@@ -101,7 +101,7 @@ def read_transform_pairs(path) -> tuple[np.ndarray, np.ndarray]:
     T_cam_marker [m]. DataError naming the file, the key and its line for anything it does not expect."""
     import yaml
 
-    from ..config import read_text
+    from ..config import BoundedLoader, read_text
 
     path = Path(path)
     if not path.is_file():
@@ -110,7 +110,7 @@ def read_transform_pairs(path) -> tuple[np.ndarray, np.ndarray]:
     # directives (%YAML:1.0, which PyYAML refuses) as comments: the line numbers stay those of the file
     text = "\n".join("#" + ln if ln.lstrip().startswith("%") else ln for ln in text.splitlines())
     try:
-        docs = [d for d in yaml.compose_all(text, Loader=yaml.SafeLoader) if d is not None]
+        docs = [d for d in yaml.compose_all(text, Loader=BoundedLoader) if d is not None]
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         at = f"line {mark.line + 1}: " if mark is not None else ""

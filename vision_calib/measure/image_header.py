@@ -129,6 +129,30 @@ def _pillow(path: Path):
     return None
 
 
+def _sniff(fh) -> tuple[int, int] | None:
+    """(width, height) of the PNG, BMP, JPEG or TIFF header at the start of the binary file object, or None."""
+    head = fh.read(32)
+    size = _png(head) or _bmp(head)
+    if size is None and head[:2] == b"\xff\xd8":
+        size = _jpeg(fh)
+    if size is None and head[:2] in (b"II", b"MM"):
+        size = _tiff(fh, head)
+    return size
+
+
+def buffer_size(data) -> tuple[int, int] | None:
+    """(width, height) [px] declared by an encoded image held in memory (bytes-like: a ROS ``CompressedImage``'s
+    data; PNG, JPEG, BMP, TIFF headers, the first :data:`JPEG_SCAN_BYTES` read at most), or None; never decodes,
+    never raises."""
+    import io
+
+    try:
+        size = _sniff(io.BytesIO(bytes(memoryview(data)[:JPEG_SCAN_BYTES])))
+    except (struct.error, ValueError, TypeError):
+        return None
+    return (int(size[0]), int(size[1])) if size is not None and size[0] > 0 and size[1] > 0 else None
+
+
 def header_size(path) -> tuple[int, int] | None:
     """(width, height) [px] declared by the image file's header, or None when no header parser reads it (missing,
     truncated, corrupt, or an unknown format). Reads a few bytes (JPEG: up to :data:`JPEG_SCAN_BYTES`); never
@@ -136,12 +160,7 @@ def header_size(path) -> tuple[int, int] | None:
     path = Path(path)
     try:
         with open(path, "rb") as fh:
-            head = fh.read(32)
-            size = _png(head) or _bmp(head)
-            if size is None and head[:2] == b"\xff\xd8":
-                size = _jpeg(fh)
-            if size is None and head[:2] in (b"II", b"MM"):
-                size = _tiff(fh, head)
+            size = _sniff(fh)
     except (OSError, struct.error, ValueError):
         return None
     if size is None:
@@ -180,4 +199,4 @@ def majority_size(sizes) -> tuple[tuple[int, int] | None, int]:
     return size, best
 
 
-__all__ = ["header_size", "pixel_refusal", "majority_size", "JPEG_SCAN_BYTES"]
+__all__ = ["header_size", "buffer_size", "pixel_refusal", "majority_size", "JPEG_SCAN_BYTES"]

@@ -103,13 +103,17 @@ class IntrinsicsResult:
         return dict(zip(PARAM_NAMES, (c.fx, c.fy, c.cx, c.cy, *c.dist)))
 
     def to_dict(self) -> dict:
-        """JSON/YAML-ready: the camera block (width .. dist) + std, rms_px, views, coverage, warnings."""
+        """JSON/YAML-ready: the camera block (width .. dist) + std, rms_px, covariance {names, matrix (9, 9)} of
+        PARAM_NAMES (when finite), views, coverage, warnings."""
         return {**self.camera.to_dict(),
                 "std": {k: float(self.std[k]) for k in PARAM_NAMES[:4]} | {"dist": [float(self.std[k])
                                                                                   for k in PARAM_NAMES[4:]]},
                 "rms_px": float(self.rms_px), "n_views_used": self.n_used,
                 "n_views_rejected": len(self.views) - self.n_used,
                 **({"distortion_px": distortion_summary(self.distortion)} if self.distortion else {}),
+                **({"covariance": {"names": list(PARAM_NAMES), "matrix": [[float(v) for v in row]
+                                                                          for row in np.asarray(self.cov)]}}
+                   if self.cov is not None and np.all(np.isfinite(self.cov)) else {}),
                 "coverage": self.coverage, "warnings": list(self.warnings),
                 "views": [v.to_dict() for v in self.views]}
 
