@@ -63,7 +63,9 @@ def test_inverse_command_with_millimetres_and_a_tcp(results, tmp_path):
 def test_export_command(results, tmp_path, capsys):
     assert main(["export", str(results["rx90_eye_in_hand"].folder), "--format", "dh", "--out",
                  str(tmp_path / "dh.csv"), "--json"]) == 0
-    assert json.loads(capsys.readouterr().out) == {"format": "dh", "out": str(tmp_path / "dh.csv")}
+    out = json.loads(capsys.readouterr().out)
+    assert out["format"] == "dh" and out["out"] == str(tmp_path / "dh.csv")
+    assert out["verified"]["joint_sets"] > 0 and out["verified"]["max_m"] < 1e-9 and out["verified"]["max_rad"] < 1e-9
     assert (tmp_path / "dh.csv").read_text().count("\njoint") == 6
     assert main(["export", str(results["h4_vision"].folder), "--format", "dh", "--out", str(tmp_path / "h.csv")]) == 2
     err = capsys.readouterr().err

@@ -118,13 +118,14 @@ def cmd_inverse(args) -> int:
 
 def cmd_export(args) -> int:
     from ..config import check_output_apart
-    from ..io.controller_export import export
+    from ..io.controller_export import export_verified, verified_text
     from ..serialize import to_json
 
     r = Path(args.result)
     check_output_apart(args.out_file, [(r, "folder" if r.is_dir() else "file")])
-    path = export(args.result, args.fmt, args.out_file)
-    print(to_json({"format": args.fmt, "out": str(path)}) if args.json else f"wrote {path} ({args.fmt})")
+    out = export_verified(args.result, args.fmt, args.out_file)
+    out["out"] = str(out["out"])
+    print(to_json(out) if args.json else f"wrote {out['out']} ({args.fmt}); {verified_text(out['verified'])}")
     return 0
 
 
@@ -139,15 +140,15 @@ def exporting(run):
         if code != 0:
             print(f"vision-calib: warning: --export {fmt} skipped: the run did not give a usable result", file=sys.stderr)
             return code
-        from ..io.controller_export import FORMATS, export
+        from ..io.controller_export import FORMATS, export_verified, verified_text
 
         try:
-            path = export(args.out, fmt, Path(args.out) / FORMATS[fmt].file)
+            done = export_verified(args.out, fmt, Path(args.out) / FORMATS[fmt].file)
         except VisionCalibError as exc:  # the calibration is good: its outputs stand, the export is a warning
             print(f"vision-calib: warning: --export {fmt} not written: {exc} (the run's outputs in {args.out} are "
                   f"kept; `vision-calib export {args.out} --format ...` writes another format)", file=sys.stderr)
             return code
-        print(f"vision-calib: exported {path} ({fmt})", file=sys.stderr)
+        print(f"vision-calib: exported {done['out']} ({fmt}; {verified_text(done['verified'])})", file=sys.stderr)
         return code
 
     return run_then_export

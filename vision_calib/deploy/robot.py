@@ -40,6 +40,9 @@ AMPLIFIED_DEG_PER_MM = 1.0
 #: the share of the predicted accuracy a damped correction may leave (the rest of the error budget is the model's
 #: own: leaving r adds in quadrature, sqrt(1 + 0.5^2) = 1.12 x the predicted error at most)
 DAMPED_SHARE = 0.5
+#: largest joint correction [deg] compensate gives a joint set: more is another arm configuration, not a correction
+#: (the row is named, not corrected)
+MAX_CORRECTION_DEG = 10.0
 #: rows per chunk of compensate / inverse (bounded memory: a few MB per chunk)
 CHUNK_ROWS = 4096
 #: statuses of a compensated row (:class:`Compensation`)
@@ -333,19 +336,21 @@ class CalibratedRobot:
             def f(qq):
                 return kin.tool(qq, self.x)
 
+            def jac(qq):
+                return kin.joint_jacobian(qq, self.x)
+
             s_near = np.degrees(1.0) / (1e3 * AMPLIFIED_DEG_PER_MM)
-            qd, r, s_min = damped_correction(f, lambda qq: kin.joint_jacobian(qq, self.x), T_goal[idx], q[idx],
-                                             tol[idx], s_near, lim, target=DAMPED_SHARE)
+            qd, r, s_min = damped_correction(f, jac, T_goal[idx], q[idx], tol[idx], s_near, lim, target=DAMPED_SHARE)
             amp[idx] = amplification_deg_per_mm(s_min)
-            within = self._within(r, tol[idx])
+            within = self._within(r, tol[idx], qd - q[idx])
             qc[idx[within]] = qd[within]
             redo = idx[~within]
             if redo.size:  # the damped iteration missed (a joint limit, a strong non-linearity): the exact solution
-                qe, re, _ = levenberg_marquardt(f, T_goal[redo], q[redo], lim)
-                ok = self._within(re, tol[redo])
+                qe, re, _ = levenberg_marquardt(f, T_goal[redo], q[redo], lim, jac=jac)
+                ok = self._within(re, tol[redo], qe - q[redo])
                 qc[redo[ok]] = qe[ok]
                 for i, qi, ri in zip(redo[~ok], qe[~ok], re[~ok]):
-                    status[i], why[i] = "not_corrected", self._not_corrected_why(qi, ri, tol[i])
+                    status[i], why[i] = "not_corrected", self._not_corrected_why(q[i], qi, ri, tol[i], amp[i])
             status[(status == "corrected") & (amp > AMPLIFIED_DEG_PER_MM)] = "near_singularity"
         done = np.flatnonzero(np.isin(status, STATUSES[:2]))
         rem = np.full((N, 6), np.nan)
@@ -355,16 +360,24 @@ class CalibratedRobot:
                             np.linalg.norm(rem[:, 3:], axis=1), tol[:, 0], tol[:, 1], amp)
 
     @staticmethod
-    def _within(r: np.ndarray, tol: np.ndarray) -> np.ndarray:
-        return (np.linalg.norm(r[:, :3], axis=1) <= tol[:, 0]) & (np.linalg.norm(r[:, 3:], axis=1) <= tol[:, 1])
+    def _within(r: np.ndarray, tol: np.ndarray, dq: np.ndarray) -> np.ndarray:
+        """(N,) bool: residual r (N, 6) within tol (N, 2) by a correction dq (N, n) within MAX_CORRECTION_DEG."""
+        return ((np.linalg.norm(r[:, :3], axis=1) <= tol[:, 0]) & (np.linalg.norm(r[:, 3:], axis=1) <= tol[:, 1])
+                & (np.abs(dq).max(axis=1) <= np.radians(MAX_CORRECTION_DEG)))
 
-    def _not_corrected_why(self, q: np.ndarray, r: np.ndarray, tol: np.ndarray) -> str:
+    def _not_corrected_why(self, q0: np.ndarray, q: np.ndarray, r: np.ndarray, tol: np.ndarray, amp: float) -> str:
+        """Why the exact solution q (n,) from q0 with residual r (6,) is refused."""
         lim = self.kin.joint_limits
+        near = f" (near a singularity: {amp:.3g} deg per mm)" if amp > AMPLIFIED_DEG_PER_MM else ""
+        j = int(np.argmax(np.abs(q - q0)))
+        if np.linalg.norm(r[:3]) <= tol[0] and np.linalg.norm(r[3:]) <= tol[1]:
+            return (f"not corrected: the exact correction needs {np.degrees(q[j] - q0[j]):+.3g} deg on q{j + 1}, "
+                    f"more than {MAX_CORRECTION_DEG:g} deg (another arm configuration){near}")
         at = [] if lim is None else [j for j in range(self.n_joints) if np.isclose(q[j], lim[j, 0], atol=1e-9)
                                      or np.isclose(q[j], lim[j, 1], atol=1e-9)]
         return (f"not corrected: the calibrated model's tool stays {np.linalg.norm(r[:3]) * 1e3:.3g} mm, "
                 f"{np.linalg.norm(r[3:]) * 1e3:.3g} mrad from the nominal one (predicted accuracy {tol[0] * 1e3:.3g} mm, "
-                f"{tol[1] * 1e3:.3g} mrad)" + (f"; joint q{at[0] + 1} at its limit" if at else ""))
+                f"{tol[1] * 1e3:.3g} mrad){near}" + (f"; joint q{at[0] + 1} at its limit" if at else ""))
 
     def _closed_form_rows(self, T: np.ndarray) -> tuple[np.ndarray, list]:
         """(q (N, n), [why or ""]) of a closed-form inverse, row by row where it names an unreachable pose."""
