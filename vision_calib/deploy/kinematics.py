@@ -166,10 +166,17 @@ class ChainKinematics:
         return q, r, ok
 
     def inverse(self, T, x, q_start=None, labels=None, what: str = "calibrated", x_seed=None) -> np.ndarray:
-        """Joint values (N, n) of the goals T (N, 4, 4) on the model of x: from q_start (N, n); else from the
-        solution of the model of x_seed (the nominal) where it has one, and from several starts elsewhere."""
+        """Joint values (N, n) of the goals T (N, 4, 4) on the model of x: from q_start (N, n) (the nearest branch),
+        the goals not reached from there as without it; without q_start from the solution of the model of x_seed
+        (the nominal) where it has one, and from several starts elsewhere."""
         T = np.asarray(T, float)
-        if q_start is None and x_seed is not None:
+        if q_start is not None:  # the branch asked for: Newton from q_start; the goals it misses as without one
+            q, r, ok = self._solve(T, x, q_start)
+            miss = np.flatnonzero(~ok)
+            if miss.size:
+                q[miss] = self.inverse(T[miss], x, None, [_labels(labels, len(T))[k] for k in miss], what, x_seed)
+            return q
+        if x_seed is not None:
             q_start, _, seeded = self._solve(T, x_seed)
             q, r, ok = self._solve(T, x, q_start)
             redo = np.flatnonzero(~seeded & ~ok)
