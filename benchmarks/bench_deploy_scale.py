@@ -5,6 +5,8 @@ Jacobian, chunks of ``deploy.robot.CHUNK_ROWS`` rows). Prints the time and the p
 allocations; and the process's peak RSS) for N rows, the statuses, the largest correction of a corrected row, and
 the baseline measured in the same run: the previous compensate (exact Levenberg-Marquardt with central-difference
 Jacobians on the whole table at once) on the first ``--baseline-rows`` rows, its time per row and the ratio.
+Then inverse (no start: from the nominal model's solution) of the tool poses of ``--inverse-rows`` of those joint
+sets: time, peak traced memory per row, and how many come back as the joint sets they were made from.
 
     PYTHONPATH=. .venv/bin/python benchmarks/bench_deploy_scale.py [--rows 100000] [--baseline-rows 10000]
 """
@@ -32,6 +34,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--rows", type=int, default=100_000)
     ap.add_argument("--baseline-rows", type=int, default=10_000)
+    ap.add_argument("--inverse-rows", type=int, default=20_000)
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         folder = examples_dir() / "rx90_eye_in_hand"
@@ -68,6 +71,19 @@ def main() -> None:
         except Exception as exc:  # the previous compensate fails the whole table on one row
             base_note = f" (it failed the whole table: {str(exc)[:80]}...)"
         t_old = time.perf_counter() - t0
+        ni = min(args.inverse_rows, len(inside))
+        qi = q[np.flatnonzero(c.status != "outside_limits")[:ni]]
+        T = r.forward(qi)[0]
+        tracemalloc.start()
+        t0 = time.perf_counter()
+        q_inv = r.inverse(T)
+        t_inv = time.perf_counter() - t0
+        peak_inv = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        same = np.abs(np.angle(np.exp(1j * (q_inv - qi)))).max(axis=1) < 1e-6
+        print(f"inverse {ni} rows: {t_inv:.1f} s ({t_inv / ni * 1e6:.0f} us/row), peak traced memory "
+              f"{peak_inv / 2**20:.0f} MB ({peak_inv / ni / 1024:.1f} kB/row); {int(same.sum())} rows returned the "
+              f"joint set they were made from (the others another branch; --near keeps it)")
         print(f"baseline: previous exact compensate of {len(inside)} rows (inside the limits): {t_old:.1f} s "
               f"({t_old / len(inside) * 1e6:.0f} us/row){base_note}; per-row ratio previous / new "
               f"{(t_old / len(inside)) / (t_new / args.rows):.2f}")

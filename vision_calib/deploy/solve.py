@@ -137,7 +137,7 @@ def damped_correction(f: Callable, jac: Callable, T_goal: np.ndarray, q0: np.nda
             break
         U, s, Vt = np.linalg.svd(jac(q[act]) * S[:, None])
         if it == 0:
-            s_min = s[:, -1] if n <= 6 else np.zeros(N)
+            s_min = s[:, -1]  # (min(6, n) singular values: the smallest)
         k = s.shape[1]
         b = np.einsum("aji,aj->ai", U, r[act] * S)
         c = np.einsum("aij,aj->ai", Vt, q[act] - q0[act])[:, :k]
