@@ -144,8 +144,13 @@ class ChainKinematics:
         N = len(T)
         f = self._arm(x).forward
         lim = self.joint_limits
+
+        def jac(q):  # the angular-velocity rows: the exact gradient of |r|^2 (J_log^T r = r for a rotation vector r)
+            return self.joint_jacobian(q, x)
+
         if q_start is not None:
-            return levenberg_marquardt(f, T, np.broadcast_to(np.asarray(q_start, float), (N, self.n_joints)), lim)
+            return levenberg_marquardt(f, T, np.broadcast_to(np.asarray(q_start, float), (N, self.n_joints)), lim,
+                                       jac=jac)
         seeds = self.seeds()
         Ts = f(seeds)
         # |dt| + SEED_LENGTH_M |drot| of every goal to every seed, (N, n_seeds) without (N, n_seeds, 3, 3) temporaries
@@ -160,7 +165,7 @@ class ChainKinematics:
             todo = np.flatnonzero(~ok)
             if not todo.size:
                 break
-            qs, rs, oks = levenberg_marquardt(f, T[todo], seeds[order[todo, t]], lim)
+            qs, rs, oks = levenberg_marquardt(f, T[todo], seeds[order[todo, t]], lim, jac=jac)
             better = oks | (np.linalg.norm(rs, axis=1) < np.linalg.norm(r[todo], axis=1))
             q[todo[better]], r[todo[better]], ok[todo[better]] = qs[better], rs[better], oks[better]
         return q, r, ok
@@ -179,10 +184,10 @@ class ChainKinematics:
         if x_seed is not None:
             q_start, _, seeded = self._solve(T, x_seed)
             q, r, ok = self._solve(T, x, q_start)
-            redo = np.flatnonzero(~seeded & ~ok)
+            redo = np.flatnonzero(~ok)  # no nominal solution, or none of the calibrated model near it
             if redo.size:
                 q[redo], r[redo], ok[redo] = self._solve(T[redo], x)
-            multi = not seeded.all()
+            multi = bool(redo.size)
         else:
             q, r, ok = self._solve(T, x, q_start)
             multi = q_start is None
