@@ -545,8 +545,10 @@ def export(result, fmt: str, out) -> Path:
 
 def verified_text(v: dict) -> str:
     """One line of :func:`verify_export`'s figures for messages."""
-    on = f" on {v['joint_sets']} joint sets" if v["joint_sets"] else ""
-    return f"read back and verified{on}: max {v['max_m']:.1g} m, {v['max_rad']:.1g} rad from the calibrated model"
+    if not v["joint_sets"]:
+        return f"read back and verified: max {v['max_m']:.1g} m, {v['max_rad']:.1g} rad from the result's transforms"
+    return (f"read back and verified on {v['joint_sets']} joint sets: max {v['max_m']:.1g} m, {v['max_rad']:.1g} rad "
+            "from the calibrated model")
 
 
 __all__ = ["FORMATS", "ExportFormat", "FormatNotSupportedError", "HandeyeResult", "check_values", "dh_table_text",
