@@ -174,3 +174,22 @@ def test_the_help_examples_run_as_written(results, tmp_path, monkeypatch, capsys
     for ln in lines:
         code = main(shlex.split(ln)[1:])
         assert code == 0, (ln, capsys.readouterr().err)
+
+
+def test_chunks_give_the_same_answers_and_report_progress(results, monkeypatch):
+    import vision_calib.deploy.robot as robot_mod
+
+    res = results["ur5e_eye_in_hand"]
+    r = res.robot
+    q = workspace_joints(r, res.run.setup, 23)
+    whole = r.compensate_rows(q)
+    q_inv = r.inverse(r.forward(q)[0], q_start=q)
+    monkeypatch.setattr(robot_mod, "CHUNK_ROWS", 5)
+    seen = []
+    chunked = r.compensate_rows(q, progress=lambda done, total: seen.append((done, total)))
+    assert seen == [(5, 23)] * 4 + [(3, 23)]
+    np.testing.assert_array_equal(chunked.q_corrected, whole.q_corrected)
+    np.testing.assert_array_equal(chunked.status, whole.status)
+    seen.clear()
+    np.testing.assert_array_equal(r.inverse(r.forward(q)[0], q_start=q, progress=lambda d, t: seen.append(d)), q_inv)
+    assert sum(seen) == 23 and len(seen) == 5

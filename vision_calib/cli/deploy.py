@@ -70,11 +70,17 @@ def add_deploy_parsers(sub) -> None:
 
 
 def _bar(what: str):
-    """(callback(n_done), close()) of a progress bar on stderr (tqdm; silent when stderr is not a terminal)."""
+    """(callback(rows_done, rows_total), close()) of a progress bar on stderr (tqdm; silent when stderr is not a
+    terminal)."""
     from tqdm import tqdm
 
     bar = tqdm(desc=what, unit="row", file=sys.stderr, disable=None, leave=False)
-    return bar.update, bar.close
+
+    def update(done: int, total: int) -> None:
+        bar.total = total
+        bar.update(done)
+
+    return update, bar.close
 
 
 def _warn_rows(kind: str, messages: list, report) -> None:

@@ -54,7 +54,7 @@ def compensate_file(result, joints_csv, out, report=None, progress=None) -> dict
     corrected rows to ``out`` (same units and row names; a pose_id column of the input row numbers when rows are left
     out of a table without one) and the per-row report to ``report`` (default :func:`report_path`). Rows that
     cannot be corrected (outside the joint limits, not converging) are left out and named; PoseNotReachedError (exit
-    3, nothing written) only when no row is corrected. ``progress(n_rows_done)``: see compensate_rows.
+    3, nothing written) only when no row is corrected. ``progress(rows_done, rows_total)``: see compensate_rows.
     Returns {rows, written, out, report, max_correction: {joint, row, value, unit}, flagged: [message],
     not_corrected: [message]} (values in the file's units; messages name the row)."""
     report = report_path(out) if report is None else Path(report)

@@ -225,13 +225,13 @@ class CalibratedRobot:
 
     def inverse(self, T_base_tool: ArrayLike, q_start: ArrayLike | None = None, labels=None,
                 progress=None) -> np.ndarray:
-        """Joint values (n,) or (N, n) that put the tool at T_base_tool (4, 4) or (N, 4, 4) [m] on this model:
-        a serial chain by damped Newton (Levenberg-Marquardt, joint limits kept) from q_start ((n,): one start for
-        all, or (N, n): one per pose; the branch nearest it), else from the nominal model's solution (itself from
-        the stored starts nearest the goal; those starts directly where the nominal model has no solution); the H4
-        by its closed-form inverse geometric model. In chunks of :data:`CHUNK_ROWS` poses (``progress(n_done)``
-        after each). ``deploy.kinematics.PoseNotReachedError`` (CLI exit 3) names the pose (``labels``: names of
-        the rows) when it is unreachable or the iteration does not converge."""
+        """Joint values (n,) or (N, n) that put the tool at T_base_tool (4, 4) or (N, 4, 4) [m] on this model: a
+        serial chain by damped Newton (Levenberg-Marquardt, joint limits kept) from q_start ((n,): one start for all,
+        or (N, n): one per pose; the branch nearest it), else from the nominal model's solution (itself from the
+        stored starts nearest the goal; those starts directly where the nominal model has no solution); the H4 by its
+        closed-form inverse geometric model. In chunks of :data:`CHUNK_ROWS` poses (``progress(rows_done,
+        rows_total)`` after each). ``deploy.kinematics.PoseNotReachedError`` (CLI exit 3) names the pose (``labels``:
+        names of the rows) when it is unreachable or the iteration does not converge."""
         T, single = _check_T(T_base_tool)
         start = None
         if q_start is not None:
@@ -251,7 +251,7 @@ class CalibratedRobot:
                 exc.pose_index = a + (exc.pose_index or 0)
                 raise
             if progress is not None:
-                progress(b - a)
+                progress(b - a, len(T))
         return q[0] if single else q
 
     def compensate(self, q: ArrayLike, labels=None) -> np.ndarray:
@@ -294,13 +294,13 @@ class CalibratedRobot:
         ``near_singularity``); a row the damped Gauss-Newton leaves outside the accuracy gets the exact solution
         (Levenberg-Marquardt) when that reaches it. Joint sets outside the joint limits, and rows whose correction
         would need a joint past its limit or does not converge, are named in ``why``, never raised. Vectorised
-        over chunks of :data:`CHUNK_ROWS` rows; ``progress(n_rows_done)`` is called after each."""
+        over chunks of :data:`CHUNK_ROWS` rows; ``progress(rows_done, rows_total)`` is called after each."""
         q, _ = _check_q(q, self.n_joints)
         parts = []
         for a in range(0, len(q), CHUNK_ROWS):
             parts.append(self._compensate_chunk(q[a:a + CHUNK_ROWS]))
             if progress is not None:
-                progress(len(parts[-1].q))
+                progress(len(parts[-1].q), len(q))
         return Compensation.concatenate(parts)
 
     def _outside_limits(self, q: np.ndarray) -> np.ndarray:

@@ -37,11 +37,12 @@ def joint_jacobian(f: Callable, q: np.ndarray, T_goal: np.ndarray) -> np.ndarray
 
 def levenberg_marquardt(f: Callable, T_goal: np.ndarray, q0: np.ndarray, limits: np.ndarray | None = None,
                         max_iter: int = 100, jac: Callable | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Joint values q (N, n) with f(q) (N, 4, 4) = T_goal (N, 4, 4), from q0 (N, n) inside ``limits`` (n, 2)
-    [min, max] (None: none). Levenberg damping lam I, divided by 10 after an accepted step, multiplied by 10 after a
-    rejected one; a goal stops when reached (TOL_T_M, TOL_R_RAD), stalled (STALL_STEP, STALL_GAIN: a minimum off
-    the goal, e.g. out of reach or held by a joint limit), after max_iter steps, or when lam passes 1e12.
-    jac(q (M, n)) -> (M, 6, n): d r / d q (default :func:`joint_jacobian`, central differences). Returns (q (N, n), residual (N, 6) [m, rad] at q, reached (N,) bool)."""
+    """Joint values q (N, n) with f(q) (N, 4, 4) = T_goal (N, 4, 4), from q0 (N, n) inside ``limits`` (n, 2) [min,
+    max] (None: none). Levenberg damping lam I, divided by 10 after an accepted step, multiplied by 10 after a
+    rejected one; a goal stops when reached (TOL_T_M, TOL_R_RAD), stalled (STALL_STEP, STALL_GAIN: a minimum off the
+    goal, e.g. out of reach or held by a joint limit), after max_iter steps, or when lam passes 1e12. jac(q (M, n))
+    -> (M, 6, n): d r / d q (default :func:`joint_jacobian`, central differences). Returns (q (N, n), residual (N, 6)
+    [m, rad] at q, reached (N,) bool)."""
     q = np.array(q0, float)
     N, n = q.shape
     lo, hi = (np.full(n, -np.inf), np.full(n, np.inf)) if limits is None else (limits[:, 0], limits[:, 1])
