@@ -63,7 +63,9 @@ def test_inverse_command_with_millimetres_and_a_tcp(results, tmp_path):
 def test_export_command(results, tmp_path, capsys):
     assert main(["export", str(results["rx90_eye_in_hand"].folder), "--format", "dh", "--out",
                  str(tmp_path / "dh.csv"), "--json"]) == 0
-    assert json.loads(capsys.readouterr().out) == {"format": "dh", "out": str(tmp_path / "dh.csv")}
+    out = json.loads(capsys.readouterr().out)
+    assert out["format"] == "dh" and out["out"] == str(tmp_path / "dh.csv")
+    assert out["verified"]["joint_sets"] > 0 and out["verified"]["max_m"] < 1e-9 and out["verified"]["max_rad"] < 1e-9
     assert (tmp_path / "dh.csv").read_text().count("\njoint") == 6
     assert main(["export", str(results["h4_vision"].folder), "--format", "dh", "--out", str(tmp_path / "h.csv")]) == 2
     err = capsys.readouterr().err
@@ -137,9 +139,11 @@ def test_export_option_after_a_run(tmp_path, capsys):
     assert "exported" in capsys.readouterr().err
     assert (out / FORMATS["dh"].file).read_text().startswith("# modified-DH table")
     out2 = tmp_path / "out2"
-    assert main(["process-poses", str(mp), "--out", str(out2), "--no-plots", "--json", "--export", "ur_yaml"]) == 2
+    # an export that cannot apply after a good calibration: a warning, the run's exit code (0)
+    assert main(["process-poses", str(mp), "--out", str(out2), "--no-plots", "--json", "--export", "ur_yaml"]) == 0
     err = capsys.readouterr().err
-    assert "--export ur_yaml: " in err and "format 'ur_yaml' cannot represent this serial robot" in err
+    assert "warning: --export ur_yaml not written: " in err and "format 'ur_yaml' cannot represent this serial robot" in err
+    assert not (out2 / FORMATS["ur_yaml"].file).exists()
     assert f"the run's outputs in {out2} are kept" in err
     assert (out2 / "report.json").is_file() and (out2 / "calibrated_model.yaml").is_file()  # the run's outputs kept
 

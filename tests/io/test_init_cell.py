@@ -99,3 +99,22 @@ def test_same_joint_count_keeps_the_cells_poses(tmp_path):
     doc = yaml.safe_load((tmp_path / "c" / "scene.yaml").read_text())
     assert doc["poses"]["center"] == yaml.safe_load((scenes_dir() / "ur5e_eye_in_hand.yaml").read_text())["poses"]["center"]
     assert len(scene_poses(load_scene(tmp_path / "c" / "scene.yaml"), np.random.default_rng(0), 5)) == 5
+
+
+@pytest.mark.parametrize("file_name,link", [("evil: {a: 1} #x.urdf", "c"), ("new\nline: {b: 2}.urdf", "c"),
+                                            ("quotes.urdf", "it's \"c\"")])
+def test_hostile_names_give_a_scene_that_loads_with_its_own_keys(tmp_path, capsys, file_name, link):
+    """A URDF file name or a link name holding YAML syntax, quotes or a line break: written through the YAML
+    emitter, scene.yaml reads back with the shipped keys and the names as given, and loads as a scene."""
+    xml_link = link.replace("&", "&amp;").replace('"', "&quot;")
+    path = tmp_path / file_name
+    path.write_text(TWO_LEAVES.replace('"c"', f'"{xml_link}"'))
+    assert main(["init", str(tmp_path / "cell"), "--urdf", str(path)]) == 0
+    entry = tmp_path / "cell" / "scene.yaml"
+    doc = yaml.safe_load(entry.read_text())
+    shipped = yaml.safe_load((scenes_dir() / "ur5e_eye_in_hand.yaml").read_text())
+    assert set(doc) == set(shipped)
+    assert doc["robot"] == f"robot/{file_name}" and (tmp_path / "cell" / doc["robot"]).is_file()
+    assert doc["urdf"] == {"base_link": "world", "tip_link": link}
+    chain = load_scene(entry).setup.chain  # the scene loads, with the user's robot
+    assert chain.n_joints == 3 and chain.meta["tip_link"] == link

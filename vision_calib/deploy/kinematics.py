@@ -25,8 +25,10 @@ from .. import frames as F
 from ..errors import ConfigError, UnreachablePoseError
 from ..kinematics.h4 import EXTERNAL_NAMES, TILT_NAMES, H4Robot, nacelle_T, yaw_of
 from ..kinematics.protocols import ChainModel
+from ..kinematics.serial import SerialChain
+from ..kinematics.urdf import URDFChain
 from ..rig.serial import remount_chain
-from .solve import levenberg_marquardt
+from .solve import joint_jacobian, levenberg_marquardt
 
 #: candidate starts (after the centre of the joint ranges) of a chain's inverse without a start, and how many of
 #: them (those whose tool pose is nearest the goal: |dt| + SEED_LENGTH_M |drot|) are tried
@@ -92,6 +94,32 @@ class ChainKinematics:
         J[:, :, [names.index(n) for n in self.arm_names]] = Ja[:, :, arm.params.indices(self.arm_names)]
         return J
 
+    def joint_jacobian(self, q, x) -> np.ndarray:
+        """(N, 6, n_joints) d pose_error(T, tool(q + dq)) / dq at q (N, n) [per rad or m], base frame: geometric
+        (a revolute joint about unit axis w through o: [w x (p_tool - o), w]; a prismatic one: [w, 0]) for modified-DH
+        and URDF arms, central differences for another chain. Exact for the translation rows; the rotation rows are
+        the angular velocity (= the rotation-vector derivative at a zero pose error)."""
+        arm = self._arm(x)
+        q = np.asarray(q, float)
+        if isinstance(arm, SerialChain):
+            fr = arm.forward_all(q)
+            joint_frames, axes, prism = fr[:, 1:-1], np.array([0.0, 0.0, 1.0]), np.zeros(self.n_joints, bool)
+        elif isinstance(arm, URDFChain):
+            fr = arm.forward_all(q)
+            joint_frames = fr[:, 1:-1].copy()  # child frame of each joint after its motion: same axis, same origin
+            joint_frames[:, -1] = joint_frames[:, -1] @ F.inv_T(arm.tail)  # the tip link is the last one . tail
+            axes, prism = np.asarray(arm.axes, float), np.asarray(arm.prismatic, bool)
+        else:
+            return joint_jacobian(arm.forward, q, np.broadcast_to(arm.forward(q), (len(q), 4, 4)))
+        R = joint_frames[..., :3, :3]
+        w = R @ axes[..., None] if axes.ndim == 2 else R[..., 2:3]
+        w = w[..., 0]  # (N, n, 3)
+        lever = fr[:, -1, None, :3, 3] - joint_frames[..., :3, 3]
+        J = np.empty((len(q), 6, self.n_joints))
+        J[:, :3] = np.swapaxes(np.where(prism[:, None], w, np.cross(w, lever)), 1, 2)
+        J[:, 3:] = np.swapaxes(np.where(prism[:, None], 0.0, w), 1, 2)
+        return J
+
     def observed(self, q, x) -> np.ndarray:
         return self.robot.forward(q, x)
 
@@ -116,33 +144,50 @@ class ChainKinematics:
         N = len(T)
         f = self._arm(x).forward
         lim = self.joint_limits
+
+        def jac(q):  # the angular-velocity rows: the exact gradient of |r|^2 (J_log^T r = r for a rotation vector r)
+            return self.joint_jacobian(q, x)
+
         if q_start is not None:
-            return levenberg_marquardt(f, T, np.broadcast_to(np.asarray(q_start, float), (N, self.n_joints)), lim)
+            return levenberg_marquardt(f, T, np.broadcast_to(np.asarray(q_start, float), (N, self.n_joints)), lim,
+                                       jac=jac)
         seeds = self.seeds()
-        e = F.pose_error(T[:, None], f(seeds)[None])
-        dist = np.linalg.norm(e[..., :3], axis=-1) + SEED_LENGTH_M * np.linalg.norm(e[..., 3:], axis=-1)
-        order = np.argsort(dist, axis=1)[:, :N_TRIES]
+        Ts = f(seeds)
+        # |dt| + SEED_LENGTH_M |drot| of every goal to every seed, (N, n_seeds) without (N, n_seeds, 3, 3) temporaries
+        cos = 0.5 * (np.einsum("kij,sij->ks", T[:, :3, :3], Ts[:, :3, :3]) - 1.0)
+        a, b = T[:, :3, 3], Ts[:, :3, 3]
+        dist = np.sqrt(np.clip((a * a).sum(1)[:, None] + (b * b).sum(1)[None] - 2.0 * a @ b.T, 0.0, None))
+        dist += SEED_LENGTH_M * np.arccos(np.clip(cos, -1.0, 1.0))
+        order = np.argpartition(dist, N_TRIES, axis=1)[:, :N_TRIES]
+        order = np.take_along_axis(order, np.argsort(np.take_along_axis(dist, order, axis=1), axis=1), axis=1)
         q, r, ok = np.zeros((N, self.n_joints)), np.full((N, 6), np.inf), np.zeros(N, bool)
         for t in range(N_TRIES):
             todo = np.flatnonzero(~ok)
             if not todo.size:
                 break
-            qs, rs, oks = levenberg_marquardt(f, T[todo], seeds[order[todo, t]], lim)
+            qs, rs, oks = levenberg_marquardt(f, T[todo], seeds[order[todo, t]], lim, jac=jac)
             better = oks | (np.linalg.norm(rs, axis=1) < np.linalg.norm(r[todo], axis=1))
             q[todo[better]], r[todo[better]], ok[todo[better]] = qs[better], rs[better], oks[better]
         return q, r, ok
 
     def inverse(self, T, x, q_start=None, labels=None, what: str = "calibrated", x_seed=None) -> np.ndarray:
-        """Joint values (N, n) of the goals T (N, 4, 4) on the model of x: from q_start (N, n); else from the
-        solution of the model of x_seed (the nominal) where it has one, and from several starts elsewhere."""
+        """Joint values (N, n) of the goals T (N, 4, 4) on the model of x: from q_start (N, n) (the nearest branch),
+        the goals not reached from there as without it; without q_start from the solution of the model of x_seed
+        (the nominal) where it has one, and from several starts elsewhere."""
         T = np.asarray(T, float)
-        if q_start is None and x_seed is not None:
+        if q_start is not None:  # the branch asked for: Newton from q_start; the goals it misses as without one
+            q, r, ok = self._solve(T, x, q_start)
+            miss = np.flatnonzero(~ok)
+            if miss.size:
+                q[miss] = self.inverse(T[miss], x, None, [_labels(labels, len(T))[k] for k in miss], what, x_seed)
+            return q
+        if x_seed is not None:
             q_start, _, seeded = self._solve(T, x_seed)
             q, r, ok = self._solve(T, x, q_start)
-            redo = np.flatnonzero(~seeded & ~ok)
+            redo = np.flatnonzero(~ok)  # no nominal solution, or none of the calibrated model near it
             if redo.size:
                 q[redo], r[redo], ok[redo] = self._solve(T[redo], x)
-            multi = not seeded.all()
+            multi = bool(redo.size)
         else:
             q, r, ok = self._solve(T, x, q_start)
             multi = q_start is None

@@ -24,10 +24,29 @@ from ..errors import DataError, ParameterError
 from ..io.controller_export import find_result
 from ..io.model_export import CalibratedModel, joint_offsets, read_calibrated_model
 from ..kinematics.protocols import JointOffsetForm, PrismaticJoints
-from .kinematics import kinematics_for
+from .kinematics import PoseNotReachedError, kinematics_for
+from .solve import amplification_deg_per_mm, damped_correction, levenberg_marquardt
 
 #: parameter step [m or rad] of the finite-difference parameter Jacobian
 FD_PARAM_STEP = 1e-6
+#: the accuracy compensate brings the tool within: this many predicted standard deviations of the tool pose (sqrt of
+#: the trace of the translation / rotation block of :meth:`CalibratedRobot.forward`'s covariance), at least the floors
+ACCURACY_SIGMAS = 1.0
+ACCURACY_FLOOR_T_M = 1e-6
+ACCURACY_FLOOR_R_RAD = 1e-6
+#: joint change [deg] per mm of tool motion (``deploy.solve.amplification_deg_per_mm``) above which a joint set is near
+#: a singularity: its correction is damped along the near-null directions, and the row is flagged
+AMPLIFIED_DEG_PER_MM = 1.0
+#: the share of the predicted accuracy a damped correction may leave (the rest of the error budget is the model's
+#: own: leaving r adds in quadrature, sqrt(1 + 0.5^2) = 1.12 x the predicted error at most)
+DAMPED_SHARE = 0.5
+#: largest joint correction [deg] compensate gives a joint set: more is another arm configuration, not a correction
+#: (the row is named, not corrected)
+MAX_CORRECTION_DEG = 10.0
+#: rows per chunk of compensate / inverse (bounded memory: a few MB per chunk)
+CHUNK_ROWS = 4096
+#: statuses of a compensated row (:class:`Compensation`)
+STATUSES = ("corrected", "near_singularity", "outside_limits", "not_corrected")
 
 
 def model_path(path) -> Path:
@@ -68,6 +87,41 @@ def _check_T(T: ArrayLike, what: str = "poses") -> tuple[np.ndarray, bool]:
     if bad.any():
         raise DataError(f"{what}: row {int(np.argmax(bad))} is not a finite rigid transform")
     return T, single
+
+
+def _limit_text(v: float, lo: float, hi: float, prismatic: bool) -> str:
+    if prismatic:
+        return f"{v:.6g} m outside its limits [{lo:.6g}, {hi:.6g}] m"
+    return (f"{v:.6g} rad ({np.degrees(v):.6g} deg) outside its limits [{lo:.6g}, {hi:.6g}] rad "
+            f"([{np.degrees(lo):.6g}, {np.degrees(hi):.6g}] deg)")
+
+
+@dataclass(frozen=True)
+class Compensation:
+    """Per joint set of :meth:`CalibratedRobot.compensate_rows` (N rows, n joints): q (N, n) the commands meant for
+    the nominal model; q_corrected (N, n) (NaN where not corrected); status (N,) one of :data:`STATUSES`; why (N,)
+    str ("" for a corrected row); remaining_t_m / remaining_r_rad (N,): the tool error left on the calibrated model
+    (NaN where not corrected); tolerance_t_m / tolerance_r_rad (N,): the predicted accuracy it is brought within;
+    amplification (N,) [deg per mm] (``deploy.solve.amplification_deg_per_mm``, NaN for a closed-form robot)."""
+
+    q: np.ndarray
+    q_corrected: np.ndarray
+    status: np.ndarray
+    why: np.ndarray
+    remaining_t_m: np.ndarray
+    remaining_r_rad: np.ndarray
+    tolerance_t_m: np.ndarray
+    tolerance_r_rad: np.ndarray
+    amplification: np.ndarray
+
+    @property
+    def corrected(self) -> np.ndarray:
+        """(N,) bool: the rows with a correction (status corrected or near_singularity)."""
+        return np.isin(self.status, STATUSES[:2])
+
+    @staticmethod
+    def concatenate(parts: list) -> "Compensation":
+        return Compensation(*(np.concatenate([getattr(p, f) for p in parts]) for f in Compensation.__dataclass_fields__))
 
 
 @dataclass(frozen=True, eq=False)
@@ -169,29 +223,175 @@ class CalibratedRobot:
         T, C = self._propagate(self.kin.observed, self.kin.observed_jacobian, q, fd)
         return (T[0], C[0]) if single else (T, C)
 
-    def inverse(self, T_base_tool: ArrayLike, q_start: ArrayLike | None = None, labels=None) -> np.ndarray:
-        """Joint values (n,) or (N, n) that put the tool at T_base_tool (4, 4) or (N, 4, 4) [m] on this model:
-        a serial chain by damped Newton (Levenberg-Marquardt, joint limits kept) from q_start, else from the
-        nominal model's solution (itself from the stored starts nearest the goal; those starts directly where the
-        nominal model has no solution); the H4 by its closed-form inverse geometric model.
-        ``deploy.kinematics.PoseNotReachedError`` (CLI exit 3) names the pose (``labels``: names of the rows) when it
-        is unreachable or the iteration does not converge."""
+    def inverse(self, T_base_tool: ArrayLike, q_start: ArrayLike | None = None, labels=None,
+                progress=None) -> np.ndarray:
+        """Joint values (n,) or (N, n) that put the tool at T_base_tool (4, 4) or (N, 4, 4) [m] on this model: a
+        serial chain by damped Newton (Levenberg-Marquardt, joint limits kept) from q_start ((n,): one start for all,
+        or (N, n): one per pose; the branch nearest it), else from the nominal model's solution (itself from the
+        stored starts nearest the goal; those starts directly where the nominal model has no solution); the H4 by its
+        closed-form inverse geometric model. In chunks of :data:`CHUNK_ROWS` poses (``progress(rows_done,
+        rows_total)`` after each). ``deploy.kinematics.PoseNotReachedError`` (CLI exit 3) names the pose (``labels``:
+        names of the rows) when it is unreachable or the iteration does not converge."""
         T, single = _check_T(T_base_tool)
         start = None
         if q_start is not None:
             start, _ = _check_q(q_start, self.n_joints, "q_start")
+            if len(start) not in (1, len(T)):
+                raise DataError(f"q_start: {len(start)} joint sets for {len(T)} poses (give one, or one per pose)")
             start = np.broadcast_to(start, (len(T), self.n_joints))
-        q = self.kin.inverse(T, self.x, start, labels, "nominal" if self.is_nominal else "calibrated",
-                             x_seed=None if self.is_nominal else self.x_nominal)
+        lab = list(labels) if labels is not None else [f"#{k}" for k in range(len(T))]
+        q = np.empty((len(T), self.n_joints))
+        for a in range(0, len(T), CHUNK_ROWS):
+            b = min(a + CHUNK_ROWS, len(T))
+            try:
+                q[a:b] = self.kin.inverse(T[a:b], self.x, None if start is None else start[a:b], lab[a:b],
+                                          "nominal" if self.is_nominal else "calibrated",
+                                          x_seed=None if self.is_nominal else self.x_nominal)
+            except PoseNotReachedError as exc:
+                exc.pose_index = a + (exc.pose_index or 0)
+                raise
+            if progress is not None:
+                progress(b - a, len(T))
         return q[0] if single else q
 
     def compensate(self, q: ArrayLike, labels=None) -> np.ndarray:
-        """The joint values (n,) or (N, n) that put the tool, on the calibrated model, where the NOMINAL model puts
-        it for q: what to send instead of q to a controller that computed q with the nominal model."""
+        """The joint values (n,) or (N, n) that put the tool, on the calibrated model, within its predicted accuracy
+        of where the NOMINAL model puts it for q: what to send instead of q to a controller that computed q with the
+        nominal model (:meth:`compensate_rows`). PoseNotReachedError naming the first row (``labels``) that cannot
+        be corrected or is outside the joint limits."""
         q, single = _check_q(q, self.n_joints)
-        T = self.kin.tool(q, self.x_nominal)
-        qc = self.kin.inverse(T, self.x, q, labels, "calibrated")
-        return qc[0] if single else qc
+        c = self.compensate_rows(q)
+        bad = np.flatnonzero(~c.corrected)
+        if bad.size:
+            k = int(bad[0])
+            lab = list(labels) if labels is not None else [f"#{i}" for i in range(len(q))]
+            raise PoseNotReachedError(f"joint set {lab[k]}: {c.why[k]}" + (f" ({bad.size} rows not corrected)"
+                                                                            if bad.size > 1 else ""), pose_index=k)
+        return c.q_corrected[0] if single else c.q_corrected
+
+    def accuracy(self, q: np.ndarray) -> np.ndarray:
+        """(N, 2) [m, rad]: the predicted accuracy at joint sets q (N, n): :data:`ACCURACY_SIGMAS` x the RMS
+        translation / rotation error the covariance predicts, the smaller of the tool pose's (base frame) and the
+        measured transform's (:meth:`observed`: what the calibration saw; the base frame's own uncertainty, common
+        to all poses, is in the first only), at least the floors."""
+        var = np.zeros((len(q), 6))
+        if np.any(self.covariance):
+            tol = []
+            for jac in (self.kin.tool_jacobian, self.kin.observed_jacobian):
+                J = jac(q, self.x)
+                v = np.einsum("kin,kin->ki", J @ self.covariance, J)
+                tol.append(np.column_stack([v[:, :3].sum(1), v[:, 3:].sum(1)]))
+            var = np.minimum(*tol)
+        else:
+            var = var[:, :2]
+        return np.maximum(ACCURACY_SIGMAS * np.sqrt(np.clip(var, 0, None)), [ACCURACY_FLOOR_T_M, ACCURACY_FLOOR_R_RAD])
+
+    def compensate_rows(self, q: ArrayLike, progress=None) -> Compensation:
+        """Compensate each joint set of q (N, n) (meant for the nominal model) on its own (:class:`Compensation`):
+        the smallest joint correction that puts the calibrated model's tool within its predicted accuracy
+        (:meth:`accuracy`) of the nominal model's tool: exact along the well-conditioned joint directions, damped
+        along those that need more than :data:`AMPLIFIED_DEG_PER_MM` (``deploy.solve.damped_correction``; flagged
+        ``near_singularity``); a row the damped Gauss-Newton leaves outside the accuracy gets the exact solution
+        (Levenberg-Marquardt) when that reaches it. Joint sets outside the joint limits, and rows whose correction
+        would need a joint past its limit or does not converge, are named in ``why``, never raised. Vectorised
+        over chunks of :data:`CHUNK_ROWS` rows; ``progress(rows_done, rows_total)`` is called after each."""
+        q, _ = _check_q(q, self.n_joints)
+        parts = []
+        for a in range(0, len(q), CHUNK_ROWS):
+            parts.append(self._compensate_chunk(q[a:a + CHUNK_ROWS]))
+            if progress is not None:
+                progress(len(parts[-1].q), len(q))
+        return Compensation.concatenate(parts)
+
+    def _outside_limits(self, q: np.ndarray) -> np.ndarray:
+        """(N,) str: why each joint set is outside the joint limits ("" inside)."""
+        why = np.full(len(q), "", dtype=object)
+        lim = self.kin.joint_limits
+        if lim is None:
+            return why
+        lim = np.asarray(lim, float)
+        out = (q < lim[:, 0]) | (q > lim[:, 1])
+        for k, j in zip(*np.nonzero(out)):
+            if not why[k]:
+                why[k] = f"joint q{j + 1} = " + _limit_text(q[k, j], *lim[j], bool(self.prismatic[j]))
+        return why
+
+    def _compensate_chunk(self, q: np.ndarray) -> Compensation:
+        N = len(q)
+        kin = self.kin
+        T_goal = kin.tool(q, self.x_nominal)
+        tol = self.accuracy(q)
+        why = self._outside_limits(q)
+        status = np.where(why != "", "outside_limits", "corrected").astype(object)
+        qc, amp = np.full(q.shape, np.nan), np.full(N, np.nan)
+        idx = np.flatnonzero(why == "")
+        if kin.closed_form:
+            qc[idx], err = self._closed_form_rows(T_goal[idx])
+            for i, e in zip(idx, err):
+                if e:
+                    status[i], why[i] = "not_corrected", e
+        elif idx.size:
+            lim = kin.joint_limits
+
+            def f(qq):
+                return kin.tool(qq, self.x)
+
+            def jac(qq):
+                return kin.joint_jacobian(qq, self.x)
+
+            s_near = np.degrees(1.0) / (1e3 * AMPLIFIED_DEG_PER_MM)
+            qd, r, s_min = damped_correction(f, jac, T_goal[idx], q[idx], tol[idx], s_near, lim, target=DAMPED_SHARE)
+            amp[idx] = amplification_deg_per_mm(s_min)
+            within = self._within(r, tol[idx], qd - q[idx])
+            qc[idx[within]] = qd[within]
+            redo = idx[~within]
+            if redo.size:  # the damped iteration missed (a joint limit, a strong non-linearity): the exact solution
+                qe, re, _ = levenberg_marquardt(f, T_goal[redo], q[redo], lim, jac=jac)
+                ok = self._within(re, tol[redo], qe - q[redo])
+                qc[redo[ok]] = qe[ok]
+                for i, qi, ri in zip(redo[~ok], qe[~ok], re[~ok]):
+                    status[i], why[i] = "not_corrected", self._not_corrected_why(q[i], qi, ri, tol[i], amp[i])
+            status[(status == "corrected") & (amp > AMPLIFIED_DEG_PER_MM)] = "near_singularity"
+        done = np.flatnonzero(np.isin(status, STATUSES[:2]))
+        rem = np.full((N, 6), np.nan)
+        rem[done] = F.pose_error(T_goal[done], kin.tool(qc[done], self.x))
+        qc[~np.isin(status, STATUSES[:2])] = np.nan
+        return Compensation(q, qc, status.astype(str), why.astype(str), np.linalg.norm(rem[:, :3], axis=1),
+                            np.linalg.norm(rem[:, 3:], axis=1), tol[:, 0], tol[:, 1], amp)
+
+    @staticmethod
+    def _within(r: np.ndarray, tol: np.ndarray, dq: np.ndarray) -> np.ndarray:
+        """(N,) bool: residual r (N, 6) within tol (N, 2) by a correction dq (N, n) within MAX_CORRECTION_DEG."""
+        return ((np.linalg.norm(r[:, :3], axis=1) <= tol[:, 0]) & (np.linalg.norm(r[:, 3:], axis=1) <= tol[:, 1])
+                & (np.abs(dq).max(axis=1) <= np.radians(MAX_CORRECTION_DEG)))
+
+    def _not_corrected_why(self, q0: np.ndarray, q: np.ndarray, r: np.ndarray, tol: np.ndarray, amp: float) -> str:
+        """Why the exact solution q (n,) from q0 with residual r (6,) is refused."""
+        lim = self.kin.joint_limits
+        near = f" (near a singularity: {amp:.3g} deg per mm)" if amp > AMPLIFIED_DEG_PER_MM else ""
+        j = int(np.argmax(np.abs(q - q0)))
+        if np.linalg.norm(r[:3]) <= tol[0] and np.linalg.norm(r[3:]) <= tol[1]:
+            return (f"not corrected: the exact correction needs {np.degrees(q[j] - q0[j]):+.3g} deg on q{j + 1}, "
+                    f"more than {MAX_CORRECTION_DEG:g} deg (another arm configuration){near}")
+        at = [] if lim is None else [j for j in range(self.n_joints) if np.isclose(q[j], lim[j, 0], atol=1e-9)
+                                     or np.isclose(q[j], lim[j, 1], atol=1e-9)]
+        return (f"not corrected: the calibrated model's tool stays {np.linalg.norm(r[:3]) * 1e3:.3g} mm, "
+                f"{np.linalg.norm(r[3:]) * 1e3:.3g} mrad from the nominal one (predicted accuracy {tol[0] * 1e3:.3g} mm, "
+                f"{tol[1] * 1e3:.3g} mrad){near}" + (f"; joint q{at[0] + 1} at its limit" if at else ""))
+
+    def _closed_form_rows(self, T: np.ndarray) -> tuple[np.ndarray, list]:
+        """(q (N, n), [why or ""]) of a closed-form inverse, row by row where it names an unreachable pose."""
+        q, why = np.full((len(T), self.n_joints), np.nan), [""] * len(T)
+        todo = np.arange(len(T))
+        while todo.size:
+            try:
+                q[todo] = self.kin.inverse(T[todo], self.x)
+                break
+            except PoseNotReachedError as exc:
+                k = exc.pose_index or 0
+                why[todo[k]] = f"not corrected: {exc}"
+                todo = np.delete(todo, k)
+        return q, why
 
     # ------------------------------------------------------------------ joint offsets
     def joint_offsets(self) -> dict:

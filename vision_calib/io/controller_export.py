@@ -22,8 +22,11 @@ raises :class:`FormatNotSupportedError` naming both. All files are written atomi
 
 from __future__ import annotations
 
+import csv
 import hashlib
+import io
 import json
+import re
 import tempfile
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
@@ -38,7 +41,7 @@ from ..errors import ConfigError, DataError
 from ..kinematics.h4 import H4Robot
 from ..kinematics.protocols import ChainModel
 from ..kinematics.serial import SerialChain
-from ..kinematics.urdf import URDFChain, calibrated_origins, export_urdf
+from ..kinematics.urdf import URDFChain, calibrated_origins, export_urdf, load_urdf_robot
 from ..serialize import write_text_atomic
 from .model_export import OFFSET_CONVENTION, CalibratedModel, read_calibrated_model
 
@@ -53,6 +56,18 @@ ROS_FRAMES = {"base": "base_link", "flange": "tool0", "cam": "camera_optical_fra
 UR_JOINTS = ("shoulder", "upper_arm", "forearm", "wrist_1", "wrist_2", "wrist_3")
 #: relative parameter step of the finite-difference mount covariance
 MOUNT_FD_STEP = 1e-7
+#: report kinds of a hand-eye result (recorded folder with flange poses; pose-pair file of process-poses)
+HANDEYE_KINDS = ("process_handeye", "process_pose_pairs")
+#: plausibility of the exported values: an arm parameter (length / angle) at most this far from the robot file's
+#: nominal value, a mount translation at most this far from its parent frame's origin
+MAX_LENGTH_CHANGE_M = 0.1
+MAX_ANGLE_CHANGE_RAD = np.radians(20.0)
+MAX_MOUNT_TRANSLATION_M = 10.0
+#: the read-back check: joint sets (seeded, inside the joint limits), and the largest difference [m, rad] between
+#: the file's forward kinematics and the calibrated model's
+N_VERIFY_JOINTS = 64
+VERIFY_TOL_M = 1e-6
+VERIFY_TOL_RAD = 1e-6
 
 
 class FormatNotSupportedError(ConfigError):
@@ -61,7 +76,7 @@ class FormatNotSupportedError(ConfigError):
 
 @dataclass(frozen=True)
 class HandeyeResult:
-    """A hand-eye result (``report.json`` of kind process_handeye): mount "eye_in_hand" | "fixed"; transforms
+    """A hand-eye result (``report.json`` of a kind in :data:`HANDEYE_KINDS`): mount "eye_in_hand" | "fixed"; transforms
     {name: (T (4, 4) m, std (6,) [m, rad] or None)} for T_flange_cam / T_base_target (eye in hand) or T_base_cam /
     T_flange_target (fixed camera)."""
 
@@ -82,7 +97,7 @@ def find_result(path) -> Path:
     if (p / MODEL_FILE).is_file():
         return p / MODEL_FILE
     rep = p / REPORT_FILE
-    if rep.is_file() and _report(rep).get("kind") == "process_handeye":
+    if rep.is_file() and _report(rep).get("kind") in HANDEYE_KINDS:
         return rep
     raise DataError(f"{p}: no {MODEL_FILE} in this result folder (the fit was not usable: see its report.json "
                     "verdict) and no hand-eye result")
@@ -99,11 +114,11 @@ def _report(path: Path) -> dict:
 
 
 def read_handeye(path) -> HandeyeResult:
-    """The hand-eye transforms of a process_handeye report.json (:class:`HandeyeResult`)."""
+    """The hand-eye transforms of a hand-eye report.json (:data:`HANDEYE_KINDS`, :class:`HandeyeResult`)."""
     path = Path(path)
     doc = _report(path)
     he = doc.get("handeye")
-    if doc.get("kind") != "process_handeye" or not isinstance(he, dict):
+    if doc.get("kind") not in HANDEYE_KINDS or not isinstance(he, dict):
         raise DataError(f"{path}: not a hand-eye result (report kind {doc.get('kind')!r}); a calibrated robot has "
                         f"its {MODEL_FILE}")
     mount = he.get("mount")
@@ -144,12 +159,18 @@ def _unsupported(res: CalibratedModel, fmt: str, why: str) -> FormatNotSupported
                                    f"({type(res.robot).__name__}): {why}")
 
 
+def _name(value) -> str:
+    """A name (robot, link, file) for a comment line: a JSON string (quoted, control characters and non-ASCII
+    escaped): it cannot end the comment or start a line."""
+    return json.dumps(str(value), ensure_ascii=True)
+
+
 def _offset_lines(res: CalibratedModel, prefix: str) -> list[str]:
     """Comment lines listing the joint offsets of the model file (:data:`OFFSET_CONVENTION`)."""
     if not res.joint_offsets:
         return []
     out = [f"{prefix}joint offsets ({OFFSET_CONVENTION}):"]
-    out += [f"{prefix}  {j} ({o.get('parameter')}): {o['offset']!r} {o.get('unit', '')}"
+    out += [f"{prefix}  {_name(j)} ({_name(o.get('parameter'))}): {float(o['offset'])!r} {_name(o.get('unit', ''))}"
             for j, o in res.joint_offsets.items()]
     return out
 
@@ -167,7 +188,7 @@ def urdf_text(res: CalibratedModel) -> str:
         text = _mdh_urdf(robot, res.x)
     else:
         raise _unsupported(res, "urdf", "a URDF holds tree-shaped serial chains only (this robot closes loops)")
-    head = "\n".join(["calibrated by vision_calib from " + res.path.name + "; the mounts (camera, target) are not in "
+    head = "\n".join(["calibrated by vision_calib from " + _name(res.path.name) + "; the mounts (camera, target) are not in "
                       "this file: export them in format ros_tf"] + _offset_lines(res, "")).replace("--", "-")
     lines = text.split("\n", 1)
     if lines[0].startswith("<?xml"):
@@ -224,11 +245,12 @@ def dh_table_text(res: CalibratedModel) -> str:
     nom = chain.params.values(res.nominal_robot.params.nominal) if res.nominal_robot is not None else v
     TL, TR = chain.nominal_transforms(res.x)
     lines = [
-        f"# modified-DH table (Khalil-Kleinfinger / Craig) of {chain.name}, calibrated by vision_calib ({res.path.name})",
+        f"# modified-DH table (Khalil-Kleinfinger / Craig) of {_name(chain.name)}, calibrated by vision_calib "
+        f"({_name(res.path.name)})",
         "# link i: T_{i-1,i}(q_i) = Tz(l_i) Rx(alpha_i) Ry(beta_i) Tx(a_i) Rz(theta_i + q_i) Tz(d_i)"
         " (beta: Hayati, l: extra translation; 0 when the robot has none)",
-        f"# chain: {chain.measured_name}(q) = base . T_{{0,1}}(q_1) ... T_{{n-1,n}}(q_n) . tool;"
-        f" base = {chain.left}, tool = {chain.right} (x, y, z and a unit quaternion qx, qy, qz, qw, scalar last)",
+        f"# chain: {_name(chain.measured_name)}(q) = base . T_{{0,1}}(q_1) ... T_{{n-1,n}}(q_n) . tool;"
+        f" base = {_name(chain.left)}, tool = {_name(chain.right)} (x, y, z and a unit quaternion qx, qy, qz, qw, scalar last)",
         "# units: lengths m, angles rad; q_i: the controller's joint reading (rad)",
         "# joint offset: theta_offset_i = theta_i - theta_i(nominal); the calibrated joint i turns by theta_i + q_i:"
         " a controller using the nominal table adds theta_offset_i to its joint reading",
@@ -245,7 +267,9 @@ def dh_table_text(res: CalibratedModel) -> str:
             v[f"alpha{i}"], v.get(f"beta{i}", 0.0), v[f"a{i}"], v[f"theta{i}"], v[f"d{i}"], v.get(f"l{i}", 0.0),
             v[f"theta{i}"] - nom[f"theta{i}"])] + [""] * 7)
     rows.append(pose_row("tool", chain.right, TR))
-    return "\n".join(lines + [",".join(r) for r in rows]) + "\n"
+    buf = io.StringIO()
+    csv.writer(buf, lineterminator="\n").writerows(rows)
+    return "\n".join(lines) + "\n" + buf.getvalue()
 
 
 # ----------------------------------------------------------------------------- UR kinematics YAML
@@ -268,9 +292,9 @@ def ur_yaml_text(res: CalibratedModel) -> str:
     body = yaml.safe_dump({"kinematics": kin}, sort_keys=False)
     kin["hash"] = "vision_calib_" + hashlib.sha1(body.encode()).hexdigest()[:16]
     joints = chain.meta.get("joint_names") or ()
-    head = [f"# UR kinematics of {chain.name} calibrated by vision_calib ({res.path.name}): the origin of each joint "
-            "in its parent link",
-            "# (" + ", ".join(f"{a} = {b}" for a, b in zip(UR_JOINTS, joints)) + "), x, y, z [m], roll, pitch, "
+    head = [f"# UR kinematics of {_name(chain.name)} calibrated by vision_calib ({_name(res.path.name)}): the origin "
+            "of each joint in its parent link",
+            "# (" + ", ".join(f"{a} = {_name(b)}" for a, b in zip(UR_JOINTS, joints)) + "), x, y, z [m], roll, pitch, "
             "yaw [rad] (R = Rz(yaw) Ry(pitch) Rx(roll));",
             "# the joint offsets are folded into the origins (origin = URDF origin . correction . Rz(q0)), as the UR "
             "calibration extraction writes them; hash: of this file's numbers, not the robot's own calibration hash"]
@@ -279,10 +303,19 @@ def ur_yaml_text(res: CalibratedModel) -> str:
 
 
 # ----------------------------------------------------------------------------- ROS static transforms
+#: a ROS frame name (tf2): letters, digits, _ and / (no space: the static_transform_publisher line splits on them)
+ROS_FRAME_RE = re.compile(r"[A-Za-z_/][A-Za-z0-9_/]*")
+
+
 def _ros_frame(label: str, robot=None) -> str:
     if isinstance(robot, URDFChain) and label in ("base", "flange"):
-        return robot.meta.get("base_link" if label == "base" else "tip_link") or ROS_FRAMES[label]
-    return ROS_FRAMES.get(label, label)
+        name = robot.meta.get("base_link" if label == "base" else "tip_link") or ROS_FRAMES[label]
+    else:
+        name = ROS_FRAMES.get(label, label)
+    if not ROS_FRAME_RE.fullmatch(str(name)):
+        raise FormatNotSupportedError(f"frame {_name(name)} is not a ROS frame name (letters, digits, _ and / only, "
+                                      "rule ROS_FRAME_RE): rename the link in the URDF")
+    return name
 
 
 def _split_name(name: str) -> tuple[str, str]:
@@ -349,7 +382,7 @@ def ros_tf_text(res: CalibratedModel | HandeyeResult) -> str:
             s = np.sqrt(np.clip(np.diag(m["cov"]), 0.0, None))
             d["std"] = {"translation_m": [float(v) for v in s[:3]], "rotation_rad": [float(v) for v in s[3:]]}
         items.append(d)
-    head = ["# ROS static transforms of the identified mounts, written by vision_calib from " + res.path.name,
+    head = ["# ROS static transforms of the identified mounts, written by vision_calib from " + _name(res.path.name),
             "# parent_frame -> child_frame: translation [m], rotation (unit quaternion, scalar last); camera frames are",
             "# optical (x right, y down, z forward). Publish one with:",
             "#   ros2 run tf2_ros static_transform_publisher <static_transform_publisher>",
@@ -379,15 +412,146 @@ FORMATS = {
 }
 
 
-def export(result, fmt: str, out) -> Path:
+# ----------------------------------------------------------------------------- value checks, read-back check
+def _is_mount(name: str) -> bool:
+    return name.split(".", 1)[0].startswith("T_")
+
+
+def check_values(res: CalibratedModel | HandeyeResult) -> None:
+    """DataError naming the parameter (or transform) and the rule when a value to export is not finite, an arm
+    parameter is further than :data:`MAX_LENGTH_CHANGE_M` / :data:`MAX_ANGLE_CHANGE_RAD` from the robot file's
+    nominal value, or a mount translation is beyond :data:`MAX_MOUNT_TRANSLATION_M`."""
+    if isinstance(res, HandeyeResult):
+        for n, (T, _) in res.transforms.items():
+            if np.linalg.norm(T[:3, 3]) > MAX_MOUNT_TRANSLATION_M:
+                raise DataError(f"{res.path}: {n} translation {np.linalg.norm(T[:3, 3]):.6g} m is implausible (rule: a "
+                                f"mount within {MAX_MOUNT_TRANSLATION_M:g} m of its parent frame): nothing exported")
+        return
+    nom_robot = res.nominal_robot if res.nominal_robot is not None else res.robot
+    nom = dict(zip(nom_robot.params.names, nom_robot.params.nominal))
+    kinds = dict(zip(res.robot.params.names, res.robot.params.kinds))
+    for n, v in zip(res.names, res.x):
+        if not np.isfinite(v):
+            raise DataError(f"{res.path}: parameter {n} = {v} is not finite: nothing exported")
+        kind, rule = kinds.get(n), None
+        if _is_mount(n):
+            if n.rsplit(".", 1)[-1] in ("tx", "ty", "tz") and abs(v) > MAX_MOUNT_TRANSLATION_M:
+                rule = f"a mount translation within {MAX_MOUNT_TRANSLATION_M:g} m"
+        elif n in nom and kind == "length" and abs(v - nom[n]) > MAX_LENGTH_CHANGE_M:
+            rule = f"a length within {MAX_LENGTH_CHANGE_M:g} m of the robot file's {nom[n]:.6g} m"
+        elif n in nom and kind == "angle" and abs(np.angle(np.exp(1j * (v - nom[n])))) > MAX_ANGLE_CHANGE_RAD:
+            rule = f"an angle within {np.degrees(MAX_ANGLE_CHANGE_RAD):g} deg of the robot file's {nom[n]:.6g} rad"
+        if rule:
+            raise DataError(f"{res.path}: parameter {n} = {v:.6g} {'m' if kind == 'length' else 'rad'} is implausible "
+                            f"(rule: {rule}): nothing exported")
+
+
+def _verify_joints(robot) -> np.ndarray:
+    """(N_VERIFY_JOINTS, n) joint sets inside the joint limits (within +-pi), seeded."""
+    n = robot.n_joints
+    lim = np.tile([-np.pi, np.pi], (n, 1)) if robot.joint_limits is None else np.asarray(robot.joint_limits, float)
+    lo, hi = np.maximum(lim[:, 0], -np.pi), np.minimum(lim[:, 1], np.pi)
+    return lo + np.random.default_rng(0).uniform(size=(N_VERIFY_JOINTS, n)) * (hi - lo)
+
+
+def _mdh_fk(rows: list, q: np.ndarray) -> np.ndarray:
+    """(N, 4, 4) base . prod Tz(l) Rx(alpha) Ry(beta) Tx(a) Rz(theta + q) Tz(d) . tool of the DH table's rows."""
+    def num(r, k):
+        return float(r[k])
+
+    pose = {r["frame"]: F.T_from_xyz_quat([num(r, k) for k in ("x_m", "y_m", "z_m")],
+                                          [num(r, k) for k in ("qx", "qy", "qz", "qw")])
+            for r in rows if r["frame"] in ("base", "tool")}
+    T = np.broadcast_to(pose["base"], (len(q), 4, 4))
+    for r, qi in zip([r for r in rows if r["frame"].startswith("joint")], q.T):
+        C = F.make_T(None, [0, 0, num(r, "l_m")]) @ F.make_T(F.rot_x(num(r, "alpha_rad")))
+        C = C @ F.make_T(F.rot_y(num(r, "beta_rad"))) @ F.make_T(None, [num(r, "a_m"), 0, 0])
+        T = T @ C @ F.make_T(F.rot_z(num(r, "theta_rad") + qi), np.broadcast_to([0, 0, num(r, "d_m")], (len(q), 3)))
+    return T @ pose["tool"]
+
+
+def _read_back(res, fmt: str, text: str) -> list[tuple[np.ndarray, np.ndarray]]:
+    """[(T from the file (N, 4, 4), T of the calibrated model (N, 4, 4))] of the written text, parsed by the
+    format's reader (xml.etree through kinematics.urdf, csv, yaml)."""
+    if fmt == "ros_tf":
+        doc = yaml.safe_load(text)
+        if set(doc) != {"format", "transforms"}:
+            raise DataError(f"ros_tf: the written YAML has the top-level keys {sorted(doc)}")
+        out = []
+        for item, m in zip(doc["transforms"], mount_transforms(res)):
+            t, r = item["translation"], item["rotation"]
+            args = item["static_transform_publisher"].split(" ")
+            if args[7:] != [m["parent"], m["child"]] or [item["parent_frame"], item["child_frame"]] != args[7:]:
+                raise DataError(f"ros_tf: {m['name']}: the frames read back are {args[7:]}")
+            T_yaml = F.T_from_xyz_quat([t[k] for k in "xyz"], [r[k] for k in "xyzw"])
+            T_args = F.T_from_xyz_quat([float(v) for v in args[:3]], [float(v) for v in args[3:7]])
+            out.append((np.stack([T_yaml, T_args]), np.stack([m["T"], m["T"]])))
+        return out
+    robot = res.robot
+    q = _verify_joints(robot)
+    if fmt == "dh":
+        rows = list(csv.DictReader(io.StringIO("\n".join(ln for ln in text.splitlines() if not ln.startswith("#")))))
+        return [(_mdh_fk(rows, q), robot.forward(q, res.x))]
+    if fmt == "urdf":
+        base, tip = ((robot.meta.get("base_link"), robot.meta.get("tip_link")) if isinstance(robot, URDFChain)
+                     else ("base_link", f"link_{robot.n_joints}"))
+        with tempfile.TemporaryDirectory() as tmp:
+            (Path(tmp) / "model.urdf").write_text(text, encoding="utf-8")
+            back = load_urdf_robot(Path(tmp) / "model.urdf", base, tip)
+        return [(back.flange(q), robot.flange(q, res.x))]
+    doc = yaml.safe_load(text)  # ur_yaml
+    kin = doc.get("kinematics") if isinstance(doc, dict) else None
+    if set(doc) != {"kinematics"} or list(kin) != [*UR_JOINTS, "hash"]:
+        raise DataError(f"ur_yaml: the written YAML reads back as {sorted(doc)} / {list(kin or ())}")
+    raw = robot.meta["raw_origins"]
+    T = np.broadcast_to(np.eye(4), (len(q), 4, 4))
+    for i, name in enumerate(UR_JOINTS):  # fixed joints before joint i (origins = fixed . raw), file origin, Rz(q)
+        o = kin[name]
+        O = F.T_from_xyz_rpy([o["x"], o["y"], o["z"]], [o["roll"], o["pitch"], o["yaw"]])
+        T = T @ (robot.origins[i] @ F.inv_T(raw[i]) @ O) @ F.make_T(F.rot_z(q[:, i]))
+    return [(T @ robot.tail, robot.flange(q, res.x))]
+
+
+def verify_export(res, fmt: str, text: str) -> dict:
+    """Read the written ``text`` back (:func:`_read_back`) and compare its forward kinematics (ros_tf: its
+    transforms) with the calibrated model on :data:`N_VERIFY_JOINTS` joint sets. Returns {joint_sets (0 for
+    ros_tf), max_m, max_rad}; DataError above :data:`VERIFY_TOL_M` / :data:`VERIFY_TOL_RAD`."""
+    pairs = _read_back(res, fmt, text)
+    e = np.concatenate([F.pose_error(a, b) for a, b in pairs])
+    et, er = float(np.linalg.norm(e[:, :3], axis=1).max()), float(np.linalg.norm(e[:, 3:], axis=1).max())
+    if not (et <= VERIFY_TOL_M and er <= VERIFY_TOL_RAD):
+        raise DataError(f"{fmt}: the written file read back differs from the calibrated model by {et:.3g} m, "
+                        f"{er:.3g} rad (tolerance {VERIFY_TOL_M:g} m, {VERIFY_TOL_RAD:g} rad): nothing exported")
+    return {"joint_sets": 0 if fmt == "ros_tf" else N_VERIFY_JOINTS, "max_m": et, "max_rad": er}
+
+
+def export_verified(result, fmt: str, out) -> dict:
     """Write the result (a result folder or file, or a loaded :class:`CalibratedModel` / :class:`HandeyeResult`) in
-    format ``fmt`` (:data:`FORMATS`) to the file ``out`` (atomic); returns ``out``."""
+    format ``fmt`` (:data:`FORMATS`) to the file ``out`` (atomic) after :func:`check_values` and
+    :func:`verify_export` of the text. Returns {out: Path, format, verified: {joint_sets, max_m, max_rad}}."""
     if fmt not in FORMATS:
         raise ConfigError(f"unknown export format {fmt!r} (known: {', '.join(FORMATS)})")
     res = result if isinstance(result, (CalibratedModel, HandeyeResult)) else load_result(result)
-    return write_text_atomic(out, FORMATS[fmt].text(res))
+    check_values(res)
+    text = FORMATS[fmt].text(res)
+    verified = verify_export(res, fmt, text)
+    return {"out": write_text_atomic(out, text), "format": fmt, "verified": verified}
 
 
-__all__ = ["FORMATS", "ExportFormat", "FormatNotSupportedError", "HandeyeResult", "dh_table_text", "export",
+def export(result, fmt: str, out) -> Path:
+    """:func:`export_verified`, returning the path written."""
+    return export_verified(result, fmt, out)["out"]
+
+
+def verified_text(v: dict) -> str:
+    """One line of :func:`verify_export`'s figures for messages."""
+    if not v["joint_sets"]:
+        return f"read back and verified: max {v['max_m']:.1g} m, {v['max_rad']:.1g} rad from the result's transforms"
+    return (f"read back and verified on {v['joint_sets']} joint sets: max {v['max_m']:.1g} m, {v['max_rad']:.1g} rad "
+            "from the calibrated model")
+
+
+__all__ = ["FORMATS", "ExportFormat", "FormatNotSupportedError", "HandeyeResult", "check_values", "dh_table_text",
+           "export", "export_verified", "verified_text", "verify_export",
            "find_result", "load_result", "mount_transforms", "read_handeye", "ros_tf_text", "static_transform_args",
            "ur_yaml_text", "urdf_text"]

@@ -23,6 +23,8 @@ import shutil
 from dataclasses import dataclass
 from pathlib import Path
 
+import yaml
+
 from ..config import load_yaml
 from ..errors import ConfigError
 from ..serialize import write_text_atomic
@@ -101,8 +103,20 @@ def _empty_target_dir(dest: Path) -> None:
                           "(nothing was written)")
 
 
-def _set_line(text: str, key: str, value: str) -> str:
-    """``text`` with its top-level ``key:`` line set to ``key: value`` (comment kept), or the line appended."""
+def _flow(value) -> str:
+    """``value`` (str, number, list, dict) as one line of YAML (PyYAML's emitter, flow style, strings double-quoted:
+    quotes, ``#``, ``: `` and line breaks escaped, never a new key)."""
+    out = yaml.safe_dump(value, default_flow_style=True, default_style='"', width=float("inf"), allow_unicode=False)
+    out = out.rstrip("\n")
+    if "\n" in out:  # the emitter kept it on one line above; a change there must not go unnoticed
+        raise ConfigError(f"init: cannot write {value!r} on one YAML line")
+    return out
+
+
+def _set_line(text: str, key: str, value) -> str:
+    """``text`` with its top-level ``key:`` line set to ``key: <value as YAML>`` (:func:`_flow`; comment kept), or
+    the line appended."""
+    value = _flow(value)
     pat = re.compile(rf"^{re.escape(key)}:[^\n#]*(#[^\n]*)?$", re.M)
     m = pat.search(text)
     if m is None:
@@ -149,26 +163,50 @@ def init_cell(dest, name: str | None = None, urdf=None, base_link: str | None = 
             raise ConfigError(f"init --urdf {urdf}: needs a .urdf file and a URDF cell to start from (--from ur5e)")
         base, tip, n, mid, note = _urdf_chain_guess(robot_src, base_link, tip_link)
         notes.append(note)
-        text = _set_line(text, "urdf", f"{{base_link: {base}, tip_link: {tip}}}")
+        text = _set_line(text, "urdf", {"base_link": base, "tip_link": tip})
         if len((doc.get("poses") or {}).get("center") or ()) != n:  # the cell's own joint sets fit another arm
             text = _urdf_poses(text, n, mid)
         text = _set_line(text, "name", f"{robot_src.stem}_cell")
+    else:
+        base = tip = None
         notes.append("edit mounts (where the board and the camera are) and poses.center/spread so that the camera "
                      "sees the board, then check with: vision-calib identifiability " + str(dest / "scene.yaml"))
     robot_ref = f"robot/{robot_src.name}"
-    copy_file(robot_src, dest / robot_ref)
     text = _set_line(text, "robot", robot_ref)
     if doc.get("target"):
         target_src = (scene_file.parent / str(doc["target"])).resolve()
         if not target_src.is_file():  # a shipped scene naming a shipped target by its folder
             target_src = targets_dir() / Path(str(doc["target"])).name
-        copy_file(target_src, dest / "target.yaml")
         text = _set_line(text, "target", "target.yaml")
     head = (f"# Your cell, started from the shipped scene {st.scene!r} by `vision-calib init` ({st.what}).\n"
             "# Every file it names is in this folder: edit them in place. Keys you edit are commented.\n")
-    entry = write_text_atomic(dest / "scene.yaml", head + _comment_keys(text))
+    text = head + _comment_keys(text)
+    want = {"robot": robot_ref, **({"target": "target.yaml"} if doc.get("target") else {}),
+            **({"urdf": {"base_link": base, "tip_link": tip}, "name": f"{robot_src.stem}_cell"} if urdf is not None
+               else {})}
+    _check_scene_text(text, set(doc) | set(want), want, "scene.yaml (not written)")
+    copy_file(robot_src, dest / robot_ref)
+    if doc.get("target"):
+        copy_file(target_src, dest / "target.yaml")
+    entry = write_text_atomic(dest / "scene.yaml", text)
+    _check_scene_text(load_yaml(entry), set(doc) | set(want), want, str(entry))  # as the scene loader reads it
     notes.insert(0, f"wrote {entry} (+ {robot_ref}{', target.yaml' if doc.get('target') else ''})")
     return {"folder": str(dest), "entry": str(entry), "notes": notes}
+
+
+def _check_scene_text(text, keys: set, want: dict, where: str) -> None:
+    """Read the scene text (or its loaded dict) back: ConfigError naming ``where`` unless it loads as YAML, its
+    top-level keys are ``keys`` and the values of ``want`` are there as written."""
+    try:
+        doc = yaml.safe_load(text) if isinstance(text, str) else text
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"init: {where} does not load as YAML ({exc})") from None
+    if not isinstance(doc, dict) or set(doc) != keys:
+        raise ConfigError(f"init: {where} reads back with the keys {sorted(doc) if isinstance(doc, dict) else doc!r}, "
+                          f"expected {sorted(keys)}")
+    bad = [k for k, v in want.items() if doc.get(k) != v]
+    if bad:
+        raise ConfigError(f"init: {where}: {bad[0]} reads back as {doc.get(bad[0])!r}, written {want[bad[0]]!r}")
 
 
 def _urdf_chain_guess(path: Path, base_link, tip_link):
