@@ -66,18 +66,18 @@ def _holdout(after_mm, mounts_mm, mounts_change):
 
 
 def test_the_calibrated_robot_must_beat_the_mounts_only_calibration_on_held_out_poses():
-    from vision_calib.experiment.holdout import _decide
+    from vision_calib.experiment.holdout import holdout_decision
 
-    ok = _decide(_holdout(0.1, 0.8, (-0.8, -0.2)), [])
+    ok = holdout_decision(_holdout(0.1, 0.8, (-0.8, -0.2)), [])
     assert ok["ok"] and "against the mounts-only calibration" in ok["reason"]
-    worse = _decide(_holdout(0.3, 0.2, (0.02, 0.17)), [])
+    worse = holdout_decision(_holdout(0.3, 0.2, (0.02, 0.17)), [])
     assert not worse["ok"] and "worse in position than the nominal robot with only its mounts" in worse["reason"]
-    same = _decide(_holdout(0.2, 0.2, (-0.05, 0.05)), [])
+    same = holdout_decision(_holdout(0.2, 0.2, (-0.05, 0.05)), [])
     assert not same["ok"] and "does not predict held-out poses better than the nominal robot with only its mounts" \
         in same["reason"] and "more poses" in same["reason"]
     plain = _holdout(0.2, 0.2, (-0.05, 0.05))
     del plain["mounts_only"]  # no baseline (a base set of mounts only, or of robot parameters only)
-    assert _decide(plain, [])["ok"]
+    assert holdout_decision(plain, [])["ok"]
 
 
 @pytest.mark.slow

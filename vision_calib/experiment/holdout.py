@@ -272,7 +272,7 @@ def holdout_validation(setup: Setup, meas: Measurements, method: str, residual: 
         pred["heldout_position_rms_mm"] = rms_pred
         pred["ratio_observed_to_predicted"] = obs / rms_pred if rms_pred > 0 else None
         out["predicted"] = pred
-    out["decision"] = _decide(out, fails)
+    out["decision"] = holdout_decision(out, fails)
     return out
 
 
@@ -291,8 +291,9 @@ def _mounts_only(fsetup: Setup, params, train: Measurements, method: str, residu
     return res.identified if res.converged and np.all(np.isfinite(res.identified)) else None
 
 
-def _decide(h: dict, fails: list[str]) -> dict:
-    """{ok, reason}: see the module docstring."""
+def holdout_decision(h: dict, fails: list[str]) -> dict:
+    """{ok, reason} of a ``holdout`` block ``h`` (its overall errors, intervals and ``mounts_only``) and the
+    folds' identification failures ``fails``: see the module docstring."""
     if fails:
         return {"ok": False, "reason": "the k-fold training sets cannot identify the free parameters: "
                                        + "; ".join(fails[:3])}
@@ -399,5 +400,5 @@ def holdout_lines(h: dict | None) -> list[str]:
     return lines
 
 
-__all__ = ["DEFAULT_FOLDS", "fold_indices", "error_stats", "rms_change_interval", "holdout_validation", "holdout_failure", "holdout_lines",
+__all__ = ["DEFAULT_FOLDS", "fold_indices", "holdout_decision", "error_stats", "rms_change_interval", "holdout_validation", "holdout_failure", "holdout_lines",
            "predicted_accuracy", "tool_point_supported", "flagged_labels"]
