@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from vision_calib.experiment.simulate import run_simulation
-from vision_calib.experiment.steps import UNEXPLAINED_CHI2_DOF, inconsistency_failure
+from vision_calib.experiment.steps import inconsistency_failure
 from vision_calib.rig import load_scene
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -37,11 +37,11 @@ def test_h4_fifteen_single_frame_poses_give_a_better_robot_with_honest_std():
     assert axis_failed >= 1
 
 
-def _ident(chi2_dof, verdict):
+def _ident(chi2_dof, verdict, adequacy="too large"):
     check = None if verdict is None else {"verdict": verdict, "methods": ["igm", "lse"], "chi2": 300.0, "dof": 19,
                                           "p_value": 1e-50, "max_abs_z": 2.8, "worst": "h4.L"}
     return SimpleNamespace(method_check=check, problem=SimpleNamespace(n_obs=15),
-                           adequacy={"chi2_dof": chi2_dof, "expected_chi2_dof": (0.3, 2.2),
+                           adequacy={"chi2_dof": chi2_dof, "expected_chi2_dof": (0.3, 2.2), "verdict": adequacy,
                                      "worst_poses": [{"label": "014"}, {"label": "003"}]},
                            prepared={"warning": "the measured rotations do not share one fixed rotation axis"})
 
@@ -53,8 +53,8 @@ def test_inconsistency_needs_both_a_misfit_and_a_method_disagreement():
         assert part in f["message"]
     assert inconsistency_failure(_ident(193.0, "agree")) is None  # a misfit both methods agree on: a warning
     assert inconsistency_failure(_ident(193.0, None)) is None  # no second method
-    assert inconsistency_failure(_ident(UNEXPLAINED_CHI2_DOF * 0.9, "disagree")) is None
-    assert inconsistency_failure(_ident(float("nan"), "disagree")) is None
+    assert inconsistency_failure(_ident(1.5, "disagree", "consistent")) is None  # a disagreement alone: a warning
+    assert inconsistency_failure(_ident(float("nan"), "disagree", "not available")) is None
 
 
 def _holdout(after_mm, mounts_mm, mounts_change):
