@@ -91,3 +91,23 @@ def test_a_robot_the_model_cannot_represent_is_not_written_at_twelve_poses():
         reason = rep["holdout"]["decision"]["reason"]
         assert not rep["holdout"]["decision"]["ok"] and "only its mounts calibrated" in reason
         assert rep["verdict"]["status"] == "failed" and not rep["verdict"]["usable"]
+
+
+def test_registered_validation_error_removes_a_rigid_frame_offset_only():
+    """Evaluation.position_rms_registered_mm: a model whose positions are the truth's moved rigidly (another base
+    frame) has a large raw error and none left after registration; a non-rigid error stays."""
+    from vision_calib import frames as F
+    from vision_calib.rig.base import Evaluation
+
+    rng = np.random.default_rng(3)
+    Q = rng.uniform(-0.1, 0.1, size=(30, 3))
+    R, t = F.so3_exp(np.array([0.01, -0.02, 0.015])), np.array([0.002, -0.001, 0.003])
+    err = np.zeros((30, 6))
+    err[:, :3] = Q @ R.T + t - Q
+    rigid = Evaluation(Q, err)
+    assert rigid.to_dict()["position_rms_mm"] > 2.0 and rigid.position_rms_registered_mm < 1e-9
+    bend = err.copy()
+    bend[:, 2] += 1e-3 * (Q[:, 0] / 0.1) ** 2  # up to 1 mm of bending no rigid motion explains
+    reg = Evaluation(Q, bend).position_rms_registered_mm
+    assert 0.1 < reg < 1.0
+    assert np.isnan(Evaluation(Q[:2], err[:2]).position_rms_registered_mm)
