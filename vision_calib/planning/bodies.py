@@ -55,6 +55,8 @@ TRIPOD_CAMERA_RADIUS_M = 0.05
 #: a pair of bodies closer than the clearance in at least this fraction of random joint sets is not checked
 ALWAYS_NEAR_FRACTION = 0.99
 ALWAYS_NEAR_SAMPLES = 1000
+#: joint sets of the scene's own sampler on which no checked self pair may be closer than the clearance
+OWN_POSES = 500
 #: the side [m] of the box that stands for a plane in FCL (its distance queries to a half-space are unreliable)
 PLANE_BOX_M = 20.0
 
@@ -370,21 +372,44 @@ def build_model(scene, setup, rng: np.random.Generator | None = None) -> RobotMo
     disabled, keep = [], []
     if cand:
         rng = rng or np.random.default_rng(0)
-        q = setup.generic_poses(rng, ALWAYS_NEAR_SAMPLES)
-        a, b = body_hulls(bodies, setup.link_frames(q))
         r = np.array([bd.hull_r for bd in bodies])
         P = np.array(cand)
-        d = segment_distance(a[:, P[:, 0]], b[:, P[:, 0]], a[:, P[:, 1]], b[:, P[:, 1]]) - r[P[:, 0]] - r[P[:, 1]]
+
+        def pair_bounds(q):
+            a, b = body_hulls(bodies, setup.link_frames(q))
+            return segment_distance(a[:, P[:, 0]], b[:, P[:, 0]], a[:, P[:, 1]], b[:, P[:, 1]]) - r[P[:, 0]] - r[P[:, 1]]
+
+        d = pair_bounds(setup.generic_poses(rng, ALWAYS_NEAR_SAMPLES))
         near = np.mean(d < ps.clearance_m, axis=0)
-        for (i, j), f in zip(cand, near):
+        # the scene's own poses (its random sampler, target in view) are poses the arm takes: a pair of capsules
+        # closer than the clearance there is a modelling error of the primitives, not a collision
+        own = own_poses(scene, setup, rng)
+        d_own = pair_bounds(own) if own is not None else None
+        for k, ((i, j), f) in enumerate(zip(cand, near)):
             if f >= ALWAYS_NEAR_FRACTION:
                 disabled.append((bodies[i].name, bodies[j].name,
                                  f"closer than the clearance in {100 * f:.0f} % of {ALWAYS_NEAR_SAMPLES} random joint "
                                  "sets (structural neighbours)"))
+            elif d_own is not None and np.any(d_own[:, k] < ps.clearance_m):
+                disabled.append((bodies[i].name, bodies[j].name,
+                                 f"closer than the clearance in {int(np.sum(d_own[:, k] < ps.clearance_m))} of "
+                                 f"{len(own)} of the scene's own random poses (the primitive shapes overlap where the "
+                                 "arm does not: give planning.link_radii or URDF collision elements)"))
             else:
                 keep.append((i, j))
     return RobotModel(tuple(bodies), tuple(obstacles), obstacle_pairs, np.array(keep, int).reshape(-1, 2), source,
                       tuple(disabled), tuple(notes))
+
+
+def own_poses(scene, setup, rng: np.random.Generator) -> np.ndarray | None:
+    """(OWN_POSES, n) joint sets of the scene's own random pose sampler (``sample_poses``: its region, target in
+    view; what ``simulate`` draws its random identification and validation poses from), None when it finds none."""
+    from ..errors import VisionCalibError
+
+    try:
+        return setup.sample_poses(rng, OWN_POSES)
+    except VisionCalibError:
+        return None
 
 
 __all__ = ["Body", "RobotModel", "build_model", "segment_distance", "body_hulls", "DEFAULT_LINK_RADII_M",

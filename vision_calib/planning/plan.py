@@ -8,7 +8,10 @@ Steps of a plan (figures and seeds in ``plan.json``):
    point (flange / nacelle) lies in a workspace box, or joint sets within +-delta of a start joint set;
 2. screening (:func:`screen`): reachable (joint limits; H4: the inverse model closes), the target measurable
    (:mod:`.view`), collision-free with the clearance (:mod:`.collision`; arms only);
-3. D-optimal selection of N poses for the base parameters at the cell's noise (:mod:`.design`);
+3. selection of N poses (:mod:`.design`): D-optimal for the base parameters under the image measurement (each
+   candidate's pose covariance from the camera model, the target's corners and the corner noise, for the frames
+   the user records), then a Fedorov exchange on the predicted mean squared position error over the validation
+   poses (the scene's validation sampler, :data:`CRITERION_POSES` of them, or ``--validate-on``);
 4. the tour (:mod:`.tour`): short in joint-space travel time, its moves checked for collisions;
 5. clearance, view figures and leverage per pose, identifiability, and the predicted accuracy of the plan against
    random measurable poses (:mod:`.predict`);
@@ -46,6 +49,10 @@ def no_collision_note(setup) -> str:
             f"({setup.reach_check}) only")
 #: random designs whose D criterion the plan's is compared with (D-efficiency)
 EFFICIENCY_DRAWS = 20
+#: validation poses drawn from the scene's validation sampler for the design criterion
+CRITERION_POSES = 200
+#: random candidates, beside the D pool, among which the validation criterion's exchange swaps poses
+EXCHANGE_RANDOM = 600
 
 
 @dataclass(frozen=True)
@@ -205,11 +212,14 @@ def collision_setup(scene: Scene):
     """(collision model, checker) of the scene's arm, (None, None) for a kind without one (H4)."""
     if not isinstance(scene.setup, ArmFrames):
         return None, None
-    from .bodies import build_model
+    from .bodies import build_model, own_poses
     from .collision import CollisionChecker
 
     model = build_model(scene, scene.setup)
-    return model, CollisionChecker(model, scene.planning.clearance_m)
+    checker = CollisionChecker(model, scene.planning.clearance_m)
+    own = own_poses(scene, scene.setup, np.random.default_rng(5))
+    checker.fixed = checker.mark_fixed(scene.setup.link_frames(own)) if own is not None else None
+    return model, checker
 
 
 def _pose_rows(scene, ids, poses, joints, figs, clear, lev) -> list[dict]:
@@ -266,11 +276,39 @@ def _settings(scene: Scene, source: CandidateSource, n_candidates: int, seed: in
                       "sigma_deg": float(np.degrees(scene.measurement.sigma_r_rad))}}
 
 
+def validation_poses(scene: Scene, validate_on=None, seed: int = 0) -> tuple[np.ndarray, str]:
+    """(validation poses (V, .) of the design criterion, what they are): ``validate_on`` (a poses.csv path, or
+    commanded poses (V, .)) or :data:`CRITERION_POSES` poses of the scene's validation sampler."""
+    from ..rig.scene import scene_poses
+
+    if validate_on is None:
+        V = scene_poses(scene, np.random.default_rng([int(seed), 31]), CRITERION_POSES
+                        if scene.validation.kind == "random" else None, which="validation")
+        return V, f"{len(V)} poses of the scene's validation sampler ({scene.validation.kind})"
+    if isinstance(validate_on, (str, Path)):
+        ids, _, V, _ = read_pose_list(scene, validate_on)
+        return V, f"the {len(ids)} poses of {validate_on}"
+    V = np.asarray(validate_on, float)
+    return V, f"{len(V)} given poses"
+
+
+def _select(scene, info, poses, n, rng, W, candidates=None) -> np.ndarray:
+    """D-optimal start (``design.select``), then the exchange on the validation criterion W among the D pool and
+    :data:`EXCHANGE_RANDOM` random candidates (indices into ``poses``)."""
+    start = D.select(scene, info, poses, n, rng, candidates=candidates)
+    sub = np.arange(info.A.shape[0]) if candidates is None else np.asarray(candidates, int)
+    pool = sub[D.pool_indices(info.A[sub], rng)]
+    extra = sub if len(sub) <= EXCHANGE_RANDOM else rng.choice(sub, EXCHANGE_RANDOM, replace=False)
+    return D.refine_for_validation(info.A, start, W, np.union1d(np.union1d(pool, extra), start))
+
+
 def plan_cell(scene, n_poses: int, out_dir=None, seed: int = 0, n_candidates: int = DEFAULT_CANDIDATES,
-              source: CandidateSource | None = None, draws: int = DRAWS, counts=None, plots: bool = True) -> dict:
+              source: CandidateSource | None = None, draws: int = DRAWS, counts=None, plots: bool = True,
+              frames: int | None = None, validate_on=None) -> dict:
     """Plan ``n_poses`` poses for the scene (module docstring); writes the outputs into ``out_dir`` when given and
     returns plan.json's content. Seeded: the same seed gives the same plan. draws: Monte Carlo draws of the
-    predicted accuracy (0: none); counts: its pose counts (default N / 2, N, 2 N)."""
+    predicted accuracy (0: none); counts: its pose counts (default N / 2, N, 2 N); frames: frames the user records
+    per pose (default the scene's); validate_on: the validation poses (:func:`validation_poses`)."""
     t0 = time.perf_counter()
     scene = _load(scene)
     setup = scene.setup
@@ -279,6 +317,8 @@ def plan_cell(scene, n_poses: int, out_dir=None, seed: int = 0, n_candidates: in
     if isinstance(n_poses, bool) or int(n_poses) < 1:
         raise ConfigError(f"--poses: expected a positive number of poses, got {n_poses!r}")
     n = int(n_poses)
+    frames = int(frames or scene.measurement.frames)
+    V, v_what = validation_poses(scene, validate_on, seed)
     cand = candidate_poses(scene, source, n_candidates, rng)
     model, checker = collision_setup(scene)
     scr = screen(scene, cand, checker)
@@ -290,8 +330,9 @@ def plan_cell(scene, n_poses: int, out_dir=None, seed: int = 0, n_candidates: in
     pool = cand[kept]
     sub = np.arange(len(pool)) if len(pool) <= D.MAX_INFO else np.sort(rng.choice(len(pool), D.MAX_INFO, replace=False))
     base, rep0 = D.base_mask(scene, pool[sub], rng)
-    info = D.information(scene, pool[sub], base, rep0)
-    pick = D.select(scene, info, pool[sub], n, rng)
+    info = D.information(scene, pool[sub], base, rep0, frames)
+    W = D.validation_weight(D.validation_blocks(scene, V, base))
+    pick = _select(scene, info, pool[sub], n, rng, W)
     chosen = sub[pick]
     P = pool[chosen]
     joints = setup.joints(P, setup.params.nominal)
@@ -308,20 +349,21 @@ def plan_cell(scene, n_poses: int, out_dir=None, seed: int = 0, n_candidates: in
     A_sel = info.A[pick]
     lev = D.leverages(A_sel, D.info_matrix(A_sel))
     design = _efficiency(info.A, pick, rng, n)
-    rep = D.identifiability(scene, P, base)
+    rep = D.identifiability(scene, P, base, frames)
     n_min = -(-info.A.shape[2] // info.A.shape[1])
     cts = _counts(n, n_min, len(pool), counts)
     memo = {n: P}
 
     def plan_of_count(c):
         if c not in memo:
-            memo[c] = pool[sub[D.select(scene, info, pool[sub], c, np.random.default_rng([int(seed), 27, c]))]]
+            memo[c] = pool[sub[_select(scene, info, pool[sub], c, np.random.default_rng([int(seed), 27, c]), W)]]
         return memo[c]
 
     t_pred = time.perf_counter()
     pred = None
     if draws:  # 0: no prediction (tests)
-        pred = predicted_accuracy(scene, plan_of_count, pool, cts, base, draws, seed)
+        pred = predicted_accuracy(scene, plan_of_count, pool, cts, base, draws, seed, frames=frames,
+                                  validation=None if validate_on is None else V)
         pred["seconds"] = time.perf_counter() - t_pred
     tb = _tour_block(tour, ids, joints)
     warnings = []
@@ -347,12 +389,20 @@ def plan_cell(scene, n_poses: int, out_dir=None, seed: int = 0, n_candidates: in
         "settings": _settings(scene, source, len(cand), seed),
         "screening": {**scr["counts"], "seconds": scr["seconds"], "rate_per_s": scr["rate_per_s"],
                       "fcl_queries": scr["fcl_queries"]},
-        "collision_model": None if model is None else model.to_dict(),
+        "collision_model": None if model is None else {**model.to_dict(), "clearance_leaves_out": checker.fixed},
         "n_poses": n,
         "poses": _pose_rows(scene, ids, P, joints, figs, clear, lev),
         "tour": tb,
-        "design": {**design, "criterion": "D (log det of the base parameters' information at the cell's noise, "
-                                          "scaled units)", "base_parameters": list(info.names),
+        "design": {**design, "criterion": "D-optimal start (log det of the base parameters' information under the "
+                                          "image measurement, scaled units), then exchange on the predicted validation "
+                                          "position RMS sqrt(tr(W M^-1))", "validation_poses": v_what,
+                   "predicted_validation_rms": {
+                       "plan": D.validation_rms_quantiles(info.A, pick, W, rng),
+                       "random": _random_quantiles(info.A, n, W, rng),
+                       "of": "first order: the validation position RMS over noise draws (median, 95th percentile) "
+                             "of the plan's poses and, median over random sets of as many screened candidates, of "
+                             "random poses"},
+                   "frames": frames, "base_parameters": list(info.names),
                    "pool": f"{len(sub)} screened candidates; exchange on the {D.POOL_TOP} of largest leverage + "
                            f"{D.POOL_RANDOM} random"},
         "identifiability": _ident_block(rep, setup, base),
@@ -366,6 +416,14 @@ def plan_cell(scene, n_poses: int, out_dir=None, seed: int = 0, n_candidates: in
 
         write_plan(out_dir, scene, plan, P, joints, model, plots=plots)
     return plan
+
+
+def _random_quantiles(A: np.ndarray, n: int, W: np.ndarray, rng: np.random.Generator) -> dict:
+    """Median over EFFICIENCY_DRAWS random designs of n of the blocks A of each first-order RMS quantile."""
+    q = [D.validation_rms_quantiles(A, rng.choice(A.shape[0], n, replace=False), W, rng, 1000)
+         for _ in range(EFFICIENCY_DRAWS)]
+    return {k: (float(np.median([v[k] for v in q if v[k] is not None])) if any(v[k] is not None for v in q) else None)
+            for k in ("median_mm", "p95_mm")}
 
 
 def _ident_block(rep, setup, base) -> dict:

@@ -174,9 +174,8 @@ def plan_html(res: dict, out_dir) -> str:
     pred = res.get("predicted_accuracy")
     out.append("<h2>Predicted accuracy</h2>")
     if pred:
-        out.append(f"<p>identify-synthetic Monte Carlo at the cell's noise (pose {pred['noise']['sigma_mm']:.3g} mm, "
-                   f"{pred['noise']['sigma_deg']:.3g} deg per component, the scene's measurement.sigma_mm / sigma_deg; "
-                   f"method {esc(pred['method'])}): position error of the identified robot against the truth on "
+        out.append(f"<p>identify-synthetic Monte Carlo under the image measurement ({esc(pred['noise']['model'])}; "
+                   f"{pred['noise']['frames']} frames per pose; method {esc(pred['method'])}): position error of the identified robot against the truth on "
                    f"{esc(pred['validation'])}, pooled over {pred['draws']} draws "
                    f"({esc(pred['seeds'])}). Random sets: new measurable collision-free poses each draw.</p>")
         out.append(_acc_table(pred, "your list (usable poses)" if check else None))
