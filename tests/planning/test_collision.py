@@ -163,3 +163,21 @@ obstacles: [{{kind: plane, xyz: [0, 0, -0.01]}}, {{kind: box, name: block, size:
     ok, why = ck.screen(sc.setup.link_frames(q))
     assert ok[0] and not ok[1] and why[1][1] == "block"
     assert ck.n_fcl > n0  # boxes: decided by FCL (their hulls are not exact)
+
+
+@pytest.mark.parametrize("old, new, needle", [
+    ('<origin xyz="0 0 0.2"/><geometry><box', '<origin xyz="a b c"/><geometry><box', "link 'l1' <collision>: origin xyz"),
+    ('<sphere radius="0.03"/>', '<sphere radius="0"/>', "link 'tip' <collision>: sphere radius"),
+    ('<box size="0.08 0.08 0.4"/>', '<box size="0.08 nan 0.4"/>', "link 'l1' <collision>: box size"),
+    ('<cylinder radius="0.08" length="0.1"/>', '<cylinder radius="0.08"/>', "link 'base' <collision>: cylinder length"),
+    ('<origin xyz="0 0 0.2"/><geometry><box', '<origin xyz="0 0 0.2" rpy="0 90 0"/><geometry><box',
+     "degrees read as radians"),
+])
+def test_bad_urdf_collision_numbers_are_named_errors(tmp_path, old, new, needle):
+    from vision_calib.errors import ConfigError
+    from vision_calib.planning.bodies import urdf_collisions
+
+    assert old in URDF
+    (tmp_path / "two.urdf").write_text(URDF.replace(old, new, 1))
+    with pytest.raises(ConfigError, match=needle.replace("(", r"\(")):
+        urdf_collisions(tmp_path / "two.urdf", ("base", "l1", "l2"))

@@ -162,13 +162,37 @@ class RobotModel:
 
 
 # ----------------------------------------------------------------------------------------------- URDF geometry
-def _origin(el) -> np.ndarray:
+def _numbers(text, n: int | None, where: str, what: str, positive: bool = False) -> tuple[float, ...]:
+    """The whitespace-separated numbers of a URDF attribute: ConfigError naming ``where`` (file, link) and ``what``
+    when they do not read, are not ``n`` many, are not finite or (``positive``) not > 0."""
+    from ..errors import ConfigError
+
+    try:
+        v = tuple(float(t) for t in str(text).split())
+    except ValueError:
+        raise ConfigError(f"{where}: {what} {text!r} is not a list of numbers") from None
+    if n is not None and len(v) != n:
+        raise ConfigError(f"{where}: {what} {text!r}: expected {n} numbers, got {len(v)}")
+    if not all(np.isfinite(v)):
+        raise ConfigError(f"{where}: {what} {text!r} is not finite")
+    if positive and not all(x > 0 for x in v):
+        raise ConfigError(f"{where}: {what} {text!r}: sizes must be > 0")
+    return v
+
+
+def _origin(el, where: str = "URDF") -> np.ndarray:
     from scipy.spatial.transform import Rotation
+
+    from ..errors import ConfigError
 
     T = np.eye(4)
     if el is not None:
-        T[:3, 3] = [float(v) for v in el.get("xyz", "0 0 0").split()]
-        T[:3, :3] = Rotation.from_euler("xyz", [float(v) for v in el.get("rpy", "0 0 0").split()]).as_matrix()
+        T[:3, 3] = _numbers(el.get("xyz", "0 0 0"), 3, where, "origin xyz")
+        rpy = _numbers(el.get("rpy", "0 0 0"), 3, where, "origin rpy")
+        if max(abs(a) for a in rpy) > 2 * np.pi + 0.1:
+            raise ConfigError(f"{where}: origin rpy {el.get('rpy')!r} is beyond +-2 pi: URDF angles are in radians "
+                              "(degrees read as radians?)")
+        T[:3, :3] = Rotation.from_euler("xyz", rpy).as_matrix()
     return T
 
 
@@ -182,7 +206,7 @@ def urdf_collisions(path: Path, chain_links: tuple[str, ...]) -> tuple[dict, lis
         if j.get("type") != "fixed":
             continue
         p, c = j.find("parent").get("link"), j.find("child").get("link")
-        T = _origin(j.find("origin"))
+        T = _origin(j.find("origin"), f"{path}: joint {j.get('name')!r}")
         fixed.setdefault(p, []).append((c, T))
         fixed.setdefault(c, []).append((p, np.linalg.inv(T)))
     where = {}  # link -> (chain frame index, T_frame_link)
@@ -208,17 +232,21 @@ def urdf_collisions(path: Path, chain_links: tuple[str, ...]) -> tuple[dict, lis
         k, T_fl = where[name]
         for c in cols:
             g = c.find("geometry")
-            T = T_fl @ _origin(c.find("origin"))
+            at = f"{path}: link {name!r} <collision>"
+            T = T_fl @ _origin(c.find("origin"), at)
             el = None if g is None else next(iter(g), None)
             if el is None:
                 continue
             if el.tag == "box":
-                dims = tuple(float(v) for v in el.get("size").split())
+                dims = _numbers(el.get("size"), 3, at, "box size", positive=True)
                 out.setdefault(k, []).append((name, "box", dims, T))
             elif el.tag in ("cylinder", "capsule"):
-                out.setdefault(k, []).append((name, el.tag, (float(el.get("radius")), float(el.get("length"))), T))
+                dims = (_numbers(el.get("radius"), 1, at, f"{el.tag} radius", positive=True)[0],
+                        _numbers(el.get("length"), 1, at, f"{el.tag} length", positive=True)[0])
+                out.setdefault(k, []).append((name, el.tag, dims, T))
             elif el.tag == "sphere":
-                out.setdefault(k, []).append((name, "sphere", (float(el.get("radius")),), T))
+                out.setdefault(k, []).append((name, "sphere", _numbers(el.get("radius"), 1, at, "sphere radius",
+                                                                       positive=True), T))
             else:
                 out.setdefault(k, []).append((name, "mesh", (), T))
     return out, notes
@@ -333,8 +361,12 @@ def build_model(scene, setup, rng: np.random.Generator | None = None) -> RobotMo
         cols, more = urdf_collisions(robot_file, setup.link_names()[:-1])
         if cols:
             bodies, source = [], f"URDF collision elements ({robot_file.name})"
+            bare = []
             for k in range(n + 1):
                 items = cols.get(k, [])
+                if not items and k < n:  # no <collision> on this link: its primitive capsule, named
+                    bodies.append(prim[k])
+                    bare.append(prim[k].name)
                 if any(s == "mesh" for _, s, _, _ in items):
                     meshes = sorted({lk for lk, s, _, _ in items if s == "mesh"})
                     notes.append(f"{', '.join(meshes)}: mesh collision geometry is not read"
@@ -356,6 +388,9 @@ def build_model(scene, setup, rng: np.random.Generator | None = None) -> RobotMo
                         bodies.append(segment_body(nm, k, T[:3, 3] - ax, T[:3, 3] + ax, dims[0]))
                     else:
                         bodies.append(shape_body(nm, k, shape, dims, T))
+            if bare:
+                notes.append(f"{', '.join(bare)}: no collision element in the URDF: the primitive capsules are used "
+                             "(checked: " + ", ".join(b.name for b in bodies) + ")")
             notes += more
     tool_r = DEFAULT_TOOL_RADIUS_M if ps.tool_radius_m is None else ps.tool_radius_m
     target = None
