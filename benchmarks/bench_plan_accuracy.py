@@ -13,14 +13,11 @@ RMS (first order, median over noise draws) over the simulated one. Image runs ta
 from __future__ import annotations
 
 import argparse
-import csv
-import io
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from vision_calib.experiment.simulate import run_simulation
 from vision_calib.planning.plan import plan_cell
@@ -30,22 +27,6 @@ from vision_calib.rig import SCENES_DIR
 def seeds(text: str) -> list[int]:
     a, _, b = text.partition("-")
     return list(range(int(a), int(b) + 1)) if b else [int(v) for v in text.split(",")]
-
-
-def _pose_scene(plan_dir: Path, name: str, joints: np.ndarray) -> Path:
-    """A copy of the plan's simulate_plan.yaml whose poses are ``joints`` (N, n) rad (a pose file beside it)."""
-    buf = io.StringIO()
-    w = csv.writer(buf)
-    w.writerow(["pose_id"] + [f"q{j + 1}" for j in range(joints.shape[1])])
-    for i, q in enumerate(joints):
-        w.writerow([f"{i:03d}"] + [repr(float(v)) for v in q])
-    (plan_dir / f"{name}.csv").write_text(buf.getvalue())
-    doc = yaml.safe_load((plan_dir / "simulate_plan.yaml").read_text())
-    doc["poses"] = {**doc["poses"], "path": f"{name}.csv"}  # the region keys stay: the same validation poses
-    doc["name"] = name
-    p = plan_dir / f"{name}.yaml"
-    p.write_text(yaml.safe_dump(doc, sort_keys=False))
-    return p
 
 
 def _run(scene_path, seed, frames, n_poses=None) -> dict:

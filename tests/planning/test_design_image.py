@@ -47,7 +47,7 @@ def test_add_gains_match_direct_inverses():
     A, W = _blocks(rng)
     sel = np.arange(5)
     Mi = np.linalg.inv(D.info_matrix(A, sel))
-    g = D._add_gains(A[10:20], Mi, W)
+    g = D.add_gains(A[10:20], Mi, W)
     direct = [np.trace(W @ Mi) - np.trace(W @ np.linalg.inv(D.info_matrix(A, np.r_[sel, k]))) for k in range(10, 20)]
     np.testing.assert_allclose(g, direct, rtol=1e-8)
 

@@ -222,7 +222,7 @@ def validation_rms_quantiles(A: np.ndarray, idx, W: np.ndarray, rng: np.random.G
     return {"median_mm": float(np.median(r)), "p95_mm": float(np.percentile(r, 95))}
 
 
-def _add_gains(A: np.ndarray, Mi: np.ndarray, W: np.ndarray) -> np.ndarray:
+def add_gains(A: np.ndarray, Mi: np.ndarray, W: np.ndarray) -> np.ndarray:
     """(K,) decrease of tr(W M^-1) when each block A_k (K, m, L) is added to the information of inverse Mi
     (Woodbury: tr((I + B A_k^T)^-1 B W B^T), B = A_k Mi)."""
     B = np.einsum("kmi,ij->kmj", A, Mi)
@@ -251,7 +251,7 @@ def refine_for_validation(A: np.ndarray, idx, W: np.ndarray, candidates=None, ma
             else:
                 Mi = _inv(M)
             base_val = float(np.trace(W @ Mi))
-            val = base_val - _add_gains(A[out], Mi, W)
+            val = base_val - add_gains(A[out], Mi, W)
             j = int(np.argmin(val))
             if val[j] < best[0]:
                 best = (float(val[j]), pos, int(out[j]))
@@ -264,4 +264,4 @@ def refine_for_validation(A: np.ndarray, idx, W: np.ndarray, candidates=None, ma
 
 __all__ = ["Information", "information", "base_mask", "identifiability", "select", "d_criterion", "d_efficiency", "leverages",
            "pool_indices", "info_matrix", "pose_covariances", "validation_blocks", "validation_weight", "validation_mse",
-           "refine_for_validation", "validation_rms_quantiles", "SYSTEMATIC_CORNER_PX"]
+           "refine_for_validation", "validation_rms_quantiles", "add_gains", "SYSTEMATIC_CORNER_PX"]
