@@ -131,3 +131,33 @@ def test_clearance_figures_change_with_the_joints():
     c = checker.clearances(sc.setup.link_frames(q))
     assert np.ptp([r["clearance_m"] for r in c]) > 1e-3
     assert ["forearm_link", "camera (T_flange_cam)"] in checker.fixed["self"]  # fixed by the wrist: left out
+
+
+def test_smallest_count_finds_the_first_count_that_reaches_the_target():
+    from vision_calib.errors import DataError
+    from vision_calib.planning.plan import smallest_count
+
+    seen = []
+
+    def q(c):  # p95 falling as 1 / sqrt(c)
+        seen.append(c)
+        return {"p95_mm": 1.0 / np.sqrt(c)}
+
+    for target in (0.5, 0.3, 0.2, 0.1):
+        n = smallest_count(q, target, 3, 200)
+        assert 1 / np.sqrt(n) <= target < 1 / np.sqrt(n - 1) or n == 3
+    assert len(set(seen)) < 60  # a search, not a scan of 3..200
+    with pytest.raises(DataError, match="not reached with up to 200 poses"):
+        smallest_count(q, 0.01, 3, 200)
+
+
+def test_length_option_reads_units():
+    import argparse
+
+    from vision_calib.cli.plan import length_m
+
+    assert length_m("0.1mm") == pytest.approx(1e-4) and length_m("100um") == pytest.approx(1e-4)
+    assert length_m("0.0001 m") == pytest.approx(1e-4) and length_m("0.1") == pytest.approx(1e-4)
+    for bad in ("fast", "-1mm", "nan", "0"):
+        with pytest.raises(argparse.ArgumentTypeError):
+            length_m(bad)

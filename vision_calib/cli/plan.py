@@ -49,12 +49,34 @@ def add_plan_parser(sub) -> None:
     p.add_argument("--frames", type=count, default=None,
                    help="frames you will record per pose (default: the scene's measurement.frames): the image "
                         "measurement's noise the design and the prediction assume")
+    p.add_argument("--target-accuracy", type=length_m, default=None, metavar="LENGTH",
+                   help="plan the fewest poses whose predicted validation position RMS (95th percentile over noise "
+                        "draws) reaches this, e.g. 0.1mm (units mm, um, m; a bare number: mm); instead of --poses")
     p.add_argument("--validate-on", default=None, metavar="POSES_CSV",
                    help="the poses where the accuracy matters (pose_id,q1..qn): the design criterion and the "
                         "prediction are taken over them (default: the scene's validation poses)")
     p.add_argument("--seed", type=seed, default=None, help="random seed (default 0)")
     p.add_argument("--no-plots", action="store_true", help="skip the 3-D picture")
     add_json(p)
+
+
+LENGTH_UNITS = {"mm": 1e-3, "um": 1e-6, "m": 1.0}
+
+
+def length_m(text: str) -> float:
+    """A length "0.1mm", "100um", "0.0001 m" or a bare number (mm) in metres; argparse error otherwise."""
+    import argparse
+    import math
+
+    t = str(text).strip().lower()
+    unit = next((u for u in ("mm", "um", "m") if t.endswith(u)), None)
+    try:
+        v = float(t[: -len(unit)] if unit else t)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a length such as 0.1mm, got {text!r}") from None
+    if not (math.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f"expected a positive length, got {text!r}")
+    return v * LENGTH_UNITS[unit or "mm"]
 
 
 def cmd_plan(args) -> int:
@@ -91,9 +113,11 @@ def cmd_plan(args) -> int:
                                   delta_rad=float(np.radians(args.delta)))
         else:
             src = CandidateSource()
+        if args.target_accuracy is not None and args.poses is not None:
+            raise ConfigError("plan: give --poses or --target-accuracy, not both")
         res = plan_cell(scene, args.poses or scene.poses.count or 20, args.out, seed=seed, n_candidates=cands,
                         source=src, draws=draws, plots=not args.no_plots, frames=args.frames,
-                        validate_on=args.validate_on)
+                        validate_on=args.validate_on, target_accuracy_m=args.target_accuracy)
     if args.json:
         print(to_json(res))
     else:
@@ -122,6 +146,10 @@ def _summary_plan(res: dict, out) -> str:
     for r in (pred or {}).get("rows", []):
         lines.append(f"predicted validation position RMS, {r['count']} poses: plan {mm(r['plan'])}, random "
                      f"{mm(r['random'])} (median of {pred['draws']} draws)")
+    curve = res.get("accuracy_vs_count") or {}
+    if curve.get("target_mm"):
+        lines.append(f"--target-accuracy {curve['target_mm']:g} mm: {res['n_poses']} poses are the fewest whose "
+                     "predicted validation position RMS reaches it (95 % of noise draws)")
     pv = (res.get("design") or {}).get("predicted_validation_rms")
     if pv and pv["plan"]["median_mm"] is not None and pv["random"]["median_mm"] is not None:
         lines.append(f"predicted validation position RMS (first order, {res['design']['frames']} frames per pose): plan "

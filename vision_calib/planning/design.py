@@ -223,12 +223,35 @@ def validation_rms_quantiles(A: np.ndarray, idx, W: np.ndarray, rng: np.random.G
 
 
 def add_gains(A: np.ndarray, Mi: np.ndarray, W: np.ndarray) -> np.ndarray:
-    """(K,) decrease of tr(W M^-1) when each block A_k (K, m, L) is added to the information of inverse Mi
-    (Woodbury: tr((I + B A_k^T)^-1 B W B^T), B = A_k Mi)."""
-    B = np.einsum("kmi,ij->kmj", A, Mi)
-    S = np.eye(A.shape[1])[None] + np.einsum("kmi,kni->kmn", B, A)
-    BW = np.einsum("kmi,ij,knj->kmn", B, W, B)
-    return np.einsum("kmm->k", np.linalg.solve(S, BW))
+    """Decrease of tr(W M^-1) when each block A_k (K, m, L) is added to the information of inverse Mi (L, L), or
+    of each of several inverses Mi (P, L, L): (K,) or (P, K) (Woodbury: tr((I + B A_k^T)^-1 B W B^T), B = A_k Mi)."""
+    one = Mi.ndim == 2
+    Mi = Mi[None] if one else Mi
+    B = np.matmul(A[None], Mi[:, None])  # (P, K, m, L)
+    S = np.eye(A.shape[1]) + np.matmul(B, np.swapaxes(A, 1, 2)[None])
+    BW = np.matmul(np.matmul(B, W), np.swapaxes(B, 2, 3))
+    g = np.trace(np.linalg.solve(S, BW), axis1=2, axis2=3)
+    return g[0] if one else g
+
+
+def _removal_inverses(A: np.ndarray, sel: list) -> np.ndarray:
+    """(n, L, L) inverses of the information without each pose of the design sel (a tiny ridge where one is
+    singular)."""
+    As = A[np.asarray(sel, int)]
+    M = np.einsum("kmi,kmj->ij", As, As)
+    Mk = M[None] - np.einsum("kmi,kmj->kij", As, As)
+    ridge = 1e-9 * np.trace(M) / M.shape[0] * np.eye(M.shape[0])
+    out = np.empty_like(Mk)
+    for k, Mr in enumerate(Mk):
+        try:
+            out[k] = np.linalg.inv(Mr) if np.linalg.matrix_rank(Mr) == Mr.shape[0] else np.linalg.inv(Mr + ridge)
+        except np.linalg.LinAlgError:
+            out[k] = np.linalg.pinv(Mr + ridge, hermitian=True)
+    return out
+
+
+#: design positions per batch of the exchange's gains (memory: batch x candidates x m x L doubles)
+SWAP_BATCH = 8
 
 
 def refine_for_validation(A: np.ndarray, idx, W: np.ndarray, candidates=None, max_swaps: int = MAX_SWAPS) -> np.ndarray:
@@ -239,25 +262,17 @@ def refine_for_validation(A: np.ndarray, idx, W: np.ndarray, candidates=None, ma
     cand = np.arange(A.shape[0]) if candidates is None else np.asarray(candidates, int)
     cur = validation_mse(A, sel, W)
     for _ in range(max_swaps if np.isfinite(cur) else 0):
-        best = (cur * (1 - 1e-9), None, None)
         out = np.setdiff1d(cand, sel)
         if not out.size:
             break
-        for pos in range(len(sel)):
-            rest = sel[:pos] + sel[pos + 1:]
-            M = info_matrix(A, rest)
-            if np.linalg.matrix_rank(M) < M.shape[0]:
-                Mi = _inv(M + 1e-9 * np.trace(M) / M.shape[0] * np.eye(M.shape[0]))
-            else:
-                Mi = _inv(M)
-            base_val = float(np.trace(W @ Mi))
-            val = base_val - add_gains(A[out], Mi, W)
-            j = int(np.argmin(val))
-            if val[j] < best[0]:
-                best = (float(val[j]), pos, int(out[j]))
-        if best[1] is None:
+        Mi = _removal_inverses(A, sel)
+        base_val = np.einsum("ij,kji->k", W, Mi)  # tr(W Mi_k)
+        val = np.concatenate([base_val[s:s + SWAP_BATCH, None] - add_gains(A[out], Mi[s:s + SWAP_BATCH], W)
+                              for s in range(0, len(sel), SWAP_BATCH)])
+        pos, j = np.unravel_index(int(np.argmin(val)), val.shape)
+        if not val[pos, j] < cur * (1 - 1e-9):
             break
-        sel[best[1]] = best[2]
+        sel[pos] = int(out[j])
         cur = validation_mse(A, sel, W)
     return np.array(sel, int)
 

@@ -51,6 +51,8 @@ def no_collision_note(setup) -> str:
 EFFICIENCY_DRAWS = 20
 #: validation poses drawn from the scene's validation sampler for the design criterion
 CRITERION_POSES = 200
+#: the most poses --target-accuracy plans
+MAX_TARGET_POSES = 200
 #: random candidates, beside the D pool, among which the validation criterion's exchange swaps poses
 EXCHANGE_RANDOM = 600
 
@@ -302,13 +304,41 @@ def _select(scene, info, poses, n, rng, W, candidates=None) -> np.ndarray:
     return D.refine_for_validation(info.A, start, W, np.union1d(np.union1d(pool, extra), start))
 
 
+def smallest_count(quantiles, target_mm: float, lo: int, hi: int) -> int:
+    """The smallest pose count in [lo, hi] whose ``quantiles(count)["p95_mm"]`` reaches ``target_mm``: growing by half
+    until one does, then bisection. DataError naming the best reached when none up to hi does."""
+    def ok(c):
+        q = quantiles(c)["p95_mm"]
+        return q is not None and q <= target_mm
+
+    c, fail = lo, lo - 1
+    while not ok(c):
+        fail = c
+        if c >= hi:
+            best = min((quantiles(k)["p95_mm"] for k in (lo, hi) if quantiles(k)["p95_mm"] is not None), default=None)
+            raise DataError(f"--target-accuracy {target_mm:g} mm: not reached with up to {hi} poses (95th percentile "
+                            f"of the predicted validation position RMS at {hi} poses: "
+                            f"{'n/a' if best is None else f'{best:.3g} mm'}): record more frames per pose, or ask less")
+        c = min(hi, max(c + 1, int(1.5 * c)))
+    a, b = fail + 1, c
+    while a < b:
+        m = (a + b) // 2
+        if ok(m):
+            b = m
+        else:
+            a = m + 1
+    return b
+
+
 def plan_cell(scene, n_poses: int, out_dir=None, seed: int = 0, n_candidates: int = DEFAULT_CANDIDATES,
               source: CandidateSource | None = None, draws: int = DRAWS, counts=None, plots: bool = True,
-              frames: int | None = None, validate_on=None) -> dict:
+              frames: int | None = None, validate_on=None, target_accuracy_m: float | None = None) -> dict:
     """Plan ``n_poses`` poses for the scene (module docstring); writes the outputs into ``out_dir`` when given and
     returns plan.json's content. Seeded: the same seed gives the same plan. draws: Monte Carlo draws of the
     predicted accuracy (0: none); counts: its pose counts (default N / 2, N, 2 N); frames: frames the user records
-    per pose (default the scene's); validate_on: the validation poses (:func:`validation_poses`)."""
+    per pose (default the scene's); validate_on: the validation poses (:func:`validation_poses`); target_accuracy_m:
+    plan the smallest count whose predicted validation position RMS (95th percentile over noise draws, first order)
+    reaches it (:func:`smallest_count`; n_poses ignored)."""
     t0 = time.perf_counter()
     scene = _load(scene)
     setup = scene.setup
@@ -316,6 +346,8 @@ def plan_cell(scene, n_poses: int, out_dir=None, seed: int = 0, n_candidates: in
     rng = np.random.default_rng([int(seed), 27])
     if isinstance(n_poses, bool) or int(n_poses) < 1:
         raise ConfigError(f"--poses: expected a positive number of poses, got {n_poses!r}")
+    if target_accuracy_m is not None and not (np.isfinite(target_accuracy_m) and target_accuracy_m > 0):
+        raise ConfigError(f"--target-accuracy: expected a positive length, got {target_accuracy_m!r} m")
     n = int(n_poses)
     frames = int(frames or scene.measurement.frames)
     V, v_what = validation_poses(scene, validate_on, seed)
@@ -323,7 +355,7 @@ def plan_cell(scene, n_poses: int, out_dir=None, seed: int = 0, n_candidates: in
     model, checker = collision_setup(scene)
     scr = screen(scene, cand, checker)
     kept = scr["kept"]
-    if kept.size < n:
+    if kept.size < (n if target_accuracy_m is None else 1):
         raise DataError(f"{scene.path}: only {kept.size} of {len(cand)} candidates are reachable, measurable and "
                         f"collision-free ({_screen_line(scr['counts'])}), fewer than the {n} poses asked: widen the "
                         "region (poses.spread), relax planning limits, or ask for fewer poses")
@@ -332,7 +364,25 @@ def plan_cell(scene, n_poses: int, out_dir=None, seed: int = 0, n_candidates: in
     base, rep0 = D.base_mask(scene, pool[sub], rng)
     info = D.information(scene, pool[sub], base, rep0, frames)
     W = D.validation_weight(D.validation_blocks(scene, V, base))
-    pick = _select(scene, info, pool[sub], n, rng, W)
+    picks, curve = {}, {}
+
+    def pick_of(c):
+        if c not in picks:
+            picks[c] = _select(scene, info, pool[sub], c, np.random.default_rng([int(seed), 27, c]), W)
+        return picks[c]
+
+    def quantiles(c):
+        if c not in curve:
+            curve[c] = D.validation_rms_quantiles(info.A, pick_of(c), W, np.random.default_rng([int(seed), 29, c]))
+        return curve[c]
+
+    n_min = -(-info.A.shape[2] // info.A.shape[1])
+    if target_accuracy_m is not None:
+        n = smallest_count(quantiles, target_accuracy_m * 1e3, n_min, min(len(sub), MAX_TARGET_POSES))
+    elif kept.size < n:
+        raise DataError(f"{scene.path}: only {kept.size} candidates kept, fewer than the {n} poses asked")
+    pick = pick_of(n)
+    quantiles(n)
     chosen = sub[pick]
     P = pool[chosen]
     joints = setup.joints(P, setup.params.nominal)
@@ -350,14 +400,22 @@ def plan_cell(scene, n_poses: int, out_dir=None, seed: int = 0, n_candidates: in
     lev = D.leverages(A_sel, D.info_matrix(A_sel))
     design = _efficiency(info.A, pick, rng, n)
     rep = D.identifiability(scene, P, base, frames)
-    n_min = -(-info.A.shape[2] // info.A.shape[1])
-    cts = _counts(n, n_min, len(pool), counts)
+    cts = _counts(n, n_min, len(sub), counts)
     memo = {n: P}
 
     def plan_of_count(c):
         if c not in memo:
-            memo[c] = pool[sub[_select(scene, info, pool[sub], c, np.random.default_rng([int(seed), 27, c]), W)]]
+            memo[c] = pool[sub[pick_of(c)]]
         return memo[c]
+
+    for c in cts:
+        quantiles(c)
+    acc_curve = {"of": "first-order validation position RMS [mm] over noise draws (median, 95th percentile) of the "
+                       "planned poses of each count and, median over random sets of as many screened candidates, of "
+                       "random poses", "target_mm": None if target_accuracy_m is None else target_accuracy_m * 1e3,
+                 "rows": [{"count": int(c), "plan": curve[c],
+                           "random": _random_quantiles(info.A, c, W, np.random.default_rng([int(seed), 30, c]))}
+                          for c in sorted(curve)]}
 
     t_pred = time.perf_counter()
     pred = None
@@ -397,15 +455,13 @@ def plan_cell(scene, n_poses: int, out_dir=None, seed: int = 0, n_candidates: in
                                           "image measurement, scaled units), then exchange on the predicted validation "
                                           "position RMS sqrt(tr(W M^-1))", "validation_poses": v_what,
                    "predicted_validation_rms": {
-                       "plan": D.validation_rms_quantiles(info.A, pick, W, rng),
-                       "random": _random_quantiles(info.A, n, W, rng),
-                       "of": "first order: the validation position RMS over noise draws (median, 95th percentile) "
-                             "of the plan's poses and, median over random sets of as many screened candidates, of "
-                             "random poses"},
+                       "plan": curve[n], "random": next(r["random"] for r in acc_curve["rows"] if r["count"] == n),
+                       "of": acc_curve["of"]},
                    "frames": frames, "base_parameters": list(info.names),
                    "pool": f"{len(sub)} screened candidates; exchange on the {D.POOL_TOP} of largest leverage + "
                            f"{D.POOL_RANDOM} random"},
         "identifiability": _ident_block(rep, setup, base),
+        "accuracy_vs_count": acc_curve,
         "predicted_accuracy": pred,
         "notes": notes, "warnings": warnings,
         "seconds": None,
