@@ -155,3 +155,27 @@ def test_candidate_sources(tmp_path):
     q0 = h4.setup.joints(h4.setup.robot.pose_grid()[:1], h4.setup.params.nominal)[0]
     X = candidate_poses(h4, CandidateSource("around", start_rad=tuple(q0), delta_rad=np.radians(3)), 50, rng)
     assert X.shape[1] == 4 and len(X) > 40
+
+
+def test_validate_on_a_region_plans_for_it(tmp_path):
+    """Poses planned for a user's validation poses (--validate-on) predict a smaller error there than poses planned
+    for the scene's whole validation region, judged by the same criterion over the user's poses."""
+    from vision_calib.planning import design as D
+
+    sc = load_scene(CELL)
+    q = sc.setup.sample_poses(np.random.default_rng(11), 12, check_view=False)
+    q[:, 0] = np.radians(15.0)  # a slice of the workspace: joint 1 held
+    rows = "\n".join(f"v{i},{','.join(f'{v:.6f}' for v in np.degrees(r))}" for i, r in enumerate(q))
+    f = tmp_path / "where.csv"
+    f.write_text("pose_id," + ",".join(f"q{j + 1}" for j in range(6)) + "\n" + rows + "\n")
+    a = plan_cell(CELL, 12, None, seed=3, n_candidates=3000, draws=0)
+    b = plan_cell(CELL, 12, None, seed=3, n_candidates=3000, draws=0, validate_on=f)
+    assert str(f) in b["design"]["validation_poses"] and str(f) not in a["design"]["validation_poses"]
+    base = sc.setup.params.mask(a["design"]["base_parameters"])
+    assert b["design"]["base_parameters"] == a["design"]["base_parameters"]
+    W = D.validation_weight(D.validation_blocks(sc, q, base))
+    mse = []
+    for res in (a, b):
+        P = np.array([p["joints_rad"] for p in res["poses"]])
+        mse.append(D.validation_mse(D.information(sc, P, base).A, np.arange(len(P)), W))
+    assert mse[1] < mse[0]

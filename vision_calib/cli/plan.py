@@ -96,7 +96,7 @@ def cmd_plan(args) -> int:
     scene = load_scene(args.scene)
     if args.check:
         res = check_poses(scene, args.check, args.out, seed=seed, n_candidates=cands, draws=draws, angle_factor=af,
-                          plots=not args.no_plots)
+                          plots=not args.no_plots, frames=args.frames)
     else:
         given = [k for k, v in (("--from-list", args.from_list), ("--box", args.box), ("--around", args.around))
                  if v is not None]

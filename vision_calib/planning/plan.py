@@ -501,13 +501,16 @@ def _screen_line(c: dict) -> str:
 
 
 def check_poses(scene, csv_path, out_dir=None, seed: int = 0, n_candidates: int = DEFAULT_CANDIDATES,
-                draws: int = DRAWS, angle_factor: float | None = None, plots: bool = True) -> dict:
+                draws: int = DRAWS, angle_factor: float | None = None, plots: bool = True,
+                frames: int | None = None) -> dict:
     """Report a user's own pose list (``poses.csv``, recording layout) the way a plan is reported: per pose joint
     limits, collisions (clearance), view figures; the moves in the list's order; the D criterion against random
     and D-optimal sets of as many poses from the scene's region; the predicted accuracy of the list's usable poses.
-    ``verdict``: ok when every pose is usable and no move collides."""
+    ``verdict``: ok when every pose is usable and no move collides. frames: per pose, the image measurement's noise
+    (default the scene's)."""
     t0 = time.perf_counter()
     scene = _load(scene)
+    frames = int(frames or scene.measurement.frames)
     setup = scene.setup
     rng = np.random.default_rng([int(seed), 27])
     ids, q, P, units_from = read_pose_list(scene, csv_path, angle_factor)
@@ -568,7 +571,7 @@ def check_poses(scene, csv_path, out_dir=None, seed: int = 0, n_candidates: int 
         sub = np.arange(len(pool)) if len(pool) <= D.MAX_INFO else np.sort(rng.choice(len(pool), D.MAX_INFO, replace=False))
         base, rep0 = D.base_mask(scene, pool[sub], rng)
         both = np.concatenate([U, pool[sub]])
-        info = D.information(scene, both, base, rep0)
+        info = D.information(scene, both, base, rep0, frames)
         mine = np.arange(n)
         others = np.arange(n, len(both))
         crit = D.d_criterion(info.A, mine)
@@ -585,8 +588,9 @@ def check_poses(scene, csv_path, out_dir=None, seed: int = 0, n_candidates: int 
             opt_logdet = D.d_criterion(info.A, opt)["logdet"]
             out_design["d_efficiency_vs_plan"] = D.d_efficiency(crit["logdet"], opt_logdet, L)
             plan_n = both[opt]
-            pred = predicted_accuracy(scene, lambda c: plan_n, pool, [n], base, draws, seed, given=U) if draws else None
-            rep = _ident_block(D.identifiability(scene, U, base), setup, base)
+            pred = predicted_accuracy(scene, lambda c: plan_n, pool, [n], base, draws, seed, given=U,
+                                      frames=frames) if draws else None
+            rep = _ident_block(D.identifiability(scene, U, base, frames), setup, base)
         else:
             warnings.append(f"{n} usable poses give fewer equations than the {L} base parameters: nothing identifiable "
                             f"to predict (at least {n_min} poses)")
