@@ -274,8 +274,10 @@ def _efficiency(A: np.ndarray, idx, rng: np.random.Generator, n: int) -> dict:
 def _settings(scene: Scene, source: CandidateSource, n_candidates: int, seed: int) -> dict:
     return {**scene.planning.to_dict(), "min_square_px": MIN_SQUARE_PX, "candidates": int(n_candidates),
             "candidate_source": source.describe(), "seed": int(seed),
-            "noise": {"sigma_mm": scene.measurement.sigma_t_m * 1e3,
-                      "sigma_deg": float(np.degrees(scene.measurement.sigma_r_rad))}}
+            "noise": {"model": "image: each pose's covariance from the camera model, the target's projected corners, "
+                               "the sensor's noise and blur (Cramér-Rao bound of the frame-averaged corners) and the "
+                               "detector's systematic corner error",
+                      "systematic_corner_px": D.SYSTEMATIC_CORNER_PX}}
 
 
 def validation_poses(scene: Scene, validate_on=None, seed: int = 0) -> tuple[np.ndarray, str]:
@@ -488,7 +490,8 @@ def _ident_block(rep, setup, base) -> dict:
     out = {k: d[k] for k in ("n_params", "n_obs", "rank", "condition_number", "condition_number_of",
                              "non_identifiable", "base_parameters")}
     out["not_in_base_set"] = [nm for nm, b, f in zip(setup.params.names, base, setup.params.free) if f and not b]
-    out["of"] = ("the base parameters (identifiable from the candidate region), whitened by the cell's noise; "
+    out["of"] = ("the base parameters (identifiable from the candidate region), whitened by the image measurement's "
+                 "pose covariance; "
                  "not_in_base_set: the scene's free parameters no pose of the region identifies (fixed at nominal)")
     return out
 

@@ -115,7 +115,7 @@ def draw_plan(path, scene, poses: np.ndarray, model) -> Path:
 def _acc_table(pred: dict, given_label: str | None = None) -> str:
     rows, classes = [], []
     for r in pred["rows"]:
-        for what, label in (("plan", "planned (D-optimal)"), ("random", "random measurable")):
+        for what, label in (("plan", "planned"), ("random", "random measurable")):
             f = r[what]
             rows.append([esc(r["count"]), esc(label), num(f["median_mm"], ".3g"), num(f["p95_mm"], ".3g"),
                          num(f["rms_median_mm"], ".3g"), esc(f"{f['draws']}" + (f" ({f['failed_draws']} failed)"
@@ -206,7 +206,8 @@ def plan_html(res: dict, out_dir) -> str:
     out.append("<h2>Predicted accuracy</h2>")
     if pred:
         out.append(f"<p>identify-synthetic Monte Carlo under the image measurement ({esc(pred['noise']['model'])}; "
-                   f"{pred['noise']['frames']} frames per pose; method {esc(pred['method'])}): position error of the identified robot against the truth on "
+                   f"{pred['noise']['frames']} frames per pose; method {esc(pred['method'])}): position error of the "
+                   "identified robot against the truth on "
                    f"{esc(pred['validation'])}, pooled over {pred['draws']} draws "
                    f"({esc(pred['seeds'])}). Random sets: new measurable collision-free poses each draw.</p>")
         out.append(_acc_table(pred, "your list (usable poses)" if check else None))
