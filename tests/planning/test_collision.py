@@ -156,7 +156,7 @@ obstacles: [{{kind: plane, xyz: [0, 0, -0.01]}}, {{kind: box, name: block, size:
     assert model.source.startswith("URDF collision elements")
     shapes = {b.name: b.shape for b in model.bodies}
     assert shapes["base"] == "cylinder" and shapes["l1"] == "box" and shapes["tip"] == "sphere"
-    assert any("mesh" in n for n in model.notes)  # l2's mesh: its primitive capsule instead, named
+    assert any("mesh" in w and "checked: " in w for w in model.warnings)  # l2's mesh: its primitive capsule, named
     ck = CollisionChecker(model, 0.02)
     q = np.radians([[0, 0], [0, 60]])  # l2 level above the block; l2 swung down through it
     n0 = ck.n_fcl
@@ -181,3 +181,33 @@ def test_bad_urdf_collision_numbers_are_named_errors(tmp_path, old, new, needle)
     (tmp_path / "two.urdf").write_text(URDF.replace(old, new, 1))
     with pytest.raises(ConfigError, match=needle.replace("(", r"\(")):
         urdf_collisions(tmp_path / "two.urdf", ("base", "l1", "l2"))
+
+
+def test_links_without_collision_elements_get_capsules_and_a_warning(tmp_path):
+    """A URDF with collision geometry on some links only: the others are not left unchecked without a word."""
+    urdf = URDF.replace('<link name="l1"><collision><origin xyz="0 0 0.2"/><geometry><box size="0.08 0.08 0.4"/>'
+                        '</geometry></collision></link>', '<link name="l1"/>')
+    assert urdf != URDF
+    (tmp_path / "two.urdf").write_text(urdf)
+    (tmp_path / "s.yaml").write_text(f"""
+robot: two.urdf
+urdf: {{base_link: base, tip_link: tip}}
+mount: eye_in_hand
+units: {{length: m, angle: deg}}
+mounts:
+  target_in_base: {{xyz: [0.5, 0, 0], rpy: [180, 0, 0]}}
+  camera_in_flange: {{xyz: [0.05, 0, 0]}}
+camera: {{width: 640, height: 480, fx: 600, fy: 600, cx: 320, cy: 240}}
+target: {SCENES_DIR.parent}/targets/charuco_a5.yaml
+poses: {{center: [0, 30], spread: [20, 20]}}
+obstacles: [{{kind: box, name: block, size: [0.1, 0.3, 0.1], xyz: [0.15, 0, 0.3]}}]
+""")
+    sc = load_scene(tmp_path / "s.yaml")
+    model = build_model(sc, sc.setup)
+    shapes = {b.name: b.shape for b in model.bodies}
+    assert shapes["l1"] == "capsule"  # its primitive, not nothing
+    w = [x for x in model.warnings if "no collision element" in x]
+    assert w and "l1" in w[0] and "checked: " in " ".join(model.warnings)
+    ck = CollisionChecker(model, 0.02)
+    ok, why = ck.screen(sc.setup.link_frames(np.radians([[0.0, 60.0]])))
+    assert not ok[0] and why[0][1] == "block"  # l2 swung down through the block: still found

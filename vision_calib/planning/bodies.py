@@ -140,7 +140,8 @@ class RobotModel:
     """The robot's bodies (attached to ``link_frames`` indices), the static obstacles, and the pairs checked:
     ``obstacle_pairs`` (K, 2) [robot body, obstacle] and ``self_pairs`` (S, 2) [body, body] indices; ``disabled``:
     [(body, body, why)] of the self pairs left out beyond adjacent frames; ``source``: where the bodies came from;
-    ``notes``: what the model could not represent."""
+    ``notes``: what the model could not represent; ``warnings``: collision geometry it did not read (named, with
+    what was checked instead)."""
 
     bodies: tuple[Body, ...]
     obstacles: tuple[Body, ...]
@@ -149,6 +150,7 @@ class RobotModel:
     source: str
     disabled: tuple = ()
     notes: tuple[str, ...] = field(default=())
+    warnings: tuple[str, ...] = field(default=())
 
     def to_dict(self) -> dict:
         return {"source": self.source,
@@ -158,7 +160,7 @@ class RobotModel:
                                "dims_m": [] if b.plane else list(b.dims)} for b in self.obstacles],
                 "self_pairs_checked": [[self.bodies[i].name, self.bodies[j].name] for i, j in self.self_pairs],
                 "self_pairs_left_out": [{"pair": [a, b], "why": why} for a, b, why in self.disabled],
-                "notes": list(self.notes)}
+                "notes": list(self.notes), "warnings": list(self.warnings)}
 
 
 # ----------------------------------------------------------------------------------------------- URDF geometry
@@ -343,7 +345,7 @@ def build_model(scene, setup, rng: np.random.Generator | None = None) -> RobotMo
     n = setup.n_joints
     q_ref = np.zeros((1, n))
     frames_ref = setup.link_frames(q_ref)[0]
-    notes = []
+    notes, warns = [], []
     radii = ps.link_radii_m
     if radii is None:
         radii = DEFAULT_LINK_RADII_M.get(setup.robot_name)
@@ -369,7 +371,7 @@ def build_model(scene, setup, rng: np.random.Generator | None = None) -> RobotMo
                     bare.append(prim[k].name)
                 if any(s == "mesh" for _, s, _, _ in items):
                     meshes = sorted({lk for lk, s, _, _ in items if s == "mesh"})
-                    notes.append(f"{', '.join(meshes)}: mesh collision geometry is not read"
+                    warns.append(f"{', '.join(meshes)}: mesh collision geometry is not read"
                                  + (f": the primitive capsule of {prim[k].name} is used" if k < n else
                                     " (no primitive on the flange: not checked)"))
                     if k < n:
@@ -389,9 +391,10 @@ def build_model(scene, setup, rng: np.random.Generator | None = None) -> RobotMo
                     else:
                         bodies.append(shape_body(nm, k, shape, dims, T))
             if bare:
-                notes.append(f"{', '.join(bare)}: no collision element in the URDF: the primitive capsules are used "
-                             "(checked: " + ", ".join(b.name for b in bodies) + ")")
-            notes += more
+                warns.append(f"{', '.join(bare)}: no collision element in the URDF: the primitive capsules are used")
+            if warns:
+                warns[-1] += " (checked: " + ", ".join(b.name for b in bodies) + ")"
+            warns += more
     tool_r = DEFAULT_TOOL_RADIUS_M if ps.tool_radius_m is None else ps.tool_radius_m
     target = None
     if scene.target_path is not None:
@@ -433,7 +436,7 @@ def build_model(scene, setup, rng: np.random.Generator | None = None) -> RobotMo
             else:
                 keep.append((i, j))
     return RobotModel(tuple(bodies), tuple(obstacles), obstacle_pairs, np.array(keep, int).reshape(-1, 2), source,
-                      tuple(disabled), tuple(notes))
+                      tuple(disabled), tuple(notes), tuple(warns))
 
 
 def own_poses(scene, setup, rng: np.random.Generator) -> np.ndarray | None:

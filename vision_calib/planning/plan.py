@@ -426,7 +426,7 @@ def plan_cell(scene, n_poses: int, out_dir=None, seed: int = 0, n_candidates: in
                                   validation=None if validate_on is None else V)
         pred["seconds"] = time.perf_counter() - t_pred
     tb = _tour_block(tour, ids, joints)
-    warnings = []
+    warnings = [] if model is None else list(model.warnings)
     mine = next((r["plan"] for r in (pred or {}).get("rows", []) if r["count"] == n), None)
     if mine is not None and mine["failed_draws"]:
         warnings.append(f"the synthetic identification of the {n} planned poses failed in {mine['failed_draws']} of "
@@ -546,7 +546,7 @@ def check_poses(scene, csv_path, out_dir=None, seed: int = 0, n_candidates: int 
     from .tour import move_samples, travel_times
 
     C = travel_times(joints, scene.planning.max_joint_speed_rad_s)
-    moves, warnings = [], []
+    moves, warnings = [], ([] if model is None else list(model.warnings))
     for k in range(len(ids) - 1):
         m = {"from": ids[k], "to": ids[k + 1], "time_s": float(C[k, k + 1]),
              "largest_joint_change_deg": float(np.degrees(np.max(np.abs(joints[k + 1] - joints[k])))),
