@@ -136,8 +136,9 @@ URDF = """<?xml version="1.0"?>
 """
 
 
-def test_urdf_collision_elements_are_used_when_present(tmp_path):
-    (tmp_path / "two.urdf").write_text(URDF)
+def _two_link_scene(tmp_path, urdf: str, obstacles: str):
+    """The scene of the two-joint URDF ``urdf`` with an eye-in-hand camera and ``obstacles`` (YAML list)."""
+    (tmp_path / "two.urdf").write_text(urdf)
     (tmp_path / "s.yaml").write_text(f"""
 robot: two.urdf
 urdf: {{base_link: base, tip_link: tip}}
@@ -149,9 +150,16 @@ mounts:
 camera: {{width: 640, height: 480, fx: 600, fy: 600, cx: 320, cy: 240}}
 target: {SCENES_DIR.parent}/targets/charuco_a5.yaml
 poses: {{center: [0, 30], spread: [20, 20]}}
-obstacles: [{{kind: plane, xyz: [0, 0, -0.01]}}, {{kind: box, name: block, size: [0.1, 0.3, 0.1], xyz: [0.15, 0, 0.3]}}]
+obstacles: {obstacles}
 """)
-    sc = load_scene(tmp_path / "s.yaml")
+    return load_scene(tmp_path / "s.yaml")
+
+
+BLOCK = "{kind: box, name: block, size: [0.1, 0.3, 0.1], xyz: [0.15, 0, 0.3]}"
+
+
+def test_urdf_collision_elements_are_used_when_present(tmp_path):
+    sc = _two_link_scene(tmp_path, URDF, f"[{{kind: plane, xyz: [0, 0, -0.01]}}, {BLOCK}]")
     model = build_model(sc, sc.setup)
     assert model.source.startswith("URDF collision elements")
     shapes = {b.name: b.shape for b in model.bodies}
@@ -188,21 +196,7 @@ def test_links_without_collision_elements_get_capsules_and_a_warning(tmp_path):
     urdf = URDF.replace('<link name="l1"><collision><origin xyz="0 0 0.2"/><geometry><box size="0.08 0.08 0.4"/>'
                         '</geometry></collision></link>', '<link name="l1"/>')
     assert urdf != URDF
-    (tmp_path / "two.urdf").write_text(urdf)
-    (tmp_path / "s.yaml").write_text(f"""
-robot: two.urdf
-urdf: {{base_link: base, tip_link: tip}}
-mount: eye_in_hand
-units: {{length: m, angle: deg}}
-mounts:
-  target_in_base: {{xyz: [0.5, 0, 0], rpy: [180, 0, 0]}}
-  camera_in_flange: {{xyz: [0.05, 0, 0]}}
-camera: {{width: 640, height: 480, fx: 600, fy: 600, cx: 320, cy: 240}}
-target: {SCENES_DIR.parent}/targets/charuco_a5.yaml
-poses: {{center: [0, 30], spread: [20, 20]}}
-obstacles: [{{kind: box, name: block, size: [0.1, 0.3, 0.1], xyz: [0.15, 0, 0.3]}}]
-""")
-    sc = load_scene(tmp_path / "s.yaml")
+    sc = _two_link_scene(tmp_path, urdf, f"[{BLOCK}]")
     model = build_model(sc, sc.setup)
     shapes = {b.name: b.shape for b in model.bodies}
     assert shapes["l1"] == "capsule"  # its primitive, not nothing
