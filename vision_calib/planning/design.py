@@ -37,7 +37,7 @@ RESTARTS = 1
 #: ``measure.covariance``'s model that does not average over frames): fitted so that the image-model covariance
 #: whitens the true pose errors of rendered, detected and PnP-measured poses (mean chi2/6 = 1): 0.0238 px on 60
 #: random UR5e poses, 0.0252 px on 60 RX-90 poses (A5 ChArUco board, the scenes' noise and blur, 2 frames; the
-#: Cramér-Rao bound alone gave chi2/6 = 46 and 52)
+#: Cramér-Rao bound alone gave chi2/6 = 46 and 52; ``benchmarks/bench_plan_noise.py``)
 SYSTEMATIC_CORNER_PX = 0.025
 #: noise draws of the first-order validation RMS distribution (:func:`validation_rms_quantiles`)
 RMS_DRAWS = 4000
