@@ -1,53 +1,33 @@
-"""Does a plan measure better than random poses? (issue 27) `plan` a cell, then `simulate` (images: render, measure,
-identify, validate against the truth) over exactly the planned poses and over random measurable poses, seed by seed,
-and compare the validation position RMS (the identified robot against the truth on the scene's random validation
-poses over the workspace) and the held-out RMS (k-fold on the measured poses).
+"""Does a plan measure better than random poses, and does it predict what simulate gives? (issues 27, 34) For each
+scene and seed S: `plan --seed S --frames F`, then `simulate --seed S --frames F` (images: render, measure, identify,
+validate against the truth) over exactly the planned poses and over the scene's own random poses (``simulate
+--poses N``: its pose region with its view check; for the H4 a random subset of its 81-pose grid). Prints per seed
+and as medians over the seeds: the validation position RMS ratio plan / random, and the plan's predicted validation
+RMS (first order, median over noise draws) over the simulated one. Image runs take a few seconds each; a plan
+~20 s (one core).
 
-Random measurable poses: ``screened`` (default) draws N of the plan's own screened candidates (reachable,
-measurable, collision-free) per seed and simulates them through a pose file; ``scene`` uses the scene's own random
-poses (``simulate --poses N``: its pose region with the scene's view check; for the H4 a random subset of the
-81-pose grid). Both sets go through the same simulate seed (noise, truth, validation poses).
-
-    PYTHONPATH=. python benchmarks/bench_plan_accuracy.py --scene ur5e_cell.yaml --poses 20 --seeds 0-4
-    PYTHONPATH=. python benchmarks/bench_plan_accuracy.py --scene h4_vision.yaml --poses 20 --seeds 0-4 --baseline scene
+    PYTHONPATH=. python benchmarks/bench_plan_accuracy.py --scenes ur5e_eye_in_hand.yaml,rx90_eye_in_hand.yaml --seeds 231-235
+    PYTHONPATH=. python benchmarks/bench_plan_accuracy.py --scenes h4_vision.yaml,ur5e_cell.yaml --seeds 231-233
 """
 
 from __future__ import annotations
 
 import argparse
-import csv
-import io
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from vision_calib.experiment.simulate import run_simulation
-from vision_calib.planning.plan import CandidateSource, candidate_poses, collision_setup, plan_cell, screen
+from vision_calib.planning.plan import plan_cell
 from vision_calib.rig import SCENES_DIR, load_scene
 
 
 def seeds(text: str) -> list[int]:
     a, _, b = text.partition("-")
     return list(range(int(a), int(b) + 1)) if b else [int(v) for v in text.split(",")]
-
-
-def _pose_scene(plan_dir: Path, name: str, joints: np.ndarray) -> Path:
-    """A copy of the plan's simulate_plan.yaml whose poses are ``joints`` (N, n) rad (a pose file beside it)."""
-    buf = io.StringIO()
-    w = csv.writer(buf)
-    w.writerow(["pose_id"] + [f"q{j + 1}" for j in range(joints.shape[1])])
-    for i, q in enumerate(joints):
-        w.writerow([f"{i:03d}"] + [repr(float(v)) for v in q])
-    (plan_dir / f"{name}.csv").write_text(buf.getvalue())
-    doc = yaml.safe_load((plan_dir / "simulate_plan.yaml").read_text())
-    doc["poses"] = {**doc["poses"], "path": f"{name}.csv"}  # the region keys stay: the same validation poses
-    doc["name"] = name
-    p = plan_dir / f"{name}.yaml"
-    p.write_text(yaml.safe_dump(doc, sort_keys=False))
-    return p
 
 
 def _run(scene_path, seed, frames, n_poses=None) -> dict:
@@ -63,57 +43,50 @@ def _run(scene_path, seed, frames, n_poses=None) -> dict:
             "seconds": time.perf_counter() - t}
 
 
+def _plan_row(scene_path: Path, n: int, seed: int, frames, work: Path) -> tuple[dict, float]:
+    t = time.perf_counter()
+    plan = plan_cell(scene_path, n, work, seed=seed, draws=0, frames=frames, plots=False)
+    return plan, time.perf_counter() - t
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scene", default="ur5e_cell.yaml")
+    ap.add_argument("--scenes", default="ur5e_eye_in_hand.yaml,rx90_eye_in_hand.yaml",
+                    help="comma-separated scene files of scenes/ (e.g. add h4_vision.yaml, ur5e_cell.yaml)")
     ap.add_argument("--poses", type=int, default=20)
-    ap.add_argument("--seeds", default="0-4")
-    ap.add_argument("--frames", type=int, default=None, help="frames per pose (default: the scene's)")
-    ap.add_argument("--baseline", choices=("screened", "scene"), default="screened")
-    ap.add_argument("--plan-seed", type=int, default=0)
-    ap.add_argument("--draws", type=int, default=10, help="Monte Carlo draws of the plan's prediction")
+    ap.add_argument("--seeds", default="231-235", help="plan seed = simulate seed, e.g. 231-235 or 231,233")
+    ap.add_argument("--frames", type=int, default=2, help="frames per pose (plan --frames and simulate --frames)")
     args = ap.parse_args()
-    scene_path = SCENES_DIR / args.scene
-    work = Path(tempfile.mkdtemp(prefix="bench_plan_"))
-    t = time.perf_counter()
-    plan = plan_cell(scene_path, args.poses, work, seed=args.plan_seed, draws=args.draws)
-    row = next(r for r in plan["predicted_accuracy"]["rows"] if r["count"] == args.poses)
-    print(f"plan {args.scene} --poses {args.poses} --seed {args.plan_seed}: {time.perf_counter() - t:.1f} s; predicted "
-          f"validation RMS plan {row['plan']['rms_median_mm']:.4g} mm, random {row['random']['rms_median_mm']:.4g} mm "
-          f"(ratio {row['ratio_rms']:.3f}, {plan['predicted_accuracy']['draws']} draws); smallest clearance "
-          + (f"{min(p['clearance_m'] for p in plan['poses']) * 1e3:.1f} mm" if plan["poses"][0].get("clearance_m")
-             is not None else "n/a (no collision model)"))
-    scene = load_scene(scene_path)
-    pool = None
-    if args.baseline == "screened":
-        _, checker = collision_setup(scene)
-        cand = candidate_poses(scene, CandidateSource(), 20000, np.random.default_rng([args.plan_seed, 99]))
-        pool = cand[screen(scene, cand, checker)["kept"]]
-    rows = []
-    for s in seeds(args.seeds):
-        a = _run(work / "simulate_plan.yaml", s, args.frames)
-        if pool is not None:
-            pick = pool[np.sort(np.random.default_rng([s, 98]).choice(len(pool), args.poses, replace=False))]
-            b = _run(_pose_scene(work, f"random_{s}", scene.setup.joints(pick, scene.setup.params.nominal)), s,
-                     args.frames)
-        else:
-            b = _run(scene_path, s, args.frames, args.poses)
-        rows.append((s, a, b))
-        print(f"seed {s}: plan {a['n_valid']}/{a['n_poses']} measured, validation RMS {a['validation_rms_mm']:.4g} mm, "
-              f"held-out {a['heldout_rms_mm']:.4g} mm ({a['status']}, {a['seconds']:.0f} s) | random "
-              f"{b['n_valid']}/{b['n_poses']}, validation RMS {b['validation_rms_mm']:.4g} mm, held-out "
-              f"{b['heldout_rms_mm']:.4g} mm ({b['status']}, {b['seconds']:.0f} s)", flush=True)
-    pa = np.median([a["validation_rms_mm"] for _, a, _ in rows])
-    pb = np.median([b["validation_rms_mm"] for _, _, b in rows])
-    ha = np.median([a["heldout_rms_mm"] for _, a, _ in rows])
-    hb = np.median([b["heldout_rms_mm"] for _, _, b in rows])
-    print(f"median over {len(rows)} seeds: validation RMS plan {pa:.4g} mm vs random {pb:.4g} mm -> ratio {pa / pb:.3f}; "
-          f"held-out RMS plan {ha:.4g} mm vs random {hb:.4g} mm -> ratio {ha / hb:.3f}")
-    print(f"predicted (plan's report): {row['plan']['rms_median_mm']:.4g} vs {row['random']['rms_median_mm']:.4g} mm "
-          f"(ratio {row['ratio_rms']:.3f}) at the scene's synthetic pose noise {scene.measurement.sigma_t_m * 1e3:.3g} mm, "
-          f"{np.degrees(scene.measurement.sigma_r_rad):.3g} deg per component; the images measured the poses to "
-          f"{np.median([a['pose_noise'][0] for _, a, _ in rows]):.3g} mm, "
-          f"{np.median([a['pose_noise'][1] for _, a, _ in rows]):.3g} deg RMS per component (plan, median of seeds)")
+    print(f"{args.poses} poses, {args.frames} frames; per seed S: plan --seed S --frames F, simulate over exactly the "
+          "planned poses and over the scene's own random poses (same simulate seed S: noise, truth, validation poses)")
+    for name in args.scenes.split(","):
+        scene_path = SCENES_DIR / name.strip()
+        scene = load_scene(scene_path)
+        baseline = scene_path
+        if scene.poses.kind == "configurations":  # a named set (thesis): random poses of the scene's own sampler
+            baseline = replace(scene, poses=replace(scene.poses, kind="random"))
+            print(f"{name}: its identification poses are a named configuration set; random: the scene's own sampler "
+                  "(its region, target in view)")
+        rows = []
+        for s in seeds(args.seeds):
+            work = Path(tempfile.mkdtemp(prefix="bench_plan_"))
+            plan, tp = _plan_row(scene_path, args.poses, s, args.frames, work)
+            pv = plan["design"]["predicted_validation_rms"]
+            a = _run(work / "simulate_plan.yaml", s, args.frames)
+            b = _run(baseline, s, args.frames, args.poses)
+            rows.append((pv["plan"]["median_mm"], a["validation_rms_mm"], b["validation_rms_mm"]))
+            clear = [p.get("clearance_m") for p in plan["poses"] if p.get("clearance_m") is not None]
+            print(f"{name} seed {s}: plan {tp:.0f} s ({plan['screening']['kept']} of {plan['screening']['candidates']} "
+                  f"candidates kept), predicted {pv['plan']['median_mm']:.4g} mm (random {pv['random']['median_mm']:.4g})"
+                  f"; simulated plan {a['validation_rms_mm']:.4g} mm ({a['n_valid']}/{a['n_poses']} measured), random "
+                  f"{b['validation_rms_mm']:.4g} mm ({b['n_valid']}/{b['n_poses']}); plan/random "
+                  f"{a['validation_rms_mm'] / b['validation_rms_mm']:.3f}, predicted/simulated "
+                  f"{pv['plan']['median_mm'] / a['validation_rms_mm']:.3f}"
+                  + (f"; clearance {min(clear) * 1e3:.1f}-{max(clear) * 1e3:.1f} mm" if clear else ""), flush=True)
+        pr, sa, sb = (np.array(v, float) for v in zip(*rows))
+        print(f"{name}: median over {len(rows)} seeds: plan/random {np.median(sa / sb):.3f} (medians "
+              f"{np.median(sa):.4g} / {np.median(sb):.4g} mm -> {np.median(sa) / np.median(sb):.3f}); predicted/simulated "
+              f"{np.median(pr / sa):.3f}", flush=True)
 
 
 if __name__ == "__main__":

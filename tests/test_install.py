@@ -112,8 +112,8 @@ def test_wheel_commands_from_any_folder(tmp_path):
     assert b"DICT_5X5_100" in pdf and b"/Image" not in pdf
 
 
-#: the modules of the extras [sim], [cluster], [gpu], [plan], [ros] and of [test]'s URDF reader: none is needed by
-#: the core
+#: the modules of the extras [sim], [cluster], [gpu], [ros], of [test]'s URDF reader, and FCL (a core dependency
+#: since `plan` is in the core, imported only by plan's collision checks): none is needed by these core commands
 EXTRA_MODULES = ("pyrender", "OpenGL", "trimesh", "dask", "distributed", "pyarrow", "torch", "kornia", "yourdfpy",
                  "lxml", "fcl", "rosbags")
 

@@ -136,8 +136,9 @@ URDF = """<?xml version="1.0"?>
 """
 
 
-def test_urdf_collision_elements_are_used_when_present(tmp_path):
-    (tmp_path / "two.urdf").write_text(URDF)
+def _two_link_scene(tmp_path, urdf: str, obstacles: str):
+    """The scene of the two-joint URDF ``urdf`` with an eye-in-hand camera and ``obstacles`` (YAML list)."""
+    (tmp_path / "two.urdf").write_text(urdf)
     (tmp_path / "s.yaml").write_text(f"""
 robot: two.urdf
 urdf: {{base_link: base, tip_link: tip}}
@@ -149,17 +150,58 @@ mounts:
 camera: {{width: 640, height: 480, fx: 600, fy: 600, cx: 320, cy: 240}}
 target: {SCENES_DIR.parent}/targets/charuco_a5.yaml
 poses: {{center: [0, 30], spread: [20, 20]}}
-obstacles: [{{kind: plane, xyz: [0, 0, -0.01]}}, {{kind: box, name: block, size: [0.1, 0.3, 0.1], xyz: [0.15, 0, 0.3]}}]
+obstacles: {obstacles}
 """)
-    sc = load_scene(tmp_path / "s.yaml")
+    return load_scene(tmp_path / "s.yaml")
+
+
+BLOCK = "{kind: box, name: block, size: [0.1, 0.3, 0.1], xyz: [0.15, 0, 0.3]}"
+
+
+def test_urdf_collision_elements_are_used_when_present(tmp_path):
+    sc = _two_link_scene(tmp_path, URDF, f"[{{kind: plane, xyz: [0, 0, -0.01]}}, {BLOCK}]")
     model = build_model(sc, sc.setup)
     assert model.source.startswith("URDF collision elements")
     shapes = {b.name: b.shape for b in model.bodies}
     assert shapes["base"] == "cylinder" and shapes["l1"] == "box" and shapes["tip"] == "sphere"
-    assert any("mesh" in n for n in model.notes)  # l2's mesh: its primitive capsule instead, named
+    assert any("mesh" in w and "checked: " in w for w in model.warnings)  # l2's mesh: its primitive capsule, named
     ck = CollisionChecker(model, 0.02)
     q = np.radians([[0, 0], [0, 60]])  # l2 level above the block; l2 swung down through it
     n0 = ck.n_fcl
     ok, why = ck.screen(sc.setup.link_frames(q))
     assert ok[0] and not ok[1] and why[1][1] == "block"
     assert ck.n_fcl > n0  # boxes: decided by FCL (their hulls are not exact)
+
+
+@pytest.mark.parametrize("old, new, needle", [
+    ('<origin xyz="0 0 0.2"/><geometry><box', '<origin xyz="a b c"/><geometry><box', "link 'l1' <collision>: origin xyz"),
+    ('<sphere radius="0.03"/>', '<sphere radius="0"/>', "link 'tip' <collision>: sphere radius"),
+    ('<box size="0.08 0.08 0.4"/>', '<box size="0.08 nan 0.4"/>', "link 'l1' <collision>: box size"),
+    ('<cylinder radius="0.08" length="0.1"/>', '<cylinder radius="0.08"/>', "link 'base' <collision>: cylinder length"),
+    ('<origin xyz="0 0 0.2"/><geometry><box', '<origin xyz="0 0 0.2" rpy="0 90 0"/><geometry><box',
+     "degrees read as radians"),
+])
+def test_bad_urdf_collision_numbers_are_named_errors(tmp_path, old, new, needle):
+    from vision_calib.errors import ConfigError
+    from vision_calib.planning.bodies import urdf_collisions
+
+    assert old in URDF
+    (tmp_path / "two.urdf").write_text(URDF.replace(old, new, 1))
+    with pytest.raises(ConfigError, match=needle.replace("(", r"\(")):
+        urdf_collisions(tmp_path / "two.urdf", ("base", "l1", "l2"))
+
+
+def test_links_without_collision_elements_get_capsules_and_a_warning(tmp_path):
+    """A URDF with collision geometry on some links only: the others are not left unchecked without a word."""
+    urdf = URDF.replace('<link name="l1"><collision><origin xyz="0 0 0.2"/><geometry><box size="0.08 0.08 0.4"/>'
+                        '</geometry></collision></link>', '<link name="l1"/>')
+    assert urdf != URDF
+    sc = _two_link_scene(tmp_path, urdf, f"[{BLOCK}]")
+    model = build_model(sc, sc.setup)
+    shapes = {b.name: b.shape for b in model.bodies}
+    assert shapes["l1"] == "capsule"  # its primitive, not nothing
+    w = [x for x in model.warnings if "no collision element" in x]
+    assert w and "l1" in w[0] and "checked: " in " ".join(model.warnings)
+    ck = CollisionChecker(model, 0.02)
+    ok, why = ck.screen(sc.setup.link_frames(np.radians([[0.0, 60.0]])))
+    assert not ok[0] and why[0][1] == "block"  # l2 swung down through the block: still found

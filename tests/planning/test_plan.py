@@ -69,6 +69,29 @@ def test_plan_outputs_a_recording_to_fill_and_a_scene_that_simulates_it(ur5e_pla
     assert "Predicted accuracy" in html and "data:image/png;base64" in html and "http" not in html.split("<body>")[1]
 
 
+def test_plan_page_ends_with_next_steps_and_its_pose_table_fits_a_laptop(ur5e_plan):
+    import re
+
+    out, res = ur5e_plan
+    html = (out / "report.html").read_text()
+    body = html.split("<body>")[1]
+    last = body[body.rindex("<h2>"):]
+    assert last.startswith("<h2>Next steps</h2>") and f"vision-calib process {out.name}" in last
+    assert "images/&lt;pose_id&gt;/" in last and f"record {res['design']['frames']} frames" in last
+    assert res["accuracy_vs_count"]["rows"] and "How many poses" in html and body.count("data:image/png;base64") >= 2
+    # the pose table's width: each column as wide as its longest unbroken line (~7.5 px a character at the page's
+    # font, 17 px padding and border), within the page's 1180 px less its padding
+    table = body[body.index("<h2>Poses</h2>"):]
+    table = table[table.index("<table>"):table.index("</table>")]
+    widths = {}
+    for row in re.findall(r"<tr[^>]*>(.*?)</tr>", table, re.S):
+        for j, cell in enumerate(re.findall(r"<t[hd][^>]*>(.*?)</t[hd]>", row, re.S)):
+            lines = [re.sub(r"<[^>]+>", "", ln).replace("&amp;", "&") for ln in cell.split("<br>")]
+            widths[j] = max(widths.get(j, 0), max(len(ln) for ln in lines))
+    assert len(widths) >= 9
+    assert sum(7.5 * w + 17 for w in widths.values()) <= 1180 - 48, widths
+
+
 def test_h4_plan_checks_visibility_and_reachability(tmp_path):
     res = plan_cell(SCENES_DIR / "h4_vision.yaml", 20, tmp_path, seed=0, n_candidates=2000, draws=0)
     setup = load_scene(SCENES_DIR / "h4_vision.yaml").setup
@@ -132,3 +155,27 @@ def test_candidate_sources(tmp_path):
     q0 = h4.setup.joints(h4.setup.robot.pose_grid()[:1], h4.setup.params.nominal)[0]
     X = candidate_poses(h4, CandidateSource("around", start_rad=tuple(q0), delta_rad=np.radians(3)), 50, rng)
     assert X.shape[1] == 4 and len(X) > 40
+
+
+def test_validate_on_a_region_plans_for_it(tmp_path):
+    """Poses planned for a user's validation poses (--validate-on) predict a smaller error there than poses planned
+    for the scene's whole validation region, judged by the same criterion over the user's poses."""
+    from vision_calib.planning import design as D
+
+    sc = load_scene(CELL)
+    q = sc.setup.sample_poses(np.random.default_rng(11), 12, check_view=False)
+    q[:, 0] = np.radians(15.0)  # a slice of the workspace: joint 1 held
+    rows = "\n".join(f"v{i},{','.join(f'{v:.6f}' for v in np.degrees(r))}" for i, r in enumerate(q))
+    f = tmp_path / "where.csv"
+    f.write_text("pose_id," + ",".join(f"q{j + 1}" for j in range(6)) + "\n" + rows + "\n")
+    a = plan_cell(CELL, 12, None, seed=3, n_candidates=3000, draws=0)
+    b = plan_cell(CELL, 12, None, seed=3, n_candidates=3000, draws=0, validate_on=f)
+    assert str(f) in b["design"]["validation_poses"] and str(f) not in a["design"]["validation_poses"]
+    base = sc.setup.params.mask(a["design"]["base_parameters"])
+    assert b["design"]["base_parameters"] == a["design"]["base_parameters"]
+    W = D.validation_weight(D.validation_blocks(sc, q, base))
+    mse = []
+    for res in (a, b):
+        P = np.array([p["joints_rad"] for p in res["poses"]])
+        mse.append(D.validation_mse(D.information(sc, P, base).A, np.arange(len(P)), W))
+    assert mse[1] < mse[0]

@@ -55,6 +55,8 @@ TRIPOD_CAMERA_RADIUS_M = 0.05
 #: a pair of bodies closer than the clearance in at least this fraction of random joint sets is not checked
 ALWAYS_NEAR_FRACTION = 0.99
 ALWAYS_NEAR_SAMPLES = 1000
+#: joint sets of the scene's own sampler on which no checked self pair may be closer than the clearance
+OWN_POSES = 500
 #: the side [m] of the box that stands for a plane in FCL (its distance queries to a half-space are unreliable)
 PLANE_BOX_M = 20.0
 
@@ -138,7 +140,8 @@ class RobotModel:
     """The robot's bodies (attached to ``link_frames`` indices), the static obstacles, and the pairs checked:
     ``obstacle_pairs`` (K, 2) [robot body, obstacle] and ``self_pairs`` (S, 2) [body, body] indices; ``disabled``:
     [(body, body, why)] of the self pairs left out beyond adjacent frames; ``source``: where the bodies came from;
-    ``notes``: what the model could not represent."""
+    ``notes``: what the model could not represent; ``warnings``: collision geometry it did not read (named, with
+    what was checked instead)."""
 
     bodies: tuple[Body, ...]
     obstacles: tuple[Body, ...]
@@ -147,6 +150,7 @@ class RobotModel:
     source: str
     disabled: tuple = ()
     notes: tuple[str, ...] = field(default=())
+    warnings: tuple[str, ...] = field(default=())
 
     def to_dict(self) -> dict:
         return {"source": self.source,
@@ -156,17 +160,41 @@ class RobotModel:
                                "dims_m": [] if b.plane else list(b.dims)} for b in self.obstacles],
                 "self_pairs_checked": [[self.bodies[i].name, self.bodies[j].name] for i, j in self.self_pairs],
                 "self_pairs_left_out": [{"pair": [a, b], "why": why} for a, b, why in self.disabled],
-                "notes": list(self.notes)}
+                "notes": list(self.notes), "warnings": list(self.warnings)}
 
 
 # ----------------------------------------------------------------------------------------------- URDF geometry
-def _origin(el) -> np.ndarray:
+def _numbers(text, n: int | None, where: str, what: str, positive: bool = False) -> tuple[float, ...]:
+    """The whitespace-separated numbers of a URDF attribute: ConfigError naming ``where`` (file, link) and ``what``
+    when they do not read, are not ``n`` many, are not finite or (``positive``) not > 0."""
+    from ..errors import ConfigError
+
+    try:
+        v = tuple(float(t) for t in str(text).split())
+    except ValueError:
+        raise ConfigError(f"{where}: {what} {text!r} is not a list of numbers") from None
+    if n is not None and len(v) != n:
+        raise ConfigError(f"{where}: {what} {text!r}: expected {n} numbers, got {len(v)}")
+    if not all(np.isfinite(v)):
+        raise ConfigError(f"{where}: {what} {text!r} is not finite")
+    if positive and not all(x > 0 for x in v):
+        raise ConfigError(f"{where}: {what} {text!r}: sizes must be > 0")
+    return v
+
+
+def _origin(el, where: str = "URDF") -> np.ndarray:
     from scipy.spatial.transform import Rotation
+
+    from ..errors import ConfigError
 
     T = np.eye(4)
     if el is not None:
-        T[:3, 3] = [float(v) for v in el.get("xyz", "0 0 0").split()]
-        T[:3, :3] = Rotation.from_euler("xyz", [float(v) for v in el.get("rpy", "0 0 0").split()]).as_matrix()
+        T[:3, 3] = _numbers(el.get("xyz", "0 0 0"), 3, where, "origin xyz")
+        rpy = _numbers(el.get("rpy", "0 0 0"), 3, where, "origin rpy")
+        if max(abs(a) for a in rpy) > 2 * np.pi + 0.1:
+            raise ConfigError(f"{where}: origin rpy {el.get('rpy')!r} is beyond +-2 pi: URDF angles are in radians "
+                              "(degrees read as radians?)")
+        T[:3, :3] = Rotation.from_euler("xyz", rpy).as_matrix()
     return T
 
 
@@ -180,7 +208,7 @@ def urdf_collisions(path: Path, chain_links: tuple[str, ...]) -> tuple[dict, lis
         if j.get("type") != "fixed":
             continue
         p, c = j.find("parent").get("link"), j.find("child").get("link")
-        T = _origin(j.find("origin"))
+        T = _origin(j.find("origin"), f"{path}: joint {j.get('name')!r}")
         fixed.setdefault(p, []).append((c, T))
         fixed.setdefault(c, []).append((p, np.linalg.inv(T)))
     where = {}  # link -> (chain frame index, T_frame_link)
@@ -206,17 +234,21 @@ def urdf_collisions(path: Path, chain_links: tuple[str, ...]) -> tuple[dict, lis
         k, T_fl = where[name]
         for c in cols:
             g = c.find("geometry")
-            T = T_fl @ _origin(c.find("origin"))
+            at = f"{path}: link {name!r} <collision>"
+            T = T_fl @ _origin(c.find("origin"), at)
             el = None if g is None else next(iter(g), None)
             if el is None:
                 continue
             if el.tag == "box":
-                dims = tuple(float(v) for v in el.get("size").split())
+                dims = _numbers(el.get("size"), 3, at, "box size", positive=True)
                 out.setdefault(k, []).append((name, "box", dims, T))
             elif el.tag in ("cylinder", "capsule"):
-                out.setdefault(k, []).append((name, el.tag, (float(el.get("radius")), float(el.get("length"))), T))
+                dims = (_numbers(el.get("radius"), 1, at, f"{el.tag} radius", positive=True)[0],
+                        _numbers(el.get("length"), 1, at, f"{el.tag} length", positive=True)[0])
+                out.setdefault(k, []).append((name, el.tag, dims, T))
             elif el.tag == "sphere":
-                out.setdefault(k, []).append((name, "sphere", (float(el.get("radius")),), T))
+                out.setdefault(k, []).append((name, "sphere", _numbers(el.get("radius"), 1, at, "sphere radius",
+                                                                       positive=True), T))
             else:
                 out.setdefault(k, []).append((name, "mesh", (), T))
     return out, notes
@@ -313,7 +345,7 @@ def build_model(scene, setup, rng: np.random.Generator | None = None) -> RobotMo
     n = setup.n_joints
     q_ref = np.zeros((1, n))
     frames_ref = setup.link_frames(q_ref)[0]
-    notes = []
+    notes, warns = [], []
     radii = ps.link_radii_m
     if radii is None:
         radii = DEFAULT_LINK_RADII_M.get(setup.robot_name)
@@ -331,11 +363,15 @@ def build_model(scene, setup, rng: np.random.Generator | None = None) -> RobotMo
         cols, more = urdf_collisions(robot_file, setup.link_names()[:-1])
         if cols:
             bodies, source = [], f"URDF collision elements ({robot_file.name})"
+            bare = []
             for k in range(n + 1):
                 items = cols.get(k, [])
+                if not items and k < n:  # no <collision> on this link: its primitive capsule, named
+                    bodies.append(prim[k])
+                    bare.append(prim[k].name)
                 if any(s == "mesh" for _, s, _, _ in items):
                     meshes = sorted({lk for lk, s, _, _ in items if s == "mesh"})
-                    notes.append(f"{', '.join(meshes)}: mesh collision geometry is not read"
+                    warns.append(f"{', '.join(meshes)}: mesh collision geometry is not read"
                                  + (f": the primitive capsule of {prim[k].name} is used" if k < n else
                                     " (no primitive on the flange: not checked)"))
                     if k < n:
@@ -354,7 +390,11 @@ def build_model(scene, setup, rng: np.random.Generator | None = None) -> RobotMo
                         bodies.append(segment_body(nm, k, T[:3, 3] - ax, T[:3, 3] + ax, dims[0]))
                     else:
                         bodies.append(shape_body(nm, k, shape, dims, T))
-            notes += more
+            if bare:
+                warns.append(f"{', '.join(bare)}: no collision element in the URDF: the primitive capsules are used")
+            if warns:
+                warns[-1] += " (checked: " + ", ".join(b.name for b in bodies) + ")"
+            warns += more
     tool_r = DEFAULT_TOOL_RADIUS_M if ps.tool_radius_m is None else ps.tool_radius_m
     target = None
     if scene.target_path is not None:
@@ -370,21 +410,44 @@ def build_model(scene, setup, rng: np.random.Generator | None = None) -> RobotMo
     disabled, keep = [], []
     if cand:
         rng = rng or np.random.default_rng(0)
-        q = setup.generic_poses(rng, ALWAYS_NEAR_SAMPLES)
-        a, b = body_hulls(bodies, setup.link_frames(q))
         r = np.array([bd.hull_r for bd in bodies])
         P = np.array(cand)
-        d = segment_distance(a[:, P[:, 0]], b[:, P[:, 0]], a[:, P[:, 1]], b[:, P[:, 1]]) - r[P[:, 0]] - r[P[:, 1]]
+
+        def pair_bounds(q):
+            a, b = body_hulls(bodies, setup.link_frames(q))
+            return segment_distance(a[:, P[:, 0]], b[:, P[:, 0]], a[:, P[:, 1]], b[:, P[:, 1]]) - r[P[:, 0]] - r[P[:, 1]]
+
+        d = pair_bounds(setup.generic_poses(rng, ALWAYS_NEAR_SAMPLES))
         near = np.mean(d < ps.clearance_m, axis=0)
-        for (i, j), f in zip(cand, near):
+        # the scene's own poses (its random sampler, target in view) are poses the arm takes: a pair of capsules
+        # closer than the clearance there is a modelling error of the primitives, not a collision
+        own = own_poses(scene, setup, rng)
+        d_own = pair_bounds(own) if own is not None else None
+        for k, ((i, j), f) in enumerate(zip(cand, near)):
             if f >= ALWAYS_NEAR_FRACTION:
                 disabled.append((bodies[i].name, bodies[j].name,
                                  f"closer than the clearance in {100 * f:.0f} % of {ALWAYS_NEAR_SAMPLES} random joint "
                                  "sets (structural neighbours)"))
+            elif d_own is not None and np.any(d_own[:, k] < ps.clearance_m):
+                disabled.append((bodies[i].name, bodies[j].name,
+                                 f"closer than the clearance in {int(np.sum(d_own[:, k] < ps.clearance_m))} of "
+                                 f"{len(own)} of the scene's own random poses (the primitive shapes overlap where the "
+                                 "arm does not: give planning.link_radii or URDF collision elements)"))
             else:
                 keep.append((i, j))
     return RobotModel(tuple(bodies), tuple(obstacles), obstacle_pairs, np.array(keep, int).reshape(-1, 2), source,
-                      tuple(disabled), tuple(notes))
+                      tuple(disabled), tuple(notes), tuple(warns))
+
+
+def own_poses(scene, setup, rng: np.random.Generator) -> np.ndarray | None:
+    """(OWN_POSES, n) joint sets of the scene's own random pose sampler (``sample_poses``: its region, target in
+    view; what ``simulate`` draws its random identification and validation poses from), None when it finds none."""
+    from ..errors import VisionCalibError
+
+    try:
+        return setup.sample_poses(rng, OWN_POSES)
+    except VisionCalibError:
+        return None
 
 
 __all__ = ["Body", "RobotModel", "build_model", "segment_distance", "body_hulls", "DEFAULT_LINK_RADII_M",

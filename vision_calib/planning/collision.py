@@ -22,6 +22,8 @@ import numpy as np
 from ..errors import import_extra
 from .bodies import Body, RobotModel, body_hulls, segment_distance
 
+#: a pair whose distance varies less than this [m] over the scene's poses is fixed by the geometry
+FIXED_DISTANCE_M = 0.002
 #: joint sets per broad-phase block (memory: ~ pairs x block x 100 bytes)
 BLOCK = 4096
 
@@ -80,6 +82,23 @@ class CollisionChecker:
         self.o_n = np.array([b.T_frame_body[:3, 2] for b in obs]).reshape(-1, 3)  # plane normals (+z of the plane)
         self.o_exact = np.array([b.exact for b in obs], bool)
         self.b_exact = np.array([b.exact for b in model.bodies], bool)
+        self.varying = None  # (obstacle pairs (K,) bool, self pairs (S,) bool) of the clearance figures
+
+    def mark_fixed(self, frames: np.ndarray) -> dict:
+        """Mark the pairs whose distance bound varies less than :data:`FIXED_DISTANCE_M` over the joint sets'
+        frames (N, n + 2, 4, 4) (the scene's own poses: a sphere on joint 1's axis and the table, a wrist link and
+        the camera) as fixed: :meth:`clearances` leaves them out. Returns {obstacle: [[body, obstacle]], self:
+        [[body, body]]} of the fixed pairs."""
+        lo, ls = self.lower_bounds(frames)
+        vo, vs = np.ptp(lo, axis=0) >= FIXED_DISTANCE_M, np.ptp(ls, axis=0) >= FIXED_DISTANCE_M
+        if not (vo.any() or vs.any()):
+            return {"obstacle": [], "self": []}
+        self.varying = (vo, vs)
+        names = [b.name for b in self.model.bodies]
+        onames = [b.name for b in self.model.obstacles]
+        op, sp = self.model.obstacle_pairs, self.model.self_pairs
+        return {"obstacle": [[names[i], onames[j]] for i, j in op[~vo]],
+                "self": [[names[i], names[j]] for i, j in sp[~vs]]}
 
     # ------------------------------------------------------------------ broad phase
     def lower_bounds(self, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -167,9 +186,12 @@ class CollisionChecker:
     def clearances(self, frames: np.ndarray) -> list[dict]:
         """Exact clearance of each joint set (FCL on every checked pair, planes exactly): [{clearance_m, closest: [body, other],
         obstacle_m, self_m}] (the smallest distance overall, to an obstacle, between two links; a negative or zero
-        distance: in contact or penetrating)."""
+        distance: in contact or penetrating). The pairs whose distance the joints do not change (:meth:`mark_fixed`;
+        screened all the same) are left out: the same figure on every pose."""
         out = []
         op, sp = self.model.obstacle_pairs, self.model.self_pairs
+        if self.varying is not None:
+            op, sp = op[self.varying[0]], sp[self.varying[1]]
         names = [b.name for b in self.model.bodies]
         onames = [b.name for b in self.model.obstacles]
         for F in frames:

@@ -1,13 +1,19 @@
-"""D-optimal choice of the poses among the screened candidates, for the base parameters at the cell's measurement
-noise (``identify.pose_selection.select_poses``), and the figures of a design: D criterion, D-efficiency against
-another design, each pose's leverage.
+"""The choice of the poses among the screened candidates and the figures of a design.
+
+Every candidate's information is whitened by the pose covariance the image measurement will give it
+(:func:`pose_covariances`: camera model, the target's projected corners, the corner noise, frames per pose). The
+choice: D-optimal for the base parameters (``identify.pose_selection.select_poses``), then a Fedorov exchange on
+the predicted mean squared position error over the validation poses, tr(W M^-1) (:func:`validation_blocks`,
+:func:`refine_for_validation`). Figures: D criterion, D-efficiency against another design, each pose's leverage,
+the first-order validation RMS quantiles over noise draws (:func:`validation_rms_quantiles`).
 
 The exchange algorithm holds every candidate pair's information in memory ((K m)^2 numbers for K candidates of m
 rows), so it runs on a pool: the :data:`POOL_TOP` candidates of largest leverage in the information of all screened
 candidates (at most :data:`MAX_INFO` of them, drawn at random; leverage = trace(A_k M^-1 A_k^T): how much of the
 parameter space a pose alone pins down; the extreme poses a D-optimal design needs are among them) and
 :data:`POOL_RANDOM` others drawn at random. On the UR5e cell this pool gave validation errors 0.66x those of random
-poses (synthetic, 10 seeds), against 0.78x for a pool of 300 random candidates.
+poses (synthetic, 10 seeds; D criterion alone, fixed pose noise), against 0.78x for a pool of 300 random
+candidates.
 """
 
 from __future__ import annotations
@@ -22,11 +28,21 @@ from ..identify.pose_selection import design_criterion, information_blocks, sele
 
 POOL_TOP = 200
 POOL_RANDOM = 100
-MAX_INFO = 20000
+MAX_INFO = 4000
 #: candidates analysed for the base parameters (identifiability at the nominal, SVD)
 BASE_POSES = 300
 #: exchange restarts of select_poses (from random designs; 0: greedy start only)
 RESTARTS = 1
+#: systematic corner error [px, per coordinate] of the detector, the same in every frame of a pose (the part of
+#: ``measure.covariance``'s model that does not average over frames): fitted so that the image-model covariance
+#: whitens the true pose errors of rendered, detected and PnP-measured poses (mean chi2/6 = 1): 0.0238 px on 60
+#: random UR5e poses, 0.0252 px on 60 RX-90 poses (A5 ChArUco board, the scenes' noise and blur, 2 frames; the
+#: Cramér-Rao bound alone gave chi2/6 = 46 and 52; ``benchmarks/bench_plan_noise.py``)
+SYSTEMATIC_CORNER_PX = 0.025
+#: noise draws of the first-order validation RMS distribution (:func:`validation_rms_quantiles`)
+RMS_DRAWS = 4000
+#: the validation criterion's exchange stops after this many swaps
+MAX_SWAPS = 200
 
 
 @dataclass(frozen=True)
@@ -40,13 +56,31 @@ class Information:
     names: tuple[str, ...]
     residual: str
     analysis: object
+    cov: np.ndarray | None = None
 
 
-def pose_covariances(scene, n: int) -> np.ndarray:
-    """(n, 6, 6) the cell's pose measurement covariance (``measurement.sigma_mm`` / ``sigma_deg``), per pose."""
-    m = scene.measurement
-    st, sr = max(m.sigma_t_m, 1e-6), max(m.sigma_r_rad, 1e-6)
-    return np.broadcast_to(np.diag([st**2] * 3 + [sr**2] * 3), (n, 6, 6)).copy()
+def pose_covariances(scene, poses: np.ndarray, frames: int | None = None) -> np.ndarray:
+    """(K, 6, 6) [m, rad] covariance of the target pose ``measure`` will give at commanded poses (K, .) with
+    ``frames`` frames each (default the scene's ``measurement.frames``), at the nominal geometry: the image model's
+    Cramér-Rao bound of the frame-averaged corners (``measure.covariance.image_bound_pose_cov``: the scene's camera,
+    target, sensor noise and blur) plus the detector's systematic corner error :data:`SYSTEMATIC_CORNER_PX`, the same
+    in every frame of a pose (the random + systematic model of ``measure.covariance``): + s^2 (J^T J)^-1, J the
+    reprojection Jacobian of the target's corners (2K_c, 6)."""
+    from ..measure.covariance import image_bound_pose_cov
+    from ..measure.pnp import reprojection_jacobian
+    from ..targets import load_target
+
+    setup = scene.setup
+    nf = int(frames or scene.measurement.frames)
+    target = load_target(scene.target_path)
+    _, p = target.corner_points()
+    T = setup.T_cam_target(np.asarray(poses), setup.params.nominal)
+    out = np.empty((len(T), 6, 6))
+    for k, Tk in enumerate(T):
+        J = reprojection_jacobian(Tk, p, setup.camera)
+        out[k] = image_bound_pose_cov(target, setup.camera, Tk, scene.effects, nf) + \
+            SYSTEMATIC_CORNER_PX**2 * np.linalg.pinv(J.T @ J)
+    return 0.5 * (out + np.swapaxes(out, 1, 2))
 
 
 def base_mask(scene, poses: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, object]:
@@ -57,28 +91,31 @@ def base_mask(scene, poses: np.ndarray, rng: np.random.Generator) -> tuple[np.nd
     return scene.setup.params.mask(rep.base_parameters), rep
 
 
-def _problem(scene, poses: np.ndarray, base: np.ndarray):
+def _problem(scene, poses: np.ndarray, base: np.ndarray, cov: np.ndarray | None = None, frames: int | None = None):
     setup = scene.setup
     residual = setup.residual_for(scene.identification.method, scene.identification.residual)
-    meas = setup.synthetic_measurements(poses, setup.params.nominal, np.random.default_rng(0),
-                                        pose_cov=pose_covariances(scene, len(poses)))
+    cov = pose_covariances(scene, poses, frames) if cov is None else cov
+    meas = setup.synthetic_measurements(poses, setup.params.nominal, np.random.default_rng(0), pose_cov=cov)
     problem, params = base_problem(setup, meas, residual, base)
     return problem, params, residual
 
 
-def information(scene, poses: np.ndarray, base: np.ndarray, analysis=None) -> Information:
+def information(scene, poses: np.ndarray, base: np.ndarray, analysis=None, frames: int | None = None) -> Information:
     """Information blocks of commanded poses (K, .) for the ``base`` parameters, at the nominal geometry whitened
-    by the cell's measurement noise."""
-    problem, params, residual = _problem(scene, poses, base)
-    return Information(information_blocks(problem), np.asarray(base, bool), tuple(params.free_names), residual, analysis)
+    by the image model's pose covariance (:func:`pose_covariances`, ``frames`` per pose); ``cov`` (K, 6, 6) kept."""
+    cov = pose_covariances(scene, poses, frames)
+    problem, params, residual = _problem(scene, poses, base, cov)
+    return Information(information_blocks(problem), np.asarray(base, bool), tuple(params.free_names), residual, analysis,
+                       cov)
 
 
-def identifiability(scene, poses: np.ndarray, base: np.ndarray):
+def identifiability(scene, poses: np.ndarray, base: np.ndarray, frames: int | None = None):
     """IdentifiabilityReport (``identify.analyze``) of commanded poses for the ``base`` parameters, whitened by the
-    cell's noise (the parameters outside the base set are not identifiable from the candidate region at all)."""
+    image model's pose covariance (the parameters outside the base set are not identifiable from the candidate
+    region at all)."""
     from ..identify import analyze
 
-    return analyze(_problem(scene, poses, base)[0], selection="order")
+    return analyze(_problem(scene, poses, base, frames=frames)[0], selection="order")
 
 
 def info_matrix(A: np.ndarray, idx=None) -> np.ndarray:
@@ -132,10 +169,120 @@ def select(scene, info: Information, poses: np.ndarray, n: int, rng: np.random.G
         raise IdentifiabilityError(f"{n} poses asked, only {len(sub)} candidates are measurable and collision-free: "
                                    "widen the candidate region or ask for fewer poses")
     pool = pool_indices(A, rng)
-    problem, _, _ = _problem(scene, np.asarray(poses)[sub[pool]], info.base)
+    cov = None if info.cov is None else info.cov[sub[pool]]
+    problem, _, _ = _problem(scene, np.asarray(poses)[sub[pool]], info.base, cov)
     idx = select_poses(problem, n, restarts=RESTARTS)
     return sub[pool[idx]]
 
 
+def validation_blocks(scene, validation: np.ndarray, base: np.ndarray, step: float = 1e-3) -> np.ndarray:
+    """(V, 3, L) derivative of the position error [m] at the validation poses (V, .) (``Setup.evaluate``: what
+    ``simulate`` reports as the validation position error) with respect to the ``base`` parameters, in units of
+    their ``scale`` (the columns of :class:`Information`); central differences of ``step`` scale units."""
+    setup = scene.setup
+    x0 = np.asarray(setup.params.nominal, float)
+    cols = np.flatnonzero(np.asarray(base, bool) & np.asarray(setup.params.free, bool))
+    G = np.zeros((len(validation), 3, len(cols)))
+    for k, c in enumerate(cols):
+        xp, xm = x0.copy(), x0.copy()
+        xp[c] += step * setup.params.scale[c]
+        xm[c] -= step * setup.params.scale[c]
+        ep = setup.evaluate(xp, x0, validation).errors[:, :3]
+        em = setup.evaluate(xm, x0, validation).errors[:, :3]
+        G[:, :, k] = (ep - em) / (2 * step)
+    return G
+
+
+def validation_weight(G: np.ndarray) -> np.ndarray:
+    """(L, L) W = sum_v G_v^T G_v / V of validation blocks G (V, 3, L): the mean squared validation position error
+    of a design of information M is tr(W M^-1) [m^2] (first order, unit-whitened pose noise)."""
+    return np.einsum("vai,vaj->ij", G, G) / G.shape[0]
+
+
+def _inv(M: np.ndarray) -> np.ndarray:
+    return np.linalg.pinv(M, hermitian=True)
+
+
+def validation_mse(A: np.ndarray, idx, W: np.ndarray) -> float:
+    """tr(W M^-1) [m^2] of the design idx over blocks A (K, m, L): the predicted mean squared validation position
+    error (inf when the design does not identify the base parameters)."""
+    M = info_matrix(A, idx)
+    if np.linalg.matrix_rank(M) < M.shape[0]:
+        return float("inf")
+    return float(np.trace(W @ _inv(M)))
+
+
+def validation_rms_quantiles(A: np.ndarray, idx, W: np.ndarray, rng: np.random.Generator,
+                             draws: int = RMS_DRAWS) -> dict:
+    """{median_mm, p95_mm}: quantiles over noise draws of the validation position RMS of the design idx, first
+    order: RMS^2 = d^T W d with the parameter error d ~ N(0, M^-1) (what one ``simulate`` run gives is one draw; the
+    RMS of a few effective directions spreads widely, its median is below sqrt(tr(W M^-1))). None when the design
+    does not identify the base parameters."""
+    M = info_matrix(A, idx)
+    if np.linalg.matrix_rank(M) < M.shape[0]:
+        return {"median_mm": None, "p95_mm": None}
+    w, U = np.linalg.eigh(W)
+    S = U * np.sqrt(np.clip(w, 0, None))  # W = S S^T
+    lam = np.clip(np.linalg.eigvalsh(S.T @ _inv(M) @ S), 0, None)  # RMS^2 = sum lam_i chi2_1
+    r = np.sqrt(rng.chisquare(1, size=(draws, lam.size)) @ lam) * 1e3
+    return {"median_mm": float(np.median(r)), "p95_mm": float(np.percentile(r, 95))}
+
+
+def add_gains(A: np.ndarray, Mi: np.ndarray, W: np.ndarray) -> np.ndarray:
+    """Decrease of tr(W M^-1) when each block A_k (K, m, L) is added to the information of inverse Mi (L, L), or
+    of each of several inverses Mi (P, L, L): (K,) or (P, K) (Woodbury: tr((I + B A_k^T)^-1 B W B^T), B = A_k Mi)."""
+    one = Mi.ndim == 2
+    Mi = Mi[None] if one else Mi
+    B = np.matmul(A[None], Mi[:, None])  # (P, K, m, L)
+    S = np.eye(A.shape[1]) + np.matmul(B, np.swapaxes(A, 1, 2)[None])
+    BW = np.matmul(np.matmul(B, W), np.swapaxes(B, 2, 3))
+    g = np.trace(np.linalg.solve(S, BW), axis1=2, axis2=3)
+    return g[0] if one else g
+
+
+def _removal_inverses(A: np.ndarray, sel: list) -> np.ndarray:
+    """(n, L, L) inverses of the information without each pose of the design sel (a tiny ridge where one is
+    singular)."""
+    As = A[np.asarray(sel, int)]
+    M = np.einsum("kmi,kmj->ij", As, As)
+    Mk = M[None] - np.einsum("kmi,kmj->kij", As, As)
+    ridge = 1e-9 * np.trace(M) / M.shape[0] * np.eye(M.shape[0])
+    out = np.empty_like(Mk)
+    for k, Mr in enumerate(Mk):
+        try:
+            out[k] = np.linalg.inv(Mr) if np.linalg.matrix_rank(Mr) == Mr.shape[0] else np.linalg.inv(Mr + ridge)
+        except np.linalg.LinAlgError:
+            out[k] = np.linalg.pinv(Mr + ridge, hermitian=True)
+    return out
+
+
+#: design positions per batch of the exchange's gains (memory: batch x candidates x m x L doubles)
+SWAP_BATCH = 8
+
+
+def refine_for_validation(A: np.ndarray, idx, W: np.ndarray, candidates=None, max_swaps: int = MAX_SWAPS) -> np.ndarray:
+    """Fedorov exchange of the design idx (n,) over blocks A (K, m, L) (or among ``candidates``) on the validation
+    criterion tr(W M^-1) (:func:`validation_mse`): the best swap (one pose out, one in) while it lowers the
+    criterion; the start must identify the base parameters (a D-optimal design). Returns the design (n,)."""
+    sel = [int(i) for i in idx]
+    cand = np.arange(A.shape[0]) if candidates is None else np.asarray(candidates, int)
+    cur = validation_mse(A, sel, W)
+    for _ in range(max_swaps if np.isfinite(cur) else 0):
+        out = np.setdiff1d(cand, sel)
+        if not out.size:
+            break
+        Mi = _removal_inverses(A, sel)
+        base_val = np.einsum("ij,kji->k", W, Mi)  # tr(W Mi_k)
+        val = np.concatenate([base_val[s:s + SWAP_BATCH, None] - add_gains(A[out], Mi[s:s + SWAP_BATCH], W)
+                              for s in range(0, len(sel), SWAP_BATCH)])
+        pos, j = np.unravel_index(int(np.argmin(val)), val.shape)
+        if not val[pos, j] < cur * (1 - 1e-9):
+            break
+        sel[pos] = int(out[j])
+        cur = validation_mse(A, sel, W)
+    return np.array(sel, int)
+
+
 __all__ = ["Information", "information", "base_mask", "identifiability", "select", "d_criterion", "d_efficiency", "leverages",
-           "pool_indices", "info_matrix", "pose_covariances"]
+           "pool_indices", "info_matrix", "pose_covariances", "validation_blocks", "validation_weight", "validation_mse",
+           "refine_for_validation", "validation_rms_quantiles", "add_gains", "SYSTEMATIC_CORNER_PX"]

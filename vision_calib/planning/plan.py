@@ -8,7 +8,10 @@ Steps of a plan (figures and seeds in ``plan.json``):
    point (flange / nacelle) lies in a workspace box, or joint sets within +-delta of a start joint set;
 2. screening (:func:`screen`): reachable (joint limits; H4: the inverse model closes), the target measurable
    (:mod:`.view`), collision-free with the clearance (:mod:`.collision`; arms only);
-3. D-optimal selection of N poses for the base parameters at the cell's noise (:mod:`.design`);
+3. selection of N poses (:mod:`.design`): D-optimal for the base parameters under the image measurement (each
+   candidate's pose covariance from the camera model, the target's corners and the corner noise, for the frames
+   the user records), then a Fedorov exchange on the predicted mean squared position error over the validation
+   poses (the scene's validation sampler, :data:`CRITERION_POSES` of them, or ``--validate-on``);
 4. the tour (:mod:`.tour`): short in joint-space travel time, its moves checked for collisions;
 5. clearance, view figures and leverage per pose, identifiability, and the predicted accuracy of the plan against
    random measurable poses (:mod:`.predict`);
@@ -46,6 +49,12 @@ def no_collision_note(setup) -> str:
             f"({setup.reach_check}) only")
 #: random designs whose D criterion the plan's is compared with (D-efficiency)
 EFFICIENCY_DRAWS = 20
+#: validation poses drawn from the scene's validation sampler for the design criterion
+CRITERION_POSES = 200
+#: the most poses --target-accuracy plans
+MAX_TARGET_POSES = 200
+#: random candidates, beside the D pool, among which the validation criterion's exchange swaps poses
+EXCHANGE_RANDOM = 600
 
 
 @dataclass(frozen=True)
@@ -205,11 +214,14 @@ def collision_setup(scene: Scene):
     """(collision model, checker) of the scene's arm, (None, None) for a kind without one (H4)."""
     if not isinstance(scene.setup, ArmFrames):
         return None, None
-    from .bodies import build_model
+    from .bodies import build_model, own_poses
     from .collision import CollisionChecker
 
     model = build_model(scene, scene.setup)
-    return model, CollisionChecker(model, scene.planning.clearance_m)
+    checker = CollisionChecker(model, scene.planning.clearance_m)
+    own = own_poses(scene, scene.setup, np.random.default_rng(5))
+    checker.fixed = checker.mark_fixed(scene.setup.link_frames(own)) if own is not None else None
+    return model, checker
 
 
 def _pose_rows(scene, ids, poses, joints, figs, clear, lev) -> list[dict]:
@@ -262,15 +274,73 @@ def _efficiency(A: np.ndarray, idx, rng: np.random.Generator, n: int) -> dict:
 def _settings(scene: Scene, source: CandidateSource, n_candidates: int, seed: int) -> dict:
     return {**scene.planning.to_dict(), "min_square_px": MIN_SQUARE_PX, "candidates": int(n_candidates),
             "candidate_source": source.describe(), "seed": int(seed),
-            "noise": {"sigma_mm": scene.measurement.sigma_t_m * 1e3,
-                      "sigma_deg": float(np.degrees(scene.measurement.sigma_r_rad))}}
+            "noise": {"model": "image: each pose's covariance from the camera model, the target's projected corners, "
+                               "the sensor's noise and blur (Cramér-Rao bound of the frame-averaged corners) and the "
+                               "detector's systematic corner error",
+                      "systematic_corner_px": D.SYSTEMATIC_CORNER_PX}}
+
+
+def validation_poses(scene: Scene, validate_on=None, seed: int = 0) -> tuple[np.ndarray, str]:
+    """(validation poses (V, .) of the design criterion, what they are): ``validate_on`` (a poses.csv path, or
+    commanded poses (V, .)) or :data:`CRITERION_POSES` poses of the scene's validation sampler."""
+    from ..rig.scene import scene_poses
+
+    if validate_on is None:
+        V = scene_poses(scene, np.random.default_rng([int(seed), 31]), CRITERION_POSES
+                        if scene.validation.kind == "random" else None, which="validation")
+        return V, f"{len(V)} poses of the scene's validation sampler ({scene.validation.kind})"
+    if isinstance(validate_on, (str, Path)):
+        ids, _, V, _ = read_pose_list(scene, validate_on)
+        return V, f"the {len(ids)} poses of {validate_on}"
+    V = np.asarray(validate_on, float)
+    return V, f"{len(V)} given poses"
+
+
+def _select(scene, info, poses, n, rng, W, candidates=None) -> np.ndarray:
+    """D-optimal start (``design.select``), then the exchange on the validation criterion W among the D pool and
+    :data:`EXCHANGE_RANDOM` random candidates (indices into ``poses``)."""
+    start = D.select(scene, info, poses, n, rng, candidates=candidates)
+    sub = np.arange(info.A.shape[0]) if candidates is None else np.asarray(candidates, int)
+    pool = sub[D.pool_indices(info.A[sub], rng)]
+    extra = sub if len(sub) <= EXCHANGE_RANDOM else rng.choice(sub, EXCHANGE_RANDOM, replace=False)
+    return D.refine_for_validation(info.A, start, W, np.union1d(np.union1d(pool, extra), start))
+
+
+def smallest_count(quantiles, target_mm: float, lo: int, hi: int) -> int:
+    """The smallest pose count in [lo, hi] whose ``quantiles(count)["p95_mm"]`` reaches ``target_mm``: growing by half
+    until one does, then bisection. DataError naming the best reached when none up to hi does."""
+    def ok(c):
+        q = quantiles(c)["p95_mm"]
+        return q is not None and q <= target_mm
+
+    c, fail = lo, lo - 1
+    while not ok(c):
+        fail = c
+        if c >= hi:
+            best = min((quantiles(k)["p95_mm"] for k in (lo, hi) if quantiles(k)["p95_mm"] is not None), default=None)
+            raise DataError(f"--target-accuracy {target_mm:g} mm: not reached with up to {hi} poses (95th percentile "
+                            f"of the predicted validation position RMS at {hi} poses: "
+                            f"{'n/a' if best is None else f'{best:.3g} mm'}): record more frames per pose, or ask less")
+        c = min(hi, max(c + 1, int(1.5 * c)))
+    a, b = fail + 1, c
+    while a < b:
+        m = (a + b) // 2
+        if ok(m):
+            b = m
+        else:
+            a = m + 1
+    return b
 
 
 def plan_cell(scene, n_poses: int, out_dir=None, seed: int = 0, n_candidates: int = DEFAULT_CANDIDATES,
-              source: CandidateSource | None = None, draws: int = DRAWS, counts=None, plots: bool = True) -> dict:
+              source: CandidateSource | None = None, draws: int = DRAWS, counts=None, plots: bool = True,
+              frames: int | None = None, validate_on=None, target_accuracy_m: float | None = None) -> dict:
     """Plan ``n_poses`` poses for the scene (module docstring); writes the outputs into ``out_dir`` when given and
     returns plan.json's content. Seeded: the same seed gives the same plan. draws: Monte Carlo draws of the
-    predicted accuracy (0: none); counts: its pose counts (default N / 2, N, 2 N)."""
+    predicted accuracy (0: none); counts: its pose counts (default N / 2, N, 2 N); frames: frames the user records
+    per pose (default the scene's); validate_on: the validation poses (:func:`validation_poses`); target_accuracy_m:
+    plan the smallest count whose predicted validation position RMS (95th percentile over noise draws, first order)
+    reaches it (:func:`smallest_count`; n_poses ignored)."""
     t0 = time.perf_counter()
     scene = _load(scene)
     setup = scene.setup
@@ -278,20 +348,43 @@ def plan_cell(scene, n_poses: int, out_dir=None, seed: int = 0, n_candidates: in
     rng = np.random.default_rng([int(seed), 27])
     if isinstance(n_poses, bool) or int(n_poses) < 1:
         raise ConfigError(f"--poses: expected a positive number of poses, got {n_poses!r}")
+    if target_accuracy_m is not None and not (np.isfinite(target_accuracy_m) and target_accuracy_m > 0):
+        raise ConfigError(f"--target-accuracy: expected a positive length, got {target_accuracy_m!r} m")
     n = int(n_poses)
+    frames = int(frames or scene.measurement.frames)
+    V, v_what = validation_poses(scene, validate_on, seed)
     cand = candidate_poses(scene, source, n_candidates, rng)
     model, checker = collision_setup(scene)
     scr = screen(scene, cand, checker)
     kept = scr["kept"]
-    if kept.size < n:
+    if kept.size < (n if target_accuracy_m is None else 1):
         raise DataError(f"{scene.path}: only {kept.size} of {len(cand)} candidates are reachable, measurable and "
                         f"collision-free ({_screen_line(scr['counts'])}), fewer than the {n} poses asked: widen the "
                         "region (poses.spread), relax planning limits, or ask for fewer poses")
     pool = cand[kept]
     sub = np.arange(len(pool)) if len(pool) <= D.MAX_INFO else np.sort(rng.choice(len(pool), D.MAX_INFO, replace=False))
     base, rep0 = D.base_mask(scene, pool[sub], rng)
-    info = D.information(scene, pool[sub], base, rep0)
-    pick = D.select(scene, info, pool[sub], n, rng)
+    info = D.information(scene, pool[sub], base, rep0, frames)
+    W = D.validation_weight(D.validation_blocks(scene, V, base))
+    picks, curve = {}, {}
+
+    def pick_of(c):
+        if c not in picks:
+            picks[c] = _select(scene, info, pool[sub], c, np.random.default_rng([int(seed), 27, c]), W)
+        return picks[c]
+
+    def quantiles(c):
+        if c not in curve:
+            curve[c] = D.validation_rms_quantiles(info.A, pick_of(c), W, np.random.default_rng([int(seed), 29, c]))
+        return curve[c]
+
+    n_min = -(-info.A.shape[2] // info.A.shape[1])
+    if target_accuracy_m is not None:
+        n = smallest_count(quantiles, target_accuracy_m * 1e3, n_min, min(len(sub), MAX_TARGET_POSES))
+    elif kept.size < n:
+        raise DataError(f"{scene.path}: only {kept.size} candidates kept, fewer than the {n} poses asked")
+    pick = pick_of(n)
+    quantiles(n)
     chosen = sub[pick]
     P = pool[chosen]
     joints = setup.joints(P, setup.params.nominal)
@@ -308,23 +401,32 @@ def plan_cell(scene, n_poses: int, out_dir=None, seed: int = 0, n_candidates: in
     A_sel = info.A[pick]
     lev = D.leverages(A_sel, D.info_matrix(A_sel))
     design = _efficiency(info.A, pick, rng, n)
-    rep = D.identifiability(scene, P, base)
-    n_min = -(-info.A.shape[2] // info.A.shape[1])
-    cts = _counts(n, n_min, len(pool), counts)
+    rep = D.identifiability(scene, P, base, frames)
+    cts = _counts(n, n_min, len(sub), counts)
     memo = {n: P}
 
     def plan_of_count(c):
         if c not in memo:
-            memo[c] = pool[sub[D.select(scene, info, pool[sub], c, np.random.default_rng([int(seed), 27, c]))]]
+            memo[c] = pool[sub[pick_of(c)]]
         return memo[c]
+
+    for c in cts:
+        quantiles(c)
+    acc_curve = {"of": "first-order validation position RMS [mm] over noise draws (median, 95th percentile) of the "
+                       "planned poses of each count and, median over random sets of as many screened candidates, of "
+                       "random poses", "target_mm": None if target_accuracy_m is None else target_accuracy_m * 1e3,
+                 "rows": [{"count": int(c), "plan": curve[c],
+                           "random": _random_quantiles(info.A, c, W, np.random.default_rng([int(seed), 30, c]))}
+                          for c in sorted(curve)]}
 
     t_pred = time.perf_counter()
     pred = None
     if draws:  # 0: no prediction (tests)
-        pred = predicted_accuracy(scene, plan_of_count, pool, cts, base, draws, seed)
+        pred = predicted_accuracy(scene, plan_of_count, pool, cts, base, draws, seed, frames=frames,
+                                  validation=None if validate_on is None else V)
         pred["seconds"] = time.perf_counter() - t_pred
     tb = _tour_block(tour, ids, joints)
-    warnings = []
+    warnings = [] if model is None else list(model.warnings)
     mine = next((r["plan"] for r in (pred or {}).get("rows", []) if r["count"] == n), None)
     if mine is not None and mine["failed_draws"]:
         warnings.append(f"the synthetic identification of the {n} planned poses failed in {mine['failed_draws']} of "
@@ -347,15 +449,21 @@ def plan_cell(scene, n_poses: int, out_dir=None, seed: int = 0, n_candidates: in
         "settings": _settings(scene, source, len(cand), seed),
         "screening": {**scr["counts"], "seconds": scr["seconds"], "rate_per_s": scr["rate_per_s"],
                       "fcl_queries": scr["fcl_queries"]},
-        "collision_model": None if model is None else model.to_dict(),
+        "collision_model": None if model is None else {**model.to_dict(), "clearance_leaves_out": checker.fixed},
         "n_poses": n,
         "poses": _pose_rows(scene, ids, P, joints, figs, clear, lev),
         "tour": tb,
-        "design": {**design, "criterion": "D (log det of the base parameters' information at the cell's noise, "
-                                          "scaled units)", "base_parameters": list(info.names),
+        "design": {**design, "criterion": "D-optimal start (log det of the base parameters' information under the "
+                                          "image measurement, scaled units), then exchange on the predicted validation "
+                                          "position RMS sqrt(tr(W M^-1))", "validation_poses": v_what,
+                   "predicted_validation_rms": {
+                       "plan": curve[n], "random": next(r["random"] for r in acc_curve["rows"] if r["count"] == n),
+                       "of": acc_curve["of"]},
+                   "frames": frames, "base_parameters": list(info.names),
                    "pool": f"{len(sub)} screened candidates; exchange on the {D.POOL_TOP} of largest leverage + "
                            f"{D.POOL_RANDOM} random"},
         "identifiability": _ident_block(rep, setup, base),
+        "accuracy_vs_count": acc_curve,
         "predicted_accuracy": pred,
         "notes": notes, "warnings": warnings,
         "seconds": None,
@@ -368,13 +476,22 @@ def plan_cell(scene, n_poses: int, out_dir=None, seed: int = 0, n_candidates: in
     return plan
 
 
+def _random_quantiles(A: np.ndarray, n: int, W: np.ndarray, rng: np.random.Generator) -> dict:
+    """Median over EFFICIENCY_DRAWS random designs of n of the blocks A of each first-order RMS quantile."""
+    q = [D.validation_rms_quantiles(A, rng.choice(A.shape[0], n, replace=False), W, rng, 1000)
+         for _ in range(EFFICIENCY_DRAWS)]
+    return {k: (float(np.median([v[k] for v in q if v[k] is not None])) if any(v[k] is not None for v in q) else None)
+            for k in ("median_mm", "p95_mm")}
+
+
 def _ident_block(rep, setup, base) -> dict:
     """The identifiability of the poses for the base parameters, and the parameters no candidate identifies."""
     d = rep.to_dict()
     out = {k: d[k] for k in ("n_params", "n_obs", "rank", "condition_number", "condition_number_of",
                              "non_identifiable", "base_parameters")}
     out["not_in_base_set"] = [nm for nm, b, f in zip(setup.params.names, base, setup.params.free) if f and not b]
-    out["of"] = ("the base parameters (identifiable from the candidate region), whitened by the cell's noise; "
+    out["of"] = ("the base parameters (identifiable from the candidate region), whitened by the image measurement's "
+                 "pose covariance; "
                  "not_in_base_set: the scene's free parameters no pose of the region identifies (fixed at nominal)")
     return out
 
@@ -387,13 +504,16 @@ def _screen_line(c: dict) -> str:
 
 
 def check_poses(scene, csv_path, out_dir=None, seed: int = 0, n_candidates: int = DEFAULT_CANDIDATES,
-                draws: int = DRAWS, angle_factor: float | None = None, plots: bool = True) -> dict:
+                draws: int = DRAWS, angle_factor: float | None = None, plots: bool = True,
+                frames: int | None = None) -> dict:
     """Report a user's own pose list (``poses.csv``, recording layout) the way a plan is reported: per pose joint
     limits, collisions (clearance), view figures; the moves in the list's order; the D criterion against random
     and D-optimal sets of as many poses from the scene's region; the predicted accuracy of the list's usable poses.
-    ``verdict``: ok when every pose is usable and no move collides."""
+    ``verdict``: ok when every pose is usable and no move collides. frames: per pose, the image measurement's noise
+    (default the scene's)."""
     t0 = time.perf_counter()
     scene = _load(scene)
+    frames = int(frames or scene.measurement.frames)
     setup = scene.setup
     rng = np.random.default_rng([int(seed), 27])
     ids, q, P, units_from = read_pose_list(scene, csv_path, angle_factor)
@@ -426,7 +546,7 @@ def check_poses(scene, csv_path, out_dir=None, seed: int = 0, n_candidates: int 
     from .tour import move_samples, travel_times
 
     C = travel_times(joints, scene.planning.max_joint_speed_rad_s)
-    moves, warnings = [], []
+    moves, warnings = [], ([] if model is None else list(model.warnings))
     for k in range(len(ids) - 1):
         m = {"from": ids[k], "to": ids[k + 1], "time_s": float(C[k, k + 1]),
              "largest_joint_change_deg": float(np.degrees(np.max(np.abs(joints[k + 1] - joints[k])))),
@@ -454,7 +574,7 @@ def check_poses(scene, csv_path, out_dir=None, seed: int = 0, n_candidates: int 
         sub = np.arange(len(pool)) if len(pool) <= D.MAX_INFO else np.sort(rng.choice(len(pool), D.MAX_INFO, replace=False))
         base, rep0 = D.base_mask(scene, pool[sub], rng)
         both = np.concatenate([U, pool[sub]])
-        info = D.information(scene, both, base, rep0)
+        info = D.information(scene, both, base, rep0, frames)
         mine = np.arange(n)
         others = np.arange(n, len(both))
         crit = D.d_criterion(info.A, mine)
@@ -471,8 +591,9 @@ def check_poses(scene, csv_path, out_dir=None, seed: int = 0, n_candidates: int 
             opt_logdet = D.d_criterion(info.A, opt)["logdet"]
             out_design["d_efficiency_vs_plan"] = D.d_efficiency(crit["logdet"], opt_logdet, L)
             plan_n = both[opt]
-            pred = predicted_accuracy(scene, lambda c: plan_n, pool, [n], base, draws, seed, given=U) if draws else None
-            rep = _ident_block(D.identifiability(scene, U, base), setup, base)
+            pred = predicted_accuracy(scene, lambda c: plan_n, pool, [n], base, draws, seed, given=U,
+                                      frames=frames) if draws else None
+            rep = _ident_block(D.identifiability(scene, U, base, frames), setup, base)
         else:
             warnings.append(f"{n} usable poses give fewer equations than the {L} base parameters: nothing identifiable "
                             f"to predict (at least {n_min} poses)")

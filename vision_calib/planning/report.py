@@ -15,6 +15,7 @@ from ..rig.base import ArmFrames
 from ..serialize import write_bytes_atomic, write_json_atomic, write_text_atomic
 
 PICTURE = "plan_poses.png"
+ACCURACY_PICTURE = "plan_accuracy.png"
 PLAN_JSON = "plan.json"
 HTML = "report.html"
 SIM_SCENE = "simulate_plan.yaml"
@@ -114,7 +115,7 @@ def draw_plan(path, scene, poses: np.ndarray, model) -> Path:
 def _acc_table(pred: dict, given_label: str | None = None) -> str:
     rows, classes = [], []
     for r in pred["rows"]:
-        for what, label in (("plan", "planned (D-optimal)"), ("random", "random measurable")):
+        for what, label in (("plan", "planned"), ("random", "random measurable")):
             f = r[what]
             rows.append([esc(r["count"]), esc(label), num(f["median_mm"], ".3g"), num(f["p95_mm"], ".3g"),
                          num(f["rms_median_mm"], ".3g"), esc(f"{f['draws']}" + (f" ({f['failed_draws']} failed)"
@@ -135,16 +136,46 @@ def _poses_table(res: dict) -> str:
     problems = any(p.get("problem") for p in res["poses"])
     for p in res["poses"]:
         v = p["view"]
-        rows.append([esc(p["id"]), esc(" ".join(f"{a:.1f}" for a in p["joints_deg"])),
+        j = [f"{a:.1f}" for a in p["joints_deg"]]
+        h = (len(j) + 1) // 2
+        rows.append([esc(p["id"]), esc(" ".join(j[:h])) + "<br>" + esc(" ".join(j[h:])),
                      num(None if p.get("clearance_m") is None else p["clearance_m"] * 1e3, ".1f", "-"),
-                     esc(" / ".join(p.get("closest") or []) or "-"),
+                     "<br>".join(esc(c) for c in p.get("closest") or []) or "-",
                      num(None if v["distance_m"] is None else v["distance_m"] * 1e3, ".0f"),
                      num(v["incidence_deg"], ".1f"), num(v["square_px"], ".1f"), num(v["margin_px"], ".0f"),
                      num(p.get("leverage"), ".2f", "-")] + ([esc(p.get("problem", ""))] if problems else []))
         classes.append("bad" if p.get("problem") else "")
     return table(["pose", "joints [deg]", "clearance [mm]", "closest", "distance [mm]", "incidence [deg]",
-                  "smallest square [px]", "margin [px]", "leverage"] + (["problem"] if problems else []), rows,
-                 left=(3, 9), row_classes=classes)
+                  "square [px]", "margin [px]", "leverage"] + (["problem"] if problems else []), rows,
+                 left=(1, 3, 9), row_classes=classes)
+
+
+def draw_accuracy(path, curve: dict) -> Path:
+    """N -> predicted validation position RMS (median and 95th percentile, first order) of the planned and of random
+    poses (``plan.json``'s ``accuracy_vs_count``), the target as a line; a PNG of ~600 px."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = curve["rows"]
+    n = [r["count"] for r in rows]
+    fig, ax = plt.subplots(figsize=(5.5, 3.0))
+    for what, colour in (("plan", "#2b6cb0"), ("random", "#b5523b")):
+        for q, style in (("median_mm", "-o"), ("p95_mm", "--")):
+            ax.plot(n, [r[what][q] if r[what][q] is not None else np.nan for r in rows], style, color=colour, ms=3,
+                    label=f"{what} {'median' if q == 'median_mm' else '95 %'}")
+    if curve.get("target_mm"):
+        ax.axhline(curve["target_mm"], color="#555", lw=0.8, ls=":", label="target")
+    ax.set_xlabel("poses")
+    ax.set_ylabel("validation position RMS [mm]")
+    ax.legend(fontsize=7)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    plt.close(fig)
+    return write_bytes_atomic(path, buf.getvalue())
 
 
 def plan_html(res: dict, out_dir) -> str:
@@ -174,9 +205,9 @@ def plan_html(res: dict, out_dir) -> str:
     pred = res.get("predicted_accuracy")
     out.append("<h2>Predicted accuracy</h2>")
     if pred:
-        out.append(f"<p>identify-synthetic Monte Carlo at the cell's noise (pose {pred['noise']['sigma_mm']:.3g} mm, "
-                   f"{pred['noise']['sigma_deg']:.3g} deg per component, the scene's measurement.sigma_mm / sigma_deg; "
-                   f"method {esc(pred['method'])}): position error of the identified robot against the truth on "
+        out.append(f"<p>identify-synthetic Monte Carlo under the image measurement ({esc(pred['noise']['model'])}; "
+                   f"{pred['noise']['frames']} frames per pose; method {esc(pred['method'])}): position error of the "
+                   "identified robot against the truth on "
                    f"{esc(pred['validation'])}, pooled over {pred['draws']} draws "
                    f"({esc(pred['seeds'])}). Random sets: new measurable collision-free poses each draw.</p>")
         out.append(_acc_table(pred, "your list (usable poses)" if check else None))
@@ -192,6 +223,18 @@ def plan_html(res: dict, out_dir) -> str:
                    f"scaled units) {d['logdet']:.4g}; D-efficiency against random sets of as many poses "
                    f"{effs:.3g} (median)" + (f"; against a D-optimal set {d['d_efficiency_vs_plan']:.3g}"
                                              if "d_efficiency_vs_plan" in d else "") + ".</p>")
+    curve = res.get("accuracy_vs_count")
+    if curve:
+        out.append("<h3>How many poses</h3>")
+        acc_pic = Path(out_dir) / ACCURACY_PICTURE
+        if acc_pic.is_file():
+            out.append(f"<figure>{png_img(acc_pic, 'predicted accuracy against the number of poses')}</figure>")
+        out.append(table(["poses", "plan median [mm]", "plan 95 % [mm]", "random median [mm]", "random 95 % [mm]"],
+                         [[esc(r["count"]), num(r["plan"]["median_mm"], ".3g"), num(r["plan"]["p95_mm"], ".3g"),
+                           num(r["random"]["median_mm"], ".3g"), num(r["random"]["p95_mm"], ".3g")]
+                          for r in curve["rows"]]))
+        out.append(f"<p class=\"muted\">{esc(curve['of'])}" + (f"; target {curve['target_mm']:g} mm (95 %)"
+                                                                 if curve.get("target_mm") else "") + ".</p>")
     out.append("<h2>Poses</h2>")
     out.append("<p>in tour order; joints to command (nominal model); clearance: smallest distance of the robot's bodies "
                "to the obstacles and to its own non-adjacent links (FCL); view: camera to board centre, board normal "
@@ -245,6 +288,16 @@ def plan_html(res: dict, out_dir) -> str:
     files = res.get("files") or {}
     if files:
         out.append('<p class="muted">files: ' + ", ".join(esc(v) for v in files.values()) + "</p>")
+    if not check:
+        nf = (res.get("design") or {}).get("frames") or "the scene's"
+        out.append("<h2>Next steps</h2><ol>"
+                   "<li>drive the tour: the joint values of <code>poses.csv</code>, in its order (the robot's "
+                   "current position to the first pose is not checked);</li>"
+                   f"<li>at each pose record {esc(nf)} frames of the board into "
+                   "<code>images/&lt;pose_id&gt;/</code> (the folders are there; <code>recording.yaml</code> "
+                   "describes them);</li>"
+                   f"<li>run <code>vision-calib process {esc(Path(out_dir).name)}</code> (in the folder above it): "
+                   "measure, identify and validate.</li></ol>")
     return page(title, "\n".join(out))
 
 
@@ -282,7 +335,7 @@ def write_plan(out_dir, scene, res: dict, poses: np.ndarray, joints: np.ndarray,
     if recording:
         from ..io.recording import write_recording
 
-        write_recording(out, scene, poses, joints, scene.measurement.frames)
+        write_recording(out, scene, poses, joints, (res.get("design") or {}).get("frames") or scene.measurement.frames)
         for p in res["poses"]:
             (out / "images" / p["id"]).mkdir(parents=True, exist_ok=True)
         write_simulate_scene(out, scene)
@@ -291,6 +344,9 @@ def write_plan(out_dir, scene, res: dict, poses: np.ndarray, joints: np.ndarray,
     if plots:
         draw_plan(out / PICTURE, scene, poses, model)
         files["picture"] = PICTURE
+        if res.get("accuracy_vs_count"):
+            draw_accuracy(out / ACCURACY_PICTURE, res["accuracy_vs_count"])
+            files["accuracy_picture"] = ACCURACY_PICTURE
     files.update({"plan": PLAN_JSON, "report": HTML})
     res["files"] = files
     write_json_atomic(out / PLAN_JSON, res)
@@ -298,4 +354,4 @@ def write_plan(out_dir, scene, res: dict, poses: np.ndarray, joints: np.ndarray,
     return files
 
 
-__all__ = ["write_plan", "draw_plan", "plan_html"]
+__all__ = ["write_plan", "draw_plan", "draw_accuracy", "plan_html"]

@@ -12,8 +12,8 @@ Scene keys (both optional; lengths and angles in the scene's ``units``, keys wit
     planning:
       clearance: 0.02              # every robot body keeps this distance from the obstacles and its own links
       distance: [0.2, 1.5]         # camera-target distance limits (depth of field)
-      max_incidence: 50            # board normal vs the viewing ray to the board centre
-      margin_px: 20                # the whole board this far inside the image border
+      max_incidence: 60            # board normal vs the viewing ray to the board centre
+      margin_px: 10                # the whole board this far inside the image border
       max_joint_speed: 60          # per second, every joint (travel time of the tour)
       move_step: 2                 # sampling of the straight joint-space moves for collisions
       link_radii: [..]             # primitive collision model: n radii (the base up to joint 1, then the link
@@ -42,8 +42,11 @@ COLLISION_KEYS = ("link_radii", "tool_radius")
 
 DEFAULT_CLEARANCE_M = 0.02
 DEFAULT_DISTANCE_M = (0.2, 1.5)
-DEFAULT_MAX_INCIDENCE_DEG = 50.0
-DEFAULT_MARGIN_PX = 20.0
+#: the view limits default to those of the scene's own pose sampler (``Setup.visible``: the whole board 10 px
+#: inside the image, its normal within 60 deg of the viewing ray), so that the planner's candidates cover the
+#: region random poses are drawn from; a scene's planning: keys make them stricter
+DEFAULT_MAX_INCIDENCE_DEG = 60.0
+DEFAULT_MARGIN_PX = 10.0
 #: joint speed of the tour's travel times when the scene gives none: a cautious speed for a calibration session
 #: (the UR5e's limit is 180 deg/s; 60 deg/s is what a person next to the robot lets it drive)
 DEFAULT_JOINT_SPEED_DEG_S = 60.0

@@ -1,0 +1,163 @@
+"""Planning under the image measurement (issue 34): the pose covariance of the image model, the validation
+criterion's exchange (Woodbury gains against direct inverses, no single swap left that improves it), the first-order
+RMS quantiles against a Monte Carlo of the synthetic identification, the view limits no stricter than the scene's
+own sampler, and a self-collision model that accepts every pose of the shipped scenes' own sampler."""
+
+import inspect
+
+import numpy as np
+import pytest
+
+from vision_calib.planning import design as D
+from vision_calib.rig import SCENES_DIR, load_scene
+from vision_calib.rig.base import Setup
+from vision_calib.rig.cell import DEFAULT_MARGIN_PX, DEFAULT_MAX_INCIDENCE_DEG
+
+UR5E = SCENES_DIR / "ur5e_eye_in_hand.yaml"
+
+
+def test_pose_covariance_adds_a_systematic_floor_that_frames_do_not_average():
+    sc = load_scene(UR5E)
+    q = sc.setup.sample_poses(np.random.default_rng(3), 4)
+    c1, c10, c1000 = (D.pose_covariances(sc, q, f) for f in (1, 10, 1000))
+    d1, d10, d1000 = (np.diagonal(c, axis1=1, axis2=2) for c in (c1, c10, c1000))
+    assert np.all(d1 > d10) and np.all(d10 > d1000)  # the random part averages over frames
+    # the systematic part does not: with many frames the covariance tends to s^2 (J^T J)^-1, not to zero
+    from vision_calib.measure.pnp import reprojection_jacobian
+    from vision_calib.targets import load_target
+
+    _, p = load_target(sc.target_path).corner_points()
+    T = sc.setup.T_cam_target(q, sc.setup.params.nominal)
+    floor = np.array([D.SYSTEMATIC_CORNER_PX**2 * np.linalg.inv(reprojection_jacobian(Tk, p, sc.setup.camera).T
+                                                                 @ reprojection_jacobian(Tk, p, sc.setup.camera))
+                      for Tk in T])
+    np.testing.assert_allclose(c1000, floor, rtol=0.05, atol=1e-15)
+    for c in c1:
+        assert np.all(np.linalg.eigvalsh(c) > 0)
+
+
+def _blocks(rng, K=40, m=6, L=9):
+    A = rng.normal(size=(K, m, L)) * rng.uniform(0.2, 2.0, size=(K, 1, 1))
+    G = rng.normal(size=(30, 3, L))
+    return A, D.validation_weight(G)
+
+
+def test_add_gains_match_direct_inverses():
+    rng = np.random.default_rng(0)
+    A, W = _blocks(rng)
+    sel = np.arange(5)
+    Mi = np.linalg.inv(D.info_matrix(A, sel))
+    g = D.add_gains(A[10:20], Mi, W)
+    direct = [np.trace(W @ Mi) - np.trace(W @ np.linalg.inv(D.info_matrix(A, np.r_[sel, k]))) for k in range(10, 20)]
+    np.testing.assert_allclose(g, direct, rtol=1e-8)
+
+
+def test_exchange_ends_where_no_single_swap_improves_and_beats_its_start():
+    rng = np.random.default_rng(1)
+    A, W = _blocks(rng)
+    start = np.arange(4)  # 24 equations for 9 parameters: identifiable
+    sel = D.refine_for_validation(A, start, W)
+    v = D.validation_mse(A, sel, W)
+    assert v < D.validation_mse(A, start, W)
+    for pos in range(len(sel)):
+        for j in np.setdiff1d(np.arange(len(A)), sel):
+            trial = sel.copy()
+            trial[pos] = j
+            assert D.validation_mse(A, trial, W) >= v * (1 - 1e-7)
+
+
+def test_first_order_quantiles_match_the_quadratic_form():
+    rng = np.random.default_rng(2)
+    A, W = _blocks(rng)
+    sel = np.arange(6)
+    q = D.validation_rms_quantiles(A, sel, W, np.random.default_rng(3), 20000)
+    C = np.linalg.inv(D.info_matrix(A, sel))
+    d = np.random.default_rng(4).multivariate_normal(np.zeros(len(C)), C, size=20000)
+    r = np.sqrt(np.einsum("ki,ij,kj->k", d, W, d)) * 1e3
+    assert q["median_mm"] == pytest.approx(np.median(r), rel=0.03)
+    assert q["p95_mm"] == pytest.approx(np.percentile(r, 95), rel=0.03)
+    assert D.validation_rms_quantiles(A, [0], W, rng)["median_mm"] is None  # 6 equations, 9 parameters
+
+
+def test_first_order_prediction_matches_the_synthetic_identification():
+    """The plan's headline figure (first order) against identify-synthetic runs drawn from the same covariances."""
+    from vision_calib.experiment.synthetic import run_synthetic
+
+    sc = load_scene(UR5E)
+    rng = np.random.default_rng(7)
+    P = sc.setup.sample_poses(rng, 20)
+    base, _ = D.base_mask(sc, sc.setup.sample_poses(rng, 200), rng)
+    info = D.information(sc, P, base, frames=2)
+    V = sc.setup.sample_poses(np.random.default_rng(8), 100, check_view=False)
+    W = D.validation_weight(D.validation_blocks(sc, V, base))
+    q = D.validation_rms_quantiles(info.A, np.arange(20), W, np.random.default_rng(9))
+    rms = []
+    for k in range(30):
+        run = run_synthetic(sc, poses=P, validation=V, seed=100 + k, base=base, pose_cov=info.cov)
+        rms.append(np.sqrt(np.mean(run.after.position_errors_mm**2)))
+    # 30 draws: the sample median is within ~15 % of the true one
+    assert np.median(rms) == pytest.approx(q["median_mm"], rel=0.2)
+
+
+def test_view_limits_default_to_the_scene_sampler():
+    sig = inspect.signature(Setup.visible).parameters
+    assert DEFAULT_MARGIN_PX == sig["margin_px"].default
+    assert DEFAULT_MAX_INCIDENCE_DEG == sig["max_tilt_deg"].default
+
+
+@pytest.mark.parametrize("name", ["rx90_eye_in_hand.yaml", "thesis_arm_tripod_probe.yaml", "ur5e_eye_in_hand.yaml"])
+def test_self_collision_accepts_the_scene_own_poses(name):
+    pytest.importorskip("fcl")
+    from vision_calib.planning.plan import collision_setup
+
+    sc = load_scene(SCENES_DIR / name)
+    model, checker = collision_setup(sc)
+    q = sc.setup.sample_poses(np.random.default_rng(123), 400)  # not the draws the model was built on
+    F = sc.setup.link_frames(q)
+    lo, ls = checker.lower_bounds(F)
+    own = ls >= sc.planning.clearance_m  # self pairs only: the scene's obstacles may still be in the way
+    assert own.all(), [model.bodies[i].name + " / " + model.bodies[j].name for i, j in model.self_pairs[~own.all(0)]]
+    for a, b, why in model.disabled:  # every pair left out says why
+        assert why
+
+
+def test_clearance_figures_change_with_the_joints():
+    pytest.importorskip("fcl")
+    from vision_calib.planning.plan import collision_setup
+
+    sc = load_scene(UR5E)
+    _, checker = collision_setup(sc)
+    q = sc.setup.sample_poses(np.random.default_rng(4), 6)
+    c = checker.clearances(sc.setup.link_frames(q))
+    assert np.ptp([r["clearance_m"] for r in c]) > 1e-3
+    assert ["forearm_link", "camera (T_flange_cam)"] in checker.fixed["self"]  # fixed by the wrist: left out
+
+
+def test_smallest_count_finds_the_first_count_that_reaches_the_target():
+    from vision_calib.errors import DataError
+    from vision_calib.planning.plan import smallest_count
+
+    seen = []
+
+    def q(c):  # p95 falling as 1 / sqrt(c)
+        seen.append(c)
+        return {"p95_mm": 1.0 / np.sqrt(c)}
+
+    for target in (0.5, 0.3, 0.2, 0.1):
+        n = smallest_count(q, target, 3, 200)
+        assert 1 / np.sqrt(n) <= target < 1 / np.sqrt(n - 1) or n == 3
+    assert len(set(seen)) < 60  # a search, not a scan of 3..200
+    with pytest.raises(DataError, match="not reached with up to 200 poses"):
+        smallest_count(q, 0.01, 3, 200)
+
+
+def test_length_option_reads_units():
+    import argparse
+
+    from vision_calib.cli.plan import length_m
+
+    assert length_m("0.1mm") == pytest.approx(1e-4) and length_m("100um") == pytest.approx(1e-4)
+    assert length_m("0.0001 m") == pytest.approx(1e-4) and length_m("0.1") == pytest.approx(1e-4)
+    for bad in ("fast", "-1mm", "nan", "0"):
+        with pytest.raises(argparse.ArgumentTypeError):
+            length_m(bad)
