@@ -43,6 +43,8 @@ DAMPED_SHARE = 0.5
 #: largest joint correction [deg] compensate gives a joint set: more is another arm configuration, not a correction
 #: (the row is named, not corrected)
 MAX_CORRECTION_DEG = 10.0
+#: ... and of a prismatic joint [mm] (more is not a calibration correction)
+MAX_CORRECTION_MM = 10.0
 #: rows per chunk of compensate / inverse (bounded memory: a few MB per chunk)
 CHUNK_ROWS = 4096
 #: statuses of a compensated row (:class:`Compensation`)
@@ -359,20 +361,28 @@ class CalibratedRobot:
         return Compensation(q, qc, status.astype(str), why.astype(str), np.linalg.norm(rem[:, :3], axis=1),
                             np.linalg.norm(rem[:, 3:], axis=1), tol[:, 0], tol[:, 1], amp)
 
-    @staticmethod
-    def _within(r: np.ndarray, tol: np.ndarray, dq: np.ndarray) -> np.ndarray:
-        """(N,) bool: residual r (N, 6) within tol (N, 2) by a correction dq (N, n) within MAX_CORRECTION_DEG."""
+    def max_correction(self) -> np.ndarray:
+        """(n,) the largest correction compensate gives each joint [rad: :data:`MAX_CORRECTION_DEG`; m for a
+        prismatic joint: :data:`MAX_CORRECTION_MM`]."""
+        return np.where(self.prismatic, MAX_CORRECTION_MM * 1e-3, np.radians(MAX_CORRECTION_DEG))
+
+    def _within(self, r: np.ndarray, tol: np.ndarray, dq: np.ndarray) -> np.ndarray:
+        """(N,) bool: residual r (N, 6) within tol (N, 2) by a correction dq (N, n) within :meth:`max_correction`."""
         return ((np.linalg.norm(r[:, :3], axis=1) <= tol[:, 0]) & (np.linalg.norm(r[:, 3:], axis=1) <= tol[:, 1])
-                & (np.abs(dq).max(axis=1) <= np.radians(MAX_CORRECTION_DEG)))
+                & np.all(np.abs(dq) <= self.max_correction(), axis=1))
 
     def _not_corrected_why(self, q0: np.ndarray, q: np.ndarray, r: np.ndarray, tol: np.ndarray, amp: float) -> str:
         """Why the exact solution q (n,) from q0 with residual r (6,) is refused."""
         lim = self.kin.joint_limits
         near = f" (near a singularity: {amp:.3g} deg per mm)" if amp > AMPLIFIED_DEG_PER_MM else ""
-        j = int(np.argmax(np.abs(q - q0)))
+        j = int(np.argmax(np.abs(q - q0) / self.max_correction()))
         if np.linalg.norm(r[:3]) <= tol[0] and np.linalg.norm(r[3:]) <= tol[1]:
-            return (f"not corrected: the exact correction needs {np.degrees(q[j] - q0[j]):+.3g} deg on q{j + 1}, "
-                    f"more than {MAX_CORRECTION_DEG:g} deg (another arm configuration){near}")
+            if self.prismatic[j]:
+                need = f"{(q[j] - q0[j]) * 1e3:+.3g} mm on q{j + 1}, more than {MAX_CORRECTION_MM:g} mm (prismatic)"
+            else:
+                need = (f"{np.degrees(q[j] - q0[j]):+.3g} deg on q{j + 1}, more than {MAX_CORRECTION_DEG:g} deg "
+                        "(another arm configuration)")
+            return f"not corrected: the exact correction needs {need}{near}"
         at = [] if lim is None else [j for j in range(self.n_joints) if np.isclose(q[j], lim[j, 0], atol=1e-9)
                                      or np.isclose(q[j], lim[j, 1], atol=1e-9)]
         return (f"not corrected: the calibrated model's tool stays {np.linalg.norm(r[:3]) * 1e3:.3g} mm, "
