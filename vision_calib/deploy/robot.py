@@ -24,7 +24,7 @@ from ..errors import DataError, ParameterError
 from ..io.controller_export import find_result
 from ..io.model_export import CalibratedModel, joint_offsets, read_calibrated_model
 from ..kinematics.protocols import JointOffsetForm, PrismaticJoints
-from .kinematics import PoseNotReachedError, kinematics_for
+from .kinematics import PoseNotReachedError, kinematics_for, raise_not_reached
 from .solve import amplification_deg_per_mm, damped_correction, levenberg_marquardt
 
 #: parameter step [m or rad] of the finite-difference parameter Jacobian
@@ -225,16 +225,17 @@ class CalibratedRobot:
         T, C = self._propagate(self.kin.observed, self.kin.observed_jacobian, q, fd)
         return (T[0], C[0]) if single else (T, C)
 
-    def inverse(self, T_base_tool: ArrayLike, q_start: ArrayLike | None = None, labels=None,
-                progress=None) -> np.ndarray:
-        """Joint values (n,) or (N, n) that put the tool at T_base_tool (4, 4) or (N, 4, 4) [m] on this model: a
-        serial chain by damped Newton (Levenberg-Marquardt, joint limits kept) from q_start ((n,): one start for all,
-        or (N, n): one per pose; the branch nearest it), else from the nominal model's solution (itself from the
-        stored starts nearest the goal; those starts directly where the nominal model has no solution); the H4 by its
-        closed-form inverse geometric model. In chunks of :data:`CHUNK_ROWS` poses (``progress(rows_done,
-        rows_total)`` after each). ``deploy.kinematics.PoseNotReachedError`` (CLI exit 3) names the pose (``labels``:
-        names of the rows) when it is unreachable or the iteration does not converge."""
-        T, single = _check_T(T_base_tool)
+    def inverse_rows(self, T_base_tool: ArrayLike, q_start: ArrayLike | None = None, labels=None,
+                     progress=None) -> tuple[np.ndarray, np.ndarray]:
+        """(q (N, n), why (N,) str): joint values that put the tool at each pose of T_base_tool (N, 4, 4) [m] on this
+        model, each pose on its own: a serial chain by damped Newton (Levenberg-Marquardt, joint limits kept,
+        ``deploy.kinematics.BatchedArm``) from q_start ((n,): one start for all, or (N, n): one per pose; the branch
+        nearest it), else from the nominal model's solution (itself from the stored starts nearest the goal; those
+        starts directly where the nominal model has no solution); the H4 by its closed-form inverse geometric model.
+        A pose not reached (unreachable, or the iteration stalls off it): q NaN, why names it (``labels``: names of
+        the rows) with the residual left; "" for a pose reached. In chunks of :data:`CHUNK_ROWS` poses
+        (``progress(rows_done, rows_total)`` after each)."""
+        T, _ = _check_T(T_base_tool)
         start = None
         if q_start is not None:
             start, _ = _check_q(q_start, self.n_joints, "q_start")
@@ -242,19 +243,24 @@ class CalibratedRobot:
                 raise DataError(f"q_start: {len(start)} joint sets for {len(T)} poses (give one, or one per pose)")
             start = np.broadcast_to(start, (len(T), self.n_joints))
         lab = list(labels) if labels is not None else [f"#{k}" for k in range(len(T))]
-        q = np.empty((len(T), self.n_joints))
+        q, why = np.empty((len(T), self.n_joints)), np.empty(len(T), dtype=object)
         for a in range(0, len(T), CHUNK_ROWS):
             b = min(a + CHUNK_ROWS, len(T))
-            try:
-                q[a:b] = self.kin.inverse(T[a:b], self.x, None if start is None else start[a:b], lab[a:b],
-                                          "nominal" if self.is_nominal else "calibrated",
-                                          x_seed=None if self.is_nominal else self.x_nominal)
-            except PoseNotReachedError as exc:
-                exc.pose_index = a + (exc.pose_index or 0)
-                raise
+            q[a:b], why[a:b] = self.kin.inverse_rows(T[a:b], self.x, None if start is None else start[a:b], lab[a:b],
+                                                     "nominal" if self.is_nominal else "calibrated",
+                                                     x_seed=None if self.is_nominal else self.x_nominal)
             if progress is not None:
                 progress(b - a, len(T))
-        return q[0] if single else q
+        return q, why.astype(str)
+
+    def inverse(self, T_base_tool: ArrayLike, q_start: ArrayLike | None = None, labels=None,
+                progress=None) -> np.ndarray:
+        """Joint values (n,) or (N, n) that put the tool at T_base_tool (4, 4) or (N, 4, 4) [m] on this model
+        (:meth:`inverse_rows`); ``deploy.kinematics.PoseNotReachedError`` (CLI exit 3) names the first pose not
+        reached (``labels``: names of the rows) and how many are not."""
+        q, why = self.inverse_rows(T_base_tool, q_start, labels, progress)
+        raise_not_reached(why)
+        return q[0] if np.ndim(T_base_tool) == 2 else q
 
     def compensate(self, q: ArrayLike, labels=None) -> np.ndarray:
         """The joint values (n,) or (N, n) that put the tool, on the calibrated model, within its predicted accuracy
@@ -328,10 +334,10 @@ class CalibratedRobot:
         qc, amp = np.full(q.shape, np.nan), np.full(N, np.nan)
         idx = np.flatnonzero(why == "")
         if kin.closed_form:
-            qc[idx], err = self._closed_form_rows(T_goal[idx])
+            qc[idx], err = kin.inverse_rows(T_goal[idx], self.x)
             for i, e in zip(idx, err):
                 if e:
-                    status[i], why[i] = "not_corrected", e
+                    status[i], why[i] = "not_corrected", f"not corrected: {e}"
         elif idx.size:
             lim = kin.joint_limits
 
@@ -388,20 +394,6 @@ class CalibratedRobot:
         return (f"not corrected: the calibrated model's tool stays {np.linalg.norm(r[:3]) * 1e3:.3g} mm, "
                 f"{np.linalg.norm(r[3:]) * 1e3:.3g} mrad from the nominal one (predicted accuracy {tol[0] * 1e3:.3g} mm, "
                 f"{tol[1] * 1e3:.3g} mrad){near}" + (f"; joint q{at[0] + 1} at its limit" if at else ""))
-
-    def _closed_form_rows(self, T: np.ndarray) -> tuple[np.ndarray, list]:
-        """(q (N, n), [why or ""]) of a closed-form inverse, row by row where it names an unreachable pose."""
-        q, why = np.full((len(T), self.n_joints), np.nan), [""] * len(T)
-        todo = np.arange(len(T))
-        while todo.size:
-            try:
-                q[todo] = self.kin.inverse(T[todo], self.x)
-                break
-            except PoseNotReachedError as exc:
-                k = exc.pose_index or 0
-                why[todo[k]] = f"not corrected: {exc}"
-                todo = np.delete(todo, k)
-        return q, why
 
     # ------------------------------------------------------------------ joint offsets
     def joint_offsets(self) -> dict:
