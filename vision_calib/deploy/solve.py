@@ -72,7 +72,7 @@ def levenberg_marquardt(f: Callable | None, T_goal: np.ndarray, q0: np.ndarray, 
             J = Jq[act]
         else:
             J = joint_jacobian(f, qa, T_goal[act]) if jac is None else jac(qa)
-        JtJ = np.einsum("kin,kim->knm", J, J)
+        JtJ = np.swapaxes(J, 1, 2) @ J
         g = np.einsum("kin,ki->kn", J, r[act])
         A = JtJ + lam[act, None, None] * eye
         step = -np.linalg.solve(A, g[..., None])[..., 0]
