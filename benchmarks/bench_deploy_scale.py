@@ -50,16 +50,16 @@ class PreviousKinematics(ChainKinematics):
         return super()._arms(x)[0], None
 
     def joint_jacobian(self, q, x) -> np.ndarray:
-        fr = self._arm(x).forward_all(q)  # every joint turns about its frame's z axis
+        fr = self.arm_at(x).forward_all(q)  # every joint turns about its frame's z axis
         w, lever = fr[:, 1:-1, :3, 2], fr[:, -1, None, :3, 3] - fr[:, 1:-1, :3, 3]
         return np.concatenate([np.swapaxes(np.cross(w, lever), 1, 2), np.swapaxes(w, 1, 2)], axis=1)
 
 
 def _inverse(r, T) -> tuple:
-    """(q, why, seconds, peak RSS MB after) of r.inverse_rows(T)."""
-    t0 = time.perf_counter()
+    """(q, why, wall seconds, CPU seconds of this process, peak RSS MB after) of r.inverse_rows(T)."""
+    t0, c0 = time.perf_counter(), time.process_time()
     q, why = r.inverse_rows(T)
-    return q, why, time.perf_counter() - t0, _peak_rss_mb()
+    return q, why, time.perf_counter() - t0, time.process_time() - c0, _peak_rss_mb()
 
 
 def main() -> None:
@@ -79,14 +79,15 @@ def main() -> None:
         q = q + rng.uniform(-1, 1, q.shape) * np.radians(20.0)
 
         rss0 = _peak_rss_mb()
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         c = r.compensate_rows(q)
-        t_new = time.perf_counter() - t0
+        t_new, cpu_new = time.perf_counter() - t0, time.process_time() - c0
         rss = _peak_rss_mb()
         st, n = np.unique(c.status, return_counts=True)
         ok = c.corrected
         dq = np.degrees(np.abs(c.q_corrected[ok] - q[ok]).max(axis=1))
-        print(f"compensate {args.rows} rows: {t_new:.1f} s ({t_new / args.rows * 1e6:.0f} us/row); process peak RSS "
+        print(f"compensate {args.rows} rows: {t_new:.1f} s wall, {cpu_new:.1f} s CPU ({t_new / args.rows * 1e6:.0f} us/row "
+              "wall); process peak RSS "
               f"{rss:.0f} MB after it ({rss0:.0f} MB before: the processing of the example)")
         print("  statuses: " + ", ".join(f"{s} {k}" for s, k in zip(st, n)))
         print(f"  largest correction of a corrected row {dq.max():.3f} deg; near a singularity: median amplification "
@@ -106,23 +107,25 @@ def main() -> None:
         lim = r.kin.joint_limits
         qi = np.repeat(q0, -(-args.inverse_rows // len(q0)), axis=0)[: args.inverse_rows]
         qi = np.clip(qi + rng.uniform(-1, 1, qi.shape) * np.radians(20.0), lim[:, 0], lim[:, 1])
-        T = r.forward(qi)[0]
+        T = r.kin.tool(qi, r.x)  # the calibrated tool poses (without the covariance of forward())
         rss0 = _peak_rss_mb()
-        q_inv, why, t_inv, rss = _inverse(r, T)
+        q_inv, why, t_inv, cpu_inv, rss = _inverse(r, T)
         ok = why == ""
         same = ok & (np.abs(np.angle(np.exp(1j * (np.where(ok[:, None], q_inv, 0.0) - qi)))).max(axis=1) < 1e-6)
-        print(f"inverse {len(T)} rows: {t_inv:.1f} s ({t_inv / len(T) * 1e6:.0f} us/row); process peak RSS {rss:.0f} "
+        print(f"inverse {len(T)} rows: {t_inv:.1f} s wall, {cpu_inv:.1f} s CPU ({t_inv / len(T) * 1e6:.0f} us/row wall); "
+              f"process peak RSS {rss:.0f} "
               f"MB after it ({rss0:.0f} MB before); {int(ok.sum())} reached, {int((~ok).sum())} not reached (named); "
               f"{int(same.sum())} returned the joint set they were made from (the others another branch; --near "
               "keeps it)")
         nb = min(args.inverse_baseline_rows, len(T))
         prev = dataclasses.replace(r, kin=PreviousKinematics(r.model.robot, r.tcp))
-        qb, why_b, t_b, _ = _inverse(prev, T[:nb])
-        _, _, t_n, _ = _inverse(r, T[:nb])
+        qb, why_b, t_b, c_b, _ = _inverse(prev, T[:nb])
+        _, _, t_n, c_n, _ = _inverse(r, T[:nb])
         agree = (why_b == "") & ok[:nb] & (np.abs(qb - q_inv[:nb]).max(axis=1) < 1e-9)
         print(f"baseline: inverse as before BatchedArm (the chain's own forward kinematics per call) of the first {nb} "
-              f"rows: {t_b:.1f} s ({t_b / nb * 1e6:.0f} us/row); BatchedArm on the same rows {t_n:.1f} s "
-              f"({t_n / nb * 1e6:.0f} us/row): ratio {t_b / t_n:.2f}; the same joints (1e-9) on "
+              f"rows: {t_b:.1f} s wall, {c_b:.1f} s CPU ({c_b / nb * 1e6:.0f} us/row CPU); BatchedArm on the same rows "
+              f"{t_n:.1f} s wall, {c_n:.1f} s CPU ({c_n / nb * 1e6:.0f} us/row CPU): ratio (CPU) {c_b / c_n:.2f}; "
+              "the same joints (1e-9) on "
               f"{int(agree.sum())} of {nb} rows ({int((why_b != '').sum())} not reached by the baseline)")
 
 

@@ -42,7 +42,7 @@ def test_batched_forward_equals_the_chains_own_to_1e_12_m(results):
     rng = np.random.default_rng(0)
     for name, kin, x in _cases(results):
         q = _joints(kin, rng, 2000)
-        arm = kin._arm(x)
+        arm = kin.arm_at(x)
         batched = BatchedArm(arm)
         T_own = arm.forward(q)
         T = batched.forward(q)
@@ -51,14 +51,14 @@ def test_batched_forward_equals_the_chains_own_to_1e_12_m(results):
         assert np.all(T[:, 3] == [0, 0, 0, 1])
         np.testing.assert_array_equal(kin.tool(q, x), T)  # what compensate / inverse use
         # a wrong link constant would show: the same chain at another parameter vector differs
-        assert np.abs(BatchedArm(kin._arm(x + 1e-3)).forward(q) - T_own).max() > 1e-4
+        assert np.abs(BatchedArm(kin.arm_at(x + 1e-3)).forward(q) - T_own).max() > 1e-4
 
 
 @pytest.mark.parametrize("case", [0, 1, 2])
 def test_batched_joint_jacobian_matches_central_differences_of_the_chains_own(results, case):
     name, kin, x = list(_cases(results))[case]
     q = _joints(kin, np.random.default_rng(1), 200)
-    arm = kin._arm(x)
+    arm = kin.arm_at(x)
     T, J = BatchedArm(arm).forward(q, jacobian=True)
     np.testing.assert_allclose(J, joint_jacobian(arm.forward, q, arm.forward(q)), atol=1e-8, err_msg=name)
     assert np.abs(T - arm.forward(q)).max() < 1e-12

@@ -36,6 +36,8 @@ from .solve import joint_jacobian, levenberg_marquardt
 N_SEEDS = 1023
 N_TRIES = 8
 SEED_LENGTH_M = 0.3
+#: goals per block of the goal-to-seed distance table (SEED_BLOCK x (1 + N_SEEDS) floats)
+SEED_BLOCK = 4096
 #: largest tilt [rad] of an H4 goal pose (the nacelle only turns about z_B)
 H4_TILT_TOL_RAD = 1e-6
 
@@ -45,6 +47,25 @@ class PoseNotReachedError(UnreachablePoseError):
     goal and why (residual, the joint at its limit, the chain that cannot close). CLI exit code 3."""
 
     exit_code = 3
+
+
+def _nearest(T: np.ndarray, Ts: np.ndarray) -> np.ndarray:
+    """(N, N_TRIES) indices of the poses Ts (S, 4, 4) nearest each goal T (N, 4, 4), nearest first: |dt| +
+    SEED_LENGTH_M |drot|, by blocks of SEED_BLOCK goals (an (SEED_BLOCK, S) distance table, no (N, S, 3, 3)
+    temporaries)."""
+    out = np.empty((len(T), N_TRIES), dtype=np.intp)
+    Rs, b = Ts[:, :3, :3].reshape(len(Ts), 9), Ts[:, :3, 3]
+    bb = (b * b).sum(1)[None]
+    for k in range(0, len(T), SEED_BLOCK):
+        Tk = T[k:k + SEED_BLOCK]
+        a = Tk[:, :3, 3]
+        dist = np.sqrt(np.clip((a * a).sum(1)[:, None] + bb - 2.0 * a @ b.T, 0.0, None))
+        cos = 0.5 * (Tk[:, :3, :3].reshape(len(Tk), 9) @ Rs.T - 1.0)  # trace(R_a R_b^T) = sum of the products
+        dist += SEED_LENGTH_M * np.arccos(np.clip(cos, -1.0, 1.0))
+        order = np.argpartition(dist, N_TRIES, axis=1)[:, :N_TRIES]
+        out[k:k + SEED_BLOCK] = np.take_along_axis(order, np.argsort(np.take_along_axis(dist, order, axis=1), axis=1),
+                                                   axis=1)
+    return out
 
 
 def _labels(labels, N) -> list:
@@ -86,6 +107,11 @@ class BatchedArm:
         u = np.zeros((n, 4, 1))
         u[:, :3, 0] = axes
         self.KP, self.KQ, self.Ku = self.K @ P, self.K @ Q, (self.K @ u)[..., 0]
+        # an axis +-e_k (every MDH joint, most URDF ones): the joint's axis in the base frame is +-column k of its
+        # frame (M_i keeps u_i), no product needed
+        unit = (np.abs(axes) == 1.0).sum(1) == 1
+        self.axis_column = [(int(np.argmax(np.abs(v))), float(v[np.argmax(np.abs(v))])) if ok else None
+                            for v, ok in zip(axes, unit)]
 
     def forward(self, q: np.ndarray, jacobian: bool = False):
         """T_base_tool (N, 4, 4) [m] at joint sets q (N, n) [rad, m]; with ``jacobian`` also (N, 6, n) the geometric
@@ -99,7 +125,8 @@ class BatchedArm:
         G = G.reshape(3 * N, 4)
         W, O = np.empty((N, 3, n)), np.empty((N, 3, n))
         for i in range(n):
-            W[:, :, i] = (G @ self.Ku[i]).reshape(N, 3)
+            if self.axis_column[i] is None:
+                W[:, :, i] = (G @ self.Ku[i]).reshape(N, 3)
             H1 = G @ self.KP[i]
             H1 *= a[i, :, None]
             H2 = G @ self.KQ[i]
@@ -108,6 +135,9 @@ class BatchedArm:
             G += H1
             G += H2
             O[:, :, i] = G[:, 3].reshape(N, 3)
+            if self.axis_column[i] is not None:
+                k, sign = self.axis_column[i]
+                W[:, :, i] = sign * G[:, k].reshape(N, 3)
         G = G.reshape(N, 3, 4)
         T = np.zeros((N, 4, 4))
         T[:, :3] = (G.reshape(3 * N, 4) @ self.B).reshape(N, 3, 4)
@@ -147,12 +177,12 @@ class ChainKinematics:
     def joint_limits(self) -> np.ndarray | None:
         return self.robot.joint_limits
 
-    def _arm(self, x: np.ndarray):
+    def arm_at(self, x: np.ndarray):
         """The arm alone at x: the chain remounted on identity (base) and the tcp (``T_flange_tool``)."""
         return self._arms(x)[0]
 
     def _arms(self, x: np.ndarray) -> tuple:
-        """(the arm alone at x (:meth:`_arm`), its :class:`BatchedArm` or None for a chain of another kind), built
+        """(the arm alone at x (:meth:`arm_at`), its :class:`BatchedArm` or None for a chain of another kind), built
         once per x."""
         key = np.asarray(x, float).tobytes()
         arms = self._arm_cache.get(key)
@@ -170,7 +200,7 @@ class ChainKinematics:
         return arm.forward(q) if batched is None else batched.forward(arm.check_joints(q))
 
     def tool_jacobian(self, q, x) -> np.ndarray:
-        arm = self._arm(x)
+        arm = self.arm_at(x)
         Ja = arm.pose_jacobian(q)
         J = np.zeros(Ja.shape[:2] + (len(x),))
         names = self.robot.params.names
@@ -227,14 +257,7 @@ class ChainKinematics:
             return levenberg_marquardt(f, T, np.broadcast_to(np.asarray(q_start, float), (N, self.n_joints)), lim,
                                        **kw)
         seeds = self.seeds()
-        Ts = f(seeds)
-        # |dt| + SEED_LENGTH_M |drot| of every goal to every seed, (N, n_seeds) without (N, n_seeds, 3, 3) temporaries
-        cos = 0.5 * (np.einsum("kij,sij->ks", T[:, :3, :3], Ts[:, :3, :3]) - 1.0)
-        a, b = T[:, :3, 3], Ts[:, :3, 3]
-        dist = np.sqrt(np.clip((a * a).sum(1)[:, None] + (b * b).sum(1)[None] - 2.0 * a @ b.T, 0.0, None))
-        dist += SEED_LENGTH_M * np.arccos(np.clip(cos, -1.0, 1.0))
-        order = np.argpartition(dist, N_TRIES, axis=1)[:, :N_TRIES]
-        order = np.take_along_axis(order, np.argsort(np.take_along_axis(dist, order, axis=1), axis=1), axis=1)
+        order = _nearest(T, f(seeds))
         q, r, ok = np.zeros((N, self.n_joints)), np.full((N, 6), np.inf), np.zeros(N, bool)
         for t in range(N_TRIES):
             todo = np.flatnonzero(~ok)

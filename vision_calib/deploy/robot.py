@@ -45,8 +45,11 @@ DAMPED_SHARE = 0.5
 MAX_CORRECTION_DEG = 10.0
 #: ... and of a prismatic joint [mm] (more is not a calibration correction)
 MAX_CORRECTION_MM = 10.0
-#: rows per chunk of compensate / inverse (bounded memory: a few MB per chunk)
+#: rows per chunk of compensate (bounded memory: a few MB per chunk)
 CHUNK_ROWS = 4096
+#: poses per chunk of inverse (tens of MB per chunk; larger than CHUNK_ROWS: the Newton iterations of the few poses
+#: converging last cost per iteration, not per pose)
+INVERSE_CHUNK_ROWS = 32768
 #: statuses of a compensated row (:class:`Compensation`)
 STATUSES = ("corrected", "near_singularity", "outside_limits", "not_corrected")
 
@@ -233,7 +236,7 @@ class CalibratedRobot:
         nearest it), else from the nominal model's solution (itself from the stored starts nearest the goal; those
         starts directly where the nominal model has no solution); the H4 by its closed-form inverse geometric model.
         A pose not reached (unreachable, or the iteration stalls off it): q NaN, why names it (``labels``: names of
-        the rows) with the residual left; "" for a pose reached. In chunks of :data:`CHUNK_ROWS` poses
+        the rows) with the residual left; "" for a pose reached. In chunks of :data:`INVERSE_CHUNK_ROWS` poses
         (``progress(rows_done, rows_total)`` after each)."""
         T, _ = _check_T(T_base_tool)
         start = None
@@ -244,8 +247,8 @@ class CalibratedRobot:
             start = np.broadcast_to(start, (len(T), self.n_joints))
         lab = list(labels) if labels is not None else [f"#{k}" for k in range(len(T))]
         q, why = np.empty((len(T), self.n_joints)), np.empty(len(T), dtype=object)
-        for a in range(0, len(T), CHUNK_ROWS):
-            b = min(a + CHUNK_ROWS, len(T))
+        for a in range(0, len(T), INVERSE_CHUNK_ROWS):
+            b = min(a + INVERSE_CHUNK_ROWS, len(T))
             q[a:b], why[a:b] = self.kin.inverse_rows(T[a:b], self.x, None if start is None else start[a:b], lab[a:b],
                                                      "nominal" if self.is_nominal else "calibrated",
                                                      x_seed=None if self.is_nominal else self.x_nominal)
