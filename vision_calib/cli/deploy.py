@@ -120,7 +120,8 @@ def cmd_inverse(args) -> int:
     finally:
         close()
     _warn_rows("not reached", out["not_reached"], None)
-    print(f"wrote {out['out']} ({out['written']} of {out['rows']} joint sets; {len(out['not_reached'])} poses not "
+    n = len(out["not_reached"])
+    print(f"wrote {out['out']} ({out['written']} of {out['rows']} joint sets; {n} pose{'' if n == 1 else 's'} not "
           "reached)")
     return 0
 
