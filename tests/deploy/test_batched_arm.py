@@ -15,7 +15,8 @@ def _rpr():
     O = np.array([np.eye(4)] * 3)
     O[1, :3, 3] = [0.3, 0.0, 0.1]
     O[2, :3, :3] = F.rot_x(np.pi / 2)
-    return URDFChain.build("rpr", O, [[0, 0, 1.0], [1.0, 0, 0], [0, 1.0, 0]], [False, True, False],
+    # axes: -z (a coordinate axis with a sign), x (prismatic), a tilted one (the general Rodrigues path)
+    return URDFChain.build("rpr", O, [[0, 0, -1.0], [1.0, 0, 0], [0, 0.6, 0.8]], [False, True, False],
                            tail=F.make_T(F.rot_z(0.3), [0.01, 0.02, 0.05]))
 
 

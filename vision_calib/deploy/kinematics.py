@@ -107,8 +107,8 @@ class BatchedArm:
         u = np.zeros((n, 4, 1))
         u[:, :3, 0] = axes
         self.KP, self.KQ, self.Ku = self.K @ P, self.K @ Q, (self.K @ u)[..., 0]
-        # an axis +-e_k (every MDH joint, most URDF ones): the joint's axis in the base frame is +-column k of its
-        # frame (M_i keeps u_i), no product needed
+        # an axis sign e_k (every MDH joint, most URDF ones): the motion turns two columns of the frame or moves its
+        # origin along column k, and the joint's axis in the base frame is sign x column k (M_i keeps u_i)
         unit = (np.abs(axes) == 1.0).sum(1) == 1
         self.axis_column = [(int(np.argmax(np.abs(v))), float(v[np.argmax(np.abs(v))])) if ok else None
                             for v, ok in zip(axes, unit)]
@@ -119,25 +119,34 @@ class BatchedArm:
         q = np.asarray(q, float)
         N, n = q.shape
         a = np.repeat(np.where(self.prismatic, q, np.sin(q)).T, 3, axis=1)  # (n, 3N): one per row of each frame
-        b = np.repeat(np.where(self.prismatic, 0.0, 1.0 - np.cos(q)).T, 3, axis=1)
+        c = np.repeat(np.cos(q).T, 3, axis=1)
         G = np.zeros((N, 3, 4))  # the top 3 rows of each frame, as (3N, 4) below
         G[:, 0, 0] = G[:, 1, 1] = G[:, 2, 2] = 1.0
         G = G.reshape(3 * N, 4)
         W, O = np.empty((N, 3, n)), np.empty((N, 3, n))
         for i in range(n):
-            if self.axis_column[i] is None:
+            if self.axis_column[i] is None:  # any axis: G K (I + a P + b Q)
                 W[:, :, i] = (G @ self.Ku[i]).reshape(N, 3)
-            H1 = G @ self.KP[i]
-            H1 *= a[i, :, None]
-            H2 = G @ self.KQ[i]
-            H2 *= b[i, :, None]
-            G = G @ self.K[i]
-            G += H1
-            G += H2
-            O[:, :, i] = G[:, 3].reshape(N, 3)
-            if self.axis_column[i] is not None:
+                H1 = G @ self.KP[i]
+                H1 *= a[i, :, None]
+                H2 = G @ self.KQ[i]
+                H2 *= (1.0 - c[i])[:, None]
+                G = G @ self.K[i]
+                G += H1
+                G += H2
+            else:  # axis sign e_k: the motion only mixes two columns of G K (or adds to its translation)
+                G = G @ self.K[i]
                 k, sign = self.axis_column[i]
+                if self.prismatic[i]:
+                    G[:, 3] += (sign * a[i]) * G[:, k]
+                else:  # R Rot(e_k, v): columns (k+1, k+2) turned by v
+                    ci, cj = (k + 1) % 3, (k + 2) % 3
+                    s_, c_ = sign * a[i], c[i]
+                    gi = G[:, ci].copy()
+                    G[:, ci] = c_ * gi + s_ * G[:, cj]
+                    G[:, cj] = c_ * G[:, cj] - s_ * gi
                 W[:, :, i] = sign * G[:, k].reshape(N, 3)
+            O[:, :, i] = G[:, 3].reshape(N, 3)
         G = G.reshape(N, 3, 4)
         T = np.zeros((N, 4, 4))
         T[:, :3] = (G.reshape(3 * N, 4) @ self.B).reshape(N, 3, 4)
