@@ -29,7 +29,7 @@ from ..kinematics.protocols import ChainModel
 from ..kinematics.serial import SerialChain
 from ..kinematics.urdf import URDFChain
 from ..rig.serial import remount_chain
-from .solve import joint_jacobian, levenberg_marquardt
+from .solve import AMPLIFIED_DEG_PER_MM, LEVER_M, amplification_deg_per_mm, joint_jacobian, levenberg_marquardt
 
 #: candidate starts (after the centre of the joint ranges) of a chain's inverse without a start, and how many of
 #: them (those whose tool pose is nearest the goal: |dt| + SEED_LENGTH_M |drot|) are tried
@@ -302,7 +302,7 @@ class ChainKinematics:
         else:
             q, r, ok = self._solve(T, x, q_start)
             multi = q_start is None
-        why = self._not_reached(T, q, r, ok, labels, what, multi)
+        why = self._not_reached(T, x, q, r, ok, labels, what, multi)
         q[~ok] = np.nan
         return q, why
 
@@ -312,16 +312,23 @@ class ChainKinematics:
         raise_not_reached(why)
         return q
 
-    def _not_reached(self, T, q, r, ok, labels, what, multi) -> np.ndarray:
-        """(N,) why each goal is not reached ("" where it is)."""
+    def _not_reached(self, T, x, q, r, ok, labels, what, multi) -> np.ndarray:
+        """(N,) why each goal is not reached ("" where it is): residual, a joint held at its limit, the amplification
+        (``deploy.solve.amplification_deg_per_mm``) where the iteration ended when above AMPLIFIED_DEG_PER_MM."""
         lab = _labels(labels, len(T))
         why = np.full(len(T), "", dtype=object)
         lim = self._limits()
         start = "from the start given or the nominal solution" + (f" or {N_TRIES} other starts" if multi else "")
-        for k in np.flatnonzero(~ok):
+        bad = np.flatnonzero(~ok)
+        if bad.size:  # the conditioning where the iteration ended: near a singularity it converges slowly or stalls
+            J = self.joint_jacobian(q[bad], x) * np.array([1.0, 1.0, 1.0, LEVER_M, LEVER_M, LEVER_M])[:, None]
+            amp = amplification_deg_per_mm(np.linalg.svd(J, compute_uv=False)[:, -1])
+        for i, k in enumerate(bad):
             at = [j for j in range(self.n_joints) if np.isclose(q[k, j], lim[j, 0], atol=1e-9) or
                   np.isclose(q[k, j], lim[j, 1], atol=1e-9)]
             held = f"; joint q{at[0] + 1} at its limit [{lim[at[0], 0]:.4g}, {lim[at[0], 1]:.4g}]" if at else ""
+            if amp[i] > AMPLIFIED_DEG_PER_MM:
+                held += f"; near a singularity there ({amp[i]:.3g} deg of joint motion per mm)"
             why[k] = (f"pose {lab[k]} (x={T[k, 0, 3]:.4f}, y={T[k, 1, 3]:.4f}, z={T[k, 2, 3]:.4f} m) is not reached "
                       f"by the {what} model {start}: residual {np.linalg.norm(r[k, :3]) * 1e3:.3g} mm, "
                       f"{np.linalg.norm(r[k, 3:]) * 1e3:.3g} mrad{held}")

@@ -25,7 +25,7 @@ from ..io.controller_export import find_result
 from ..io.model_export import CalibratedModel, joint_offsets, read_calibrated_model
 from ..kinematics.protocols import JointOffsetForm, PrismaticJoints
 from .kinematics import PoseNotReachedError, kinematics_for, raise_not_reached
-from .solve import amplification_deg_per_mm, damped_correction, levenberg_marquardt
+from .solve import AMPLIFIED_DEG_PER_MM, amplification_deg_per_mm, damped_correction, levenberg_marquardt
 
 #: parameter step [m or rad] of the finite-difference parameter Jacobian
 FD_PARAM_STEP = 1e-6
@@ -34,9 +34,6 @@ FD_PARAM_STEP = 1e-6
 ACCURACY_SIGMAS = 1.0
 ACCURACY_FLOOR_T_M = 1e-6
 ACCURACY_FLOOR_R_RAD = 1e-6
-#: joint change [deg] per mm of tool motion (``deploy.solve.amplification_deg_per_mm``) above which a joint set is near
-#: a singularity: its correction is damped along the near-null directions, and the row is flagged
-AMPLIFIED_DEG_PER_MM = 1.0
 #: the share of the predicted accuracy a damped correction may leave (the rest of the error budget is the model's
 #: own: leaving r adds in quadrature, sqrt(1 + 0.5^2) = 1.12 x the predicted error at most)
 DAMPED_SHARE = 0.5

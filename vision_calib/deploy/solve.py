@@ -100,6 +100,10 @@ def levenberg_marquardt(f: Callable | None, T_goal: np.ndarray, q0: np.ndarray, 
 
 #: lever [m] at which a rotation counts as a displacement in the joint-space amplification (1 mrad ~ 1 mm)
 LEVER_M = 1.0
+#: joint change [deg] per mm of tool motion (:func:`amplification_deg_per_mm`) above which a joint set is near a
+#: singularity: compensate damps its correction along the near-null directions and flags the row; inverse names it
+#: beside a pose it does not reach
+AMPLIFIED_DEG_PER_MM = 1.0
 #: bisection steps on log10(mu) of :func:`damped_correction`, and its range [m/rad]
 N_BISECT = 20
 LOG_MU_RANGE = (-9.0, 3.0)
