@@ -86,9 +86,9 @@ def main() -> None:
         st, n = np.unique(c.status, return_counts=True)
         ok = c.corrected
         dq = np.degrees(np.abs(c.q_corrected[ok] - q[ok]).max(axis=1))
-        print(f"compensate {args.rows} rows: {t_new:.1f} s wall, {cpu_new:.1f} s CPU ({t_new / args.rows * 1e6:.0f} us/row "
-              "wall); process peak RSS "
-              f"{rss:.0f} MB after it ({rss0:.0f} MB before: the processing of the example)")
+        print(f"compensate {args.rows} rows: {t_new:.1f} s wall, {cpu_new:.1f} s CPU ({t_new / args.rows * 1e6:.0f} "
+              f"us/row wall); process peak RSS {rss:.0f} MB after it ({rss0:.0f} MB before: the processing of the "
+              "example)")
         print("  statuses: " + ", ".join(f"{s} {k}" for s, k in zip(st, n)))
         print(f"  largest correction of a corrected row {dq.max():.3f} deg; near a singularity: median amplification "
               f"{np.median(c.amplification[c.status == 'near_singularity']):.2f} deg/mm")
@@ -113,9 +113,9 @@ def main() -> None:
         q_inv, why, t_inv, cpu_inv, rss = _inverse(r, T)
         ok = why == ""
         same = ok & (np.abs(np.angle(np.exp(1j * (np.where(ok[:, None], q_inv, 0.0) - qi)))).max(axis=1) < 1e-6)
-        print(f"inverse {len(T)} rows: {t_inv:.1f} s wall, {cpu_inv:.1f} s CPU ({t_inv / len(T) * 1e6:.0f} us/row wall); "
-              f"process peak RSS {rss:.0f} "
-              f"MB after it ({rss0:.0f} MB before); {int(ok.sum())} reached, {int((~ok).sum())} not reached (named); "
+        print(f"inverse {len(T)} rows: {t_inv:.1f} s wall, {cpu_inv:.1f} s CPU ({t_inv / len(T) * 1e6:.0f} us/row "
+              f"wall); process peak RSS {rss:.0f} MB after it ({rss0:.0f} MB before); {int(ok.sum())} reached, "
+              f"{int((~ok).sum())} not reached (named); "
               f"{int(same.sum())} returned the joint set they were made from (the others another branch; --near "
               "keeps it)")
         nb = min(args.inverse_baseline_rows, len(T))
