@@ -1,6 +1,6 @@
 """The deploy commands: ``compensate``, ``inverse`` and ``export`` on a result folder, joint / pose tables with their
-units in the header, named errors (file, line, column; exit 2), unreachable rows (exit 3, row named, nothing
-written), and ``--export NAME`` after a run (process-poses)."""
+units in the header, named errors (file, line, column; exit 2), unreachable rows (named, the others written; exit
+3 and nothing written only when no row is reached), and ``--export NAME`` after a run (process-poses)."""
 
 import csv
 import json
@@ -110,17 +110,42 @@ def test_bad_pose_tables_are_named(results, tmp_path, capsys, content, match):
     assert code == 2 and match in err and "poses.csv" in err, err
 
 
-def test_an_unreachable_pose_exits_3_naming_its_row(results, tmp_path, capsys):
-    res = results["rx90_eye_in_hand"]
-    q = workspace_joints(res.robot, res.run.setup, 2)
+def _far_table(res, path, far):
+    """A pose table of poses of the workspace (pose_id ok<k>) where the rows ``far`` are moved 3 m: out of reach.
+    Returns (T (N, 4, 4), ids)."""
+    q = workspace_joints(res.robot, res.run.setup, 4)
     T, _ = res.robot.forward(q)
-    T[1, 0, 3] += 3.0  # 3 m further: out of reach
+    ids = [f"far{k}" if k in far else f"ok{k}" for k in range(len(T))]
+    T[far, 0, 3] += 3.0
     xyz, quat = F.xyz_quat_from_T(T)
-    (tmp_path / "poses.csv").write_text("pose_id,x_m,y_m,z_m,qx,qy,qz,qw\n" + "".join(
-        f"{pid}," + ",".join(repr(float(v)) for v in (*a, *b)) + "\n" for pid, a, b in zip(("ok", "far"), xyz, quat)))
+    path.write_text("pose_id,x_m,y_m,z_m,qx,qy,qz,qw\n" + "".join(
+        f"{pid}," + ",".join(repr(float(v)) for v in (*a, *b)) + "\n" for pid, a, b in zip(ids, xyz, quat)))
+    return T, ids
+
+
+@pytest.mark.parametrize("name", ["rx90_eye_in_hand", "h4_vision"])
+def test_an_unreachable_pose_is_named_and_the_others_written(results, tmp_path, capsys, name):
+    res = results[name]
+    T, ids = _far_table(res, tmp_path / "poses.csv", [1, 2])
+    code = main(["inverse", str(res.folder), str(tmp_path / "poses.csv"), "--out", str(tmp_path / "j.csv")])
+    cap = capsys.readouterr()
+    assert code == 0, cap.err
+    for k in (1, 2):
+        assert f"warning: pose row {k + 1} (pose_id 'far{k}', poses.csv line {k + 2})" in cap.err
+    assert cap.err.count("not reached") == 2
+    assert "2 of 4 joint sets; 2 poses not reached" in cap.out
+    head, rows = _read(tmp_path / "j.csv")
+    assert [r[0] for r in rows] == ["ok0", "ok3"]
+    qi = np.array([[float(v) for v in r[1:]] for r in rows])
+    assert np.abs(F.pose_error(T[[0, 3]], res.robot.forward(qi)[0])).max() < 1e-9
+
+
+def test_inverse_exits_3_only_when_no_pose_is_reached(results, tmp_path, capsys):
+    res = results["rx90_eye_in_hand"]
+    _far_table(res, tmp_path / "poses.csv", [0, 1, 2, 3])
     code = main(["inverse", str(res.folder), str(tmp_path / "poses.csv"), "--out", str(tmp_path / "j.csv")])
     err = capsys.readouterr().err
-    assert code == 3 and "pose row 2 (pose_id 'far', poses.csv line 3)" in err and "not reached" in err, err
+    assert code == 3 and "no pose could be reached" in err and "pose row 4 (pose_id 'far3', poses.csv line 5)" in err
     assert not (tmp_path / "j.csv").exists()
 
 

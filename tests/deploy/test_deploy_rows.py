@@ -177,6 +177,7 @@ def test_the_help_examples_run_as_written(results, tmp_path, monkeypatch, capsys
 
 
 def test_chunks_give_the_same_answers_and_report_progress(results, monkeypatch):
+    import vision_calib.deploy.kinematics as kin_mod
     import vision_calib.deploy.robot as robot_mod
 
     res = results["ur5e_eye_in_hand"]
@@ -185,6 +186,7 @@ def test_chunks_give_the_same_answers_and_report_progress(results, monkeypatch):
     whole = r.compensate_rows(q)
     q_inv = r.inverse(r.forward(q)[0], q_start=q)
     monkeypatch.setattr(robot_mod, "CHUNK_ROWS", 5)
+    monkeypatch.setattr(robot_mod, "INVERSE_CHUNK_ROWS", 5)
     seen = []
     chunked = r.compensate_rows(q, progress=lambda done, total: seen.append((done, total)))
     assert seen == [(5, 23)] * 4 + [(3, 23)]
@@ -193,3 +195,10 @@ def test_chunks_give_the_same_answers_and_report_progress(results, monkeypatch):
     seen.clear()
     np.testing.assert_array_equal(r.inverse(r.forward(q)[0], q_start=q, progress=lambda d, t: seen.append(d)), q_inv)
     assert sum(seen) == 23 and len(seen) == 5
+    # without a start (the nominal solution, the stored starts by blocks of goals): the same joints chunked or not
+    monkeypatch.setattr(robot_mod, "INVERSE_CHUNK_ROWS", 32768)
+    T = r.forward(q)[0]
+    q_free = r.inverse(T)
+    monkeypatch.setattr(robot_mod, "INVERSE_CHUNK_ROWS", 5)
+    monkeypatch.setattr(kin_mod, "SEED_BLOCK", 3)
+    np.testing.assert_array_equal(r.inverse(T), q_free)

@@ -89,7 +89,8 @@ def _warn_rows(kind: str, messages: list, report) -> None:
     for m in messages[:N_NAMED]:
         print(f"vision-calib: warning: {m}", file=sys.stderr)
     if len(messages) > N_NAMED:
-        print(f"vision-calib: warning: ... {len(messages) - N_NAMED} more rows {kind} (all in {report})", file=sys.stderr)
+        where = f" (all in {report})" if report is not None else ""
+        print(f"vision-calib: warning: ... {len(messages) - N_NAMED} more rows {kind}{where}", file=sys.stderr)
 
 
 def cmd_compensate(args) -> int:
@@ -118,7 +119,10 @@ def cmd_inverse(args) -> int:
                            near=args.near, progress=update)
     finally:
         close()
-    print(f"wrote {out['out']} ({out['rows']} joint sets)")
+    _warn_rows("not reached", out["not_reached"], None)
+    n = len(out["not_reached"])
+    print(f"wrote {out['out']} ({out['written']} of {out['rows']} joint sets; {n} pose{'' if n == 1 else 's'} not "
+          "reached)")
     return 0
 
 

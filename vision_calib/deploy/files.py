@@ -110,16 +110,27 @@ def _near_joints(near, robot, table) -> np.ndarray:
 def inverse_file(result, poses_csv, out, tcp=None, angle_unit: str = "rad", near=None, progress=None) -> dict:
     """Joint values of the calibrated robot of ``result`` for each tool pose of the pose table ``poses_csv``
     (T_base_tool, ``io.pose_table``; tcp: x, y, z [m] in the flange frame), written to ``out`` as a joint table
-    (revolute joints in ``angle_unit``, prismatic in m) with the same row names. ``near``: a joint table (one row,
-    or one per pose): the solution nearest it (Newton from it), else the one nearest the nominal model's solution.
-    Returns {rows, out}."""
+    (revolute joints in ``angle_unit``, prismatic in m) with the same row names (a pose_id column of the input row
+    numbers when rows are left out of a table without one). ``near``: a joint table (one row, or one per pose): the
+    solution nearest it (Newton from it), else the one nearest the nominal model's solution. Poses not reached
+    (``CalibratedRobot.inverse_rows``) are left out and named; PoseNotReachedError (exit 3, nothing written) only
+    when no pose is reached. Returns {rows, written, out, not_reached: [message naming the row]}."""
     _apart(out, result, poses_csv, *([near] if near is not None else []))
     robot = CalibratedRobot.load(model_path(result), tcp=tcp)
     table = read_pose_table(poses_csv)
     start = None if near is None else _near_joints(near, robot, table)
-    q = robot.inverse(table.T, q_start=start, labels=table.labels(), progress=progress)
-    write_joint_table(out, q, tuple("m" if p else angle_unit for p in robot.prismatic), table.ids)
-    return {"rows": int(len(q)), "out": str(out)}
+    q, why = robot.inverse_rows(table.T, q_start=start, labels=table.labels(), progress=progress)
+    ok = why == ""
+    failed = [str(w) for w in why[~ok]]
+    if not ok.any():
+        raise PoseNotReachedError(f"{table.path}: no pose could be reached: " + "; ".join(failed[:N_NAMED])
+                                  + (f"; ... ({len(failed)} poses)" if len(failed) > N_NAMED else ""))
+    ids = table.ids
+    if ids is None and not ok.all():
+        ids = tuple(str(k + 1) for k in range(len(q)))
+    write_joint_table(out, q[ok], tuple("m" if p else angle_unit for p in robot.prismatic),
+                      None if ids is None else [ids[i] for i in np.flatnonzero(ok)])
+    return {"rows": int(len(q)), "written": int(ok.sum()), "out": str(out), "not_reached": failed}
 
 
 __all__ = ["compensate_file", "inverse_file", "report_path"]

@@ -24,8 +24,8 @@ from ..errors import DataError, ParameterError
 from ..io.controller_export import find_result
 from ..io.model_export import CalibratedModel, joint_offsets, read_calibrated_model
 from ..kinematics.protocols import JointOffsetForm, PrismaticJoints
-from .kinematics import PoseNotReachedError, kinematics_for
-from .solve import amplification_deg_per_mm, damped_correction, levenberg_marquardt
+from .kinematics import PoseNotReachedError, kinematics_for, raise_not_reached
+from .solve import AMPLIFIED_DEG_PER_MM, amplification_deg_per_mm, damped_correction, levenberg_marquardt
 
 #: parameter step [m or rad] of the finite-difference parameter Jacobian
 FD_PARAM_STEP = 1e-6
@@ -34,17 +34,19 @@ FD_PARAM_STEP = 1e-6
 ACCURACY_SIGMAS = 1.0
 ACCURACY_FLOOR_T_M = 1e-6
 ACCURACY_FLOOR_R_RAD = 1e-6
-#: joint change [deg] per mm of tool motion (``deploy.solve.amplification_deg_per_mm``) above which a joint set is near
-#: a singularity: its correction is damped along the near-null directions, and the row is flagged
-AMPLIFIED_DEG_PER_MM = 1.0
 #: the share of the predicted accuracy a damped correction may leave (the rest of the error budget is the model's
 #: own: leaving r adds in quadrature, sqrt(1 + 0.5^2) = 1.12 x the predicted error at most)
 DAMPED_SHARE = 0.5
 #: largest joint correction [deg] compensate gives a joint set: more is another arm configuration, not a correction
 #: (the row is named, not corrected)
 MAX_CORRECTION_DEG = 10.0
-#: rows per chunk of compensate / inverse (bounded memory: a few MB per chunk)
+#: ... and of a prismatic joint [mm] (more is not a calibration correction)
+MAX_CORRECTION_MM = 10.0
+#: rows per chunk of compensate (bounded memory: a few MB per chunk)
 CHUNK_ROWS = 4096
+#: poses per chunk of inverse (tens of MB per chunk; larger than CHUNK_ROWS: the Newton iterations of the few poses
+#: converging last cost per iteration, not per pose)
+INVERSE_CHUNK_ROWS = 32768
 #: statuses of a compensated row (:class:`Compensation`)
 STATUSES = ("corrected", "near_singularity", "outside_limits", "not_corrected")
 
@@ -223,16 +225,17 @@ class CalibratedRobot:
         T, C = self._propagate(self.kin.observed, self.kin.observed_jacobian, q, fd)
         return (T[0], C[0]) if single else (T, C)
 
-    def inverse(self, T_base_tool: ArrayLike, q_start: ArrayLike | None = None, labels=None,
-                progress=None) -> np.ndarray:
-        """Joint values (n,) or (N, n) that put the tool at T_base_tool (4, 4) or (N, 4, 4) [m] on this model: a
-        serial chain by damped Newton (Levenberg-Marquardt, joint limits kept) from q_start ((n,): one start for all,
-        or (N, n): one per pose; the branch nearest it), else from the nominal model's solution (itself from the
-        stored starts nearest the goal; those starts directly where the nominal model has no solution); the H4 by its
-        closed-form inverse geometric model. In chunks of :data:`CHUNK_ROWS` poses (``progress(rows_done,
-        rows_total)`` after each). ``deploy.kinematics.PoseNotReachedError`` (CLI exit 3) names the pose (``labels``:
-        names of the rows) when it is unreachable or the iteration does not converge."""
-        T, single = _check_T(T_base_tool)
+    def inverse_rows(self, T_base_tool: ArrayLike, q_start: ArrayLike | None = None, labels=None,
+                     progress=None) -> tuple[np.ndarray, np.ndarray]:
+        """(q (N, n), why (N,) str): joint values that put the tool at each pose of T_base_tool (N, 4, 4) [m] on this
+        model, each pose on its own: a serial chain by damped Newton (Levenberg-Marquardt, joint limits kept,
+        ``deploy.kinematics.BatchedArm``) from q_start ((n,): one start for all, or (N, n): one per pose; the branch
+        nearest it), else from the nominal model's solution (itself from the stored starts nearest the goal; those
+        starts directly where the nominal model has no solution); the H4 by its closed-form inverse geometric model.
+        A pose not reached (unreachable, or the iteration stalls off it): q NaN, why names it (``labels``: names of
+        the rows) with the residual left; "" for a pose reached. In chunks of :data:`INVERSE_CHUNK_ROWS` poses
+        (``progress(rows_done, rows_total)`` after each)."""
+        T, _ = _check_T(T_base_tool)
         start = None
         if q_start is not None:
             start, _ = _check_q(q_start, self.n_joints, "q_start")
@@ -240,19 +243,24 @@ class CalibratedRobot:
                 raise DataError(f"q_start: {len(start)} joint sets for {len(T)} poses (give one, or one per pose)")
             start = np.broadcast_to(start, (len(T), self.n_joints))
         lab = list(labels) if labels is not None else [f"#{k}" for k in range(len(T))]
-        q = np.empty((len(T), self.n_joints))
-        for a in range(0, len(T), CHUNK_ROWS):
-            b = min(a + CHUNK_ROWS, len(T))
-            try:
-                q[a:b] = self.kin.inverse(T[a:b], self.x, None if start is None else start[a:b], lab[a:b],
-                                          "nominal" if self.is_nominal else "calibrated",
-                                          x_seed=None if self.is_nominal else self.x_nominal)
-            except PoseNotReachedError as exc:
-                exc.pose_index = a + (exc.pose_index or 0)
-                raise
+        q, why = np.empty((len(T), self.n_joints)), np.empty(len(T), dtype=object)
+        for a in range(0, len(T), INVERSE_CHUNK_ROWS):
+            b = min(a + INVERSE_CHUNK_ROWS, len(T))
+            q[a:b], why[a:b] = self.kin.inverse_rows(T[a:b], self.x, None if start is None else start[a:b], lab[a:b],
+                                                     "nominal" if self.is_nominal else "calibrated",
+                                                     x_seed=None if self.is_nominal else self.x_nominal)
             if progress is not None:
                 progress(b - a, len(T))
-        return q[0] if single else q
+        return q, why.astype(str)
+
+    def inverse(self, T_base_tool: ArrayLike, q_start: ArrayLike | None = None, labels=None,
+                progress=None) -> np.ndarray:
+        """Joint values (n,) or (N, n) that put the tool at T_base_tool (4, 4) or (N, 4, 4) [m] on this model
+        (:meth:`inverse_rows`); ``deploy.kinematics.PoseNotReachedError`` (CLI exit 3) names the first pose not
+        reached (``labels``: names of the rows) and how many are not."""
+        q, why = self.inverse_rows(T_base_tool, q_start, labels, progress)
+        raise_not_reached(why)
+        return q[0] if np.ndim(T_base_tool) == 2 else q
 
     def compensate(self, q: ArrayLike, labels=None) -> np.ndarray:
         """The joint values (n,) or (N, n) that put the tool, on the calibrated model, within its predicted accuracy
@@ -326,10 +334,10 @@ class CalibratedRobot:
         qc, amp = np.full(q.shape, np.nan), np.full(N, np.nan)
         idx = np.flatnonzero(why == "")
         if kin.closed_form:
-            qc[idx], err = self._closed_form_rows(T_goal[idx])
+            qc[idx], err = kin.inverse_rows(T_goal[idx], self.x)
             for i, e in zip(idx, err):
                 if e:
-                    status[i], why[i] = "not_corrected", e
+                    status[i], why[i] = "not_corrected", f"not corrected: {e}"
         elif idx.size:
             lim = kin.joint_limits
 
@@ -359,39 +367,33 @@ class CalibratedRobot:
         return Compensation(q, qc, status.astype(str), why.astype(str), np.linalg.norm(rem[:, :3], axis=1),
                             np.linalg.norm(rem[:, 3:], axis=1), tol[:, 0], tol[:, 1], amp)
 
-    @staticmethod
-    def _within(r: np.ndarray, tol: np.ndarray, dq: np.ndarray) -> np.ndarray:
-        """(N,) bool: residual r (N, 6) within tol (N, 2) by a correction dq (N, n) within MAX_CORRECTION_DEG."""
+    def max_correction(self) -> np.ndarray:
+        """(n,) the largest correction compensate gives each joint [rad: :data:`MAX_CORRECTION_DEG`; m for a
+        prismatic joint: :data:`MAX_CORRECTION_MM`]."""
+        return np.where(self.prismatic, MAX_CORRECTION_MM * 1e-3, np.radians(MAX_CORRECTION_DEG))
+
+    def _within(self, r: np.ndarray, tol: np.ndarray, dq: np.ndarray) -> np.ndarray:
+        """(N,) bool: residual r (N, 6) within tol (N, 2) by a correction dq (N, n) within :meth:`max_correction`."""
         return ((np.linalg.norm(r[:, :3], axis=1) <= tol[:, 0]) & (np.linalg.norm(r[:, 3:], axis=1) <= tol[:, 1])
-                & (np.abs(dq).max(axis=1) <= np.radians(MAX_CORRECTION_DEG)))
+                & np.all(np.abs(dq) <= self.max_correction(), axis=1))
 
     def _not_corrected_why(self, q0: np.ndarray, q: np.ndarray, r: np.ndarray, tol: np.ndarray, amp: float) -> str:
         """Why the exact solution q (n,) from q0 with residual r (6,) is refused."""
         lim = self.kin.joint_limits
         near = f" (near a singularity: {amp:.3g} deg per mm)" if amp > AMPLIFIED_DEG_PER_MM else ""
-        j = int(np.argmax(np.abs(q - q0)))
+        j = int(np.argmax(np.abs(q - q0) / self.max_correction()))
         if np.linalg.norm(r[:3]) <= tol[0] and np.linalg.norm(r[3:]) <= tol[1]:
-            return (f"not corrected: the exact correction needs {np.degrees(q[j] - q0[j]):+.3g} deg on q{j + 1}, "
-                    f"more than {MAX_CORRECTION_DEG:g} deg (another arm configuration){near}")
+            if self.prismatic[j]:
+                need = f"{(q[j] - q0[j]) * 1e3:+.3g} mm on q{j + 1}, more than {MAX_CORRECTION_MM:g} mm (prismatic)"
+            else:
+                need = (f"{np.degrees(q[j] - q0[j]):+.3g} deg on q{j + 1}, more than {MAX_CORRECTION_DEG:g} deg "
+                        "(another arm configuration)")
+            return f"not corrected: the exact correction needs {need}{near}"
         at = [] if lim is None else [j for j in range(self.n_joints) if np.isclose(q[j], lim[j, 0], atol=1e-9)
                                      or np.isclose(q[j], lim[j, 1], atol=1e-9)]
         return (f"not corrected: the calibrated model's tool stays {np.linalg.norm(r[:3]) * 1e3:.3g} mm, "
                 f"{np.linalg.norm(r[3:]) * 1e3:.3g} mrad from the nominal one (predicted accuracy {tol[0] * 1e3:.3g} mm, "
                 f"{tol[1] * 1e3:.3g} mrad){near}" + (f"; joint q{at[0] + 1} at its limit" if at else ""))
-
-    def _closed_form_rows(self, T: np.ndarray) -> tuple[np.ndarray, list]:
-        """(q (N, n), [why or ""]) of a closed-form inverse, row by row where it names an unreachable pose."""
-        q, why = np.full((len(T), self.n_joints), np.nan), [""] * len(T)
-        todo = np.arange(len(T))
-        while todo.size:
-            try:
-                q[todo] = self.kin.inverse(T[todo], self.x)
-                break
-            except PoseNotReachedError as exc:
-                k = exc.pose_index or 0
-                why[todo[k]] = f"not corrected: {exc}"
-                todo = np.delete(todo, k)
-        return q, why
 
     # ------------------------------------------------------------------ joint offsets
     def joint_offsets(self) -> dict:

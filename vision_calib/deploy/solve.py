@@ -35,19 +35,25 @@ def joint_jacobian(f: Callable, q: np.ndarray, T_goal: np.ndarray) -> np.ndarray
     return J
 
 
-def levenberg_marquardt(f: Callable, T_goal: np.ndarray, q0: np.ndarray, limits: np.ndarray | None = None,
-                        max_iter: int = 100, jac: Callable | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def levenberg_marquardt(f: Callable | None, T_goal: np.ndarray, q0: np.ndarray, limits: np.ndarray | None = None,
+                        max_iter: int = 100, jac: Callable | None = None,
+                        fj: Callable | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Joint values q (N, n) with f(q) (N, 4, 4) = T_goal (N, 4, 4), from q0 (N, n) inside ``limits`` (n, 2) [min,
     max] (None: none). Levenberg damping lam I, divided by 10 after an accepted step, multiplied by 10 after a
     rejected one; a goal stops when reached (TOL_T_M, TOL_R_RAD), stalled (STALL_STEP, STALL_GAIN: a minimum off the
     goal, e.g. out of reach or held by a joint limit), after max_iter steps, or when lam passes 1e12. jac(q (M, n))
-    -> (M, 6, n): d r / d q (default :func:`joint_jacobian`, central differences). Returns (q (N, n), residual (N, 6)
-    [m, rad] at q, reached (N,) bool)."""
+    -> (M, 6, n): d r / d q (default :func:`joint_jacobian`, central differences); fj(q) -> (f(q), jac(q)) instead
+    of both (one pass over the frames; the Jacobian of an accepted trial kept for the next step). Returns (q (N, n),
+    residual (N, 6) [m, rad] at q, reached (N,) bool)."""
     q = np.array(q0, float)
     N, n = q.shape
     lo, hi = (np.full(n, -np.inf), np.full(n, np.inf)) if limits is None else (limits[:, 0], limits[:, 1])
     q = np.clip(q, lo, hi)
-    r = fast_pose_error(T_goal, f(q))
+    if fj is not None:
+        T, Jq = fj(q)
+    else:
+        T, Jq = f(q), None
+    r = fast_pose_error(T_goal, T)
     cost = np.sum(r * r, axis=1)
     lam = np.full(N, 1e-3)
 
@@ -56,18 +62,26 @@ def levenberg_marquardt(f: Callable, T_goal: np.ndarray, q0: np.ndarray, limits:
 
     ok = done(r)
     stalled = np.zeros(N, bool)
+    eye = np.eye(n)
     for _ in range(max_iter):
         act = np.flatnonzero(~ok & ~stalled & (lam < 1e12))
         if not act.size:
             break
         qa = q[act]
-        J = joint_jacobian(f, qa, T_goal[act]) if jac is None else jac(qa)
-        JtJ = np.einsum("kin,kim->knm", J, J)
+        if Jq is not None:
+            J = Jq[act]
+        else:
+            J = joint_jacobian(f, qa, T_goal[act]) if jac is None else jac(qa)
+        JtJ = np.swapaxes(J, 1, 2) @ J
         g = np.einsum("kin,ki->kn", J, r[act])
-        A = JtJ + lam[act, None, None] * np.eye(n)
+        A = JtJ + lam[act, None, None] * eye
         step = -np.linalg.solve(A, g[..., None])[..., 0]
         qt = np.clip(qa + step, lo, hi)
-        rt = fast_pose_error(T_goal[act], f(qt))
+        if Jq is not None:
+            Tt, Jt = fj(qt)
+        else:
+            Tt = f(qt)
+        rt = fast_pose_error(T_goal[act], Tt)
         ct = np.sum(rt * rt, axis=1)
         better = ct < cost[act]
         idx = act[better]
@@ -76,15 +90,20 @@ def levenberg_marquardt(f: Callable, T_goal: np.ndarray, q0: np.ndarray, limits:
         stalled[idx] = ((np.abs(qt[better] - qa[better]).max(axis=1) < STALL_STEP)
                         | ((ct[better] > (1.0 - STALL_GAIN) * cost[idx]) & (ct[better] > TOL_T_M**2)))
         q[idx], r[idx], cost[idx] = qt[better], rt[better], ct[better]
+        if Jq is not None:
+            Jq[idx] = Jt[better]
         lam[idx] = np.maximum(lam[idx] * 0.1, 1e-12)
         lam[act[~better]] *= 10.0
-        ok = done(r)
+        ok[act] = done(r[act])
     return q, r, ok
-
 
 
 #: lever [m] at which a rotation counts as a displacement in the joint-space amplification (1 mrad ~ 1 mm)
 LEVER_M = 1.0
+#: joint change [deg] per mm of tool motion (:func:`amplification_deg_per_mm`) above which a joint set is near a
+#: singularity: compensate damps its correction along the near-null directions and flags the row; inverse names it
+#: beside a pose it does not reach
+AMPLIFIED_DEG_PER_MM = 1.0
 #: bisection steps on log10(mu) of :func:`damped_correction`, and its range [m/rad]
 N_BISECT = 20
 LOG_MU_RANGE = (-9.0, 3.0)
