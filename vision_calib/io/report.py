@@ -427,7 +427,8 @@ def summary_text(report: dict) -> str:
 
 
 #: accuracy keys of the summary's validation line (the rest of the block: the kind's criteria, their own line)
-_ACCURACY_SHOWN = ("position_rms_mm", "position_max_mm", "rotation_rms_deg", "rotation_max_deg", "n_poses")
+_ACCURACY_SHOWN = ("position_rms_mm", "position_max_mm", "rotation_rms_deg", "rotation_max_deg", "n_poses",
+                   "position_rms_registered_mm")  # the last in report.json only (the audit reads it)
 
 
 def _before_after(key: str, b: dict, a: dict, fmt: str) -> str:
