@@ -113,12 +113,57 @@ def test_self_collision_accepts_the_scene_own_poses(name):
     sc = load_scene(SCENES_DIR / name)
     model, checker = collision_setup(sc)
     q = sc.setup.sample_poses(np.random.default_rng(123), 400)  # not the draws the model was built on
-    F = sc.setup.link_frames(q)
-    lo, ls = checker.lower_bounds(F)
-    own = ls >= sc.planning.clearance_m  # self pairs only: the scene's obstacles may still be in the way
-    assert own.all(), [model.bodies[i].name + " / " + model.bodies[j].name for i, j in model.self_pairs[~own.all(0)]]
+    ok, why = checker.screen(sc.setup.link_frames(q))
+    names = {b.name for b in model.bodies}
+    # self pairs only: the scene's obstacles may still be in the way
+    assert not [w for w in why if w is not None and w[1] in names]
     for a, b, why in model.disabled:  # every pair left out says why
         assert why
+    # a pair the scene's poses bring closer than the clearance is still checked, at a reduced distance, named
+    assert len(checker.self_allowed) == len(model.self_pairs)
+    for a, b, d, why in model.reduced:
+        assert d < sc.planning.clearance_m and why and f"{a} / {b} at {1e3 * d:.1f} mm" in model.warnings[-1]
+
+
+def test_a_self_pair_at_a_reduced_distance_still_refuses_a_folded_arm():
+    pytest.importorskip("fcl")
+    from vision_calib.planning.plan import collision_setup
+
+    sc = load_scene(SCENES_DIR / "thesis_arm_tripod_probe.yaml")
+    model, checker = collision_setup(sc)
+    assert model.reduced  # the board on the flange comes close to the forearm on the scene's own poses
+    allowed = dict(zip(map(tuple, model.self_pairs.tolist()), checker.self_allowed))
+    assert min(allowed.values()) < sc.planning.clearance_m
+    names = [b.name for b in model.bodies]
+    folded = np.radians([[78, 175, 162, 152, 71, 89]])  # shoulder and elbow folded: the forearm into the base
+    ok, why = checker.screen(sc.setup.link_frames(folded))
+    assert not ok[0] and why[0][0] in names and why[0][1] in names, why
+
+
+def test_h4_axis_rows_give_the_axis_estimate_covariance():
+    from vision_calib.identify.camera_axis import axis_information_rows, estimate_camera_axis
+
+    sc = load_scene(SCENES_DIR / "h4_vision.yaml")
+    st = sc.setup
+    P = st.sample_poses(np.random.default_rng(3), 15)
+    cov = D.pose_covariances(sc, P, 2)
+    T = st.T_cam_target(P, st.params.nominal)
+    R_BC0, R_ME0 = st.tilt_reference()
+    rows = axis_information_rows(T, cov[:, 3:, 3:], R_BC0, R_ME0)
+    C = np.linalg.inv(np.einsum("kmi,kmj->ij", rows, rows))
+    est = estimate_camera_axis(T, rot_cov=cov[:, 3:, 3:], R_BC0=R_BC0, R_ME0=R_ME0)
+    np.testing.assert_allclose(C[:2, :2], est.cov_tilt_cam, rtol=1e-6)
+    np.testing.assert_allclose(C[2:, 2:], est.cov_tilt_target, rtol=1e-6)
+    # the planner's prediction carries the tilts: never below the one that takes them as known
+    V = st.sample_poses(np.random.default_rng(4), 20)
+    base, _ = D.base_mask(sc, P, np.random.default_rng(0))
+    info = D.information(sc, P, base, None, 2)
+    A, W = D.with_axis_tilts(sc, P, base, info.cov, V)
+    assert A.shape == (15, info.A.shape[1] + 3, info.A.shape[2] + 4)
+    W0 = D.validation_weight(D.validation_blocks(sc, V, base))
+    idx = np.arange(15)
+    assert D.validation_mse(A, idx, W) > D.validation_mse(info.A, idx, W0)
+    assert D.with_axis_tilts(load_scene(UR5E), P[:0], base, info.cov, V) is None
 
 
 def test_clearance_figures_change_with_the_joints():

@@ -206,6 +206,30 @@ def estimate_camera_axis(T_cam_target: ArrayLike, rot_cov: ArrayLike | None = No
                            estimated, float(np.sqrt(np.mean(np.sum(r * r, 1))))), residuals_rad=r)
 
 
+def axis_information_rows(T_cam_target: ArrayLike, rot_cov: ArrayLike, R_BC0: ArrayLike | None = None,
+                          R_ME0: ArrayLike | None = None) -> np.ndarray:
+    """(N, 3, 4) whitened rows, per pose, of the axis fit of :func:`estimate_camera_axis` on the 4 tilt angles
+    (camera x/y, target x/y, rad; the estimate's ``tilt_cam_rad``, ``tilt_target_rad``) at exact rotations
+    T_cam_target (N, 4, 4) (e.g. the nominal model's) with rotation noise rot_cov (3, 3) or (N, 3, 3) rad^2 (camera
+    frame), each pose's nacelle angle eliminated: sum_k rows_k^T rows_k is the inverse of the tilts' covariance the
+    estimate gives for those poses (first order), additive over poses (what a pose design adds to the axis prior)."""
+    R, rot_cov = _check_input(T_cam_target, rot_cov)
+    R_BC0 = np.diag([1.0, -1.0, -1.0]) if R_BC0 is None else np.asarray(R_BC0, float)
+    R_ME0 = np.diag([1.0, -1.0, -1.0]) if R_ME0 is None else np.asarray(R_ME0, float)
+    c_nom, n_nom = R_BC0.T @ EZ, R_ME0 @ EZ
+    A = _min_rotation(c_nom, _common_axis(R @ R[0].T, c_nom)) @ R_BC0.T
+    B = (_min_rotation(n_nom, _common_axis(np.swapaxes(R[0], -1, -2) @ R, n_nom)) @ R_ME0).T
+    phi = yaw_of(A.T @ R @ B.T)
+    W = np.swapaxes(np.linalg.cholesky(np.linalg.inv(rot_cov)), -1, -2)
+    Gp, _, _, _, _, _, Uc, Un = _system(R, A, B, phi, W)
+    c, n = A @ EZ, B.T @ EZ
+    # tilt = J a for the tangent unknowns a (as in _finish): J = blockdiag(Tc Gc, Tn Gn)
+    J = np.zeros((4, 4))
+    J[0:2, 0:2] = _tilt(c_nom, c, -np.eye(3)[:, :2])[1] @ (-skew(c) @ Uc)
+    J[2:4, 2:4] = _tilt(n_nom, n, np.eye(3)[:, :2])[1] @ (-skew(n) @ Un)
+    return Gp @ np.linalg.inv(J)
+
+
 def _system(R, A, B, phi, W):
     """Whitened Gauss-Newton system of the rotation model at (A, B, phi), by pose (O(N) time and memory).
 

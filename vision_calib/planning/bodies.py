@@ -55,8 +55,11 @@ TRIPOD_CAMERA_RADIUS_M = 0.05
 #: a pair of bodies closer than the clearance in at least this fraction of random joint sets is not checked
 ALWAYS_NEAR_FRACTION = 0.99
 ALWAYS_NEAR_SAMPLES = 1000
-#: joint sets of the scene's own sampler on which no checked self pair may be closer than the clearance
+#: joint sets of the scene's own sampler on which no checked self pair may be closer than its allowed distance
 OWN_POSES = 500
+#: a self pair that the scene's own poses bring closer than the clearance keeps being checked, at an allowed distance
+#: of its smallest distance over those poses minus this margin [m] (other sampler draws go a little deeper)
+OWN_POSE_MARGIN_M = 0.01
 #: the side [m] of the box that stands for a plane in FCL (its distance queries to a half-space are unreliable)
 PLANE_BOX_M = 20.0
 
@@ -139,9 +142,11 @@ def obstacle_bodies(obstacles: tuple[Obstacle, ...]) -> list[Body]:
 class RobotModel:
     """The robot's bodies (attached to ``link_frames`` indices), the static obstacles, and the pairs checked:
     ``obstacle_pairs`` (K, 2) [robot body, obstacle] and ``self_pairs`` (S, 2) [body, body] indices; ``disabled``:
-    [(body, body, why)] of the self pairs left out beyond adjacent frames; ``source``: where the bodies came from;
-    ``notes``: what the model could not represent; ``warnings``: collision geometry it did not read (named, with
-    what was checked instead)."""
+    [(body, body, why)] of the self pairs left out beyond adjacent frames; ``self_allowed_m`` (S,) [m]: the distance
+    each self pair must keep (the clearance, or less for a pair the scene's own poses bring closer: ``reduced``
+    [(body, body, allowed m, why)]; negative: the primitive shapes may overlap that deep); ``source``: where the
+    bodies came from; ``notes``: what the model could not represent; ``warnings``: collision geometry it did not
+    read (named, with what was checked instead), the self pairs checked at a reduced distance."""
 
     bodies: tuple[Body, ...]
     obstacles: tuple[Body, ...]
@@ -151,6 +156,8 @@ class RobotModel:
     disabled: tuple = ()
     notes: tuple[str, ...] = field(default=())
     warnings: tuple[str, ...] = field(default=())
+    self_allowed_m: np.ndarray | None = None
+    reduced: tuple = ()
 
     def to_dict(self) -> dict:
         return {"source": self.source,
@@ -160,6 +167,7 @@ class RobotModel:
                                "dims_m": [] if b.plane else list(b.dims)} for b in self.obstacles],
                 "self_pairs_checked": [[self.bodies[i].name, self.bodies[j].name] for i, j in self.self_pairs],
                 "self_pairs_left_out": [{"pair": [a, b], "why": why} for a, b, why in self.disabled],
+                "self_pairs_reduced": [{"pair": [a, b], "allowed_m": d, "why": why} for a, b, d, why in self.reduced],
                 "notes": list(self.notes), "warnings": list(self.warnings)}
 
 
@@ -407,7 +415,7 @@ def build_model(scene, setup, rng: np.random.Generator | None = None) -> RobotMo
     moving = group > 0
     obstacle_pairs = np.array([(i, j) for i in np.flatnonzero(moving) for j in range(len(obstacles))], int).reshape(-1, 2)
     cand = [(i, j) for i in range(len(bodies)) for j in range(i + 1, len(bodies)) if abs(group[i] - group[j]) > 1]
-    disabled, keep = [], []
+    disabled, keep, allowed, reduced = [], [], [], []
     if cand:
         rng = rng or np.random.default_rng(0)
         r = np.array([bd.hull_r for bd in bodies])
@@ -420,7 +428,8 @@ def build_model(scene, setup, rng: np.random.Generator | None = None) -> RobotMo
         d = pair_bounds(setup.generic_poses(rng, ALWAYS_NEAR_SAMPLES))
         near = np.mean(d < ps.clearance_m, axis=0)
         # the scene's own poses (its random sampler, target in view) are poses the arm takes: a pair of capsules
-        # closer than the clearance there is a modelling error of the primitives, not a collision
+        # closer than the clearance there is a modelling error of the primitives, not a collision; the pair is still
+        # checked, at a distance just below the smallest those poses reach (it refuses poses that go deeper)
         own = own_poses(scene, setup, rng)
         d_own = pair_bounds(own) if own is not None else None
         for k, ((i, j), f) in enumerate(zip(cand, near)):
@@ -428,15 +437,25 @@ def build_model(scene, setup, rng: np.random.Generator | None = None) -> RobotMo
                 disabled.append((bodies[i].name, bodies[j].name,
                                  f"closer than the clearance in {100 * f:.0f} % of {ALWAYS_NEAR_SAMPLES} random joint "
                                  "sets (structural neighbours)"))
-            elif d_own is not None and np.any(d_own[:, k] < ps.clearance_m):
-                disabled.append((bodies[i].name, bodies[j].name,
-                                 f"closer than the clearance in {int(np.sum(d_own[:, k] < ps.clearance_m))} of "
-                                 f"{len(own)} of the scene's own random poses (the primitive shapes overlap where the "
-                                 "arm does not: give planning.link_radii or URDF collision elements)"))
-            else:
-                keep.append((i, j))
+                continue
+            keep.append((i, j))
+            allowed.append(ps.clearance_m)
+            if d_own is not None and np.any(d_own[:, k] < ps.clearance_m):
+                allowed[-1] = float(np.min(d_own[:, k])) - OWN_POSE_MARGIN_M
+                if not (bodies[i].exact and bodies[j].exact):  # FCL decides: a distance, never a penetration depth
+                    allowed[-1] = max(allowed[-1], 0.0)
+                reduced.append((bodies[i].name, bodies[j].name, allowed[-1],
+                                f"closer than the clearance in {int(np.sum(d_own[:, k] < ps.clearance_m))} of "
+                                f"{len(own)} of the scene's own random poses (smallest {1e3 * np.min(d_own[:, k]):.1f} "
+                                "mm)"))
+    if reduced:
+        warns.append("self pairs checked at a reduced distance (the primitive shapes come closer than the clearance "
+                     f"{1e3 * ps.clearance_m:.0f} mm on the scene's own random poses, where the arm does not collide: "
+                     "give planning.link_radii or URDF collision elements): "
+                     + "; ".join(f"{a} / {b} at {1e3 * d:.1f} mm ({1e3 * (ps.clearance_m - d):.1f} mm less)"
+                                 for a, b, d, _ in reduced))
     return RobotModel(tuple(bodies), tuple(obstacles), obstacle_pairs, np.array(keep, int).reshape(-1, 2), source,
-                      tuple(disabled), tuple(notes), tuple(warns))
+                      tuple(disabled), tuple(notes), tuple(warns), np.array(allowed, float), tuple(reduced))
 
 
 def own_poses(scene, setup, rng: np.random.Generator) -> np.ndarray | None:

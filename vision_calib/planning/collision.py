@@ -83,6 +83,9 @@ class CollisionChecker:
         self.o_exact = np.array([b.exact for b in obs], bool)
         self.b_exact = np.array([b.exact for b in model.bodies], bool)
         self.varying = None  # (obstacle pairs (K,) bool, self pairs (S,) bool) of the clearance figures
+        # (S,) distance each self pair must keep: the clearance, or the model's reduced one (RobotModel.reduced)
+        self.self_allowed = np.full(len(model.self_pairs), self.clearance) if model.self_allowed_m is None else \
+            np.minimum(np.asarray(model.self_allowed_m, float), self.clearance)
 
     def mark_fixed(self, frames: np.ndarray) -> dict:
         """Mark the pairs whose distance bound varies less than :data:`FIXED_DISTANCE_M` over the joint sets'
@@ -137,8 +140,9 @@ class CollisionChecker:
         return float(self.fcl.distance(o1, o2, self.request, self.fcl.DistanceResult()))
 
     def screen(self, frames: np.ndarray) -> tuple[np.ndarray, list]:
-        """(ok (N,) bool: every checked pair at least the clearance apart; why: per joint set, the first pair found
-        closer as (body, other, distance m) or None). Vectorised broad phase, FCL for undecided pairs only."""
+        """(ok (N,) bool: every checked pair at least the clearance apart (a self pair: its allowed distance,
+        ``RobotModel.self_allowed_m``); why: per joint set, the first pair found closer as (body, other, distance m)
+        or None). Vectorised broad phase, FCL for undecided pairs only."""
         N = frames.shape[0]
         ok = np.ones(N, bool)
         why = [None] * N
@@ -146,7 +150,7 @@ class CollisionChecker:
         op_exact = (self.b_exact[op[:, 0]] & self.o_exact[op[:, 1]]) | self.o_plane[op[:, 1]] if len(op) else \
             np.zeros(0, bool)
         sp_exact = self.b_exact[sp[:, 0]] & self.b_exact[sp[:, 1]] if len(sp) else np.zeros(0, bool)
-        c = self.clearance
+        c, cs = self.clearance, self.self_allowed
         names = [b.name for b in self.model.bodies]
         onames = [b.name for b in self.model.obstacles]
         for s in range(0, N, BLOCK):
@@ -154,7 +158,7 @@ class CollisionChecker:
             lo, ls = self.lower_bounds(F)
             # decided by the exact hulls
             bad_o = (lo < c) & op_exact
-            bad_s = (ls < c) & sp_exact
+            bad_s = (ls < cs) & sp_exact
             for n in np.flatnonzero(bad_o.any(axis=1) | bad_s.any(axis=1)):
                 ok[s + n] = False
                 if bad_o[n].any():
@@ -165,7 +169,7 @@ class CollisionChecker:
                     why[s + n] = (names[sp[k, 0]], names[sp[k, 1]], float(ls[n, k]))
             # undecided: FCL on the exact shapes
             und_o = (lo < c) & ~op_exact
-            und_s = (ls < c) & ~sp_exact
+            und_s = (ls < cs) & ~sp_exact
             for n in np.flatnonzero((und_o.any(axis=1) | und_s.any(axis=1)) & ok[s:s + len(F)]):
                 ko, ks = np.flatnonzero(und_o[n]), np.flatnonzero(und_s[n])
                 self.place(F[n], set(op[ko, 0].tolist()) | set(sp[ks].ravel().tolist()))
@@ -178,7 +182,7 @@ class CollisionChecker:
                     continue
                 for k in ks:
                     d = self._distance(self.robot_objs[sp[k, 0]], self.robot_objs[sp[k, 1]])
-                    if d < c:
+                    if d < cs[k]:
                         ok[s + n], why[s + n] = False, (names[sp[k, 0]], names[sp[k, 1]], d)
                         break
         return ok, why
@@ -187,11 +191,16 @@ class CollisionChecker:
         """Exact clearance of each joint set (FCL on every checked pair, planes exactly): [{clearance_m, closest: [body, other],
         obstacle_m, self_m}] (the smallest distance overall, to an obstacle, between two links; a negative or zero
         distance: in contact or penetrating). The pairs whose distance the joints do not change (:meth:`mark_fixed`;
-        screened all the same) are left out: the same figure on every pose."""
+        screened all the same) are left out: the same figure on every pose; so are the self pairs checked at a
+        reduced distance (their primitive shapes overlap on poses the arm takes)."""
         out = []
         op, sp = self.model.obstacle_pairs, self.model.self_pairs
+        # a self pair at a reduced distance (RobotModel.reduced): its primitives overlap where the arm does not
+        full = self.self_allowed >= self.clearance
         if self.varying is not None:
-            op, sp = op[self.varying[0]], sp[self.varying[1]]
+            op, sp = op[self.varying[0]], sp[self.varying[1] & full]
+        else:
+            sp = sp[full]
         names = [b.name for b in self.model.bodies]
         onames = [b.name for b in self.model.obstacles]
         for F in frames:

@@ -109,6 +109,37 @@ def information(scene, poses: np.ndarray, base: np.ndarray, analysis=None, frame
                        cov)
 
 
+def with_axis_tilts(scene, poses: np.ndarray, base: np.ndarray, cov: np.ndarray, validation: np.ndarray):
+    """What the identification estimates beyond the base parameters, for a setup with the preparation step
+    ``experiment.prepare`` (capability ``rig.base.TiltsFromAxis``, the H4, tilt_mode not "off"): its four tilt
+    parameters, identified with the rotation-axis estimate as their prior. Returns (A (K, m + 3, L + 4): the blocks
+    of the commanded poses (K, .) on the base parameters and the tilts, whitened by the pose covariances cov
+    (K, 6, 6), each with the 3 rows the pose adds to the axis fit (``identify.camera_axis.axis_information_rows``:
+    the prior's information is the sum over the design's poses), W (L + 4, L + 4): the validation weight of the
+    validation poses (V, .) on them), or None for other setups (nothing estimated beyond the base parameters)."""
+    from dataclasses import replace
+
+    from ..identify.camera_axis import axis_information_rows
+    from ..rig.base import TiltsFromAxis
+
+    setup = scene.setup
+    if not isinstance(setup, TiltsFromAxis) or setup.tilt_mode == "off":
+        return None
+    tilted = setup.with_tilts(np.zeros(4), np.ones(4))
+    names = list(tilted.params.names)
+    base_t = np.array([n in setup.tilt_names or bool(base[setup.params.names.index(n)]) for n in names])
+    sc = replace(scene, setup=tilted)
+    problem, params, _ = _problem(sc, poses, base_t, cov)
+    A = information_blocks(problem)
+    cols = [list(params.free_names).index(n) for n in setup.tilt_names]
+    scale = params.scale[params.free_index][cols]
+    R_BC0, R_ME0 = setup.tilt_reference()
+    T = setup.T_cam_target(np.asarray(poses), setup.params.nominal)
+    axis = np.zeros((len(A), 3, A.shape[2]))
+    axis[:, :, cols] = axis_information_rows(T, cov[:, 3:, 3:], R_BC0, R_ME0) * scale
+    return np.concatenate([A, axis], axis=1), validation_weight(validation_blocks(sc, validation, base_t))
+
+
 def identifiability(scene, poses: np.ndarray, base: np.ndarray, frames: int | None = None):
     """IdentifiabilityReport (``identify.analyze``) of commanded poses for the ``base`` parameters, whitened by the
     image model's pose covariance (the parameters outside the base set are not identifiable from the candidate
@@ -285,4 +316,4 @@ def refine_for_validation(A: np.ndarray, idx, W: np.ndarray, candidates=None, ma
 
 __all__ = ["Information", "information", "base_mask", "identifiability", "select", "d_criterion", "d_efficiency", "leverages",
            "pool_indices", "info_matrix", "pose_covariances", "validation_blocks", "validation_weight", "validation_mse",
-           "refine_for_validation", "validation_rms_quantiles", "add_gains", "SYSTEMATIC_CORNER_PX"]
+           "refine_for_validation", "with_axis_tilts", "validation_rms_quantiles", "add_gains", "SYSTEMATIC_CORNER_PX"]

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from dataclasses import replace as dc_replace
 from pathlib import Path
 
 import numpy as np
@@ -366,6 +367,11 @@ def plan_cell(scene, n_poses: int, out_dir=None, seed: int = 0, n_candidates: in
     base, rep0 = D.base_mask(scene, pool[sub], rng)
     info = D.information(scene, pool[sub], base, rep0, frames)
     W = D.validation_weight(D.validation_blocks(scene, V, base))
+    n_min = -(-info.A.shape[2] // info.A.shape[1])
+    tilts = D.with_axis_tilts(scene, pool[sub], base, info.cov, V)
+    if tilts is not None:  # the H4: the exchange and the predictions also carry the tilts and their axis prior
+        info = dc_replace(info, A=tilts[0], names=info.names + tuple(setup.tilt_names))
+        W = tilts[1]
     picks, curve = {}, {}
 
     def pick_of(c):
@@ -378,7 +384,6 @@ def plan_cell(scene, n_poses: int, out_dir=None, seed: int = 0, n_candidates: in
             curve[c] = D.validation_rms_quantiles(info.A, pick_of(c), W, np.random.default_rng([int(seed), 29, c]))
         return curve[c]
 
-    n_min = -(-info.A.shape[2] // info.A.shape[1])
     if target_accuracy_m is not None:
         n = smallest_count(quantiles, target_accuracy_m * 1e3, n_min, min(len(sub), MAX_TARGET_POSES))
     elif kept.size < n:

@@ -276,11 +276,14 @@ def plan_html(res: dict, out_dir) -> str:
                f"{sc_['fcl_queries']} FCL distance queries).</p>")
     cm = res.get("collision_model")
     if cm:
+        reduced = "; ".join(" / ".join(x["pair"]) + f" at {1e3 * x['allowed_m']:.1f} mm"
+                            for x in cm.get("self_pairs_reduced", []))
         out.append(f"<p>collision model: {esc(cm['source'])}; bodies: "
                    f"{esc(', '.join(b['name'] for b in cm['bodies']))}; obstacles: "
                    f"{esc(', '.join(b['name'] + ' (' + b['shape'] + ')' for b in cm['obstacles']) or 'none')}; "
                    f"{len(cm['self_pairs_checked'])} link pairs checked, left out: "
-                   f"{esc('; '.join(' / '.join(x['pair']) + ' (' + x['why'] + ')' for x in cm['self_pairs_left_out']) or 'none')}.</p>")
+                   f"{esc('; '.join(' / '.join(x['pair']) + ' (' + x['why'] + ')' for x in cm['self_pairs_left_out']) or 'none')}"
+                   f"; checked at a reduced distance: {esc(reduced or 'none')}.</p>")
     out.append("<p>limits: clearance %.0f mm, camera to board %.0f-%.0f mm, incidence <= %.0f deg, board >= %.0f px "
                "inside the image, squares >= %.0f px.</p>" % (s["clearance_m"] * 1e3, s["distance_m"][0] * 1e3,
                                                             s["distance_m"][1] * 1e3, s["max_incidence_deg"],
