@@ -341,19 +341,26 @@ class SerialChain(JointChainChecks):
         return C, x[ix[f"theta{i}"]], x[ix[f"d{i}"]]
 
     def _walk(self, q, x):
-        """Frames (N, n+2, 4, 4) in `left`: [base, link 1..n (n = flange), right]."""
+        """Frames (N, n+2, 4, 4) in `left`: [base, link 1..n (n = flange), right]. Per joint one BLAS product
+        with the constant prefix and the Rz(theta + q) Tz(d) columns written out (no per-pose 4x4 products)."""
         N = q.shape[0]
         out = np.empty((N, self.n_joints + 2, 4, 4))
         TL, TR = self.nominal_transforms(x)
-        F = np.broadcast_to(TL, (N, 4, 4)).copy()
+        F = np.broadcast_to(TL, (N, 4, 4))
         out[:, 0] = F
         for i in range(1, self.n_joints + 1):
             C, theta, d = self._link_parts(x, i)
-            # Rz(theta + q) Tz(d) = [Rz, (0, 0, d)] since Rz keeps the z axis
-            Rz = make_T(rot_z(theta + q[:, i - 1]), np.array([0.0, 0.0, d]))
-            F = F @ C @ Rz
+            FC = (F.reshape(-1, 4) @ C).reshape(N, 4, 4)
+            # (F C) Rz(theta + q) Tz(d): columns x, y rotated about z, origin moved by d along z
+            ang = theta + q[:, i - 1]
+            c, sn = np.cos(ang)[:, None], np.sin(ang)[:, None]
+            F = np.empty((N, 4, 4))
+            F[:, :, 0] = FC[:, :, 0] * c + FC[:, :, 1] * sn
+            F[:, :, 1] = FC[:, :, 1] * c - FC[:, :, 0] * sn
+            F[:, :, 2] = FC[:, :, 2]
+            F[:, :, 3] = FC[:, :, 2] * d + FC[:, :, 3]
             out[:, i] = F
-        out[:, -1] = F @ TR
+        out[:, -1] = (F.reshape(-1, 4) @ TR).reshape(N, 4, 4)
         return out
 
     def forward(self, q, x=None) -> np.ndarray:
@@ -391,14 +398,17 @@ class SerialChain(JointChainChecks):
         ix = self._idx
         frames = self._walk(q, x)
         p_end = frames[:, -1, :3, 3]  # (N, 3)
-        J = np.zeros((N, 6, n_par))
+        Jt = np.zeros((n_par, 6, N))  # filled column by column (contiguous writes), returned transposed
 
-        def rot_col(k, w, p):
-            J[:, :3, k] = np.cross(w, p_end - p)
-            J[:, 3:, k] = w
+        def rot_col(k, w, p):  # [w x (p_end - p), w], the cross product written out (np.cross copies)
+            v = p_end - p
+            Jt[k, 0] = w[:, 1] * v[:, 2] - w[:, 2] * v[:, 1]
+            Jt[k, 1] = w[:, 2] * v[:, 0] - w[:, 0] * v[:, 2]
+            Jt[k, 2] = w[:, 0] * v[:, 1] - w[:, 1] * v[:, 0]
+            Jt[k, 3:] = w.T
 
         def trans_col(k, w):
-            J[:, :3, k] = w
+            Jt[k, :3] = w.T
 
         # ---- left mount: T_left_base = [R_nom Exp(r), t], parent frame = left (identity)
         TL, TR = self.nominal_transforms(x)
@@ -436,7 +446,7 @@ class SerialChain(JointChainChecks):
         p_right = of + np.einsum("nij,j->ni", Rf, TR[:3, 3])
         for a, s in enumerate(("rx", "ry", "rz")):
             rot_col(ix[f"{self.right}.{s}"], WR[:, :, a], p_right)
-        return J
+        return np.ascontiguousarray(Jt.transpose(2, 1, 0))
 
     def position_jacobian(self, q, x=None) -> np.ndarray:
         """(N, 3, n_params): translation rows of :meth:`pose_jacobian` (m per unit parameter, in ``left``)."""
