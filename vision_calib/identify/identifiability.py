@@ -202,8 +202,17 @@ def whitened_free_jacobian(problem: IdentificationProblem, J: np.ndarray, W: np.
     n_obs * m pose rows, then the problem's prior rows (``problem.prior_rows``; N = n_obs * m + n_prior)."""
     W = problem.whitening() if W is None else W
     Jf = J[:, :, problem.params.free_index]
-    A = np.einsum("kij,kjn->kin", W, Jf).reshape(-1, Jf.shape[-1])
+    A = np.zeros(Jf.shape)
+    for j in range(Jf.shape[1]):  # sum_j W[:, :, j] Jf[:, j, :]: m passes over the rows, no per-pose products
+        A += W[:, :, j, None] * Jf[:, None, j, :]
+    A = A.reshape(-1, Jf.shape[-1])
     return np.vstack([A, problem.prior_jacobian()]) if problem.prior_rows else A
+
+
+def row_compressed(A: np.ndarray) -> np.ndarray:
+    """R (n, n) of A = Q R (A: (N, n), N > n), else A: the same column norms, singular values and right singular
+    vectors, column spans and least-squares fits as A (Q is orthogonal), at n x n size (one blocked LAPACK QR)."""
+    return np.linalg.qr(A, mode="r") if A.shape[0] > A.shape[1] else A
 
 
 def observability_indices(s: np.ndarray, n_poses: int) -> dict[str, float]:
@@ -310,6 +319,7 @@ def analyze(
     J = check_problem(problem, x)[1] if jacobian is None else jacobian
     scale = params.scale[params.free_index]
     A = whitened_free_jacobian(problem, J) * scale[None, :]
+    A = row_compressed(A)  # everything below reads only column norms, spans, fits and singular values
     col_norms = np.linalg.norm(A, axis=0)
     if normalize:
         A = A / np.where(col_norms > 0, col_norms, 1.0)[None, :]

@@ -28,7 +28,7 @@ from scipy.optimize import least_squares
 
 from ..errors import ConfigError, DataError, ParameterError, VisionCalibError
 from .identifiability import (IdentifiabilityReport, analyze, base_problem, check_problem, pose_labels,
-                              whitened_free_jacobian)
+                              row_compressed, whitened_free_jacobian)
 from .problem import NOISE_ESTIMATED, STATUS_CONVERGED, STATUS_NOT_FINITE, IdentificationProblem, IdentificationResult
 from .threads import single_threaded_blas
 
@@ -130,9 +130,10 @@ def final_check(problem: IdentificationProblem, x: np.ndarray, cov: np.ndarray, 
 
 def covariance_from_jacobian(Jw_free: np.ndarray, scale_free: np.ndarray) -> tuple[np.ndarray, bool]:
     """(n_free, n_free) covariance (JwᵀJw)^-1 computed in scaled variables; returns (cov, full_rank)."""
-    A = Jw_free * scale_free[None, :]
+    rows = max(Jw_free.shape)
+    A = row_compressed(Jw_free * scale_free[None, :])
     U, s, Vt = np.linalg.svd(A, full_matrices=False)
-    tol = max(A.shape) * np.finfo(float).eps * 1e3 * (s[0] if s.size else 0.0)
+    tol = rows * np.finfo(float).eps * 1e3 * (s[0] if s.size else 0.0)
     full = bool(s.size and s[-1] > tol)
     inv_s2 = np.where(s > tol, 1.0 / np.where(s > tol, s, 1.0) ** 2, 0.0)
     cov_z = (Vt.T * inv_s2) @ Vt
