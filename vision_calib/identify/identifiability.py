@@ -202,10 +202,7 @@ def whitened_free_jacobian(problem: IdentificationProblem, J: np.ndarray, W: np.
     n_obs * m pose rows, then the problem's prior rows (``problem.prior_rows``; N = n_obs * m + n_prior)."""
     W = problem.whitening() if W is None else W
     Jf = J[:, :, problem.params.free_index]
-    A = np.zeros(Jf.shape)
-    for j in range(Jf.shape[1]):  # sum_j W[:, :, j] Jf[:, j, :]: m passes over the rows, no per-pose products
-        A += W[:, :, j, None] * Jf[:, None, j, :]
-    A = A.reshape(-1, Jf.shape[-1])
+    A = np.matmul(W, Jf).reshape(-1, Jf.shape[-1])  # stacked (m, m) @ (m, n_free) products (einsum: ~5x slower)
     return np.vstack([A, problem.prior_jacobian()]) if problem.prior_rows else A
 
 

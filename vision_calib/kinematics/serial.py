@@ -340,27 +340,28 @@ class SerialChain(JointChainChecks):
         C = C @ _tx(x[ix[f"a{i}"]])
         return C, x[ix[f"theta{i}"]], x[ix[f"d{i}"]]
 
-    def _walk(self, q, x):
-        """Frames (N, n+2, 4, 4) in `left`: [base, link 1..n (n = flange), right]. Per joint one BLAS product
-        with the constant prefix and the Rz(theta + q) Tz(d) columns written out (no per-pose 4x4 products)."""
+    def _walk(self, q, x, keep: bool = True):
+        """Frames (n+2, N, 4, 4) in `left`, joint-major: [base, link 1..n (n = flange), right]; keep=False: only
+        the last (``right``) is stored, (1, N, 4, 4). Per joint one BLAS product with the constant prefix and the
+        Rz(theta + q) Tz(d) columns written out (no per-pose 4x4 products)."""
         N = q.shape[0]
-        out = np.empty((N, self.n_joints + 2, 4, 4))
+        out = np.empty((self.n_joints + 2 if keep else 1, N, 4, 4))
         TL, TR = self.nominal_transforms(x)
         F = np.broadcast_to(TL, (N, 4, 4))
-        out[:, 0] = F
+        if keep:
+            out[0] = F
         for i in range(1, self.n_joints + 1):
             C, theta, d = self._link_parts(x, i)
             FC = (F.reshape(-1, 4) @ C).reshape(N, 4, 4)
             # (F C) Rz(theta + q) Tz(d): columns x, y rotated about z, origin moved by d along z
             ang = theta + q[:, i - 1]
             c, sn = np.cos(ang)[:, None], np.sin(ang)[:, None]
-            F = np.empty((N, 4, 4))
+            F = out[i] if keep else np.empty((N, 4, 4))
             F[:, :, 0] = FC[:, :, 0] * c + FC[:, :, 1] * sn
             F[:, :, 1] = FC[:, :, 1] * c - FC[:, :, 0] * sn
             F[:, :, 2] = FC[:, :, 2]
             F[:, :, 3] = FC[:, :, 2] * d + FC[:, :, 3]
-            out[:, i] = F
-        out[:, -1] = (F.reshape(-1, 4) @ TR).reshape(N, 4, 4)
+        np.matmul(F.reshape(-1, 4), TR, out=out[-1].reshape(-1, 4))
         return out
 
     def forward(self, q, x=None) -> np.ndarray:
@@ -368,14 +369,14 @@ class SerialChain(JointChainChecks):
         (None = nominal)."""
         q = self.check_joints(q)
         x = self._x(x)
-        return self._walk(q, x)[:, -1]
+        return self._walk(q, x, keep=False)[-1]
 
     def forward_all(self, q, x=None) -> np.ndarray:
         """All frames (N, n+2, 4, 4) expressed in frame ``left``: index 0 = robot base (T_left_base),
         i = link i (i = 1..n; n = flange), n+1 = ``right`` frame (T_left_right). For drawing the arm."""
         q = self.check_joints(q)
         x = self._x(x)
-        return self._walk(q, x)
+        return np.moveaxis(self._walk(q, x), 0, 1)
 
     def flange(self, q, x=None) -> np.ndarray:
         """T_base_flange(q) (N, 4, 4): the arm alone, without the mounting transforms."""
@@ -396,8 +397,8 @@ class SerialChain(JointChainChecks):
         N = q.shape[0]
         n_par = len(self.params)
         ix = self._idx
-        frames = self._walk(q, x)
-        p_end = frames[:, -1, :3, 3]  # (N, 3)
+        frames = self._walk(q, x)  # (n+2, N, 4, 4)
+        p_end = frames[-1, :, :3, 3]  # (N, 3)
         Jt = np.zeros((n_par, 6, N))  # filled column by column (contiguous writes), returned transposed
 
         def rot_col(k, w, p):  # [w x (p_end - p), w], the cross product written out (np.cross copies)
@@ -420,7 +421,7 @@ class SerialChain(JointChainChecks):
             rot_col(ix[f"{self.left}.{s}"], np.broadcast_to(WL[:, a], (N, 3)), np.broadcast_to(TL[:3, 3], (N, 3)))
 
         # ---- joints
-        F = frames[:, 0]  # (N, 4, 4) frame i-1
+        F = frames[0]  # (N, 4, 4) frame i-1
         for i in range(1, self.n_joints + 1):
             R, o = F[:, :3, :3], F[:, :3, 3]
             if i in self.pre_z:
@@ -435,7 +436,7 @@ class SerialChain(JointChainChecks):
             o = o + R[:, :, 0] * x[ix[f"a{i}"]]
             rot_col(ix[f"theta{i}"], R[:, :, 2], o)  # z axis unchanged by Rz(theta + q)
             trans_col(ix[f"d{i}"], R[:, :, 2])
-            F = frames[:, i]
+            F = frames[i]
 
         # ---- right mount: T_flange_right = [R_nom Exp(r), t] in the flange frame F
         Rf, of = F[:, :3, :3], F[:, :3, 3]
@@ -446,7 +447,7 @@ class SerialChain(JointChainChecks):
         p_right = of + np.einsum("nij,j->ni", Rf, TR[:3, 3])
         for a, s in enumerate(("rx", "ry", "rz")):
             rot_col(ix[f"{self.right}.{s}"], WR[:, :, a], p_right)
-        return np.ascontiguousarray(Jt.transpose(2, 1, 0))
+        return Jt.transpose(2, 1, 0)  # a view: the caller's first selection copies it
 
     def position_jacobian(self, q, x=None) -> np.ndarray:
         """(N, 3, n_params): translation rows of :meth:`pose_jacobian` (m per unit parameter, in ``left``)."""
