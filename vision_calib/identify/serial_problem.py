@@ -180,7 +180,7 @@ def serial_problem(
             raise DataError(f"observation index out of range 0..{n - 1}: {idx[(idx < 0) | (idx >= n)][0]}")
         return idx
 
-    last = {}  # the pose errors of the last residual over all poses: the Jacobian at that x reads their rotations
+    last = {}  # the last pose errors (the Jacobian at that x reads their rotations) and Jacobian over all poses
 
     def errors(x, idx):
         key = np.asarray(x, float).tobytes() if idx is None else None
@@ -194,7 +194,16 @@ def serial_problem(
     def residual_fn(x, idx=None):
         return errors(x, idx)[:, :m].copy()
 
-    def jacobian_fn(x, idx=None):
+    def jacobian_fn(x, idx=None):  # the last one over all poses is kept: the solvers ask twice at the start
+        key = np.asarray(x, float).tobytes() if idx is None else None
+        if key is not None and last.get("xJ") == key:
+            return last["J"].copy()
+        J = _jacobian(x, idx)
+        if key is not None:
+            last.update(xJ=key, J=J.copy())
+        return J
+
+    def _jacobian(x, idx):
         Jm = chain.pose_jacobian(q[_idx(idx)], x)
         J = -Jm[:, :m, :]
         if m == 6:
