@@ -16,7 +16,8 @@ of least cost under the same weights; two weightings: 1 m : 1 rad and 1 mm : 0.1
 ``--scale N1 N2 ..`` (issue 35: pose pairs in O(N)): a pose-pair file of N simulated pairs (noise estimated) through
 ``vision-calib process-poses --no-plots``, each in a fresh interpreter: wall and CPU seconds, peak memory (max RSS),
 the seconds and memory per pair against the smallest N's in this run (a ratio near 1: linear). Targets: 2,000 pairs
-in <= 30 s and <= 1 GB.
+in <= 30 s and <= 1 GB. Then ``import-pairs``: a TransformPairs file of the largest N x 100 pairs read streamed
+(``io.transform_pairs.read_transform_pairs``) against the YAML composer on its first 5,000 pairs, in this run.
 """
 
 from __future__ import annotations
@@ -88,6 +89,28 @@ def scale(sizes, mount: str) -> None:
             first = first or (cpu / n, rss)
             print(f"{n:>6}{wall:>9.2f}{cpu:>8.2f}{rss:>12.0f}{1e3 * cpu / n:>13.2f}{cpu / n / first[0]:>10.2f}x"
                   f"{rss / first[1]:>9.2f}x")
+        import vision_calib.io.transform_pairs as TP
+
+        big, small = 100 * max(sizes), 5000
+        rng = np.random.default_rng(0)
+        T = frames.T_from_xyz_rotvec(rng.normal(size=(big, 6)))
+        for n in (small, big):
+            TP.write_transform_pairs(Path(tmp) / f"tp{n}.yml", T[:n], T[::-1][:n])
+        t0 = time.perf_counter()
+        TP.read_transform_pairs(Path(tmp) / f"tp{big}.yml")
+        t_big = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        TP.read_transform_pairs(Path(tmp) / f"tp{small}.yml")
+        t_fast = time.perf_counter() - t0
+        streamed, TP._streamed_pairs = TP._streamed_pairs, lambda *a, **k: None
+        try:
+            t0 = time.perf_counter()
+            TP.read_transform_pairs(Path(tmp) / f"tp{small}.yml")
+            t_yaml = time.perf_counter() - t0
+        finally:
+            TP._streamed_pairs = streamed
+        print(f"TransformPairs read: {big} pairs streamed {t_big:.2f} s; {small} pairs streamed {t_fast:.2f} s vs "
+              f"YAML composer {t_yaml:.2f} s ({t_yaml / t_fast:.1f}x)")
 
 
 def main() -> None:
