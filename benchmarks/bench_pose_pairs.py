@@ -72,7 +72,8 @@ def scale(sizes, mount: str) -> None:
 
     print(f"process-poses --no-plots, mount {mount}, noise estimated; load average {os.getloadavg()[0]:.2f} "
           "(2 cores shared: wall moves with it, CPU less)")
-    print(f"{'pairs':>6}{'wall s':>9}{'CPU s':>8}{'max RSS MB':>12}{'CPU ms/pair':>13}{'x smallest':>11}{'RSS ratio':>10}")
+    print(f"{'pairs':>6}{'wall s':>9}{'CPU s':>8}{'max RSS MB':>12}{'CPU ms/pair':>13}{'x smallest':>11}"
+          f"{'RSS ratio':>10}")
     first = None
     with tempfile.TemporaryDirectory() as tmp:
         for n in sizes:

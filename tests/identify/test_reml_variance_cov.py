@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.linalg import block_diag
 
-from vision_calib.identify.handeye_fit import _variance_cov
+from vision_calib.identify.handeye_fit import reml_variance_cov
 
 
 def _dense(J, known, blocks, theta):
@@ -29,4 +29,5 @@ def test_variance_cov_equals_the_dense_formula(n, k):
     blocks = B @ np.swapaxes(B, 2, 3)
     theta = rng.uniform(0.1, 1.0, k)
     ref = _dense(J, known, blocks, theta)
-    np.testing.assert_allclose(_variance_cov(J, known, blocks, theta), ref, rtol=1e-9, atol=1e-12 * np.abs(ref).max())
+    np.testing.assert_allclose(reml_variance_cov(J, known, blocks, theta), ref, rtol=1e-9,
+                               atol=1e-12 * np.abs(ref).max())

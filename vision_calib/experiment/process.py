@@ -552,4 +552,5 @@ def reprojection_noise_check(block: dict | None, pms, intr: dict, robot_px2: flo
     return rec, text
 
 
-__all__ = ["process_folder", "process_once", "fit_measured", "measure_folder", "Measured", "measure_recording", "used_corners", "label_points", "reprojection_noise_check"]
+__all__ = ["process_folder", "process_once", "fit_measured", "measure_folder", "Measured", "measure_recording",
+           "used_corners", "label_points", "reprojection_noise_check"]

@@ -173,10 +173,10 @@ def _reml_step(problem: IdentificationProblem, result: IdentificationResult, sta
     of the poses): a local refinement from there, no grid."""
     J, r, cam, Vt, Vr = _reml_terms(problem, result.identified)
     theta = _reml_max(J, r, cam, np.stack([Vt, Vr]), THETA_BOUNDS, start)
-    return theta, _variance_cov(J, cam, np.stack([Vt, Vr]), theta)
+    return theta, reml_variance_cov(J, cam, np.stack([Vt, Vr]), theta)
 
 
-def _variance_cov(J, known, blocks, theta) -> np.ndarray:
+def reml_variance_cov(J, known, blocks, theta) -> np.ndarray:
     """2 (tr(P V_i P V_j))^-1 (k, k) over the variances theta (k,) of the blocks (k, N, m, m) (pseudo-inverse: an
     unseen component gets 0, not inf). P = W - U M U^T with W = blockdiag(C_n^-1), U = W J, M = (J^T W J)^+, so
     tr(P V_i P V_j) = sum_n tr(W_n V_in W_n V_jn) - tr(M G_ij) - tr(M G_ji) + tr(M H_i M H_j), G_ij =
@@ -411,7 +411,7 @@ def _noise_irls(base, x0, Vc, theta_cam, s_robot, est_robot: bool, max_iter: int
             blocks, known = np.stack(list(Vc)), th_r[0] * Vt + th_r[1] * Vr
             th = _reml_max(J, r, known, blocks, NOISE_BOUNDS, th_c)
             th_c = _floored(th)
-        tcov = _variance_cov(J, known, blocks, th)
+        tcov = reml_variance_cov(J, known, blocks, th)
         pb = _noise_weights(base, res.identified, Vc, th_c, _robot_cov(th_r))
         new = solve_lse(pb, res.identified)
         free = np.asarray(new.free, bool)
@@ -499,4 +499,4 @@ def fit_estimated_noise(T_base_flange: np.ndarray, T_cam_target: np.ndarray, mou
 
 
 __all__ = ["HandeyeFit", "deletion_fit", "DEFAULT_CANDIDATE", "NOISE_FRAMES", "default_candidates", "closed_form_comparison",
-           "fit_handeye", "fit_estimated_noise", "measured_noise_blocks", "weighted_cost"]
+           "reml_variance_cov", "fit_handeye", "fit_estimated_noise", "measured_noise_blocks", "weighted_cost"]

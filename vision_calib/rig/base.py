@@ -397,8 +397,8 @@ class Setup:
             return ok
         q = p[front]
         uv = cam.project(q.reshape(-1, 3)).reshape(q.shape[0], -1, 2)
-        inside = np.all((uv[..., 0] >= margin_px) & (uv[..., 0] <= cam.width - 1 - margin_px) & (uv[..., 1] >= margin_px)
-                        & (uv[..., 1] <= cam.height - 1 - margin_px), axis=1)
+        inside = np.all((uv[..., 0] >= margin_px) & (uv[..., 0] <= cam.width - 1 - margin_px)
+                        & (uv[..., 1] >= margin_px) & (uv[..., 1] <= cam.height - 1 - margin_px), axis=1)
         centre = q.mean(axis=1)
         cosang = np.abs(np.einsum("ni,ni->n", T[front, :3, 2], centre)) / np.linalg.norm(centre, axis=1)
         ok[front] = inside & (cosang >= np.cos(np.radians(max_tilt_deg)))
