@@ -209,7 +209,7 @@ def test_levenberg_marquardt_matches_minpack_on_a_nonlinear_fit():
     """The normal-equations LM (solve_lse's method "lm") reaches MINPACK's minimum (scipy method "lm") on a badly
     scaled, non-zero-residual exponential fit from a far start: same cost, same x within 1e-7 of its std (and
     within 1e-8 std of the minimum polished by Gauss-Newton steps); an exact fit stops on gtol; max_nfev stops it
-    unconverged (status 0)."""
+    unconverged (status 0), a Jacobian turning non-finite with status -1."""
     from scipy.optimize import least_squares
 
     from vision_calib.identify.lse import levenberg_marquardt
@@ -237,3 +237,5 @@ def test_levenberg_marquardt_matches_minpack_on_a_nonlinear_fit():
     assert exact.status == 1 and exact.cost == 0.0
     short = levenberg_marquardt(fun, jac, z0, max_nfev=2)
     assert short.status == 0 and short.nfev == 2 and short.cost < 0.5 * np.sum(fun(z0) ** 2)
+    broken = levenberg_marquardt(fun, lambda z: jac(z) * (np.nan if z[1] != 0.2 else 1.0), z0)
+    assert broken.status == -1 and "not finite" in broken.message and broken.njev == 2

@@ -343,7 +343,8 @@ def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gto
     so the solve is that of the column-equilibrated problem), lam raised while a step does not lower the cost.
     Termination as MINPACK's ``lmder`` (scipy's method "lm"): gtol on the largest cosine between the residual and
     a column, ftol on the actual and predicted relative reduction, xtol on the scaled step; max_nfev (default
-    100 (n + 1)) evaluations of fun. Returns an :class:`LMResult` (status 1-4 converged, 0 out of evaluations)."""
+    100 (n + 1)) evaluations of fun. Returns an :class:`LMResult` (status 1-4 converged, 0 out of evaluations, -1
+    a non-finite Jacobian)."""
     from scipy.linalg import LinAlgError, cho_factor, cho_solve
 
     z = np.asarray(z0, float).copy()
@@ -358,6 +359,8 @@ def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gto
         J = np.asarray(jac(z), float)
         njev += 1
         A, g = J.T @ J, J.T @ r
+        if not (np.all(np.isfinite(A)) and np.all(np.isfinite(g))):
+            return LMResult(z, cost, -1, "the Jacobian is not finite at the current point", nfev, njev)
         diag = np.diag(A).copy()
         d2 = np.maximum(d2, diag)
         dsafe = np.where(d2 > 0, d2, 1.0)
