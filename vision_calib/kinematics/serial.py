@@ -399,14 +399,16 @@ class SerialChain(JointChainChecks):
         ix = self._idx
         frames = self._walk(q, x)  # (n+2, N, 4, 4)
         p_end = frames[-1, :, :3, 3]  # (N, 3)
+        p_end_t = np.ascontiguousarray(p_end.T)  # (3, N)
         Jt = np.zeros((n_par, 6, N))  # filled column by column (contiguous writes), returned transposed
 
-        def rot_col(k, w, p):  # [w x (p_end - p), w], the cross product written out (np.cross copies)
-            v = p_end - p
-            Jt[k, 0] = w[:, 1] * v[:, 2] - w[:, 2] * v[:, 1]
-            Jt[k, 1] = w[:, 2] * v[:, 0] - w[:, 0] * v[:, 2]
-            Jt[k, 2] = w[:, 0] * v[:, 1] - w[:, 1] * v[:, 0]
+        def rot_col(k, w, p):  # [w x (p_end - p), w], the cross product written out on contiguous rows
             Jt[k, 3:] = w.T
+            w = Jt[k, 3:]
+            v = p_end_t - np.asarray(p).T
+            Jt[k, 0] = w[1] * v[2] - w[2] * v[1]
+            Jt[k, 1] = w[2] * v[0] - w[0] * v[2]
+            Jt[k, 2] = w[0] * v[1] - w[1] * v[0]
 
         def trans_col(k, w):
             Jt[k, :3] = w.T
