@@ -342,7 +342,9 @@ def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gto
     solve of (S J^T J S + lam I) y = -S J^T r, dz = S y, S = diag(J^T J)^-1/2 (running maximum, MINPACK's scaling,
     so the solve is that of the column-equilibrated problem), lam raised while a step does not lower the cost.
     Termination as MINPACK's ``lmder`` (scipy's method "lm"): gtol on the largest cosine between the residual and
-    a column, ftol on the actual and predicted relative reduction, xtol on the scaled step; max_nfev (default
+    a column, ftol on the actual and predicted relative reduction, xtol on the scaled step, then one Gauss-Newton
+    step with the last Jacobian (kept when it does not raise the cost: the minimum to rounding, so that inputs
+    equal to rounding give answers equal to rounding through iterated fits); max_nfev (default
     100 (n + 1)) evaluations of fun. Returns an :class:`LMResult` (status 1-4 converged, 0 out of evaluations, -1
     a non-finite Jacobian)."""
     from scipy.linalg import LinAlgError, cho_factor, cho_solve
@@ -396,6 +398,16 @@ def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gto
                 lam *= 4.0
             if f_ok or x_ok:
                 status = 4 if f_ok and x_ok else (2 if f_ok else 3)
+                if rho > 1e-4 and nfev < max_nfev:  # a last Gauss-Newton step with the Jacobian at hand (chord)
+                    try:
+                        dz = -cho_solve(cho_factor(A), J.T @ r)
+                        r2 = np.asarray(fun(z + dz), float)
+                        nfev += 1
+                        c2 = 0.5 * float(r2 @ r2) if np.all(np.isfinite(r2)) else np.inf
+                        if c2 <= cost:
+                            z, r, cost = z + dz, r2, c2
+                    except LinAlgError:
+                        pass
                 return LMResult(z, cost, status, LM_MESSAGES[status], nfev, njev)
             if nfev >= max_nfev:
                 return LMResult(z, cost, 0, LM_MESSAGES[0], nfev, njev)
