@@ -1,6 +1,6 @@
 """``process`` of a recorded folder against its detection floor (issue 35: measure once).
 
-    PYTHONPATH=. .venv/bin/python benchmarks/bench_process_once.py [--poses 16] [--frames 1] [--fx-error 0.02]
+    PYTHONPATH=. .venv/bin/python benchmarks/bench_process_once.py [--poses 16] [--frames 2] [--fx-error 0.05]
                                                                    [--folder DIR ...] [--repeat 3]
 
 Folders: a simulated RX-90 eye-in-hand recording (``--poses`` x ``--frames``, rendered here, not timed) whose
@@ -72,8 +72,8 @@ def process_s(folder: Path, out: Path) -> tuple[float, dict, int, int]:
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--poses", type=int, default=16)
-    ap.add_argument("--frames", type=int, default=1)
-    ap.add_argument("--fx-error", type=float, default=0.02)
+    ap.add_argument("--frames", type=int, default=2)
+    ap.add_argument("--fx-error", type=float, default=0.05)
     ap.add_argument("--folder", nargs="*", default=[])
     ap.add_argument("--repeat", type=int, default=3)
     a = ap.parse_args()
