@@ -10,8 +10,14 @@
    least as fast as plain scipy in the default environment (issue 11).
 2. Analytic Jacobian vs 2-point finite differences through solve_lse on H4 model 12 and RX-90.
 3. 100 Monte Carlo identifications of the H4 model.
+4. Scale (issue 35): the RX-90 eye-in-hand problem at 500 / 5,000 / 50,000 poses (``--sizes``): the build
+   (poses drawn with the target in view, measurements synthesised, ``setup.problem``) and ``solve_lse`` against
+   the plain scipy ``least_squares`` fit with 2-point finite differences (defaults, trf) of the same whitened
+   residuals and free parameters, in this process; the ratio and the largest difference of the two answers in
+   units of our std. Targets: ratio >= 10 at every size, the 50k build <= 2 s.
 
-    .venv/bin/python benchmarks/bench_identify.py [--repeats 20] [--skip-seven-axis]
+    .venv/bin/python benchmarks/bench_identify.py [--repeats 20] [--skip-seven-axis] [--sizes 500 5000 50000]
+                                                  [--only-scale]
 """
 
 from __future__ import annotations
@@ -175,15 +181,50 @@ def bench_seven_axis():
           f"{r['n_free']} identified after fixing the non-identifiable ones; target: plain/ours >= 1 with the guard on)")
 
 
+# ----------------------------------------------------------------------------- scale: RX-90 at 500 .. 50,000 poses
+def bench_scale(sizes, scene_path="scenes/rx90_eye_in_hand.yaml"):
+    """Build + ours vs plain scipy FD per size (module docstring, item 4); wall seconds (this process)."""
+    scene = load_scene(scene_path)
+    setup = scene.setup
+    x_true = scene_truth(scene)
+    rp, rn, _ = rngs(0)
+    rep, _ = analyze_setup(setup, scene_poses(scene, np.random.default_rng(1), 500))
+    params = setup.params.only_free(rep.base_parameters)
+    print(f"{scene.name}: {len(params.free_names)} base parameters, pose residuals; wall s, same process, "
+          f"load average {os.getloadavg()[0]:.2f}")
+    print(f"{'poses':>7}{'build s':>9}{'ours s':>9}{'iter':>6}{'plain FD s':>12}{'FD/ours':>9}{'max |diff|/std':>16}")
+    for n in sizes:
+        t0 = time.perf_counter()
+        poses = scene_poses(scene, rp, n)
+        meas = setup.synthetic_measurements(poses, x_true, rn, scene.measurement.sigma_t_m,
+                                            scene.measurement.sigma_r_rad)
+        problem = setup.problem(meas, params=params)
+        t_build = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        res = solve_lse(problem, fix_unidentifiable=False)
+        t_ours = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        x_plain, _ = _plain_scipy_fit(problem, [nm for nm, f in zip(res.names, res.free) if f])
+        t_plain = time.perf_counter() - t0
+        dx = float(np.max(np.abs(x_plain - res.identified)[res.free] / res.std[res.free]))
+        print(f"{n:>7}{t_build:>9.2f}{t_ours:>9.2f}{res.iterations:>6}{t_plain:>12.2f}{t_plain / t_ours:>8.1f}x"
+              f"{dx:>16.2e}")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser()
     ap.add_argument("--repeats", type=int, default=20)
     ap.add_argument("--skip-seven-axis", action="store_true")
+    ap.add_argument("--sizes", type=int, nargs="*", default=[500, 5000, 50000])
+    ap.add_argument("--only-scale", action="store_true", help="item 4 only")
     ap.add_argument("--seven-axis-child", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--no-guard", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.seven_axis_child:
         print(json.dumps(seven_axis_child(args.no_guard)))
+        return
+    if args.only_scale:
+        bench_scale(args.sizes)
         return
     if not args.skip_seven_axis:
         bench_seven_axis()
@@ -201,6 +242,8 @@ def main(argv=None):
     print(f"\nMonte Carlo: {mc['runs']} identifications of {mc['scene']} (model 12, {mc['poses']} poses, new noise each): "
           f"{mc['total_s']:.3f} s total, {mc['per_run_ms']:.2f} ms each, {mc['converged']}/{mc['runs']} converged "
           f"(target < 2 s)")
+    print()
+    bench_scale(args.sizes)
 
 
 if __name__ == "__main__":

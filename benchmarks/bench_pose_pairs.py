@@ -11,6 +11,13 @@ truth. Plain LS: ``identify.handeye_problem.solve_handeye`` with equal weights, 
 of least cost under the same weights; two weightings: 1 m : 1 rad and 1 mm : 0.1 deg. Mean over the seeds.
 
     PYTHONPATH=. python benchmarks/bench_pose_pairs.py [--seeds 1-20] [--pairs 42] [--mount fixed]
+    PYTHONPATH=. python benchmarks/bench_pose_pairs.py --scale 200 2000
+
+``--scale N1 N2 ..`` (issue 35: pose pairs in O(N)): a pose-pair file of N simulated pairs (noise estimated) through
+``vision-calib process-poses --no-plots``, each in a fresh interpreter: wall and CPU seconds, peak memory (max RSS),
+the seconds and memory per pair against the smallest N's in this run (a ratio near 1: linear). Targets: 2,000 pairs
+in <= 30 s and <= 1 GB. Then ``import-pairs``: a TransformPairs file of the largest N x 100 pairs read streamed
+(``io.transform_pairs.read_transform_pairs``) against the YAML composer on its first 5,000 pairs, in this run.
 """
 
 from __future__ import annotations
@@ -52,12 +59,71 @@ def plain_ls(F, M, mount, wt, wr):
     return A, B, best
 
 
+def scale(sizes, mount: str) -> None:
+    """The ``--scale`` figures (module docstring)."""
+    import os
+    import resource
+    import subprocess
+    import sys
+    import tempfile
+    from pathlib import Path
+
+    from vision_calib.io.measured_poses import write_pose_pairs
+
+    print(f"process-poses --no-plots, mount {mount}, noise estimated; load average {os.getloadavg()[0]:.2f} "
+          "(2 cores shared: wall moves with it, CPU less)")
+    print(f"{'pairs':>6}{'wall s':>9}{'CPU s':>8}{'max RSS MB':>12}{'CPU ms/pair':>13}{'x smallest':>11}"
+          f"{'RSS ratio':>10}")
+    first = None
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in sizes:
+            d = simulate_pose_pairs(n, 4, mount)
+            path = write_pose_pairs(Path(tmp) / f"pairs{n}.yaml", d.labels, d.T_base_flange, d.T_cam_target, d.mount)
+            before = resource.getrusage(resource.RUSAGE_CHILDREN)
+            t0 = time.perf_counter()
+            subprocess.run([sys.executable, "-m", "vision_calib.cli", "process-poses", str(path), "--out",
+                            str(Path(tmp) / f"out{n}"), "--no-plots"], check=True, capture_output=True)
+            wall = time.perf_counter() - t0
+            after = resource.getrusage(resource.RUSAGE_CHILDREN)
+            cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+            rss = after.ru_maxrss / 1024  # kB -> MB (Linux); the largest child so far
+            first = first or (cpu / n, rss)
+            print(f"{n:>6}{wall:>9.2f}{cpu:>8.2f}{rss:>12.0f}{1e3 * cpu / n:>13.2f}{cpu / n / first[0]:>10.2f}x"
+                  f"{rss / first[1]:>9.2f}x")
+        import vision_calib.io.transform_pairs as TP
+
+        big, small = 100 * max(sizes), 5000
+        rng = np.random.default_rng(0)
+        T = frames.T_from_xyz_rotvec(rng.normal(size=(big, 6)))
+        for n in (small, big):
+            TP.write_transform_pairs(Path(tmp) / f"tp{n}.yml", T[:n], T[::-1][:n])
+        t0 = time.perf_counter()
+        TP.read_transform_pairs(Path(tmp) / f"tp{big}.yml")
+        t_big = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        TP.read_transform_pairs(Path(tmp) / f"tp{small}.yml")
+        t_fast = time.perf_counter() - t0
+        streamed, TP._streamed_pairs = TP._streamed_pairs, lambda *a, **k: None
+        try:
+            t0 = time.perf_counter()
+            TP.read_transform_pairs(Path(tmp) / f"tp{small}.yml")
+            t_yaml = time.perf_counter() - t0
+        finally:
+            TP._streamed_pairs = streamed
+        print(f"TransformPairs read: {big} pairs streamed {t_big:.2f} s; {small} pairs streamed {t_fast:.2f} s vs "
+              f"YAML composer {t_yaml:.2f} s ({t_yaml / t_fast:.1f}x)")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", default="1-20")
     ap.add_argument("--pairs", type=int, default=42)
     ap.add_argument("--mount", default="fixed", choices=("fixed", "eye_in_hand"))
+    ap.add_argument("--scale", type=int, nargs="*", help="pose-pair counts through process-poses (time, memory)")
     args = ap.parse_args()
+    if args.scale:
+        scale(args.scale, args.mount)
+        return
     names = ("ours", "LS 1 m : 1 rad", "LS 1 mm : 0.1 deg")
     rows, t_ours = {k: [] for k in names}, []
     for seed in seeds(args.seeds):

@@ -6,6 +6,7 @@ and the robot pose error is estimated near the truth. With the true intrinsics t
 
 from __future__ import annotations
 
+import importlib
 import shutil
 
 import pytest
@@ -47,3 +48,39 @@ def test_true_intrinsics_are_kept(flange_rec, tmp_path):
     rep = process_folder(flange_rec, tmp_path / "out", plots=False)
     assert (rep.get("cause") or {}).get("chosen", "given") == "given", rep["cause"]["message"]
     assert rep["intrinsics"]["source"] == "recording.yaml"
+
+
+def test_both_hypotheses_from_one_decode_and_detection_per_image(flange_rec, tmp_path, monkeypatch):
+    """process decodes and detects every image once although it fits both hypotheses (the refined intrinsics are
+    calibrated from, and the poses re-measured on, the given run's detections), and the chosen hypothesis's result
+    is the one a run with --refine-intrinsics alone gives (OpenCV single-threaded: its calibration is then
+    deterministic)."""
+    import cv2
+    import numpy as np
+
+    from vision_calib.experiment.process import process_once
+
+    D = importlib.import_module("vision_calib.measure.detect")  # the module (the package exports a function so named)
+
+    bad = tmp_path / "bad"
+    shutil.copytree(flange_rec, bad)
+    doc = yaml.safe_load((bad / "recording.yaml").read_text())
+    doc["camera"] = {**doc["camera"], "fx": doc["camera"]["fx"] * 1.015, "fy": doc["camera"]["fy"] * 1.015}
+    (bad / "recording.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
+    loads, finds, load, find = [], [], D.load_gray, D._find_corners
+    monkeypatch.setattr(D, "load_gray", lambda image, *a, **k: loads.append(str(image)) or load(image, *a, **k))
+    monkeypatch.setattr(D, "_find_corners", lambda *a, **k: finds.append(1) or find(*a, **k))
+    threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    try:
+        rep = process_folder(bad, tmp_path / "out", plots=False)
+        n_images = len(list((bad / "images").rglob("*.png")))
+        assert rep["cause"]["chosen"] == "refined" and len(rep["cause"]["hypotheses"]) == 2
+        assert sorted(loads) == sorted(set(loads)) and len(loads) == len(finds) == n_images
+        alone = process_once(bad, tmp_path / "alone", plots=False, refine_intrinsics=True)
+    finally:
+        cv2.setNumThreads(threads)
+    a, b = (r["handeye"]["transforms"] for r in (rep, alone))
+    for k in a:
+        assert np.array_equal(a[k]["matrix"], b[k]["matrix"]) and a[k]["std_xyz_m"] == b[k]["std_xyz_m"], k
+    assert rep["intrinsics"]["values"] == alone["intrinsics"]["values"]

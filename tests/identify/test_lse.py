@@ -203,3 +203,39 @@ def test_h4_noise_free_recovery_variant_D():
     fi = res.free
     tol = 1e-9 * np.maximum(np.abs(expected), prob.params.scale)
     assert np.all(np.abs(res.identified - expected)[fi] <= tol[fi])
+
+
+def test_levenberg_marquardt_matches_minpack_on_a_nonlinear_fit():
+    """The normal-equations LM (solve_lse's method "lm") reaches MINPACK's minimum (scipy method "lm") on a badly
+    scaled, non-zero-residual exponential fit from a far start: same cost, same x within 1e-7 of its std (and
+    within 1e-8 std of the minimum polished by Gauss-Newton steps); an exact fit stops on gtol; max_nfev stops it
+    unconverged (status 0), a Jacobian turning non-finite with status -1."""
+    from scipy.optimize import least_squares
+
+    from vision_calib.identify.lse import levenberg_marquardt
+
+    t = np.linspace(0, 4, 60)
+    y = 3e3 * np.exp(-1.3 * t) + 0.02 * np.sin(7 * t) + 5e-4 * np.cos(3 * t) * 1e3
+
+    def fun(z):
+        return (z[0] * 1e3 * np.exp(-z[1] * t) + z[2] - y) / 10.0
+
+    def jac(z):
+        e = np.exp(-z[1] * t)
+        return np.column_stack([1e3 * e, -z[0] * 1e3 * t * e, np.ones_like(t)]) / 10.0
+
+    z0 = np.array([1.0, 0.2, 0.0])
+    ref = least_squares(fun, z0, jac=jac, method="lm", xtol=1e-12, ftol=1e-12, gtol=1e-12)
+    ours = levenberg_marquardt(fun, jac, z0)
+    assert ours.status in (1, 2, 3, 4) and ours.cost == pytest.approx(ref.cost, rel=1e-12)
+    std = np.sqrt(np.diag(np.linalg.inv(jac(ref.x).T @ jac(ref.x))))
+    z = ref.x.copy()
+    for _ in range(10):
+        z = z - np.linalg.lstsq(jac(z), fun(z), rcond=None)[0]
+    assert np.max(np.abs(ours.x - ref.x) / std) < 1e-7 and np.max(np.abs(ours.x - z) / std) < 1e-8
+    exact = levenberg_marquardt(lambda z: jac(z) @ (z - [2.0, 1.0, 3.0]), jac, z0 * 0 + [2.0, 1.0, 3.0])
+    assert exact.status == 1 and exact.cost == 0.0
+    short = levenberg_marquardt(fun, jac, z0, max_nfev=2)
+    assert short.status == 0 and short.nfev == 2 and short.cost < 0.5 * np.sum(fun(z0) ** 2)
+    broken = levenberg_marquardt(fun, lambda z: jac(z) * (np.nan if z[1] != 0.2 else 1.0), z0)
+    assert broken.status == -1 and "not finite" in broken.message and broken.njev == 2

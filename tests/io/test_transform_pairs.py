@@ -135,3 +135,27 @@ def test_import_pairs_writes_a_pose_pair_file(tmp_path, capsys):
     assert "must end in .yaml" in capsys.readouterr().err
     with pytest.raises(DataError, match="--mount: expected one of eye_in_hand, fixed"):
         import_pairs(src, "tripod", tmp_path / "y.yaml")
+
+
+def test_streamed_reading_equals_the_yaml_reading(tmp_path, monkeypatch):
+    """The OpenCV layout is streamed line by line (import-pairs of 200,000 pairs); it gives the same arrays, bit
+    for bit, as composing the file as YAML, and a layout it does not know (another key order) falls back to YAML."""
+    import vision_calib.io.transform_pairs as TP
+    from vision_calib import frames
+
+    rng = np.random.default_rng(3)
+    T1 = frames.T_from_xyz_rotvec(rng.normal(size=(25, 6)))
+    T2 = frames.T_from_xyz_rotvec(rng.normal(size=(25, 6)))
+    path = TP.write_transform_pairs(tmp_path / "p.yml", T1, T2)
+    assert TP._streamed_pairs(path) is not None
+    fast = TP.read_transform_pairs(path)
+    monkeypatch.setattr(TP, "_streamed_pairs", lambda *a, **k: None)
+    slow = TP.read_transform_pairs(path)
+    monkeypatch.undo()
+    assert all(np.array_equal(a, b) for a, b in zip(fast, slow))
+    np.testing.assert_allclose(fast[0], T1, atol=1e-12)
+    text = path.read_text().replace("   rows: 4\n   cols: 4\n", "   cols: 4\n   rows: 4\n").replace(
+        "frameCount: 25\n", "")
+    (tmp_path / "q.yml").write_text(text + "frameCount: 25\n")
+    assert TP._streamed_pairs(tmp_path / "q.yml") is None  # frameCount after the matrices: not the OpenCV layout
+    assert all(np.array_equal(a, b) for a, b in zip(TP.read_transform_pairs(tmp_path / "q.yml"), fast))

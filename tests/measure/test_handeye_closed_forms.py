@@ -97,3 +97,23 @@ def test_fit_from_the_numpy_start_reaches_the_fit_from_opencvs(mount):
     assert own.result.cost_final == pytest.approx(cv.result.cost_final, rel=1e-9)
     for X, Y in ((own.A, cv.A), (own.B, cv.B)):  # the parameters are relative to each start: compare transforms
         np.testing.assert_allclose(frames.pose_error(X, Y), 0, atol=1e-8)
+
+
+def test_closed_forms_of_many_pairs_read_an_evenly_spaced_subset(monkeypatch):
+    """Above CLOSED_FORM_MAX_POSES pairs (OpenCV's cost grows as N^2) the closed forms are those of the evenly
+    spaced subset, first and last pair included, and still near the truth; up to it, of all the pairs."""
+    import vision_calib.measure.handeye as H
+
+    rng = np.random.default_rng(11)
+    A, B, F, M = _scene(rng, "fixed", 60)
+    M = _noisy(rng, M)
+    monkeypatch.setattr(H, "CLOSED_FORM_MAX_POSES", 20)
+    many = closed_forms(F, M, "fixed")
+    pick = np.unique(np.linspace(0, 59, 20).round().astype(int))
+    assert len(pick) == 20 and pick[0] == 0 and pick[-1] == 59
+    for m in ("tsai", "shah"):
+        Ac, Bc = opencv_closed_form(F[pick], M[pick], "fixed", m)
+        assert np.array_equal(many[m][0], Ac) and np.array_equal(many[m][1], Bc)
+        assert np.linalg.norm(frames.pose_error(A, many[m][0])[:3]) < 0.01
+    few = closed_forms(F[:20], M[:20], "fixed")
+    assert np.array_equal(few["tsai"][0], opencv_closed_form(F[:20], M[:20], "fixed", "tsai")[0])

@@ -162,6 +162,6 @@ def cmd_import_pairs(args) -> int:
     from ..io.transform_pairs import import_pairs
 
     check_output_apart(args.out_file, [(args.file, "file")], "--out")
-    path = import_pairs(args.file, args.mount, args.out_file, folds=args.folds)
+    path = import_pairs(args.file, args.mount, args.out_file, folds=args.folds, progress=True)
     print(f"wrote pose-pair file {path} (process it: vision-calib process-poses {path} --out DIR)")
     return 0

@@ -14,14 +14,17 @@ SOURCE_CALIBRATED = "calibrated from the recording"
 SOURCE_CAMERA_FILE = "camera file"
 
 
-def recording_intrinsics(rec, refine: bool = False, progress: bool = False, camera_file=None):
+def recording_intrinsics(rec, refine: bool = False, progress: bool = False, camera_file=None, detections=None):
     """(Recording with its camera set, report block). camera_file: a camera.yaml (``process --camera``)
     that replaces recording.yaml's intrinsics (size checked against the images; ConfigError naming it).
     The calibration uses the first frame of every pose
     (one view per pose; the other frames of a pose add noise averaging, not geometry). Report block:
     {source, values {fx, fy, cx, cy, k1, k2, p1, p2, k3}, std (None when given), rms_px, n_views_used,
     n_views_rejected, rejected_views [{name, reason}], coverage, warnings, given (recording.yaml's values
-    when refined)}. DataError naming the folder when the calibration is impossible."""
+    when refined)}. DataError naming the folder when the calibration is impossible. detections: {pose id:
+    [Detection per frame]} of these images measured with other intrinsics (``process.measure_recording``): the
+    calibration takes their first frames instead of detecting again where that gives the same corners
+    (``measure.batch.reusable_detections``)."""
     if camera_file is not None:
         from pathlib import Path
 
@@ -40,7 +43,8 @@ def recording_intrinsics(rec, refine: bool = False, progress: bool = False, came
     pids = [pid for pid in rec.pose_ids if rec.images.get(pid)]
     try:
         res = calibrate_from_images([rec.images[p][0] for p in pids], rec.target, rec.image_size,
-                                    names=[f"pose {p}" for p in pids], progress=progress)
+                                    names=[f"pose {p}" for p in pids], progress=progress,
+                                    detected=_first_frames(detections, pids, rec.target))
     except DataError as exc:
         why = "has no camera fx/fy/cx/cy" if rec.camera is None else "asks to refine the intrinsics"
         raise DataError(f"{rec.folder}: recording.yaml {why}, and calibrating them from the images failed: "
@@ -56,6 +60,17 @@ def recording_intrinsics(rec, refine: bool = False, progress: bool = False, came
         block["given"] = dict(zip(PARAM_NAMES, (c.fx, c.fy, c.cx, c.cy, *c.dist)))
     return replace(rec, camera=res.camera), block
 
+
+def _first_frames(detections, pids, target) -> dict | None:
+    """{index in pids: the pose's first-frame Detection} when those are what the calibration would detect, else None."""
+    from ..measure.batch import reusable_detections
+    from ..measure.detect import DetectConfig
+    from ..measure.intrinsics import CALIBRATION_DETECT
+
+    if not detections or replace(DetectConfig(), batch="per_frame") != DetectConfig(**CALIBRATION_DETECT) \
+            or not reusable_detections(target):
+        return None
+    return {i: detections[p][0] for i, p in enumerate(pids) if detections.get(p)}
 
 
 def _file_uncertainty(path) -> dict:

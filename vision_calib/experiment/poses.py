@@ -121,7 +121,7 @@ def _pair_errors(A, B, F, M, mount: str) -> np.ndarray:
     return pose_error(A @ mount_G(F, mount) @ B, M)
 
 
-def pair_holdout(pp: PosePairs, folds: int, seed: int, outliers=()) -> dict:
+def pair_holdout(pp: PosePairs, folds: int, seed: int, outliers=(), theta_start=None) -> dict:
     """k-fold held-out validation of a pose-pair fit (``pp``: a PosePairs, or any object with its ids,
     T_base_flange, T_cam_target, cov, noise_frame, mount, robot_std and path): the poses split by
     ``holdout.fold_indices``; each fold's
@@ -130,7 +130,8 @@ def pair_holdout(pp: PosePairs, folds: int, seed: int, outliers=()) -> dict:
     OpenCV closed form that fold's fit started from ("before"). Errors of T_cam_target, position [mm] and rotation
     [deg] norms (``holdout.error_stats``), overall and without the flagged outliers; the paired-bootstrap interval
     of the RMS change. Decision not ok (the verdict fails): a fold that cannot be identified, or our model
-    predicting held-out poses significantly worse than the closed form."""
+    predicting held-out poses significantly worse than the closed form. theta_start: the robot's variances of the
+    fit of all the poses: each fold's REML search starts there (``identify_handeye``)."""
     from .handeye_step import identify_handeye
     from .holdout import error_stats, fold_indices, rms_change_interval
 
@@ -147,7 +148,8 @@ def pair_holdout(pp: PosePairs, folds: int, seed: int, outliers=()) -> dict:
         try:
             fi = identify_handeye(F[train], M[train], pp.mount, None if C is None else C[train],
                                   [labels[i] for i in train], pp.robot_std, robust=False, noise_frame=frame,
-                                  where=f"{pp.path}: held-out validation, fold {f + 1} of {folds}")
+                                  where=f"{pp.path}: held-out validation, fold {f + 1} of {folds}",
+                                  theta_start=theta_start)
         except VisionCalibError as exc:
             fails.append(f"fold {f + 1} ({len(train)} training poses): {exc}")
             per_fold.append({**rec, "converged": False, "error": str(exc)})

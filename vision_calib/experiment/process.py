@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
@@ -37,10 +38,13 @@ IN_FIT = ("included in the fit: one nuisance coefficient (prior N(0, 1)) per eig
           "measurement covariance of the poses plus that of the intrinsics' shared error")
 
 
-def measure_recording(rec: Recording, progress: bool = False, detections: dict | None = None) -> list[PoseMeasurement]:
+def measure_recording(rec: Recording, progress: bool = False, detections: dict | None = None,
+                      detected: dict | None = None) -> list[PoseMeasurement]:
     """PoseMeasurement per pose id of a Recording (invalid ones carry a reason). detections: a dict to
-    fill with {pose id: [Detection per frame]} (for the reprojection error of the calibrated chain)."""
-    from ..measure import PoseMeasurement, measure_images
+    fill with {pose id: [Detection per frame]} (for the reprojection error of the calibrated chain). detected: those
+    of the same images made before (``measure.batch.reusable_detections``): measured with ``rec.camera`` from them
+    (undistortion + PnP), nothing decoded or detected."""
+    from ..measure import PoseMeasurement, measure_images, measure_pose
 
     out = []
     it = rec.pose_ids
@@ -54,12 +58,66 @@ def measure_recording(rec: Recording, progress: bool = False, detections: dict |
             out.append(PoseMeasurement(pid, False, f"no images in images/{pid}/", np.full((4, 4), np.nan),
                                        np.full((6, 6), np.nan), 0, 0, float("nan")))
             continue
-        pm, dets = measure_images([str(f) for f in files], rec.target, rec.camera, pose_id=pid,
-                                  config=rec.measure_config())
+        if detected is not None:
+            dets = detected[pid]
+            pm = measure_pose(dets, rec.target, rec.camera, pose_id=pid, config=rec.measure_config())
+        else:
+            pm, dets = measure_images([str(f) for f in files], rec.target, rec.camera, pose_id=pid,
+                                      config=rec.measure_config())
         out.append(pm)
         if detections is not None:
             detections[pid] = dets
     return out
+
+
+@dataclass
+class Measured:
+    """A recorded folder measured under one hypothesis on the intrinsics: the Recording with the camera used
+    (``rec.camera``), the report's ``intrinsics`` block, a PoseMeasurement per pose id, the detections {pose id:
+    [Detection per frame]}, and the seconds it took (reading the intrinsics, detection, PnP)."""
+
+    rec: Recording
+    intr: dict
+    pms: list
+    dets: dict
+    seconds: float
+
+
+def measure_folder(rec: Recording, refine_intrinsics: bool = False, progress: bool = False, camera_file=None,
+                   reuse: Measured | None = None) -> Measured:
+    """Measure ``rec`` (:func:`measure_recording`) with the intrinsics ``camera_step.recording_intrinsics`` gives.
+    reuse: the same folder measured with other intrinsics: each image is decoded and detected once per run, its
+    detections serve the camera calibration and, where detection reads no intrinsics
+    (``measure.batch.reusable_detections``), the measurement (undistortion + PnP only)."""
+    from ..measure.batch import reusable_detections
+    from .camera_step import recording_intrinsics
+
+    t0 = time.perf_counter()
+    rec, intr = recording_intrinsics(rec, refine_intrinsics, progress, camera_file,
+                                     detections=None if reuse is None else reuse.dets)
+    same = (reuse is not None and reuse.rec.camera is not None and reuse.rec.camera.size == rec.camera.size
+            and reusable_detections(rec.target))
+    dets = {}
+    pms = measure_recording(rec, progress, dets, detected=reuse.dets if same else None)
+    return Measured(rec, intr, pms, dets, time.perf_counter() - t0)
+
+
+@dataclass
+class _Fitted:
+    """One hypothesis fitted, its report built, nothing written yet: :meth:`finish` adds the :mod:`.cause` block
+    (when the cause was tested) and writes the report. tail: the summary lines that follow the cause message."""
+
+    report: dict
+    tail: str
+    write: Callable[[dict], None]
+
+    def finish(self, cause: dict | None = None) -> dict:
+        if cause:
+            self.report["cause"] = cause
+            self.report["summary_text"] += "\n" + cause["message"]
+        self.report["summary_text"] += self.tail
+        self.write(self.report)
+        return self.report
 
 
 def _recording_setup(rec):
@@ -83,59 +141,75 @@ def process_folder(folder: str | Path, out_dir: str | Path | None, method: str |
                    refine_intrinsics: bool = False, camera_file: str | Path | None = None, folds: int | None = None,
                    tcp=None) -> dict:
     """Process a recorded folder (:func:`process_once`); with intrinsics given and a reprojection far above its
-    noise model, the cause tested (:mod:`.cause`): the run redone with the intrinsics refined from the images,
-    the two hypotheses compared, the decisive one applied, both in the report's ``cause`` block."""
-    import tempfile
-
+    noise model, the cause tested (:mod:`.cause`): the intrinsics refined from the same detections, the fit redone,
+    the two hypotheses compared, the decisive one's report written (kept, not recomputed), both in its ``cause``
+    block. Each image is decoded and detected once (:func:`measure_folder`)."""
     from ..errors import VisionCalibError
     from .cause import cause_test_applies, compare
 
-    kw = dict(method=method, progress=progress, fix_unidentifiable=fix_unidentifiable, allow_symlinks=allow_symlinks,
-              folds=folds, tcp=tcp)
-    report = process_once(folder, out_dir, plots=plots, refine_intrinsics=refine_intrinsics, camera_file=camera_file,
-                          **kw)
-    if refine_intrinsics or camera_file is not None or not cause_test_applies(report):
-        return report
-    with tempfile.TemporaryDirectory(prefix="vision_calib_cause_") as tmp:
-        try:
-            refined, why = process_once(folder, tmp, plots=False, refine_intrinsics=True, **kw), None
-        except VisionCalibError as exc:
-            refined, why = None, str(exc)
-    block = compare(report, refined, why)
-    return process_once(folder, out_dir, plots=plots, refine_intrinsics=block["chosen"] == "refined", cause=block,
-                        **kw)
+    kw = dict(method=method, progress=progress, fix_unidentifiable=fix_unidentifiable, folds=folds, tcp=tcp,
+              plots=plots)
+    t0 = time.perf_counter()
+    rec = read_recording(folder, allow_symlinks=allow_symlinks)
+    given_m = measure_folder(rec, refine_intrinsics, progress, camera_file)
+    given = fit_measured(given_m, out_dir, t0=t0, **kw)
+    if refine_intrinsics or camera_file is not None or not cause_test_applies(given.report):
+        return given.finish()
+    try:
+        refined, why = fit_measured(measure_folder(rec, True, progress, reuse=given_m), out_dir, t0=t0,
+                                    early_measurements=False, **kw), None
+    except VisionCalibError as exc:
+        refined, why = None, str(exc)
+    block = compare(given.report, None if refined is None else refined.report, why)
+    return (refined if block["chosen"] == "refined" else given).finish(block)
 
 
 def process_once(folder: str | Path, out_dir: str | Path | None, method: str | None = None, progress: bool = False,
                  plots: bool = True, fix_unidentifiable: bool = False, allow_symlinks: bool = False,
                  refine_intrinsics: bool = False, camera_file: str | Path | None = None, folds: int | None = None,
                  tcp=None, cause: dict | None = None) -> dict:
-    """Process a recorded folder; writes DIR/measurements.json, DIR/report.json (+ plots, model).
-    refine_intrinsics: calibrate the camera from the recording's images even when recording.yaml gives
-    intrinsics (always done when it gives none); camera_file: a camera.yaml (``calibrate-camera``) used
-    instead of recording.yaml's intrinsics; the report's ``intrinsics`` block says which were used. folds / tcp:
-    the held-out validation's k and tool point (x, y, z in the flange frame, m), :mod:`.holdout`: its decision
-    can fail the verdict (no calibrated model). cause: the :mod:`.cause` block, reported as is."""
-    from .camera_step import SOURCE_CAMERA_FILE, fitted_camera, intrinsics_response, intrinsics_sensitivity, recording_intrinsics, remeasure
-
+    """Process a recorded folder under one hypothesis on the intrinsics (:func:`measure_folder`,
+    :func:`fit_measured`); writes DIR/measurements.json, DIR/report.json (+ plots, model). cause: the :mod:`.cause`
+    block, reported as is."""
     t0 = time.perf_counter()
     rec = read_recording(folder, allow_symlinks=allow_symlinks)
-    rec, intr = recording_intrinsics(rec, refine_intrinsics, progress, camera_file)
+    return fit_measured(measure_folder(rec, refine_intrinsics, progress, camera_file), out_dir, method, progress,
+                        plots, fix_unidentifiable, folds, tcp, t0=t0).finish(cause)
+
+
+def fit_measured(m: Measured, out_dir: str | Path | None, method: str | None = None, progress: bool = False,
+                 plots: bool = True, fix_unidentifiable: bool = False, folds: int | None = None, tcp=None,
+                 t0: float | None = None, early_measurements: bool = True) -> _Fitted:
+    """Identify and report a measured folder; the report is written by the returned object's ``finish``:
+    DIR/measurements.json (written now when ``early_measurements``, so the measurements are kept when
+    identification then fails), DIR/report.json (+ plots, model). The intrinsics used are those of ``m`` (the
+    report's ``intrinsics`` block says which: ``process --refine-intrinsics`` calibrates them from the recording's
+    images even when recording.yaml gives intrinsics, always done when it gives none; ``--camera FILE`` replaces
+    recording.yaml's). folds / tcp: the held-out validation's k and tool point (x, y, z in the flange frame, m),
+    :mod:`.holdout`: its decision can fail the verdict (no calibrated model). t0: the run's start (timings)."""
+    from .camera_step import SOURCE_CAMERA_FILE, fitted_camera, intrinsics_response, intrinsics_sensitivity, remeasure
+
+    t0 = time.perf_counter() - m.seconds if t0 is None else t0
+    rec, intr, pms, dets = m.rec, m.intr, m.pms, m.dets
     out = Path(out_dir)
     if rec.camera_file is not None and intr["source"] == f"{SOURCE_CAMERA_FILE} {rec.camera_file}":
         intr = {**intr, "source": f"{SOURCE_CAMERA_FILE} {relative_ref(rec.camera_file, out)}"}  # relative to report.json
     scene, setup = _recording_setup(rec) if rec.pose_kind != "flange_pose" else (None, None)
     nominal = setup
     method = None if scene is None else check_method(setup, method or scene.identification.method, "--method")
-    dets = {}
-    pms = measure_recording(rec, progress, dets)
     mblock = measurements_block(pms, extra_files_ignored=list(rec.extra_files))
-    out.mkdir(parents=True, exist_ok=True)
-    write_json_atomic(out / "measurements.json",  # the folder relative to this file (io.portable)
-                      {"version": REPORT_VERSION, "folder": relative_ref(rec.folder, out), **mblock})
-    t_meas = time.perf_counter() - t0
+
+    def write_measurements():  # the folder relative to this file (io.portable)
+        out.mkdir(parents=True, exist_ok=True)
+        write_json_atomic(out / "measurements.json",
+                          {"version": REPORT_VERSION, "folder": relative_ref(rec.folder, out), **mblock})
+
+    if early_measurements:
+        write_measurements()
+    t_meas = m.seconds
     if scene is None:
-        return _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets, cause, folds)
+        return _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets, folds,
+                                None if early_measurements else write_measurements)
 
     meas, ok = Measurements.from_pose_measurements(rec.poses, rec.poses, pms)
     residual = setup.residual_for(method, scene.identification.residual)
@@ -188,14 +262,18 @@ def process_once(folder: str | Path, out_dir: str | Path | None, method: str | N
         motion=motion,
         residuals=residual_stats(result.residuals, problem.residual_kind),
         extra={"intrinsics": intr, "intrinsics_sensitivity": sens,
-               "reprojection": reproj, "holdout": hold, "cause": cause},
+               "reprojection": reproj, "holdout": hold, "cause": None},
         timings={"measure": t_meas, "identify": t_id, "total": time.perf_counter() - t0}, failure=failure)
-    report["summary_text"] += points_line(report.get("reprojection")) + "\n" + "\n".join(holdout_lines(hold)) + (
-        "\n" + cause["message"] if cause else "")
-    write_report(out, report, setup, result, problem, plots=plots,
-                 overlays=_overlay_source(rec, dets, setup if report["verdict"].get("usable") else None,
-                                          result) if plots else None)
-    return report
+    report["summary_text"] += points_line(report.get("reprojection")) + "\n" + "\n".join(holdout_lines(hold))
+
+    def write(report):
+        if not early_measurements:
+            write_measurements()
+        write_report(out, report, setup, result, problem, plots=plots,
+                     overlays=_overlay_source(rec, dets, setup if report["verdict"].get("usable") else None,
+                                              result) if plots else None)
+
+    return _Fitted(report, "", write)
 
 
 def _overlay_source(rec, dets, setup=None, result=None):
@@ -233,11 +311,12 @@ def _chain_reprojection(setup, meas, problem, result, dets, rec, fitted=None) ->
     return reprojection_with(T, dets, [meas.labels[k] for k in idx], rec.target, rec.camera, fitted)
 
 
-def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None, cause=None, folds=None) -> dict:
+def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None, folds=None, write_first=None) -> _Fitted:
     """Flange poses known: identify the camera mount and the target mount only (``handeye_step``: the robot's
     pose error in the weights, given by recording.yaml ``robot_pose_std`` or estimated; closed-form start;
     outlier test, adequacy test and variance factor as the robot-chain path); k-fold held-out prediction of the
-    measured poses (``poses.pair_holdout``, ``folds``: default ``holdout.DEFAULT_FOLDS``)."""
+    measured poses (``poses.pair_holdout``, ``folds``: default ``holdout.DEFAULT_FOLDS``). write_first: called
+    before the report is written (the measurements when they were not written before the fit)."""
     from ..identify.handeye_problem import handeye_problem, stack_measurements
     from ..io.report_handeye import handeye_report
     from .camera_step import fitted_camera, intrinsics_directions, residual_response
@@ -282,8 +361,11 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None, cause=No
 
         pairs = SimpleNamespace(ids=tuple(str(lab) for lab in labels), T_base_flange=rec.poses[ok], T_cam_target=T,
                                 cov=cov, noise_frame=None, mount=mount, robot_std=rec.robot_pose_std, path=rec.folder)
+        rob = ident.fit.robot  # the folds' REML starts from the full fit's robot variances
+        start = None if rob.get("source") != "estimated" else (
+            (1e-3 * rob["translation_mm"]) ** 2, np.radians(rob["rotation_deg"]) ** 2)
         hold = pair_holdout(pairs, int(min(folds or DEFAULT_FOLDS, len(ok))), 0,
-                            outliers=[lab for lab, _ in ident.rejected])
+                            outliers=[lab for lab, _ in ident.rejected], theta_start=start)
         failure = holdout_failure(hold)
     cam_fit = None
     if ident.nuisance is not None:
@@ -317,16 +399,22 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None, cause=No
                                        *([rwarn] if rwarn else [])], result=result,
         identified=ident,
         residuals=residual_stats(result.residuals, "pose"),
-        extra={"handeye": he, "intrinsics": intr, "reprojection": he["reprojection"], "cause": cause,
+        extra={"handeye": he, "intrinsics": intr, "reprojection": he["reprojection"], "cause": None,
                **({"holdout": hold} if hold is not None else {})},
         timings={"total": time.perf_counter() - t0}, failure=failure)
-    report["summary_text"] += points_line(report.get("reprojection")) + ("\n" + cause["message"] if cause else "")
+    report["summary_text"] += points_line(report.get("reprojection"))
+    tail = ""
     if hold is not None:
         from .poses import pair_holdout_lines
 
-        report["summary_text"] += "\n" + "\n".join(pair_holdout_lines(hold))
-    write_report(out, report, plots=plots, overlays=_overlay_source(rec, dets) if plots else None)
-    return report
+        tail = "\n" + "\n".join(pair_holdout_lines(hold))
+
+    def write(report):
+        if write_first is not None:
+            write_first()
+        write_report(out, report, plots=plots, overlays=_overlay_source(rec, dets) if plots else None)
+
+    return _Fitted(report, tail, write)
 
 
 #: the chain's reprojection RMS above this many times what its noise model predicts, with intrinsics given (not
@@ -471,4 +559,5 @@ def reprojection_noise_check(block: dict | None, pms, intr: dict, robot_px2: flo
     return rec, text
 
 
-__all__ = ["process_folder", "measure_recording", "used_corners", "label_points", "reprojection_noise_check"]
+__all__ = ["process_folder", "process_once", "fit_measured", "measure_folder", "Measured", "measure_recording",
+           "used_corners", "label_points", "reprojection_noise_check"]

@@ -173,24 +173,33 @@ def _reml_step(problem: IdentificationProblem, result: IdentificationResult, sta
     of the poses): a local refinement from there, no grid."""
     J, r, cam, Vt, Vr = _reml_terms(problem, result.identified)
     theta = _reml_max(J, r, cam, np.stack([Vt, Vr]), THETA_BOUNDS, start)
-    return theta, _variance_cov(J, cam, np.stack([Vt, Vr]), theta)
+    return theta, reml_variance_cov(J, cam, np.stack([Vt, Vr]), theta)
 
 
-def _variance_cov(J, known, blocks, theta) -> np.ndarray:
+def reml_variance_cov(J, known, blocks, theta) -> np.ndarray:
     """2 (tr(P V_i P V_j))^-1 (k, k) over the variances theta (k,) of the blocks (k, N, m, m) (pseudo-inverse: an
-    unseen component gets 0, not inf)."""
-    n_obs, m = known.shape[:2]
-    C = known + np.einsum("i,inab->nab", np.asarray(theta, float), blocks)
-    Winv = np.linalg.inv(C)
-    W = np.zeros((n_obs * m, n_obs * m))
-    for k in range(n_obs):
-        W[k * m:(k + 1) * m, k * m:(k + 1) * m] = Winv[k]
-    Jf = J.reshape(n_obs * m, -1)
-    WJ = W @ Jf
-    P = W - WJ @ np.linalg.pinv(Jf.T @ WJ) @ WJ.T
-    PV = [np.einsum("ank,nkl->anl", P.reshape(n_obs * m, n_obs, m), V).reshape(n_obs * m, n_obs * m)
-          for V in blocks]
-    T = np.array([[np.sum(PV[i] * PV[j].T) for j in range(len(PV))] for i in range(len(PV))])
+    unseen component gets 0, not inf). P = W - U M U^T with W = blockdiag(C_n^-1), U = W J, M = (J^T W J)^+, so
+    tr(P V_i P V_j) = sum_n tr(W_n V_in W_n V_jn) - tr(M G_ij) - tr(M G_ji) + tr(M H_i M H_j), G_ij =
+    sum_n U_n^T V_in W_n V_jn U_n, H_i = sum_n U_n^T V_in U_n: sums over the poses, O(N) time and memory (never
+    the (N m)^2 matrix P)."""
+    blocks = np.asarray(blocks, float)
+    k, n, m = blocks.shape[:3]
+    p = J.shape[-1]
+    C = known + np.tensordot(np.asarray(theta, float), blocks, axes=1)
+    W = np.linalg.inv(C)  # (N, m, m)
+    U = W @ J  # (N, m, p)
+    M = np.linalg.pinv(J.reshape(-1, p).T @ U.reshape(-1, p))
+    WV = W[None] @ blocks  # (k, N, m, m): W_n V_in
+    VU = (blocks @ U[None]).reshape(k, n * m, p)  # V_in U_n, the poses' rows stacked
+    WVU = (W[None] @ VU.reshape(k, n, m, p)).reshape(k, n * m, p)  # W_n V_in U_n
+    H = [U.reshape(-1, p).T @ VU[i] for i in range(k)]  # (p, p) each: sum_n U_n^T V_in U_n
+    T = np.empty((k, k))
+    for i in range(k):
+        for j in range(k):
+            t1 = float(np.sum(WV[i] * np.swapaxes(WV[j], 1, 2)))
+            G = VU[i].T @ WVU[j]  # sum_n U_n^T V_in W_n V_jn U_n
+            T[i, j] = t1 - 2.0 * float(np.sum(M * G.T)) + float(np.sum((M @ H[i]) * (M @ H[j]).T))
+    T = 0.5 * (T + T.T)
     return 2.0 * np.linalg.pinv(T)
 
 
@@ -402,7 +411,7 @@ def _noise_irls(base, x0, Vc, theta_cam, s_robot, est_robot: bool, max_iter: int
             blocks, known = np.stack(list(Vc)), th_r[0] * Vt + th_r[1] * Vr
             th = _reml_max(J, r, known, blocks, NOISE_BOUNDS, th_c)
             th_c = _floored(th)
-        tcov = _variance_cov(J, known, blocks, th)
+        tcov = reml_variance_cov(J, known, blocks, th)
         pb = _noise_weights(base, res.identified, Vc, th_c, _robot_cov(th_r))
         new = solve_lse(pb, res.identified)
         free = np.asarray(new.free, bool)
@@ -490,4 +499,4 @@ def fit_estimated_noise(T_base_flange: np.ndarray, T_cam_target: np.ndarray, mou
 
 
 __all__ = ["HandeyeFit", "deletion_fit", "DEFAULT_CANDIDATE", "NOISE_FRAMES", "default_candidates", "closed_form_comparison",
-           "fit_handeye", "fit_estimated_noise", "measured_noise_blocks", "weighted_cost"]
+           "reml_variance_cov", "fit_handeye", "fit_estimated_noise", "measured_noise_blocks", "weighted_cost"]

@@ -202,8 +202,28 @@ def whitened_free_jacobian(problem: IdentificationProblem, J: np.ndarray, W: np.
     n_obs * m pose rows, then the problem's prior rows (``problem.prior_rows``; N = n_obs * m + n_prior)."""
     W = problem.whitening() if W is None else W
     Jf = J[:, :, problem.params.free_index]
-    A = np.einsum("kij,kjn->kin", W, Jf).reshape(-1, Jf.shape[-1])
+    A = np.matmul(W, Jf).reshape(-1, Jf.shape[-1])  # stacked (m, m) @ (m, n_free) products (einsum: ~5x slower)
     return np.vstack([A, problem.prior_jacobian()]) if problem.prior_rows else A
+
+
+#: :func:`row_compressed` takes R from the Cholesky factor of A^T A (one BLAS product) when R's condition number is
+#: below this: the squared conditioning then costs at most ~eps * 1e8 ~ 2e-8 relative on the smallest singular
+#: value; above it, from a Householder QR of A
+GRAM_COND_MAX = 1e4
+
+
+def row_compressed(A: np.ndarray) -> np.ndarray:
+    """R (n, n) with R^T R = A^T A (A: (N, n), N > n), else A: the same column norms, singular values and right
+    singular vectors, column spans and least-squares fits as A (A = Q R, Q orthonormal), at n x n size."""
+    if A.shape[0] <= A.shape[1]:
+        return A
+    try:
+        R = np.linalg.cholesky(A.T @ A).T
+        if np.all(np.isfinite(R)) and np.linalg.cond(R) < GRAM_COND_MAX:
+            return R
+    except np.linalg.LinAlgError:
+        pass
+    return scipy.linalg.qr(A, mode="r", check_finite=False)[0][:A.shape[1]]
 
 
 def observability_indices(s: np.ndarray, n_poses: int) -> dict[str, float]:
@@ -310,6 +330,7 @@ def analyze(
     J = check_problem(problem, x)[1] if jacobian is None else jacobian
     scale = params.scale[params.free_index]
     A = whitened_free_jacobian(problem, J) * scale[None, :]
+    A = row_compressed(A)  # everything below reads only column norms, spans, fits and singular values
     col_norms = np.linalg.norm(A, axis=0)
     if normalize:
         A = A / np.where(col_norms > 0, col_norms, 1.0)[None, :]

@@ -19,6 +19,7 @@ variance factor ``2 cost / (N - n_free)``.
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from typing import Iterable, Sequence
 
 import numpy as np
@@ -27,7 +28,7 @@ from scipy.optimize import least_squares
 
 from ..errors import ConfigError, DataError, ParameterError, VisionCalibError
 from .identifiability import (IdentifiabilityReport, analyze, base_problem, check_problem, pose_labels,
-                              whitened_free_jacobian)
+                              row_compressed, whitened_free_jacobian)
 from .problem import NOISE_ESTIMATED, STATUS_CONVERGED, STATUS_NOT_FINITE, IdentificationProblem, IdentificationResult
 from .threads import single_threaded_blas
 
@@ -129,9 +130,10 @@ def final_check(problem: IdentificationProblem, x: np.ndarray, cov: np.ndarray, 
 
 def covariance_from_jacobian(Jw_free: np.ndarray, scale_free: np.ndarray) -> tuple[np.ndarray, bool]:
     """(n_free, n_free) covariance (JwᵀJw)^-1 computed in scaled variables; returns (cov, full_rank)."""
-    A = Jw_free * scale_free[None, :]
+    rows = max(Jw_free.shape)
+    A = row_compressed(Jw_free * scale_free[None, :])
     U, s, Vt = np.linalg.svd(A, full_matrices=False)
-    tol = max(A.shape) * np.finfo(float).eps * 1e3 * (s[0] if s.size else 0.0)
+    tol = rows * np.finfo(float).eps * 1e3 * (s[0] if s.size else 0.0)
     full = bool(s.size and s[-1] > tol)
     inv_s2 = np.where(s > tol, 1.0 / np.where(s > tol, s, 1.0) ** 2, 0.0)
     cov_z = (Vt.T * inv_s2) @ Vt
@@ -282,18 +284,11 @@ def solve_lse(
         return whitened_free_jacobian(problem, problem.jacobian(x_of(z)), W) * s[None, :]
 
     cost0 = whitened_cost(problem, x0, W)
-    sol = least_squares(
-        fun,
-        np.zeros(fi.size),
-        jac=jac_fn if jac == "analytic" else jac,
-        method=method,
-        loss=loss,
-        f_scale=f_scale,
-        max_nfev=max_nfev,
-        xtol=xtol,
-        ftol=ftol,
-        gtol=gtol,
-    )
+    if method == "lm" and jac == "analytic":  # the normal equations in BLAS: no O(rows x n^2) QR per iteration
+        sol = levenberg_marquardt(fun, jac_fn, np.zeros(fi.size), max_nfev, xtol, ftol, gtol)
+    else:
+        sol = least_squares(fun, np.zeros(fi.size), jac=jac_fn if jac == "analytic" else jac, method=method,
+                            loss=loss, f_scale=f_scale, max_nfev=max_nfev, xtol=xtol, ftol=ftol, gtol=gtol)
     x = x_of(sol.x)
     J = _jacobian_or_nan(problem, x)
     cov, warnings = _lse_covariance(problem, J, W, s, sol.cost if scale_cov_by_residual else None, warnings)
@@ -311,9 +306,114 @@ def solve_lse(
     }
     iterations = sol.njev if sol.njev is not None else sol.nfev
     status = 1 if sol.status > 0 else (0 if sol.status == 0 else -1)
-    message = f"scipy least_squares ({method}): {sol.message}"
+    message = (f"Levenberg-Marquardt (normal equations): {sol.message}" if isinstance(sol, LMResult)
+               else f"scipy least_squares ({method}): {sol.message}")
     return finish_result("lse", original, problem, x0, x, cov, cost0, iterations, converged, warnings, t0, info, W,
                          status=status, message=message, J=J)
+
+
+@dataclass
+class LMResult:
+    """What :func:`levenberg_marquardt` returns (the fields of scipy's ``least_squares`` result that are read)."""
+
+    x: np.ndarray
+    cost: float
+    status: int
+    message: str
+    nfev: int
+    njev: int
+
+
+#: levenberg_marquardt's termination messages by status (MINPACK's meaning of the three tolerances)
+LM_MESSAGES = {0: "the maximum number of function evaluations is exceeded",
+               1: "gtol: the gradient is orthogonal to the residual to within gtol",
+               2: "ftol: the actual and predicted relative reductions of the cost are at most ftol",
+               3: "xtol: the relative step is at most xtol",
+               4: "ftol and xtol are both satisfied"}
+
+
+#: levenberg_marquardt's first damping (of the column-equilibrated normal matrix, unit diagonal): nearly Gauss-Newton
+LM_LAMBDA0 = 1e-6
+
+
+def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gtol=1e-12) -> LMResult:
+    """Minimise 0.5 |fun(z)|^2 (fun: (n,) -> (M,), jac: (n,) -> (M, n)) from z0 (n,) by Levenberg-Marquardt on the
+    normal equations: per iteration J^T J and J^T r (two BLAS products over the M rows) and an (n, n) Cholesky
+    solve of (S J^T J S + lam I) y = -S J^T r, dz = S y, S = diag(J^T J)^-1/2 (running maximum, MINPACK's scaling,
+    so the solve is that of the column-equilibrated problem), lam raised while a step does not lower the cost.
+    Termination as MINPACK's ``lmder`` (scipy's method "lm"): gtol on the largest cosine between the residual and
+    a column, ftol on the actual and predicted relative reduction, xtol on the scaled step, then one Gauss-Newton
+    step with the last Jacobian (kept when it does not raise the cost: the minimum to rounding, so that inputs
+    equal to rounding give answers equal to rounding through iterated fits); max_nfev (default
+    100 (n + 1)) evaluations of fun. Returns an :class:`LMResult` (status 1-4 converged, 0 out of evaluations, -1
+    a non-finite Jacobian)."""
+    from scipy.linalg import LinAlgError, cho_factor, cho_solve
+
+    z = np.asarray(z0, float).copy()
+    n = z.size
+    max_nfev = 100 * (n + 1) if max_nfev is None else int(max_nfev)
+    r = np.asarray(fun(z), float)
+    nfev, njev = 1, 0
+    cost = 0.5 * float(r @ r)
+    d2 = np.zeros(n)
+    lam, status = None, 0
+    while True:
+        J = np.asarray(jac(z), float)
+        njev += 1
+        A, g = J.T @ J, J.T @ r
+        if not (np.all(np.isfinite(A)) and np.all(np.isfinite(g))):
+            return LMResult(z, cost, -1, "the Jacobian is not finite at the current point", nfev, njev)
+        diag = np.diag(A).copy()
+        d2 = np.maximum(d2, diag)
+        dsafe = np.where(d2 > 0, d2, 1.0)
+        rn = np.sqrt(2.0 * cost)
+        if rn == 0 or np.max(np.abs(g) / (rn * np.sqrt(np.where(diag > 0, diag, np.inf)))) <= gtol:
+            status = 1
+            break
+        S = 1.0 / np.sqrt(dsafe)
+        As, gs = A * np.outer(S, S), g * S
+        if lam is None:
+            lam = LM_LAMBDA0
+        while True:
+            try:
+                y = -cho_solve(cho_factor(As + lam * np.eye(n)), gs)
+            except LinAlgError:
+                lam = max(lam * 10.0, 1e-12)
+                continue
+            dz = S * y
+            pred = -(float(g @ dz) + 0.5 * float(dz @ A @ dz))  # predicted reduction of the cost (> 0)
+            z_new = z + dz
+            r_new = np.asarray(fun(z_new), float)
+            nfev += 1
+            cost_new = 0.5 * float(r_new @ r_new) if np.all(np.isfinite(r_new)) else np.inf
+            actual = cost - cost_new
+            rho = actual / pred if pred > 0 else -1.0
+            step, size = float(np.linalg.norm(np.sqrt(dsafe) * dz)), float(np.linalg.norm(np.sqrt(dsafe) * z))
+            f_ok = abs(actual) <= ftol * cost and pred <= ftol * cost and rho <= 2.0
+            x_ok = step <= xtol * size
+            if rho > 1e-4:  # accepted: less damping when the model predicted well
+                z, r, cost = z_new, r_new, cost_new
+                lam *= max(0.1, 1.0 - (2.0 * rho - 1.0) ** 3)
+            else:
+                lam *= 4.0
+            if f_ok or x_ok:
+                status = 4 if f_ok and x_ok else (2 if f_ok else 3)
+                if rho > 1e-4 and nfev < max_nfev:  # a last Gauss-Newton step with the Jacobian at hand (chord)
+                    try:
+                        dz = -cho_solve(cho_factor(A), J.T @ r)
+                        r2 = np.asarray(fun(z + dz), float)
+                        nfev += 1
+                        c2 = 0.5 * float(r2 @ r2) if np.all(np.isfinite(r2)) else np.inf
+                        if c2 <= cost:
+                            z, r, cost = z + dz, r2, c2
+                    except LinAlgError:
+                        pass
+                return LMResult(z, cost, status, LM_MESSAGES[status], nfev, njev)
+            if nfev >= max_nfev:
+                return LMResult(z, cost, 0, LM_MESSAGES[0], nfev, njev)
+            if rho > 1e-4:
+                break
+    return LMResult(z, cost, status, LM_MESSAGES[status], nfev, njev)
 
 
 def _lse_covariance(problem, J, W, s, cost, warnings):

@@ -180,18 +180,35 @@ def serial_problem(
             raise DataError(f"observation index out of range 0..{n - 1}: {idx[(idx < 0) | (idx >= n)][0]}")
         return idx
 
-    def residual_fn(x, idx=None):
-        idx = _idx(idx)
-        T = chain.forward(q[idx], x)
-        return pose_error(T, T_meas[idx])[:, :m]
+    last = {}  # the last pose errors (the Jacobian at that x reads their rotations) and Jacobian over all poses
 
-    def jacobian_fn(x, idx=None):
-        idx = _idx(idx)
-        Jm = chain.pose_jacobian(q[idx], x)
+    def errors(x, idx):
+        key = np.asarray(x, float).tobytes() if idx is None else None
+        if key is not None and last.get("x") == key:
+            return last["e"]
+        e = pose_error(chain.forward(q[_idx(idx)], x), T_meas[_idx(idx)])
+        if key is not None:
+            last.update(x=key, e=e)
+        return e
+
+    def residual_fn(x, idx=None):
+        return errors(x, idx)[:, :m].copy()
+
+    def jacobian_fn(x, idx=None):  # the last one over all poses is kept: the solvers ask twice at the start
+        key = np.asarray(x, float).tobytes() if idx is None else None
+        if key is not None and last.get("xJ") == key:
+            return last["J"].copy()
+        J = _jacobian(x, idx)
+        if key is not None:
+            last.update(xJ=key, J=J.copy())
+        return J
+
+    def _jacobian(x, idx):
+        Jm = chain.pose_jacobian(q[_idx(idx)], x)
         J = -Jm[:, :m, :]
         if m == 6:
-            rho = pose_error(chain.forward(q[idx], x), T_meas[idx])[:, 3:]
-            J[:, 3:, :] = np.einsum("nij,njk->nik", so3_right_jacobian_inv(rho), J[:, 3:, :])
+            rho = errors(x, idx)[:, 3:]
+            J[:, 3:, :] = np.matmul(so3_right_jacobian_inv(rho), J[:, 3:, :])
         return J
 
     return IdentificationProblem(

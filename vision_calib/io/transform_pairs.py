@@ -96,9 +96,99 @@ def _matrix(node, path, key: str) -> np.ndarray:
     return T
 
 
-def read_transform_pairs(path) -> tuple[np.ndarray, np.ndarray]:
+_HEAD = re.compile(r"(T[12])_(\d+):\s*!!opencv-matrix\s*")
+_FIELD = re.compile(r"\s+(rows|cols|dt):\s*(\S+)\s*")
+
+
+def _streamed_pairs(path: Path, progress: bool = False):
+    """(T1, T2) of a TransformPairs file in the layout OpenCV (and :func:`write_transform_pairs`) writes, read
+    line by line (a progress bar over the bytes with ``progress``) without building a YAML node per number; None
+    as soon as the file departs from that layout or holds anything the checks of :func:`read_transform_pairs`
+    refuse, which then reads it (and names what is wrong)."""
+    mats, count, cur, buf = {"T1": {}, "T2": {}}, None, None, None
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=path.stat().st_size, unit="B", unit_scale=True, desc="read pairs", leave=False)
+    try:
+        with open(path, "rb") as f:
+            for raw in f:
+                if bar is not None:
+                    bar.update(len(raw))
+                line = raw.decode("utf-8", "replace").rstrip("\r\n")
+                if buf is not None:  # inside data: [ ... ]
+                    buf.append(line)
+                    if "]" in line:
+                        cur["data"], buf = " ".join(buf), None
+                    continue
+                s = line.strip()
+                if not s or s.startswith("%") or s == "---" or s.startswith("#"):
+                    continue
+                m = _HEAD.fullmatch(line)
+                if m:
+                    if cur is not None and "data" not in cur:
+                        return None
+                    idx = int(m.group(2))
+                    if idx in mats[m.group(1)]:
+                        return None
+                    cur = mats[m.group(1)][idx] = {}
+                    continue
+                if s.startswith("frameCount:") and count is None and cur is None:
+                    count = s.split(":", 1)[1].strip()
+                    continue
+                m = _FIELD.fullmatch(line)
+                if cur is not None and m and m.group(1) not in cur:
+                    cur[m.group(1)] = m.group(2)
+                    continue
+                if cur is not None and line.startswith((" ", "\t")) and s.startswith("data:") and "data" not in cur:
+                    buf = [s[5:]]
+                    if "]" in s:
+                        cur["data"], buf = s[5:], None
+                    continue
+                return None
+    finally:
+        if bar is not None:
+            bar.close()
+    n = len(mats["T1"])
+    if buf is not None or n < 3 or sorted(mats["T1"]) != list(range(n)) or sorted(mats["T2"]) != list(range(n)):
+        return None
+    if count is not None and count != str(n):
+        return None
+    out = []
+    for name in ("T1", "T2"):
+        rows = []
+        for i in range(n):
+            c = mats[name][i]
+            if (c.get("rows"), c.get("cols")) != ("4", "4") or c.get("dt") not in ("d", "f") or "data" not in c:
+                return None
+            text = c["data"].strip()
+            if not (text.startswith("[") and text.endswith("]")):
+                return None
+            try:
+                v = np.array(text[1:-1].split(","), dtype=float)
+            except ValueError:
+                return None
+            if v.size != 16:
+                return None
+            rows.append(v)
+        T = np.array(rows).reshape(n, 4, 4)
+        if not np.all(np.isfinite(T)) or np.max(np.abs(T[:, 3] - [0, 0, 0, 1])) > 1e-9:
+            return None
+        R = T[:, :3, :3]
+        if np.max(np.abs(R @ np.swapaxes(R, 1, 2) - np.eye(3))) > ROTATION_TOL or np.any(np.linalg.det(R) < 0):
+            return None
+        U, _, Vt = np.linalg.svd(R)
+        T[:, :3, :3] = U @ Vt  # renormalised, as _matrix does
+        out.append(T)
+    return out[0], out[1]
+
+
+def read_transform_pairs(path, progress: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """(T1 (N, 4, 4), T2 (N, 4, 4)) of a TransformPairs file (module docstring): T1 = T_base_ee, T2 =
-    T_cam_marker [m]. DataError naming the file, the key and its line for anything it does not expect."""
+    T_cam_marker [m]. DataError naming the file, the key and its line for anything it does not expect. The layout
+    OpenCV writes is streamed (:func:`_streamed_pairs`: O(N), a progress bar with ``progress``); any other is
+    composed as YAML."""
     import yaml
 
     from ..config import BoundedLoader, read_text
@@ -106,6 +196,9 @@ def read_transform_pairs(path) -> tuple[np.ndarray, np.ndarray]:
     path = Path(path)
     if not path.is_file():
         raise DataError(f"{path}: file not found")
+    fast = _streamed_pairs(path, progress)
+    if fast is not None:
+        return fast
     text = read_text(path, DataError)
     # directives (%YAML:1.0, which PyYAML refuses) as comments: the line numbers stay those of the file
     text = "\n".join("#" + ln if ln.lstrip().startswith("%") else ln for ln in text.splitlines())
@@ -167,11 +260,13 @@ def write_transform_pairs(path, T1, T2) -> Path:
     return write_text_atomic(path, "\n".join(lines) + "\n")
 
 
-def import_pairs(path, mount: str, out, units: dict | None = None, folds: int = 5, seed: int = 0) -> Path:
+def import_pairs(path, mount: str, out, units: dict | None = None, folds: int = 5, seed: int = 0,
+                 progress: bool = False) -> Path:
     """Write the pose-pair file ``out`` (YAML + ``<stem>.csv`` + ``<stem>_flange.csv``,
     :func:`vision_calib.io.measured_poses.write_pose_pairs`) of a TransformPairs file: flange poses T1, measured
     T_cam_target T2, pose ids ``p000``..; the measured poses' noise is estimated per axis of the target frame
-    (their files carry no noise). mount: "eye_in_hand" | "fixed". Returns the YAML's path."""
+    (their files carry no noise). mount: "eye_in_hand" | "fixed". progress: a bar while the file is read. Returns
+    the YAML's path."""
     from .measured_poses import PAIR_MOUNTS, write_pose_pairs
 
     if mount not in PAIR_MOUNTS:
@@ -179,7 +274,7 @@ def import_pairs(path, mount: str, out, units: dict | None = None, folds: int = 
     out = Path(out)
     if out.suffix.lower() not in (".yaml", ".yml"):
         raise DataError(f"{out}: the pose-pair file to write must end in .yaml (its CSVs are written beside it)")
-    T1, T2 = read_transform_pairs(path)
+    T1, T2 = read_transform_pairs(path, progress)
     ids = [f"p{i:03d}" for i in range(len(T1))]
     out.parent.mkdir(parents=True, exist_ok=True)
     return write_pose_pairs(out, ids, T1, T2, mount, "T_cam_target", units=units or {"length": "m", "angle": "deg"},

@@ -340,20 +340,28 @@ class SerialChain(JointChainChecks):
         C = C @ _tx(x[ix[f"a{i}"]])
         return C, x[ix[f"theta{i}"]], x[ix[f"d{i}"]]
 
-    def _walk(self, q, x):
-        """Frames (N, n+2, 4, 4) in `left`: [base, link 1..n (n = flange), right]."""
+    def _walk(self, q, x, keep: bool = True):
+        """Frames (n+2, N, 4, 4) in `left`, joint-major: [base, link 1..n (n = flange), right]; keep=False: only
+        the last (``right``) is stored, (1, N, 4, 4). Per joint one BLAS product with the constant prefix and the
+        Rz(theta + q) Tz(d) columns written out (no per-pose 4x4 products)."""
         N = q.shape[0]
-        out = np.empty((N, self.n_joints + 2, 4, 4))
+        out = np.empty((self.n_joints + 2 if keep else 1, N, 4, 4))
         TL, TR = self.nominal_transforms(x)
-        F = np.broadcast_to(TL, (N, 4, 4)).copy()
-        out[:, 0] = F
+        F = np.broadcast_to(TL, (N, 4, 4))
+        if keep:
+            out[0] = F
         for i in range(1, self.n_joints + 1):
             C, theta, d = self._link_parts(x, i)
-            # Rz(theta + q) Tz(d) = [Rz, (0, 0, d)] since Rz keeps the z axis
-            Rz = make_T(rot_z(theta + q[:, i - 1]), np.array([0.0, 0.0, d]))
-            F = F @ C @ Rz
-            out[:, i] = F
-        out[:, -1] = F @ TR
+            FC = (F.reshape(-1, 4) @ C).reshape(N, 4, 4)
+            # (F C) Rz(theta + q) Tz(d): columns x, y rotated about z, origin moved by d along z
+            ang = theta + q[:, i - 1]
+            c, sn = np.cos(ang)[:, None], np.sin(ang)[:, None]
+            F = out[i] if keep else np.empty((N, 4, 4))
+            F[:, :, 0] = FC[:, :, 0] * c + FC[:, :, 1] * sn
+            F[:, :, 1] = FC[:, :, 1] * c - FC[:, :, 0] * sn
+            F[:, :, 2] = FC[:, :, 2]
+            F[:, :, 3] = FC[:, :, 2] * d + FC[:, :, 3]
+        np.matmul(F.reshape(-1, 4), TR, out=out[-1].reshape(-1, 4))
         return out
 
     def forward(self, q, x=None) -> np.ndarray:
@@ -361,14 +369,14 @@ class SerialChain(JointChainChecks):
         (None = nominal)."""
         q = self.check_joints(q)
         x = self._x(x)
-        return self._walk(q, x)[:, -1]
+        return self._walk(q, x, keep=False)[-1]
 
     def forward_all(self, q, x=None) -> np.ndarray:
         """All frames (N, n+2, 4, 4) expressed in frame ``left``: index 0 = robot base (T_left_base),
         i = link i (i = 1..n; n = flange), n+1 = ``right`` frame (T_left_right). For drawing the arm."""
         q = self.check_joints(q)
         x = self._x(x)
-        return self._walk(q, x)
+        return np.moveaxis(self._walk(q, x), 0, 1)
 
     def flange(self, q, x=None) -> np.ndarray:
         """T_base_flange(q) (N, 4, 4): the arm alone, without the mounting transforms."""
@@ -389,16 +397,21 @@ class SerialChain(JointChainChecks):
         N = q.shape[0]
         n_par = len(self.params)
         ix = self._idx
-        frames = self._walk(q, x)
-        p_end = frames[:, -1, :3, 3]  # (N, 3)
-        J = np.zeros((N, 6, n_par))
+        frames = self._walk(q, x)  # (n+2, N, 4, 4)
+        p_end = frames[-1, :, :3, 3]  # (N, 3)
+        p_end_t = np.ascontiguousarray(p_end.T)  # (3, N)
+        Jt = np.zeros((n_par, 6, N))  # filled column by column (contiguous writes), returned transposed
 
-        def rot_col(k, w, p):
-            J[:, :3, k] = np.cross(w, p_end - p)
-            J[:, 3:, k] = w
+        def rot_col(k, w, p):  # [w x (p_end - p), w], the cross product written out on contiguous rows
+            Jt[k, 3:] = w.T
+            w = Jt[k, 3:]
+            v = p_end_t - np.asarray(p).T
+            Jt[k, 0] = w[1] * v[2] - w[2] * v[1]
+            Jt[k, 1] = w[2] * v[0] - w[0] * v[2]
+            Jt[k, 2] = w[0] * v[1] - w[1] * v[0]
 
         def trans_col(k, w):
-            J[:, :3, k] = w
+            Jt[k, :3] = w.T
 
         # ---- left mount: T_left_base = [R_nom Exp(r), t], parent frame = left (identity)
         TL, TR = self.nominal_transforms(x)
@@ -410,7 +423,7 @@ class SerialChain(JointChainChecks):
             rot_col(ix[f"{self.left}.{s}"], np.broadcast_to(WL[:, a], (N, 3)), np.broadcast_to(TL[:3, 3], (N, 3)))
 
         # ---- joints
-        F = frames[:, 0]  # (N, 4, 4) frame i-1
+        F = frames[0]  # (N, 4, 4) frame i-1
         for i in range(1, self.n_joints + 1):
             R, o = F[:, :3, :3], F[:, :3, 3]
             if i in self.pre_z:
@@ -425,7 +438,7 @@ class SerialChain(JointChainChecks):
             o = o + R[:, :, 0] * x[ix[f"a{i}"]]
             rot_col(ix[f"theta{i}"], R[:, :, 2], o)  # z axis unchanged by Rz(theta + q)
             trans_col(ix[f"d{i}"], R[:, :, 2])
-            F = frames[:, i]
+            F = frames[i]
 
         # ---- right mount: T_flange_right = [R_nom Exp(r), t] in the flange frame F
         Rf, of = F[:, :3, :3], F[:, :3, 3]
@@ -436,7 +449,7 @@ class SerialChain(JointChainChecks):
         p_right = of + np.einsum("nij,j->ni", Rf, TR[:3, 3])
         for a, s in enumerate(("rx", "ry", "rz")):
             rot_col(ix[f"{self.right}.{s}"], WR[:, :, a], p_right)
-        return J
+        return Jt.transpose(2, 1, 0)  # a view: the caller's first selection copies it
 
     def position_jacobian(self, q, x=None) -> np.ndarray:
         """(N, 3, n_params): translation rows of :meth:`pose_jacobian` (m per unit parameter, in ``left``)."""

@@ -78,13 +78,24 @@ def opencv_closed_form(T_base_flange, T_cam_target_meas, mount: str = "fixed",
     return A, B
 
 
+#: the closed forms read at most this many pose pairs, evenly spaced over the recording: OpenCV's
+#: ``calibrateHandEye`` pairs every motion with every other (time and memory grow as N^2: 800 pairs 30 s, 2,000 pairs
+#: out of memory, measured); the fit that starts from them reads all the pairs
+CLOSED_FORM_MAX_POSES = 200
+
+
 def closed_forms(T_base_flange, T_cam_target, mount: str) -> dict:
     """{method: (A, B) (4, 4) each, or the error message (str) when OpenCV fails} for every
-    :data:`CLOSED_FORM_METHODS` (the ``candidates`` of ``identify.handeye_fit.fit_handeye``)."""
+    :data:`CLOSED_FORM_METHODS` (the ``candidates`` of ``identify.handeye_fit.fit_handeye``), from at most
+    :data:`CLOSED_FORM_MAX_POSES` of the pairs (evenly spaced; all of them up to that number)."""
+    F, M = np.asarray(T_base_flange, float), np.asarray(T_cam_target, float)
+    if F.ndim == 3 and len(F) > CLOSED_FORM_MAX_POSES:
+        pick = np.unique(np.linspace(0, len(F) - 1, CLOSED_FORM_MAX_POSES).round().astype(int))
+        F, M = F[pick], M[pick[pick < len(M)]]
     out = {}
     for m in CLOSED_FORM_METHODS:
         try:
-            out[m] = opencv_closed_form(T_base_flange, T_cam_target, mount, m)
+            out[m] = opencv_closed_form(F, M, mount, m)
         except DataError as exc:
             out[m] = str(exc)
     return out

@@ -396,14 +396,19 @@ def find_images(folder, allow_symlinks: bool = False, hint: str = "--allow-path 
     return files
 
 
+#: the detection settings of :func:`calibrate_from_images` (a corner count low enough for oblique views)
+CALIBRATION_DETECT = {"min_corners": 4, "batch": "per_frame"}
+
+
 def calibrate_from_images(paths, target, image_size=None, names=None, config: CalibrationConfig = CalibrationConfig(),
-                          progress: bool = False) -> IntrinsicsResult:
+                          progress: bool = False, detected: dict | None = None) -> IntrinsicsResult:
     """Detect the target in every image (paths; unreadable ones are rejected views, read with
     ``measure.detect.load_gray``) and calibrate (:func:`calibrate_intrinsics`). names: view labels
     (default: the paths). Before anything is decoded, every file's header size is read
     (:mod:`.image_header`): a file beyond the pixel limit, and one whose size differs from ``image_size`` (default:
     the size most of the files have -- the majority wins, not the first file), is a rejected view named in the
-    result's warnings, never decoded."""
+    result's warnings, never decoded. detected: {index: valid Detection} already made of those files with
+    ``DetectConfig(**CALIBRATION_DETECT)`` and no intrinsics (``batch.reusable_detections``): not detected again."""
     from .detect import DetectConfig, Detection, detect
     from .image_header import header_size, majority_size, pixel_refusal
 
@@ -421,14 +426,15 @@ def calibrate_from_images(paths, target, image_size=None, names=None, config: Ca
         if i not in skip and s is not None and size is not None and s != size:
             skip[i] = (f"image size {s[0]}x{s[1]} differs from " + (f"the majority {size[0]}x{size[1]} ({count} of "
                        f"{len(fits)} images)" if count else f"the given {size[0]}x{size[1]}"))
-    todo = [i for i in range(len(paths)) if i not in skip]
+    known = {i: d for i, d in (detected or {}).items() if i not in skip and d.valid}
+    todo = [i for i in range(len(paths)) if i not in skip and i not in known]
     it = todo
     if progress:
         from tqdm import tqdm
 
         it = tqdm(todo, desc="calibrate camera: detect", unit="image", leave=False)
-    dcfg = DetectConfig(min_corners=4, batch="per_frame")
-    found = {i: detect(str(paths[i]), target, None, config=dcfg) for i in it}
+    dcfg = DetectConfig(**CALIBRATION_DETECT)
+    found = {**known, **{i: detect(str(paths[i]), target, None, config=dcfg) for i in it}}
     dets = [found[i] if i in found else Detection(False, skip[i], np.zeros(0, int), np.zeros((0, 2)), heads[i])
             for i in range(len(paths))]
     res = calibrate_intrinsics(dets, names, target, size, config)

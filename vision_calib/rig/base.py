@@ -419,20 +419,20 @@ class Setup:
         with ``margin_px``, in front of the camera, and the board normal is within max_tilt_deg of
         the viewing ray."""
         cam = self.camera
-        T = np.asarray(T_cam_target, float)
-        ok = np.ones(len(T), dtype=bool)
-        for i, Ti in enumerate(T):
-            p = F.transform_points(Ti, target_outline_m)
-            if np.any(p[:, 2] <= 0.05):
-                ok[i] = False
-                continue
-            uv = cam.project(p)
-            inside = (uv[:, 0] >= margin_px) & (uv[:, 0] <= cam.width - 1 - margin_px) & (uv[:, 1] >= margin_px) & (
-                uv[:, 1] <= cam.height - 1 - margin_px)
-            centre = p.mean(axis=0)
-            normal = Ti[:3, 2]
-            cosang = abs(normal @ centre) / np.linalg.norm(centre)
-            ok[i] = bool(inside.all() and cosang >= np.cos(np.radians(max_tilt_deg)))
+        T = np.asarray(T_cam_target, float).reshape(-1, 4, 4)
+        P = np.asarray(target_outline_m, float)
+        p = P @ np.swapaxes(T[:, :3, :3], 1, 2) + T[:, None, :3, 3]  # (N, K, 3), all poses at once
+        front = np.all(p[:, :, 2] > 0.05, axis=1)
+        ok = np.zeros(len(T), dtype=bool)
+        if not front.any():
+            return ok
+        q = p[front]
+        uv = cam.project(q.reshape(-1, 3)).reshape(q.shape[0], -1, 2)
+        inside = np.all((uv[..., 0] >= margin_px) & (uv[..., 0] <= cam.width - 1 - margin_px)
+                        & (uv[..., 1] >= margin_px) & (uv[..., 1] <= cam.height - 1 - margin_px), axis=1)
+        centre = q.mean(axis=1)
+        cosang = np.abs(np.einsum("ni,ni->n", T[front, :3, 2], centre)) / np.linalg.norm(centre, axis=1)
+        ok[front] = inside & (cosang >= np.cos(np.radians(max_tilt_deg)))
         return ok
 
     def residual_for(self, method: str, residual: str | None = None) -> str:

@@ -195,6 +195,7 @@ class CharucoKind(SquareCorners, _ArucoKind):
     #: corners from cv2.cornerSubPix: pixel-phase-locked errors (measure/covariance.py; measured:
     #: ``benchmarks/bench_measure.py --phase-terms``)
     phase_locked_share = 0.92
+    detect_uses_intrinsics = False
 
     def n_markers(self, spec):
         return (spec.rows * spec.cols) // 2

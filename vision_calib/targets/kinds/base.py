@@ -52,7 +52,11 @@ class TargetKind:
     - auto_refine: DetectConfig.refine "auto" -> this marker refinement (ArUco kinds);
     - auto_extra_subpix: whether DetectConfig.extra_subpix None (auto) runs the cornerSubPix pass;
     - phase_locked_share: the share of the systematic corner error locked to the pixel phase
-      (measure/covariance.py; 0: none).
+      (measure/covariance.py; 0: none);
+    - detect_uses_intrinsics: whether the detected corners depend on the camera intrinsics (circle centres
+      corrected for perspective, tag edges fitted in undistorted pixels): False lets a run re-measure the same
+      detections with other intrinsics instead of detecting again (default True: a kind that reads no intrinsics
+      says so).
     The kind's corner error model: :meth:`corner_info` (image-model Fisher information, default: a saddle
     corner) and :meth:`bias_columns` (detector-bias terms, default: none), from :mod:`.image_model`.
     """
@@ -63,6 +67,7 @@ class TargetKind:
     auto_refine = "none"
     auto_extra_subpix = False
     phase_locked_share = 0.0
+    detect_uses_intrinsics = True
 
     @property
     def keys(self) -> tuple[str, ...]:

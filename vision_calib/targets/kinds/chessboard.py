@@ -77,6 +77,7 @@ class ChessboardKind(SquareCorners, TargetKind):
     spec_class = ChessboardSpec
     required = ("square_m",)
     auto_extra_subpix = False
+    detect_uses_intrinsics = False
     sb_flags = SB_FLAGS
     classic_flags = CLASSIC_FLAGS
 

@@ -1,0 +1,107 @@
+"""``process`` of a recorded folder against its detection floor (issue 35: measure once).
+
+    PYTHONPATH=. .venv/bin/python benchmarks/bench_process_once.py [--poses 16] [--frames 2] [--fx-error 0.05]
+                                                                   [--folder DIR ...] [--repeat 3]
+
+Folders: a simulated RX-90 eye-in-hand recording (``--poses`` x ``--frames``, rendered here, not timed) whose
+recording.yaml gives fx, fy ``--fx-error`` off, so that ``process`` runs the cause test (both hypotheses on the
+intrinsics, :mod:`vision_calib.experiment.cause`), the same folder with the true intrinsics, and any ``--folder``
+given (a recorded folder, e.g. one ``import-rosi`` / ``import-visp`` wrote).
+
+Per folder, measured in this run: the floor, every pose's images decoded, detected and solved by PnP once
+(``measure.measure_images`` per pose, the recording's intrinsics), and ``process`` (``process_folder``, no plots),
+each the best of ``--repeat`` runs; the ratio process / floor, and the images read and detections made during
+``process`` (counted, each once is the target).
+"""
+
+from __future__ import annotations
+
+import vision_calib.cli  # noqa: F401  (single-threaded BLAS, as the CLI runs)
+
+import argparse
+import importlib
+import os
+import shutil
+import tempfile
+import time
+from pathlib import Path
+
+import yaml
+
+from vision_calib.experiment.process import process_folder
+from vision_calib.experiment.simulate import run_simulation
+from vision_calib.io.recording import read_recording
+from vision_calib.measure import measure_images
+
+SCENE = Path(__file__).resolve().parents[1] / "scenes" / "rx90_eye_in_hand.yaml"
+D = importlib.import_module("vision_calib.measure.detect")
+
+
+def floor_s(folder: Path) -> float:
+    """Seconds to decode, detect and solve PnP once per image of a recorded folder (its intrinsics)."""
+    rec = read_recording(folder)
+    t0 = time.perf_counter()
+    for pid in rec.pose_ids:
+        if rec.images.get(pid):
+            measure_images([str(f) for f in rec.images[pid]], rec.target, rec.camera, pose_id=pid,
+                           config=rec.measure_config())
+    return time.perf_counter() - t0
+
+
+def process_s(folder: Path, out: Path) -> tuple[float, dict, int, int]:
+    """(seconds, report, images decoded, corner detections run) of one ``process_folder``."""
+    loads, finds, load, find = [0], [0], D.load_gray, D._find_corners
+
+    def counted_load(*a, **k):
+        loads[0] += 1
+        return load(*a, **k)
+
+    def counted_find(*a, **k):
+        finds[0] += 1
+        return find(*a, **k)
+
+    D.load_gray, D._find_corners = counted_load, counted_find
+    try:
+        t0 = time.perf_counter()
+        rep = process_folder(folder, out, plots=False)
+        return time.perf_counter() - t0, rep, loads[0], finds[0]
+    finally:
+        D.load_gray, D._find_corners = load, find
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--poses", type=int, default=16)
+    ap.add_argument("--frames", type=int, default=2)
+    ap.add_argument("--fx-error", type=float, default=0.05)
+    ap.add_argument("--folder", nargs="*", default=[])
+    ap.add_argument("--repeat", type=int, default=3)
+    a = ap.parse_args()
+    print(f"load average {os.getloadavg()[0]:.2f} (2 cores shared: wall times move with it)")
+    with tempfile.TemporaryDirectory() as tmp:
+        d = Path(tmp)
+        run_simulation(SCENE, out_dir=d / "sim", seed=7, n_poses=a.poses, frames=a.frames, export_recording=d / "rec",
+                       workers=1, progress=False, plots=False)
+        bad = d / "rec_fx"
+        shutil.copytree(d / "rec", bad)
+        doc = yaml.safe_load((bad / "recording.yaml").read_text())
+        doc["camera"] = {**doc["camera"], "fx": doc["camera"]["fx"] * (1 + a.fx_error),
+                         "fy": doc["camera"]["fy"] * (1 + a.fx_error)}
+        (bad / "recording.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
+        folders = [(f"simulated RX-90, {a.poses} poses x {a.frames} frame(s), fx {a.fx_error:+.0%}", bad),
+                   (f"simulated RX-90, {a.poses} poses x {a.frames} frame(s), true intrinsics", d / "rec"),
+                   *((str(f), Path(f)) for f in a.folder)]
+        for name, folder in folders:
+            n_img = sum(len(v) for v in read_recording(folder).images.values())
+            fl = min(floor_s(folder) for _ in range(a.repeat))
+            runs = [process_s(folder, d / "out") for _ in range(a.repeat)]
+            wall, rep, n_load, n_find = min(runs, key=lambda r: r[0])
+            cause = (rep.get("cause") or {}).get("chosen")
+            print(f"{name}: {n_img} images; floor (decode + detect + PnP once each) {fl:.3f} s; process "
+                  f"{wall:.3f} s = {wall / fl:.2f} x the floor; during process {n_load} decodes, {n_find} detections"
+                  f" ({n_load / n_img:.2f}, {n_find / n_img:.2f} per image); cause test: "
+                  f"{'not run' if cause is None else 'chosen ' + cause}")
+
+
+if __name__ == "__main__":
+    main()
