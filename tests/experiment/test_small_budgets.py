@@ -3,6 +3,7 @@ can fail on the rotation noise of single frames, still gives a robot better than
 a fit grossly inconsistent with its data (residuals far above the noise AND the two methods disagreeing) is never
 written, whatever its held-out prediction of the measured poses says."""
 
+from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -66,15 +67,22 @@ def _holdout(after_mm, mounts_mm, mounts_change):
 
 
 def test_the_calibrated_robot_must_beat_the_mounts_only_calibration_on_held_out_poses():
-    from vision_calib.experiment.holdout import holdout_decision
+    from vision_calib.experiment.holdout import holdout_decision, with_holdout_warning
 
     ok = holdout_decision(_holdout(0.1, 0.8, (-0.8, -0.2)), [])
     assert ok["ok"] and "against the mounts-only calibration" in ok["reason"]
     worse = holdout_decision(_holdout(0.3, 0.2, (0.02, 0.17)), [])
     assert not worse["ok"] and "worse in position than the nominal robot with only its mounts" in worse["reason"]
-    same = holdout_decision(_holdout(0.2, 0.2, (-0.05, 0.05)), [])
-    assert not same["ok"] and "does not predict held-out poses better than the nominal robot with only its mounts" \
-        in same["reason"] and "more poses" in same["reason"]
+    same = holdout_decision(_holdout(0.2, 0.2, (-0.05, 0.05)), [])  # no evidence either way: a warning
+    assert same["ok"] and "not predict held-out poses significantly better than the nominal robot with only its " \
+        "mounts" in same["warning"] and "more poses" in same["warning"]
+    @dataclass(frozen=True)
+    class _Result:  # the one field with_holdout_warning touches
+        warnings: tuple
+
+    res = _Result(("w0",))
+    assert with_holdout_warning(res, {"decision": same}).warnings == ("w0", same["warning"])
+    assert with_holdout_warning(res, {"decision": ok}) is res and with_holdout_warning(res, None) is res
     plain = _holdout(0.2, 0.2, (-0.05, 0.05))
     del plain["mounts_only"]  # no baseline (a base set of mounts only, or of robot parameters only)
     assert holdout_decision(plain, [])["ok"]

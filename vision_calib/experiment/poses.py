@@ -24,7 +24,7 @@ from ..io.report import build_report, parameters_table, residual_stats, write_re
 from .checks import (copies_warning, drop_copies, drop_inconsistent, duplicate_poses, handeye_motions, motion_verdict,
                      pair_copies)
 from .gross import gross_failure
-from .holdout import flagged_labels, holdout_failure, holdout_lines, holdout_validation
+from .holdout import flagged_labels, holdout_failure, holdout_lines, holdout_validation, with_holdout_warning
 from .steps import check_method, identify_measurements, inconsistency_failure
 
 
@@ -91,6 +91,7 @@ def process_poses(path: str | Path, out_dir: str | Path | None, method: str | No
         mp.scene.setup, meas, method, residual, rep, folds, mp.seed, outliers=flagged_labels(meas, ident.rejected),
         tcp=tcp, result=result, fitted_setup=setup)
     failure = failure or inconsistency_failure(ident) or holdout_failure(hold)
+    result = with_holdout_warning(result, hold)
     ps = setup.params
     n = len(mp.ids)
     report = build_report(

@@ -25,7 +25,7 @@ from ..io.report import (REPORT_VERSION, build_report, measurements_block, param
 from ..rig import Measurements, load_scene
 from .checks import drop_copies, duplicate_poses, screen_measurements
 from .gross import gross_failure
-from .holdout import flagged_labels, holdout_failure, holdout_lines, holdout_validation
+from .holdout import flagged_labels, holdout_failure, holdout_lines, holdout_validation, with_holdout_warning
 from .steps import check_method, identify_measurements, inconsistency_failure, rejection_summary
 
 if TYPE_CHECKING:  # the measure package is imported where poses are measured
@@ -235,6 +235,7 @@ def fit_measured(m: Measured, out_dir: str | Path | None, method: str | None = N
                                                    outliers=flagged_labels(meas, ident.rejected), tcp=tcp, result=result,
                                                    fitted_setup=setup)
     failure = failure or inconsistency_failure(ident) or holdout_failure(hold)
+    result = with_holdout_warning(result, hold)
     cam_fit = None
     if ident.nuisance is not None:
         cam_fit = fitted_camera(rec.camera, used, ident.nuisance["coefficients"])

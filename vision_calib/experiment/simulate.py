@@ -26,7 +26,7 @@ from ..io.report import REPORT_VERSION, build_report, measurements_block, parame
 from ..rig import Measurements, Scene, SCENES_DIR, load_scene, scene_poses
 from .image_chain import ImageChain, ImagePool, InlineImagePool, measure_poses, start_fork_server
 from .checks import screen_measurements
-from .holdout import flagged_labels, holdout_failure, holdout_lines, holdout_validation
+from .holdout import flagged_labels, holdout_failure, holdout_lines, holdout_validation, with_holdout_warning
 from .steps import (check_method, identify_measurements, inconsistency_failure, rejection_summary, rngs,
                     run_analysis_and_truth, shared_truth, unmodelled_truth)
 from .synthetic import run_synthetic
@@ -290,6 +290,7 @@ def run_simulation(scene: Scene | str | Path, out_dir: str | Path | None = None,
         t = time.perf_counter()
         hold = holdout_validation(scene.setup, meas_used, method, residual, ident.analysis, folds, seed,
                                   outliers=flagged_labels(meas_used, ident.rejected), tcp=tcp, result=result, fitted_setup=setup)
+        result = with_holdout_warning(result, hold)
         timings["holdout"] = time.perf_counter() - t
         if val_job is not None:
             val_meas, val_idx, val_pms, T_val = val_job.result()
