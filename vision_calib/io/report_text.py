@@ -58,6 +58,7 @@ FIGURE_LABELS = {
     "position_mean_mm": ("position mean", "mm", 1.0),
     "position_rms_mm": ("position RMS", "mm", 1.0),
     "position_max_mm": ("position max", "mm", 1.0),
+    "position_rms_registered_mm": ("position RMS after a rigid registration", "mm", 1.0),
     "position_p95_mm": ("position 95th percentile", "mm", 1.0),
     "rotation_p95_deg": ("rotation 95th percentile", "deg", 1.0),
     "position_median_mm": ("position std, median", "mm", 1.0),
