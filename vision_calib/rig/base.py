@@ -24,6 +24,7 @@ from numpy.typing import ArrayLike
 from .. import frames as F
 from ..camera import CameraIntrinsics
 from ..errors import ConfigError, DataError
+from ..identify.handeye_problem import nearest_rotation
 from ..identify.problem import IdentificationProblem
 from ..kinematics.params import ParameterSet
 
@@ -134,9 +135,8 @@ class Evaluation:
             return float("nan")
         P = P_true + self.errors[:, :3]
         pc, qc = P.mean(axis=0), P_true.mean(axis=0)
-        U, _, Vt = np.linalg.svd((P - pc).T @ (P_true - qc))
-        D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
-        aligned = (P - pc) @ (U @ D @ Vt) + qc
+        R = nearest_rotation((P_true - qc).T @ (P - pc))  # Kabsch: the rotation taking P - pc onto P_true - qc
+        aligned = (P - pc) @ R.T + qc
         return float(np.sqrt(np.mean(np.sum((aligned - P_true) ** 2, axis=1)))) * 1e3
 
     def __getitem__(self, key: str) -> float:
