@@ -160,8 +160,20 @@ def close_groups(J: np.ndarray, tol: float) -> np.ndarray:
     return np.array([ids[r] for r in roots], int)
 
 
-def _copy_chi2(meas: Measurements, i: int, j: int) -> float:
-    return pose_chi2(meas.T_cam_target[i], meas.T_cam_target[j], meas.cov[i], meas.cov[j])
+def first_of_copies(groups, gap) -> tuple[list[int], list[tuple[int, int, str]]]:
+    """(indices kept, [(copy, its original, gap text)]) of N items in ``groups`` (N,) (the same robot pose): item i
+    is a copy of an earlier kept item k of its group when ``gap(k, i)`` returns a text (how close they are), else
+    None; the first of each set is kept. The rule of :func:`drop_copies` (joints) and :func:`pair_copies` (flange
+    poses)."""
+    kept, copies, members = [], [], {}
+    for i, g in enumerate(groups):
+        hit = next(((k, w) for k in members.get(g, ()) if (w := gap(k, i)) is not None), None)
+        if hit is None:
+            kept.append(i)
+            members.setdefault(g, []).append(i)
+        else:
+            copies.append((i, hit[0], hit[1]))
+    return kept, copies
 
 
 def pose_chi2(Ta, Tb, Ca, Cb) -> float:
@@ -179,20 +191,18 @@ def drop_copies(meas: Measurements) -> tuple[Measurements, list[tuple[str, str]]
     from its own copy. The first of each set is kept."""
     groups = same_joint_groups(meas)
     labels = meas.labels or tuple(str(k) for k in range(len(groups)))
-    kept, copies = [], []
-    members: dict = {}
-    for i, g in enumerate(groups):
-        orig = next((k for k in members.get(g, ()) if _copy_chi2(meas, k, i) < COPY_CHI2), None)
-        if orig is None:
-            kept.append(i)
-            members.setdefault(g, []).append(i)
-        else:
-            copies.append((str(labels[i]), f"{COPY_REASON} {labels[orig]} (the same joints and measured pose, within "
-                                           f"{np.sqrt(_copy_chi2(meas, orig, i)):.2g} sigma): one measurement under "
-                                           "two ids, counted once"))
-    if not copies:
+    T, C = meas.T_cam_target, meas.cov
+
+    def gap(k, i):
+        c2 = pose_chi2(T[k], T[i], C[k], C[i])
+        return f"{np.sqrt(c2):.2g} sigma" if c2 < COPY_CHI2 else None
+
+    kept, found = first_of_copies(groups, gap)
+    if not found:
         return meas, []
-    return meas.subset(kept), copies
+    return meas.subset(kept), [(str(labels[i]), f"{COPY_REASON} {labels[k]} (the same joints and measured pose, "
+                                                f"within {w}): one measurement under two ids, counted once")
+                               for i, k, w in found]
 
 
 def copies_warning(rejected, same: str) -> list[str]:
@@ -305,7 +315,6 @@ def pair_copies(T_base_flange, T_cam_target, cov, labels) -> tuple[list[int], li
     :data:`COPY_RAD` (none) is one measurement under two ids (the same rule as :func:`drop_copies`): counted once,
     else the std come out 1/sqrt(2) too small. The first of each set is kept."""
     M = np.asarray(T_cam_target, float)
-    kept, copies, members = [], [], {}
 
     def gap(k, i) -> str | None:  # how close pair i is to pair k when it is a copy of it, else None
         if cov is not None:
@@ -316,15 +325,9 @@ def pair_copies(T_base_flange, T_cam_target, cov, labels) -> tuple[list[int], li
             return f"{d[:3].max() * 1e3:.2g} mm, {np.degrees(d[3:].max()):.2g} deg"
         return None
 
-    for i, g in enumerate(flange_groups(T_base_flange)):
-        hit = next(((k, w) for k in members.get(g, ()) if (w := gap(k, i)) is not None), None)
-        if hit is None:
-            kept.append(i)
-            members.setdefault(g, []).append(i)
-        else:
-            copies.append((str(labels[i]), f"{COPY_REASON} {labels[hit[0]]} (the same flange pose and measured pose, "
-                                           f"within {hit[1]}): one measurement under two ids, counted once"))
-    return kept, copies
+    kept, found = first_of_copies(flange_groups(T_base_flange), gap)
+    return kept, [(str(labels[i]), f"{COPY_REASON} {labels[k]} (the same flange pose and measured pose, within {w}): "
+                                   "one measurement under two ids, counted once") for i, k, w in found]
 
 
 def handeye_motions(T_base_flange, mount: str, labels, where: str) -> dict:
