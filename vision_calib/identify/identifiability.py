@@ -226,6 +226,36 @@ def row_compressed(A: np.ndarray) -> np.ndarray:
     return scipy.linalg.qr(A, mode="r", check_finite=False)[0][:A.shape[1]]
 
 
+#: poses per block in :func:`compressed_whitened_jacobian`'s Gram matrix (a block's rows stay in cache)
+GRAM_BLOCK_POSES = 2048
+
+
+def compressed_whitened_jacobian(problem: IdentificationProblem, J: np.ndarray, scale: np.ndarray,
+                                 W: np.ndarray | None = None) -> np.ndarray:
+    """:func:`row_compressed` of the whitened free Jacobian with columns times ``scale`` (n_free,) from J
+    (n_obs, m, n), its Gram matrix summed over blocks of :data:`GRAM_BLOCK_POSES` poses (no (N, n_free) copy
+    held when the factor is well conditioned; else the Householder QR of the whole matrix, as row_compressed)."""
+    W = problem.whitening() if W is None else W
+    fi = problem.params.free_index
+    n_obs, m = J.shape[:2]
+    if n_obs * m + problem.n_prior <= fi.size:
+        return whitened_free_jacobian(problem, J, W) * scale[None, :]
+    G = np.zeros((fi.size, fi.size))
+    for a in range(0, n_obs, GRAM_BLOCK_POSES):
+        Aw = np.matmul(W[a:a + GRAM_BLOCK_POSES], J[a:a + GRAM_BLOCK_POSES][:, :, fi]).reshape(-1, fi.size) * scale
+        G += Aw.T @ Aw
+    if problem.prior_rows:
+        P = problem.prior_jacobian() * scale[None, :]
+        G += P.T @ P
+    try:
+        R = np.linalg.cholesky(G).T
+        if np.all(np.isfinite(R)) and np.linalg.cond(R) < GRAM_COND_MAX:
+            return R
+    except np.linalg.LinAlgError:
+        pass
+    return row_compressed(whitened_free_jacobian(problem, J, W) * scale[None, :])
+
+
 def observability_indices(s: np.ndarray, n_poses: int) -> dict[str, float]:
     """O1..O5 from singular values s (L,) (descending or not) and the number of poses M (see module doc)."""
     s = np.sort(np.asarray(s, float))[::-1]
@@ -329,8 +359,7 @@ def analyze(
         )
     J = check_problem(problem, x)[1] if jacobian is None else jacobian
     scale = params.scale[params.free_index]
-    A = whitened_free_jacobian(problem, J) * scale[None, :]
-    A = row_compressed(A)  # everything below reads only column norms, spans, fits and singular values
+    A = compressed_whitened_jacobian(problem, J, scale)  # below: only column norms, spans, fits, singular values
     col_norms = np.linalg.norm(A, axis=0)
     if normalize:
         A = A / np.where(col_norms > 0, col_norms, 1.0)[None, :]

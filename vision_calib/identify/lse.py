@@ -27,8 +27,8 @@ from numpy.typing import ArrayLike
 from scipy.optimize import least_squares
 
 from ..errors import ConfigError, DataError, ParameterError, VisionCalibError
-from .identifiability import (IdentifiabilityReport, analyze, base_problem, check_problem, pose_labels,
-                              row_compressed, whitened_free_jacobian)
+from .identifiability import (GRAM_COND_MAX, IdentifiabilityReport, analyze, base_problem, check_problem,
+                              pose_labels, row_compressed, whitened_free_jacobian)
 from .problem import NOISE_ESTIMATED, STATUS_CONVERGED, STATUS_NOT_FINITE, IdentificationProblem, IdentificationResult
 from .threads import single_threaded_blas
 
@@ -130,8 +130,25 @@ def final_check(problem: IdentificationProblem, x: np.ndarray, cov: np.ndarray, 
 
 def covariance_from_jacobian(Jw_free: np.ndarray, scale_free: np.ndarray) -> tuple[np.ndarray, bool]:
     """(n_free, n_free) covariance (JwᵀJw)^-1 computed in scaled variables; returns (cov, full_rank)."""
-    rows = max(Jw_free.shape)
-    A = row_compressed(Jw_free * scale_free[None, :])
+    return _covariance_of_rows(row_compressed(Jw_free * scale_free[None, :]), max(Jw_free.shape), scale_free)
+
+
+def covariance_from_normal(A_z: np.ndarray, scale_free: np.ndarray, rows: int) -> np.ndarray | None:
+    """(n_free, n_free) covariance from the normal matrix A_z = (Jw S)^T (Jw S) (n_free, n_free) of the whitened
+    Jacobian in scaled variables (S = diag(scale_free)) over ``rows`` equations: the same numbers as
+    :func:`covariance_from_jacobian` takes from its Cholesky factor (``row_compressed``); None when that factor
+    is not finite or its condition number is above ``GRAM_COND_MAX`` (then the Jacobian itself is needed)."""
+    try:
+        R = np.linalg.cholesky(A_z).T
+    except np.linalg.LinAlgError:
+        return None
+    if not (np.all(np.isfinite(R)) and np.linalg.cond(R) < GRAM_COND_MAX):
+        return None
+    cov, full = _covariance_of_rows(R, rows, scale_free)
+    return cov if full else None
+
+
+def _covariance_of_rows(A: np.ndarray, rows: int, scale_free: np.ndarray) -> tuple[np.ndarray, bool]:
     U, s, Vt = np.linalg.svd(A, full_matrices=False)
     tol = rows * np.finfo(float).eps * 1e3 * (s[0] if s.size else 0.0)
     full = bool(s.size and s[-1] > tol)
@@ -284,14 +301,20 @@ def solve_lse(
         return whitened_free_jacobian(problem, problem.jacobian(x_of(z)), W) * s[None, :]
 
     cost0 = whitened_cost(problem, x0, W)
-    if method == "lm" and jac == "analytic":  # the normal equations in BLAS: no O(rows x n^2) QR per iteration
-        sol = levenberg_marquardt(fun, jac_fn, np.zeros(fi.size), max_nfev, xtol, ftol, gtol)
+    cov = J = None
+    if method == "lm" and jac == "analytic":  # the normal equations in BLAS, accumulated over blocks of poses
+        sol = levenberg_marquardt(fun, None, np.zeros(fi.size), max_nfev, xtol, ftol, gtol,
+                                  normal=normal_equations(problem, W, x_of, s))
+        if sol.A is not None:
+            cov = covariance_from_normal(sol.A, s, problem.n_obs * problem.m + problem.n_prior)
     else:
         sol = least_squares(fun, np.zeros(fi.size), jac=jac_fn if jac == "analytic" else jac, method=method,
                             loss=loss, f_scale=f_scale, max_nfev=max_nfev, xtol=xtol, ftol=ftol, gtol=gtol)
     x = x_of(sol.x)
-    J = _jacobian_or_nan(problem, x)
-    cov, warnings = _lse_covariance(problem, J, W, s, sol.cost if scale_cov_by_residual else None, warnings)
+    if cov is None:  # no normal matrix at the solution, or an ill-conditioned one: the whole Jacobian (SVD)
+        J = _jacobian_or_nan(problem, x)
+    cov, warnings = _lse_covariance(problem, J, W, s, sol.cost if scale_cov_by_residual else None, warnings,
+                                    cov=cov)
     converged = bool(sol.status > 0)
     info = {
         "nfev": int(sol.nfev),
@@ -322,6 +345,9 @@ class LMResult:
     message: str
     nfev: int
     njev: int
+    #: (n, n) normal matrix J^T J at the last iterate before the final Gauss-Newton step (that step moves by
+    #: rounding: the covariance at the solution); None when the normal equations were not given
+    A: np.ndarray | None = None
 
 
 #: levenberg_marquardt's termination messages by status (MINPACK's meaning of the three tolerances)
@@ -336,7 +362,7 @@ LM_MESSAGES = {0: "the maximum number of function evaluations is exceeded",
 LM_LAMBDA0 = 1e-6
 
 
-def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gtol=1e-12) -> LMResult:
+def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gtol=1e-12, normal=None) -> LMResult:
     """Minimise 0.5 |fun(z)|^2 (fun: (n,) -> (M,), jac: (n,) -> (M, n)) from z0 (n,) by Levenberg-Marquardt on the
     normal equations: per iteration J^T J and J^T r (two BLAS products over the M rows) and an (n, n) Cholesky
     solve of (S J^T J S + lam I) y = -S J^T r, dz = S y, S = diag(J^T J)^-1/2 (running maximum, MINPACK's scaling,
@@ -345,8 +371,10 @@ def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gto
     a column, ftol on the actual and predicted relative reduction, xtol on the scaled step, then one Gauss-Newton
     step with the last Jacobian (kept when it does not raise the cost: the minimum to rounding, so that inputs
     equal to rounding give answers equal to rounding through iterated fits); max_nfev (default
-    100 (n + 1)) evaluations of fun. Returns an :class:`LMResult` (status 1-4 converged, 0 out of evaluations, -1
-    a non-finite Jacobian)."""
+    100 (n + 1)) evaluations of fun. ``normal`` (z, r) -> (J^T J (n, n), J^T r (n,)), when given, replaces jac
+    (a problem too large to hold J: :func:`normal_equations`); the final Gauss-Newton step then takes the normal
+    equations at the last iterate, and the result carries them (``A``). Returns an :class:`LMResult` (status
+    1-4 converged, 0 out of evaluations, -1 a non-finite Jacobian)."""
     from scipy.linalg import LinAlgError, cho_factor, cho_solve
 
     z = np.asarray(z0, float).copy()
@@ -358,9 +386,12 @@ def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gto
     d2 = np.zeros(n)
     lam, status = None, 0
     while True:
-        J = np.asarray(jac(z), float)
+        if normal is None:
+            J = np.asarray(jac(z), float)
+            A, g = J.T @ J, J.T @ r
+        else:
+            A, g = normal(z, r)
         njev += 1
-        A, g = J.T @ J, J.T @ r
         if not (np.all(np.isfinite(A)) and np.all(np.isfinite(g))):
             return LMResult(z, cost, -1, "the Jacobian is not finite at the current point", nfev, njev)
         diag = np.diag(A).copy()
@@ -398,17 +429,24 @@ def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gto
                 lam *= 4.0
             if f_ok or x_ok:
                 status = 4 if f_ok and x_ok else (2 if f_ok else 3)
+                A_end = None
                 if rho > 1e-4 and nfev < max_nfev:  # a last Gauss-Newton step with the Jacobian at hand (chord)
                     try:
-                        dz = -cho_solve(cho_factor(A), J.T @ r)
+                        if normal is None:
+                            gr = J.T @ r
+                        else:  # no J kept: the normal equations at the last iterate (also its covariance)
+                            A, gr = normal(z, r)
+                            njev += 1
+                            A_end = A if np.all(np.isfinite(A)) and np.all(np.isfinite(gr)) else None
+                        dz = -cho_solve(cho_factor(A), gr)
                         r2 = np.asarray(fun(z + dz), float)
                         nfev += 1
                         c2 = 0.5 * float(r2 @ r2) if np.all(np.isfinite(r2)) else np.inf
                         if c2 <= cost:
                             z, r, cost = z + dz, r2, c2
-                    except LinAlgError:
+                    except (LinAlgError, ValueError):
                         pass
-                return LMResult(z, cost, status, LM_MESSAGES[status], nfev, njev)
+                return LMResult(z, cost, status, LM_MESSAGES[status], nfev, njev, A_end)
             if nfev >= max_nfev:
                 return LMResult(z, cost, 0, LM_MESSAGES[0], nfev, njev)
             if rho > 1e-4:
@@ -416,16 +454,53 @@ def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gto
     return LMResult(z, cost, status, LM_MESSAGES[status], nfev, njev)
 
 
-def _lse_covariance(problem, J, W, s, cost, warnings):
-    """(cov (n_free, n_free) SI, warnings list) from J (n_obs, m, n) at the solution; NaN when J is not
-    finite; multiplied by 2 cost / dof when ``cost`` is given (a-posteriori variance factor)."""
-    Jw = whitened_free_jacobian(problem, J, W)
+#: poses per block of :func:`normal_equations`: a block's whitened Jacobian (block x m x n_params doubles, ~4 MB at
+#: 2048 x 6 x 40) stays in cache, and no (N, m, n) Jacobian is ever held
+NORMAL_BLOCK_POSES = 2048
+
+
+def normal_equations(problem: IdentificationProblem, W: np.ndarray, x_of, s: np.ndarray,
+                     block: int = NORMAL_BLOCK_POSES):
+    """(z, r) -> (A (n_free, n_free), g (n_free,)): J^T J and J^T r of the whitened, scaled residual
+    ``fun`` of :func:`solve_lse` at z (r: its (n_obs m + n_prior,) value at z), accumulated over blocks of
+    ``block`` poses (``problem.jacobian(x, idx)``; one block: the whole Jacobian, which the problem may hold
+    from its last call at that x), the prior rows last. W (n_obs, m, m) whitening, x_of: z -> x (n,), s
+    (n_free,) scales."""
+    fi = problem.params.free_index
+    n_obs, m = problem.n_obs, problem.m
+    starts = range(0, n_obs, block)
+    P = problem.prior_jacobian() * s[None, :] if problem.prior_rows else None
+
+    def normal(z, r):
+        x = x_of(z)
+        A = np.zeros((fi.size, fi.size))
+        g = np.zeros(fi.size)
+        for a in starts:
+            b = min(a + block, n_obs)
+            J = problem.jacobian(x) if b - a == n_obs else problem.jacobian(x, np.arange(a, b))
+            Jw = np.matmul(W[a:b], np.asarray(J, float)[:, :, fi]).reshape(-1, fi.size) * s[None, :]
+            A += Jw.T @ Jw
+            g += Jw.T @ r[a * m:b * m]
+        if P is not None:
+            A += P.T @ P
+            g += P.T @ r[n_obs * m:]
+        return A, g
+
+    return normal
+
+
+def _lse_covariance(problem, J, W, s, cost, warnings, cov=None):
+    """(cov (n_free, n_free) SI, warnings list) from J (n_obs, m, n) at the solution (or ``cov`` already
+    taken from the normal matrix there, :func:`covariance_from_normal`); NaN when J is not finite; multiplied
+    by 2 cost / dof when ``cost`` is given (a-posteriori variance factor)."""
     warnings = list(warnings)
-    if not np.all(np.isfinite(Jw)):
-        return np.full((s.size, s.size), np.nan), warnings
-    cov, full_rank = covariance_from_jacobian(Jw, s)
-    if not full_rank:
-        warnings.append("Jacobian at the solution is rank deficient: covariance is a pseudo-inverse")
+    if cov is None:
+        Jw = whitened_free_jacobian(problem, J, W)
+        if not np.all(np.isfinite(Jw)):
+            return np.full((s.size, s.size), np.nan), warnings
+        cov, full_rank = covariance_from_jacobian(Jw, s)
+        if not full_rank:
+            warnings.append("Jacobian at the solution is rank deficient: covariance is a pseudo-inverse")
     dof = problem.n_obs * problem.m + problem.n_prior - s.size
     if cost is not None and dof > 0:
         cov = cov * (2.0 * float(cost) / dof)

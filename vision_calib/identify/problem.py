@@ -78,8 +78,12 @@ class IdentificationProblem:
         return int(self.obs_cov.shape[1])
 
     def with_params(self, params: ParameterSet) -> "IdentificationProblem":
-        """Same observations, another parameter set (e.g. other free mask / starting point)."""
-        return replace(self, params=params)
+        """Same observations, another parameter set (e.g. other free mask / starting point); the whitening
+        already computed is kept."""
+        out = replace(self, params=params)
+        if "_whitening" in self.__dict__:
+            object.__setattr__(out, "_whitening", self.__dict__["_whitening"])
+        return out
 
     def subset(self, idx: ArrayLike) -> "IdentificationProblem":
         """Problem restricted to observations ``idx`` (k,) int."""
@@ -126,9 +130,14 @@ class IdentificationProblem:
         return out
 
     def whitening(self) -> np.ndarray:
-        """(n_obs, m, m) matrices W with W @ cov @ W.T = I (inverse Cholesky factors)."""
-        L = np.linalg.cholesky(self.obs_cov)
-        return np.linalg.inv(L)
+        """(n_obs, m, m) matrices W with W @ cov @ W.T = I (inverse Cholesky factors); computed once per
+        problem (read-only: the problem is immutable)."""
+        W = self.__dict__.get("_whitening")
+        if W is None:
+            W = np.linalg.inv(np.linalg.cholesky(self.obs_cov))
+            W.flags.writeable = False
+            object.__setattr__(self, "_whitening", W)
+        return W
 
 
 @dataclass(frozen=True)
