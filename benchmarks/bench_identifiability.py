@@ -35,7 +35,7 @@ from vision_calib.identify.serial_problem import serial_problem
 from vision_calib.kinematics import h4_variants  # noqa: E402
 from vision_calib.kinematics.h4 import random_workspace_poses
 from vision_calib.kinematics.h4_io import load_h4_robot
-from vision_calib.kinematics.serial import load_serial_robot
+from vision_calib.kinematics.serial_file import load_serial_robot
 
 
 def _line(label, out):

@@ -8,7 +8,7 @@ import numpy as np
 from vision_calib.experiment.steps import plausibility_warnings
 from vision_calib.identify import solve_lse
 from vision_calib.identify.serial_problem import serial_problem, synthetic_pose_measurements
-from vision_calib.kinematics.serial import load_serial_robot
+from vision_calib.kinematics.serial_file import load_serial_robot
 
 ROBOTS = Path(__file__).resolve().parents[2] / "scenes" / "robots"
 

@@ -6,7 +6,7 @@ import pytest
 
 from vision_calib.rig import SCENES_DIR, load_scene, scene_poses, true_parameters
 from vision_calib.experiment.simulate import run_simulation
-from vision_calib.kinematics.serial import load_serial_robot
+from vision_calib.kinematics.serial_file import load_serial_robot
 from vision_calib.targets import load_target
 
 SCENES = ["thesis_arm_eye_in_hand.yaml", "thesis_arm_tripod_probe.yaml"]

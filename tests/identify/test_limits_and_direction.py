@@ -10,7 +10,7 @@ from vision_calib import frames
 from vision_calib.errors import DataError, ParameterError
 from vision_calib.identify import solve_lse
 from vision_calib.identify.serial_problem import serial_problem
-from vision_calib.kinematics.serial import load_serial_robot
+from vision_calib.kinematics.serial_file import load_serial_robot
 from vision_calib.rig import SCENES_DIR, load_scene
 
 ROBOTS = Path(__file__).resolve().parents[2] / "scenes" / "robots"

@@ -15,7 +15,7 @@ from vision_calib.identify.problem import NOISE_ESTIMATED
 from vision_calib.identify.serial_problem import serial_problem, synthetic_pose_measurements
 from vision_calib.kinematics.h4 import random_workspace_poses
 from vision_calib.kinematics.h4_io import load_h4_robot
-from vision_calib.kinematics.serial import load_serial_robot
+from vision_calib.kinematics.serial_file import load_serial_robot
 
 ROBOTS = Path(__file__).resolve().parents[2] / "scenes" / "robots"
 

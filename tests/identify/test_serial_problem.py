@@ -9,7 +9,8 @@ from vision_calib.errors import DataError, ParameterError
 from vision_calib.frames import pose_error
 from vision_calib.identify.problem import IdentificationProblem
 from vision_calib.identify.serial_problem import serial_problem, so3_right_jacobian_inv, synthetic_pose_measurements
-from vision_calib.kinematics.serial import load_serial_robot, so3_right_jacobian
+from vision_calib.kinematics.serial import so3_right_jacobian
+from vision_calib.kinematics.serial_file import load_serial_robot
 
 ROBOTS = Path(__file__).resolve().parents[2] / "scenes" / "robots"
 

@@ -10,7 +10,8 @@ from kin_helpers import fd_pose_jacobian
 
 from vision_calib.errors import ConfigError, DataError, ParameterError
 from vision_calib.frames import T_from_xyz_rpy, make_T, pose_error, rot_x, rot_y, rot_z
-from vision_calib.kinematics.serial import SerialChain, load_serial_robot, so3_exp, so3_right_jacobian
+from vision_calib.kinematics.serial import SerialChain, so3_exp, so3_right_jacobian
+from vision_calib.kinematics.serial_file import load_serial_robot
 
 ROBOTS = Path(__file__).resolve().parents[2] / "scenes" / "robots"
 ROBOT_FILES = ["rx90", "thesis_arm", "thesis_arm_camera_table", "thesis_arm_tripod_probe"]
@@ -360,7 +361,7 @@ def test_chain_is_immutable():
 
 
 def test_kinematics_imports_no_heavy_modules():
-    code = ("import sys; import vision_calib.kinematics.serial as s; "
+    code = ("import sys; import vision_calib.kinematics.serial_file as s; "
             "s.load_serial_robot(sys.argv[1]); "
             "bad = [m for m in ('cv2', 'torch', 'OpenGL', 'pyrender', 'kornia') if m in sys.modules]; "
             "assert not bad, bad")

@@ -83,7 +83,8 @@ def cmd_plan(args) -> int:
     import numpy as np
 
     from ..config import check_output_apart
-    from ..planning.plan import DEFAULT_CANDIDATES, CandidateSource, check_poses, plan_cell
+    from ..planning.check import check_poses
+    from ..planning.plan import DEFAULT_CANDIDATES, CandidateSource, plan_cell
     from ..planning.predict import DRAWS
     from ..rig import load_scene
     from ..serialize import to_json

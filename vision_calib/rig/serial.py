@@ -241,7 +241,7 @@ class SerialSetup(Setup):
     @classmethod
     def load_chain(cls, ctx):
         """The robot file's chain (MDH robot YAML)."""
-        from ..kinematics.serial import load_serial_robot
+        from ..kinematics.serial_file import load_serial_robot
 
         return load_serial_robot(ctx.robot_path)
 
@@ -262,7 +262,7 @@ class SerialSetup(Setup):
     @classmethod
     def load_model(cls, doc: Section, robot_path: Path) -> ChainModel:
         """The robot of a calibrated-model file (``io.model_export``), nominal values still to set."""
-        from ..kinematics.serial import load_serial_robot
+        from ..kinematics.serial_file import load_serial_robot
 
         return cls._model_mounts(load_serial_robot(robot_path), doc)
 
