@@ -236,14 +236,19 @@ def projected_remeasure(target, camera, T_cam_target: dict):
         ok = (z > 0) & (uv[:, 0] >= 0) & (uv[:, 1] >= 0) & (uv[:, 0] < camera.width) & (uv[:, 1] < camera.height)
         return uv, ok
 
+    base = {}  # label -> (projected corners, inv(PnP with ``camera``) @ T): the same for every shifted camera
+
     def remeasure_with(cam, labels):
         out = []
         for lab in labels:
-            T = np.asarray(T_cam_target[lab], float)
-            uv = project(T)
-            if uv[1].sum() < 4:
+            if lab not in base:
+                T = np.asarray(T_cam_target[lab], float)
+                uv = project(T)
+                base[lab] = (uv, inv_T(pnp(uv, camera)) @ T if uv[1].sum() >= 4 else None)
+            uv, rest = base[lab]
+            if rest is None:
                 return None
-            out.append(pnp(uv, cam) @ inv_T(pnp(uv, camera)) @ T)
+            out.append(pnp(uv, cam) @ rest)
         return np.array(out)
 
     return remeasure_with
