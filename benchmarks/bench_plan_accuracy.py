@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from vision_calib.errors import ConfigError
 from vision_calib.experiment.simulate import run_simulation
 from vision_calib.planning.plan import plan_cell
 from vision_calib.rig import SCENES_DIR, load_scene
@@ -70,7 +71,11 @@ def main() -> None:
         rows = []
         for s in seeds(args.seeds):
             work = Path(tempfile.mkdtemp(prefix="bench_plan_"))
-            plan, tp = _plan_row(scene_path, args.poses, s, args.frames, work)
+            try:
+                plan, tp = _plan_row(scene_path, args.poses, s, args.frames, work)
+            except ConfigError as exc:  # e.g. a scene without camera or target: nothing to plan
+                print(f"{name}: not planned: {exc}", flush=True)
+                break
             pv = plan["design"]["predicted_validation_rms"]
             a = _run(work / "simulate_plan.yaml", s, args.frames)
             b = _run(baseline, s, args.frames, args.poses)
@@ -83,6 +88,8 @@ def main() -> None:
                   f"{a['validation_rms_mm'] / b['validation_rms_mm']:.3f}, predicted/simulated "
                   f"{pv['plan']['median_mm'] / a['validation_rms_mm']:.3f}"
                   + (f"; clearance {min(clear) * 1e3:.1f}-{max(clear) * 1e3:.1f} mm" if clear else ""), flush=True)
+        if not rows:
+            continue
         pr, sa, sb = (np.array(v, float) for v in zip(*rows))
         print(f"{name}: median over {len(rows)} seeds: plan/random {np.median(sa / sb):.3f} (medians "
               f"{np.median(sa):.4g} / {np.median(sb):.4g} mm -> {np.median(sa) / np.median(sb):.3f}); predicted/simulated "
