@@ -284,8 +284,8 @@ def _fake(*edges) -> list[Import]:
     return [Import(f"{PKG}.{a}", f"{PKG}.{b}" if b not in HEAVY else b, name, 1) for a, b, name in edges]
 
 
-GOOD = [("cli", "study.run", None), ("study.run", "experiment.steps", None), ("experiment.steps", "io.report", None),
-        ("io.report", "measure.pose", None), ("measure.pose", "rig.base", None), ("rig.base", "identify.lse", None),
+GOOD = [("cli", "study.run", None), ("study.run", "experiment.steps", None), ("experiment.steps", "report.build", None),
+        ("report.build", "measure.pose", None), ("measure.pose", "rig.base", None), ("rig.base", "identify.lse", None),
         ("identify.lse", "kinematics.serial", None), ("kinematics.serial", "config", None),
         ("config", "frames", None), ("frames", "errors", None)]
 

@@ -15,6 +15,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("sim",),
     ("planning",),
     ("experiment",),
+    ("report",),
     ("deploy",),
     ("io",),
     ("measure",),

@@ -105,7 +105,7 @@ def test_process_poses_on_pose_pairs_end_to_end(tmp_path, capsys):
     training fold, the held-out block against the closed form, the noise block, a report valid for the schema."""
     import jsonschema
 
-    from vision_calib.io.report import SCHEMA_PATH
+    from vision_calib.report.build import SCHEMA_PATH
 
     d = simulate_pose_pairs(30, 4, "fixed")
     M = d.T_cam_target.copy()

@@ -4,7 +4,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from vision_calib.io.report import summary_text, verdict
+from vision_calib.report.build import summary_text, verdict
 
 
 def _result(warnings):

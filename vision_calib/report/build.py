@@ -33,10 +33,10 @@ report.json, version 2 (each value once)::
                                                                  # process_handeye (experiment/handeye_step.py)
     warnings: [str]
     timings_s: {...}
-    files: {report, model, residuals_plot, html, ...}           # html: report.html (io/report_html.py)
+    files: {report, model, residuals_plot, html, ...}           # html: report.html (report/html.py)
 
 The machine-readable contract is the JSON Schema shipped beside this module (:data:`SCHEMA_PATH`,
-``report_schema.json``): the keys every kind always writes, their types, open blocks allowed to grow.
+``schema.json``): the keys every kind always writes, their types, open blocks allowed to grow.
 
 Changes from version 1: the parameter table is only in ``parameters`` (``identification.parameters``
 is gone); ``scene`` / ``folder`` moved under ``source``; ``verdict`` added.
@@ -51,14 +51,14 @@ from typing import Protocol
 import numpy as np
 
 from ..serialize import write_json_atomic, write_text_atomic
-from .model_export import write_calibrated_model
-from .portable import relative_source
-from .report_text import (KIND_UNITS, figure_label, fmt_sig, handeye_values, lack_of_fit_line,
+from ..io.model_export import write_calibrated_model
+from ..io.portable import relative_source
+from .text import (KIND_UNITS, figure_label, fmt_sig, handeye_values, lack_of_fit_line,
                           method_check_line)
 
 REPORT_VERSION = "2.0"
 #: JSON Schema (draft 2020-12) of report.json, shipped as package data
-SCHEMA_PATH = Path(__file__).with_name("report_schema.json")
+SCHEMA_PATH = Path(__file__).with_name("schema.json")
 
 
 class IdentifiedFit(Protocol):
@@ -91,7 +91,7 @@ def parameters_table(names, nominal, x_true, result, kinds=None) -> list[dict]:
 
 def parameter_table_text(rows: list[dict]) -> str:
     """The summary's parameter table of the identified (free) rows of :func:`parameters_table`: name, unit,
-    nominal, identified +- std (:func:`.report_text.fmt_sig`: 2 significant digits), and in simulation the true
+    nominal, identified +- std (:func:`.text.fmt_sig`: 2 significant digits), and in simulation the true
     value and z = (identified - true) / std; lengths in mm, angles in deg (rows without a unit: SI). Empty when
     nothing was identified."""
     free = [r for r in rows if r.get("free")]
@@ -136,7 +136,7 @@ def residual_stats(r, kind) -> dict:
 
 def residuals_line(res: dict) -> str:
     """One summary line of a :func:`residual_stats` block, each figure with what it is and its unit
-    (:func:`.report_text.figure_label`)."""
+    (:func:`.text.figure_label`)."""
     def part(k, vals):
         label, unit, f = figure_label(k)
         axes = "joints 1..n" if k.startswith("joint") else "x, y, z"
@@ -432,7 +432,7 @@ _ACCURACY_SHOWN = ("position_rms_mm", "position_max_mm", "rotation_rms_deg", "ro
 
 
 def _before_after(key: str, b: dict, a: dict, fmt: str) -> str:
-    """'label b -> a unit' of one figure key of two dicts, in its display unit (:func:`.report_text.figure_label`)."""
+    """'label b -> a unit' of one figure key of two dicts, in its display unit (:func:`.text.figure_label`)."""
     label, unit, f = figure_label(key)
     return f"{label} {b[key] * f:{fmt}} -> {a[key] * f:{fmt}}" + (f" {unit}" if unit else "")
 
@@ -510,7 +510,7 @@ def _add_joint_offsets(report: dict, model_path: Path) -> None:
     """The report's ``joint_offsets`` (the calibrated model file's: the joint-offset form a controller takes) and
     its summary line, where the robot has one; the joint offsets the identifiability reduction folded into other
     parameters are named as such (the offsets carry them)."""
-    from .model_export import OFFSET_CONVENTION, read_calibrated_model
+    from ..io.model_export import OFFSET_CONVENTION, read_calibrated_model
 
     cm = read_calibrated_model(model_path)
     if not cm.joint_offsets:
@@ -530,7 +530,7 @@ def write_report(out_dir, report: dict, setup=None, result=None, problem=None, e
                  plots: bool = True, overlays=None) -> Path:
     """report.json + summary.txt + report.html (+ calibrated_model.yaml with a setup; + residuals.png,
     parameters.png, and error_map.png with ``evaluations`` = {"before": Evaluation, "after": Evaluation}).
-    overlays: an ``io.overlay.OverlaySource`` (the images of the run's poses): report.html then shows what the
+    overlays: an ``report.overlay.OverlaySource`` (the images of the run's poses): report.html then shows what the
     detector found on the rejected and the worst poses. A plot, overlay or page that fails to be *drawn* costs a
     warning (in report.json and the printed summary), never the report. An output that cannot be *written* (an
     OSError: a full disk, a read-only folder) is an error, never a warning: the calibrated model files of this run
@@ -576,7 +576,7 @@ def write_report(out_dir, report: dict, setup=None, result=None, problem=None, e
         table = parameter_table_text(report.get("parameters") or [])
         write_text_atomic(out / "summary.txt", report.get("summary_text", "") + "\n" + (f"\n{table}\n" if table else ""))
         try:
-            from .report_html import write_report_html
+            from .html import write_report_html
 
             write_report_html(out, report, shown)
         except OSError:

@@ -5,7 +5,7 @@ residual histograms with labelled axes and a rotation row."""
 import numpy as np
 import pytest
 
-from vision_calib.io import plots
+from vision_calib.report import plots
 
 
 @pytest.fixture

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from vision_calib.camera import CameraIntrinsics
-from vision_calib.io.overlay import FULL_MAX_ENLARGE, FULL_MAX_WIDTH_PX, FULL_MIN_WIDTH_PX, MAX_WIDTH_PX, \
+from vision_calib.report.overlay import FULL_MAX_ENLARGE, FULL_MAX_WIDTH_PX, FULL_MIN_WIDTH_PX, MAX_WIDTH_PX, \
     build_overlays, draw_overlay, overlay_selection, recording_frames, OverlaySource
 from vision_calib.measure import Detection
 from vision_calib.rig import SCENES_DIR
