@@ -1,4 +1,4 @@
-"""The README's promises: its Python block (and the library block of docs/extending.md) runs as written (on a copy of the shipped example) and prints what its
+"""The README's promises: its Python block (and the library block of vision_calib/docs/extending.md) runs as written (on a copy of the shipped example) and prints what its
 comments say; .ci/run calls exactly the README's test command; every relative link of the README leads to a file."""
 
 import re
@@ -13,6 +13,7 @@ from vision_calib.rig import SCENES_DIR, load_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text()
+DOCS = ROOT / "vision_calib" / "docs"
 
 
 def _blocks(lang: str, text: str = README) -> list:
@@ -38,7 +39,7 @@ def test_python_block_runs(tmp_path):
 
 
 def test_library_block_of_docs_runs():
-    (code,) = _blocks("python", (ROOT / "docs" / "extending.md").read_text())
+    (code,) = _blocks("python", (ROOT / "vision_calib" / "docs" / "extending.md").read_text())
     p = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=300,
                        env={**__import__("os").environ, "PYTHONPATH": str(ROOT)})
     assert p.returncode == 0, p.stderr[-3000:]
@@ -56,6 +57,6 @@ def test_ci_runs_the_readme_test_command():
 
 
 def test_relative_links_exist():
-    for folder, text in [(ROOT, README)] + [(ROOT / "docs", p.read_text()) for p in (ROOT / "docs").glob("*.md")]:
+    for folder, text in [(ROOT, README)] + [(DOCS, p.read_text()) for p in DOCS.glob("*.md")]:
         for target in re.findall(r"\]\(([^)#:]+)(?:#[^)]*)?\)", text):
             assert (folder / target).exists(), f"{folder}: link to missing {target}"
