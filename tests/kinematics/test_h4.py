@@ -18,8 +18,8 @@ from vision_calib.kinematics.h4 import (
     model31_names,
     pose_grid_81,
     random_workspace_poses,
-    yaw_of,
 )
+from vision_calib.kinematics.h4_camera import yaw_of
 from vision_calib.kinematics.h4_io import load_h4_robot
 from vision_calib.frames import rot_x, rot_z
 
