@@ -19,7 +19,8 @@ from vision_calib.experiment.handeye_sim import TAG_STD_DEG, TAG_STD_MM, simulat
 from vision_calib.experiment.handeye_step import identify_handeye
 from vision_calib.experiment.poses import process_poses
 from vision_calib.identify.handeye_problem import mount_G, solve_handeye, x_from_transforms
-from vision_calib.io.measured_poses import read_measured_poses, write_pose_pairs
+from vision_calib.io.measured_poses import read_measured_poses
+from vision_calib.io.measured_poses_writer import write_pose_pairs
 from vision_calib.measure.handeye import closed_forms
 
 

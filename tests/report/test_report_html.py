@@ -19,7 +19,7 @@ import pytest
 
 from vision_calib.cli import main
 from vision_calib.report.overlay import FULL_MAX_ENLARGE, FULL_MIN_WIDTH_PX, MAX_WIDTH_PX
-from vision_calib.report.build import parameter_table_text, summary_text
+from vision_calib.report.summary import parameter_table_text, summary_text
 from vision_calib.report.html import handeye_section, parameters_section
 from vision_calib.report.text import FIGURE_LABELS
 from vision_calib.rig import SCENES_DIR

@@ -251,7 +251,7 @@ def _summary_identifiability(out: dict) -> str:
 
 
 def _summary_synthetic(out: dict) -> str:
-    from ..report.build import verdict_line
+    from ..report.summary import verdict_line
 
     b, a = out["accuracy"]["before"], out["accuracy"]["after"]
     return (

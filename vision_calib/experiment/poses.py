@@ -20,7 +20,8 @@ import numpy as np
 
 from ..errors import ConfigError, DataError, VisionCalibError
 from ..io.measured_poses import PosePairs, chain_direction, misreadings, read_measured_poses
-from ..report.build import build_report, parameters_table, residual_stats, write_report
+from ..report.build import build_report, parameters_table, residual_stats
+from ..report.write import write_report
 from .checks import (copies_warning, drop_copies, drop_inconsistent, duplicate_poses, handeye_motions, motion_verdict,
                      pair_copies)
 from .gross import gross_failure

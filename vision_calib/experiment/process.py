@@ -20,8 +20,8 @@ from ..errors import ConfigError, DataError, IdentifiabilityError
 from ..serialize import write_json_atomic
 from ..io.portable import relative_ref
 from ..io.recording import Recording, read_recording
-from ..report.build import (REPORT_VERSION, build_report, measurements_block, parameters_table, residual_stats,
-                         write_report)
+from ..report.build import REPORT_VERSION, build_report, measurements_block, parameters_table, residual_stats
+from ..report.write import write_report
 from ..rig import Measurements, load_scene
 from .checks import drop_copies, duplicate_poses, screen_measurements
 from .gross import gross_failure

@@ -22,7 +22,8 @@ import numpy as np
 from .. import frames as F
 from ..errors import DataError
 from ..serialize import write_json_atomic
-from ..report.build import REPORT_VERSION, build_report, measurements_block, parameters_table, write_report
+from ..report.build import REPORT_VERSION, build_report, measurements_block, parameters_table
+from ..report.write import write_report
 from ..rig import Measurements, Scene, SCENES_DIR, load_scene, scene_poses
 from .image_chain import ImageChain, ImagePool, InlineImagePool, measure_poses, start_fork_server
 from .checks import screen_measurements

@@ -130,7 +130,7 @@ def verdict_section(report: dict) -> str:
     v = report["verdict"]
     status = v.get("status", "ok" if v.get("ok") else "failed")
     state = STATE_WORDS.get(status, esc(status))
-    if status == "failed":  # as report.build.verdict_line names it
+    if status == "failed":  # as report.summary.verdict_line names it
         state += (f" ({esc(v['failure'])})" if v.get("failure") else ": not finite" if not v.get("finite", True)
                   else ": not converged")
     counts = (f"{v.get('n_rejected_poses', 0)} poses rejected ({v.get('n_outliers', 0)} as outliers); model "
@@ -200,7 +200,7 @@ def parameters_section(report: dict) -> str:
 def handeye_section(report: dict) -> str:
     he = report["handeye"]
     tf = he.get("transforms") or {}
-    # the two transforms the summary names (report.build: the identified A, B for eye-in-hand; else the base-camera
+    # the two transforms the summary names (report.summary: the identified A, B for eye-in-hand; else the base-camera
     # and flange-target ones); the inverses stay in report.json
     names = ((he.get("A"), he.get("B")) if (report.get("settings") or {}).get("mount") == "eye_in_hand"
              else ("T_base_cam", "T_flange_target"))
