@@ -124,7 +124,8 @@ def sh(cmd: str) -> Run:
 
 
 def run_python_block(page: str, marker: str) -> None:
-    """Run the ```python block of vision_calib/docs/PAGE that contains ``marker``, in the scratch folder (its ``out/``)."""
+    """Run the ```python block of vision_calib/docs/PAGE that contains ``marker``, in the scratch folder (its
+    ``out/``)."""
     blocks = re.findall(r"^```python\n(.*?)^```", (DOCS / page).read_text(), flags=re.S | re.M)
     (code,) = [b for b in blocks if marker in b]
     p = subprocess.run([sys.executable, "-c", code], cwd=scratch(), env=_env(), capture_output=True, text=True,

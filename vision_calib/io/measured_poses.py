@@ -1,5 +1,5 @@
 """Measured poses without images: joint readings + measured target/camera poses (or positions) from
-any pose logger, for ``vision-calib process-poses`` (format: ``docs/measured_poses.md``).
+any pose logger, for ``vision-calib process-poses`` (format: ``vision-calib docs measured_poses``).
 
 Two files: a YAML description and a CSV with one row per robot pose::
 
@@ -366,7 +366,8 @@ def _settings(top: Section):
         raise top.error("format", f"expected {FORMAT!r}, got {fmt!r}")
     for k in PAIR_KEYS:
         if k in top:
-            raise top.error(k, "belongs to a pose-pair file (flange_poses instead of scene: docs/measured_poses.md)")
+            raise top.error(k, "belongs to a pose-pair file (flange_poses instead of scene: vision-calib docs "
+                               "measured_poses)")
     scene_path = top.section("scene") if isinstance(top.data.get("scene"), dict) else top.path_value("scene")
     csv_path = top.path_value("csv", None) or top.file.with_suffix(".csv")
     us = _only(top.section("units"), ("length", "angle"))
