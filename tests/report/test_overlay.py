@@ -1,4 +1,4 @@
-"""Overlay images of report.html (io/overlay.py): which poses, what is drawn where (against OpenCV's own
+"""Overlay images of report.html (report/overlay.py): which poses, what is drawn where (against OpenCV's own
 projection), the frame shown of a recording, and the simulated frame rendered again = the frame the run measured."""
 
 import cv2
