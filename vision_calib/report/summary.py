@@ -10,7 +10,7 @@ from .text import KIND_UNITS, figure_label, fmt_sig, handeye_values, lack_of_fit
 
 
 def parameter_table_text(rows: list[dict]) -> str:
-    """The summary's parameter table of the identified (free) rows of :func:`parameters_table`: name, unit,
+    """The summary's parameter table of the identified (free) rows of :func:`.build.parameters_table`: name, unit,
     nominal, identified +- std (:func:`.text.fmt_sig`: 2 significant digits), and in simulation the true
     value and z = (identified - true) / std; lengths in mm, angles in deg (rows without a unit: SI). Empty when
     nothing was identified."""
@@ -39,7 +39,7 @@ def parameter_table_text(rows: list[dict]) -> str:
 
 
 def residuals_line(res: dict) -> str:
-    """One summary line of a :func:`residual_stats` block, each figure with what it is and its unit
+    """One summary line of a :func:`.build.residual_stats` block, each figure with what it is and its unit
     (:func:`.text.figure_label`)."""
     def part(k, vals):
         label, unit, f = figure_label(k)
