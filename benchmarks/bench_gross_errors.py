@@ -14,7 +14,7 @@ import numpy as np
 from vision_calib import frames as F
 from vision_calib.experiment.poses import process_poses
 from vision_calib.experiment.steps import rngs, scene_truth
-from vision_calib.io.measured_poses import write_measured_poses
+from vision_calib.io.measured_poses_writer import write_measured_poses
 from vision_calib.rig import SCENES_DIR, load_scene, scene_poses
 
 ST, SR = 1e-4, float(np.radians(0.02))

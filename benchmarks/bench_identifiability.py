@@ -3,7 +3,7 @@
 - RX-90 with base + flange-side transforms: rank with full-pose and position-only residuals;
 - the thesis' chapter-3 setup (flange position only, parameters l5, a, theta, d): a6 not identifiable;
 - H4 model 12 + external parameters (paper: 19 of 20) and model 31 + externals (paper: 36);
-- H4 fidelity to the paper (docs/h4_fidelity.md): table 1 (geometric parameters, nacelle pose
+- H4 fidelity to the paper (vision_calib/docs/h4_fidelity.md): table 1 (geometric parameters, nacelle pose
   known, 100 random poses) and table 3 (variants A-H with the external parameters, 71 of the 81
   grid poses) beside the paper's figures, under three column scalings; the parameter directions
   that limit the conditioning; the effect of d and of l, and how they change with the nominal

@@ -68,7 +68,7 @@ def scale(sizes, mount: str) -> None:
     import tempfile
     from pathlib import Path
 
-    from vision_calib.io.measured_poses import write_pose_pairs
+    from vision_calib.io.measured_poses_writer import write_pose_pairs
 
     print(f"process-poses --no-plots, mount {mount}, noise estimated; load average {os.getloadavg()[0]:.2f} "
           "(2 cores shared: wall moves with it, CPU less)")

@@ -1,6 +1,6 @@
 """What report.html adds to a run: the demo (scenes/h4_vision.yaml, seed 0) run once with its plots, then, on its
 report, the overlays (the worst poses rendered again from their seeds, detected, drawn; io/overlay.py) and the page
-(io/report_html.py) timed (CPU and wall, best of --repeats), beside the run's own total as the baseline; sizes of
+(report/html.py) timed (CPU and wall, best of --repeats), beside the run's own total as the baseline; sizes of
 report.html and its overlay JPEGs.
 
     OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 PYTHONPATH=. .venv/bin/python benchmarks/bench_report_html.py [--repeats 3]
@@ -21,8 +21,8 @@ def main() -> None:
     from vision_calib.experiment.image_chain import overlay_frames
     from vision_calib.experiment.simulate import DEFAULT_SCENE, image_chain_of, run_simulation
     from vision_calib.experiment.steps import rngs, scene_truth
-    from vision_calib.io.overlay import OverlaySource, build_overlays
-    from vision_calib.io.report_html import report_html
+    from vision_calib.report.overlay import OverlaySource, build_overlays
+    from vision_calib.report.html import report_html
     from vision_calib.rig import load_scene, scene_poses
     from vision_calib.targets import load_target
 

@@ -1,4 +1,4 @@
-"""The figures quoted in docs/*.md, generated: none is typed by hand.
+"""The figures quoted in the documentation pages (vision_calib/docs/*.md), generated: none is typed by hand.
 
 A page holds its figures in blocks
 
@@ -44,7 +44,7 @@ from pathlib import Path
 from typing import Callable
 
 ROOT = Path(__file__).resolve().parents[1]
-DOCS = ROOT / "docs"
+DOCS = ROOT / "vision_calib" / "docs"  # the pages ship with the package
 BLOCK = re.compile(r"<!-- figures: (?P<name>[\w.-]+) -->\n(?P<body>.*?)<!-- /figures -->", re.S)
 OPEN = re.compile(r"<!-- figures: (?P<name>[^ ]*) -->")
 NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
@@ -124,7 +124,8 @@ def sh(cmd: str) -> Run:
 
 
 def run_python_block(page: str, marker: str) -> None:
-    """Run the ```python block of docs/PAGE that contains ``marker``, in the scratch folder (its ``out/``)."""
+    """Run the ```python block of vision_calib/docs/PAGE that contains ``marker``, in the scratch folder (its
+    ``out/``)."""
     blocks = re.findall(r"^```python\n(.*?)^```", (DOCS / page).read_text(), flags=re.S | re.M)
     (code,) = [b for b in blocks if marker in b]
     p = subprocess.run([sys.executable, "-c", code], cwd=scratch(), env=_env(), capture_output=True, text=True,

@@ -75,7 +75,7 @@ def measured_pose_file(path, scene_path, n: int = 30, seed: int = 8, folds: int 
     """Write a ``process-poses`` file at ``path`` for the scene ``scene_path``: n random joint sets and their
     true T_cam_target perturbed by 0.1 mm / 0.3 mrad per axis (declared as the file's default sigma), seeded."""
     from vision_calib.experiment.steps import rngs
-    from vision_calib.io.measured_poses import write_measured_poses
+    from vision_calib.io.measured_poses_writer import write_measured_poses
     from vision_calib.rig import scene_poses
 
     scene = load_scene(scene_path)

@@ -198,6 +198,23 @@ def test_every_package_module_is_on_a_floor():
     assert not missing, f"modules on no floor of vision_calib.layers.LAYERS: {missing}"
 
 
+def test_rooms_hold_one_job_each():
+    """``io`` reads and writes data files only; the report (report.json and its schema, summary, HTML, plots,
+    overlays, the hand-eye block) is a room of its own, above the stages it reports on and below the pipelines that
+    write it; the controller exports and the reading of a result folder are ``deploy``'s."""
+    rank = {name: i for i, floor in enumerate(LAYERS) for name in floor}
+    assert rank["experiment"] < rank["report"] < min(rank[s] for s in ("io", "measure", "identify", "rig"))
+    assert rank["deploy"] < rank["io"]
+    room = {m: floor_of(m) for m in MODULES}
+    for mod in ("build", "summary", "write", "text", "html", "plots", "overlay", "handeye"):
+        assert room.get(f"{PKG}.report.{mod}") == "report", mod
+    assert room.get(f"{PKG}.deploy.export") == "deploy"
+    assert (ROOT / "report" / "schema.json").is_file()
+    io_files = sorted(p.name for p in (ROOT / "io").iterdir())
+    bad = [n for n in io_files if any(w in n for w in ("report", "plot", "overlay", "controller", "schema"))]
+    assert not bad, f"vision_calib/io/ holds report or controller-export files: {bad}"
+
+
 def test_imports_go_down_the_floors():
     bad = layer_violations(IMPORTS)
     assert not bad, "imports against vision_calib.layers.LAYERS:\n" + "\n".join(bad)
@@ -284,8 +301,8 @@ def _fake(*edges) -> list[Import]:
     return [Import(f"{PKG}.{a}", f"{PKG}.{b}" if b not in HEAVY else b, name, 1) for a, b, name in edges]
 
 
-GOOD = [("cli", "study.run", None), ("study.run", "experiment.steps", None), ("experiment.steps", "io.report", None),
-        ("io.report", "measure.pose", None), ("measure.pose", "rig.base", None), ("rig.base", "identify.lse", None),
+GOOD = [("cli", "study.run", None), ("study.run", "experiment.steps", None), ("experiment.steps", "report.build", None),
+        ("report.build", "measure.pose", None), ("measure.pose", "rig.base", None), ("rig.base", "identify.lse", None),
         ("identify.lse", "kinematics.serial", None), ("kinematics.serial", "config", None),
         ("config", "frames", None), ("frames", "errors", None)]
 

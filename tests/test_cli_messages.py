@@ -11,7 +11,7 @@ from scipy.stats import chi2
 from vision_calib.cli import main
 from vision_calib.cli.exits import memory_message
 from vision_calib.identify.adequacy import pose_tail
-from vision_calib.io.report import verdict_line
+from vision_calib.report.summary import verdict_line
 from vision_calib.shipped import data_dir
 
 

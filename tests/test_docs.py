@@ -1,8 +1,9 @@
-"""docs/ cannot drift: every figure block of docs/*.md is what docs/figures.py generates now (one test per block;
-rendering, studies and real data under ``slow``), every module path, dotted name and test named in docs/ exists,
-every ``vision-calib`` flag quoted in docs/ is one of that command's options, and every ``--help`` text points only
-to docs/ files and README headings that exist."""
+"""The documentation pages (vision_calib/docs/*.md, shipped with the package) cannot drift: every figure block of a
+page is what docs/figures.py generates now (one test per block; rendering, studies and real data under ``slow``),
+every module path, dotted name and test named in the pages exists, every ``vision-calib`` flag quoted in the pages is
+one of that command's options, and every ``--help`` text points only to pages and README headings that exist."""
 
+import ast
 import importlib
 import importlib.util
 import re
@@ -14,7 +15,7 @@ import pytest
 from vision_calib.cli import build_parser
 
 ROOT = Path(__file__).resolve().parents[1]
-DOCS = sorted((ROOT / "docs").glob("*.md"))
+DOCS = sorted((ROOT / "vision_calib" / "docs").glob("*.md"))
 README = ROOT / "README.md"
 
 
@@ -53,7 +54,7 @@ def test_figures_compare_numbers_only_with_a_tolerance():
     assert not F.same("a 1.000 b", "a 1.000 c", 1e-3) and not F.same("a 1.000 b", "a 1.0004 b", None)
 
 
-# ----------------------------------------------------------------------------------------------- names in docs/
+# ----------------------------------------------------------------------------------------------- names in the pages
 def _code_spans(text: str) -> list[str]:
     """Inline code spans and the lines of fenced blocks."""
     fenced = re.findall(r"^```\w*\n(.*?)^```", text, flags=re.S | re.M)
@@ -176,6 +177,14 @@ def _help_texts(parser) -> list[tuple[str, str]]:
     return out
 
 
+TOPICS = {p.stem for p in DOCS}
+
+
+def _docs_topics(text: str) -> list[str]:
+    """The topics of the ``vision-calib docs TOPIC`` commands a text names."""
+    return re.findall(r"vision-calib docs ([a-z_][\w-]*)", text)
+
+
 def test_help_texts_point_to_existing_docs_and_readme_headings():
     headings = _readme_headings()
     bad = []
@@ -184,8 +193,31 @@ def test_help_texts_point_to_existing_docs_and_readme_headings():
             if heading.strip() not in headings:
                 bad.append(f"{where}: README heading {heading.strip()!r} (README has: {sorted(headings)})")
         for path in re.findall(r"(?<![\w/])((?:docs|scenes|targets)/[\w./-]*)", text):
-            if not (ROOT / path.rstrip(".")).exists():
+            if path.startswith("docs/"):  # a checkout's path: an installed package has `vision-calib docs TOPIC`
+                bad.append(f"{where}: {path} (name the page as `vision-calib docs TOPIC`)")
+            elif not (ROOT / path.rstrip(".")).exists():
                 bad.append(f"{where}: {path}")
+        bad += [f"{where}: vision-calib docs {topic}: no such page" for topic in _docs_topics(text)
+                if topic not in TOPICS]
         if re.search(r"README(?!: |'s)", text):
             bad.append(f"{where}: README named without a heading ({text[:80]!r})")
+    assert not bad, bad
+
+
+
+def test_package_strings_name_pages_by_topic():
+    """Every string of the package (messages, help texts, docstrings) names a documentation page as ``vision-calib
+    docs TOPIC`` (an installed package has no docs/ folder), and each such topic is a page; so do the pages and the
+    README."""
+    bad = []
+    for path in sorted((ROOT / "vision_calib").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Constant) and isinstance(node.value, str):
+                where = f"{path.relative_to(ROOT)}:{node.lineno}"
+                bad += [f"{where}: {m}" for m in re.findall(r"(?<![\w/])docs/\w+\.md", node.value)]
+                bad += [f"{where}: vision-calib docs {topic}" for topic in _docs_topics(node.value)
+                        if topic not in TOPICS]
+    for page in [*DOCS, README]:
+        bad += [f"{page.name}: vision-calib docs {topic}" for topic in _docs_topics(page.read_text())
+                if topic not in TOPICS]
     assert not bad, bad

@@ -18,6 +18,7 @@ from pathlib import Path
 import pytest
 import yaml
 from blocked_imports import run_blocked
+from readme_block import check_python_block_output, readme_python_block, tree_digest
 
 from vision_calib.shipped import MARKER, data_dir, examples_dir, scenes_dir, shipped_path, targets_dir
 
@@ -72,15 +73,18 @@ def _wheel_venv(tmp: Path) -> Path:
     site = subprocess.run([str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
                           capture_output=True, text=True, check=True).stdout.strip()
     Path(site, "test_deps.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
+    # without PYTHONPATH: a checkout on it, with the egg-info the build leaves there, reads as "already installed"
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     subprocess.run([sys.executable, "-m", "pip", "--python", str(py), "install", "-q", "--no-deps", str(wheel)],
-                   check=True, capture_output=True, text=True, timeout=300)
+                   check=True, capture_output=True, text=True, timeout=300, env=env)
     return env_dir / "bin"
 
 
 @pytest.mark.slow
 def test_wheel_commands_from_any_folder(tmp_path):
     """The Done-when of issue 25 on the built wheel: init + process of the example, the demo, init of a cell from
-    the UR5e then identifiability and simulate on it, target of a shipped board: all from a temporary folder."""
+    the UR5e then identifiability and simulate on it, target of a shipped board; of issue 36: a documentation page
+    (``docs validate``) and the README's Python block: all from a temporary folder."""
     bindir = _wheel_venv(tmp_path)
     work = tmp_path / "work"
     work.mkdir()
@@ -110,6 +114,17 @@ def test_wheel_commands_from_any_folder(tmp_path):
     vc("target", "targets/charuco_a5.yaml", "--paper", "A4", "--out", "b.pdf")
     pdf = (work / "b.pdf").read_bytes()
     assert b"DICT_5X5_100" in pdf and b"/Image" not in pdf
+    assert vc("docs", "validate").stdout == (ROOT / "vision_calib" / "docs" / "validate.md").read_text()
+    assert "validate" in vc("docs").stdout and "no page 'nope'" in vc("docs", "nope", ok=(2,)).stderr
+    api = tmp_path / "api"
+    api.mkdir()
+    example = Path(where).parent / "data" / "examples" / "rx90_eye_in_hand"
+    before = tree_digest(example)
+    p = subprocess.run([str(bindir / "python"), "-c", readme_python_block()], cwd=api, env=env, capture_output=True,
+                       text=True, timeout=600)
+    assert p.returncode == 0, p.stderr[-3000:]
+    check_python_block_output(p.stdout, api / "out")
+    assert tree_digest(example) == before
 
 
 #: the modules of the extras [sim], [cluster], [gpu], [ros], of [test]'s URDF reader, and FCL (a core dependency

@@ -49,7 +49,7 @@ def measured_pose_cell(d: Path, meshes=(), n: int = 30, right: float = _H) -> Pa
     from vision_calib import frames as F
     from vision_calib.config import Section
     from vision_calib.experiment.steps import scene_truth
-    from vision_calib.io.measured_poses import write_measured_poses
+    from vision_calib.io.measured_poses_writer import write_measured_poses
     from vision_calib.rig.scene import scene_from_section
 
     d.mkdir(parents=True, exist_ok=True)

@@ -34,6 +34,10 @@ class IdentifiabilityError(VisionCalibError):
     equations than identifiable parameters); message names the parameters."""
 
 
+class UnknownTopicError(VisionCalibError):
+    """``vision-calib docs TOPIC`` with a topic that is not one of the documentation pages: the message lists them."""
+
+
 class MeasurementError(VisionCalibError):
     """Detection / PnP failed for a whole batch where a per-pose rejection is not possible."""
 

@@ -15,8 +15,9 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("sim",),
     ("planning",),
     ("experiment",),
-    ("deploy",),
-    ("io",),
+    ("report",),  # what a run says about itself (report.json, summary, HTML, plots): written by experiment
+    ("deploy",),  # a result to the robot (CalibratedRobot) and to its controller's files (deploy.export)
+    ("io",),  # data files only, read and written
     ("measure",),
     ("rig",),
     ("identify", "render", "sensor"),

@@ -1,6 +1,7 @@
 """Where the shipped data is: the scenes, robots, targets and the example recording installed WITH the package
 (package data under ``vision_calib/data/``, found through :mod:`importlib.resources`, so it is the installed
-package's data wherever that is: a wheel in site-packages, or an editable checkout).
+package's data wherever that is: a wheel in site-packages, or an editable checkout), and the documentation pages
+(``vision_calib/docs/*.md``: :func:`doc_pages`, printed by ``vision-calib docs TOPIC``).
 
 Layout of ``vision_calib/data/`` (in a checkout, ``scenes/`` and ``targets/`` at the top are links to it)::
 
@@ -66,3 +67,18 @@ def shipped_path(path) -> Path:
         if cand.exists():
             return cand
     return path
+
+
+def docs_dir() -> Path:
+    """The installed package's documentation pages (``vision_calib/docs``), as a file-system path."""
+    path = Path(str(resources.files("vision_calib") / "docs"))
+    if not path.is_dir():
+        raise FileNotFoundError(f"vision_calib's documentation pages are not on the file system at {path} "
+                                f"(install the package from a wheel or a folder, not a zip)")
+    return path
+
+
+def doc_pages() -> dict[str, Path]:
+    """{topic: page} of the documentation pages, sorted by topic: the topic is the page's file name without
+    ``.md`` (``validate``: the page validate.md)."""
+    return {p.stem: p for p in sorted(docs_dir().glob("*.md"))}

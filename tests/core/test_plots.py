@@ -1,9 +1,9 @@
-"""Report plots drawn in two processes (io.plots.draw_all): every file written, a failure surfaces."""
+"""Report plots drawn in two processes (report.plots.draw_all): every file written, a failure surfaces."""
 
 import numpy as np
 import pytest
 
-from vision_calib.io.plots import draw_all, plot_error_map, plot_parameters, plot_residuals
+from vision_calib.report.plots import draw_all, plot_error_map, plot_parameters, plot_residuals
 
 
 def test_draw_all_writes_every_plot(tmp_path):

@@ -12,7 +12,7 @@ import pytest
 
 from vision_calib import frames as F
 from vision_calib.cli import EXPORT_FORMATS, EXPORTING_RUNS, main
-from vision_calib.io.controller_export import FORMATS
+from vision_calib.deploy.export import FORMATS
 from vision_calib.rig import SCENES_DIR
 
 from deploy_helpers import workspace_joints

@@ -17,9 +17,9 @@ import yaml
 from vision_calib.cli import main
 from vision_calib.errors import DataError
 from vision_calib.experiment.handeye_sim import simulate_pose_pairs
-from vision_calib.io.controller_export import (FORMATS, UR_JOINTS, VERIFY_TOL_M, export, export_verified,
+from vision_calib.deploy.export import (FORMATS, UR_JOINTS, VERIFY_TOL_M, export, export_verified,
                                                load_result, verify_export)
-from vision_calib.io.measured_poses import write_pose_pairs
+from vision_calib.io.measured_poses_writer import write_pose_pairs
 
 HOSTILE = "evil\nhash: injected\nkinematics2: {a: 1}\n# x,y\r\nbase,0"
 

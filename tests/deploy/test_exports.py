@@ -14,7 +14,7 @@ import yaml
 
 from vision_calib import frames
 from vision_calib.errors import ConfigError
-from vision_calib.io.controller_export import FORMATS, FormatNotSupportedError, export
+from vision_calib.deploy.export import FORMATS, FormatNotSupportedError, export
 
 TOL = 1e-9
 
@@ -207,7 +207,7 @@ def _handeye_folder(folder, mount="eye_in_hand"):
     true (T_flange_cam or T_base_cam, the other mount)."""
     from vision_calib.identify import solve_lse
     from vision_calib.identify.handeye_problem import handeye_problem, transforms_from_x
-    from vision_calib.io.report_handeye import handeye_report
+    from vision_calib.report.handeye import handeye_report
     from vision_calib.serialize import to_json
 
     rng = np.random.default_rng(4)

@@ -131,7 +131,7 @@ def test_a_fixed_parameter_with_a_prior_std_adds_its_variance(results, tmp_path)
 
 
 def test_process_poses_writes_its_fit_covariance(tmp_path):
-    """The pipeline passes the fit (covariance, problem, identifiability) to the model file (io.report)."""
+    """The pipeline passes the fit (covariance, problem, identifiability) to the model file (report.write)."""
     mp = measured_pose_file(tmp_path / "in" / "measured.yaml", SCENES_DIR / "ur5e_eye_in_hand.yaml", n=40)
     assert main(["process-poses", str(mp), "--out", str(tmp_path / "out"), "--no-plots", "--json"]) == 0
     m = read_calibrated_model(tmp_path / "out" / "calibrated_model.yaml")

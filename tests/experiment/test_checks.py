@@ -105,7 +105,8 @@ def test_process_rejects_swapped_folders_and_refuses_a_wrong_target_size(tmp_pat
 
 def test_non_finite_result_writes_no_model(tmp_path):
     from vision_calib.identify.problem import IdentificationResult
-    from vision_calib.io.report import build_report, write_report
+    from vision_calib.report.build import build_report
+    from vision_calib.report.write import write_report
 
     sc = load_scene(RX90)
     n = len(sc.setup.params)

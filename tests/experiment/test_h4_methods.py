@@ -11,7 +11,7 @@ import pytest
 
 from vision_calib.errors import ConfigError
 from vision_calib.experiment.steps import identify_measurements, scene_truth
-from vision_calib.io.report import build_report
+from vision_calib.report.build import build_report
 from vision_calib.rig import load_scene
 
 SCENE = Path(__file__).resolve().parents[2] / "scenes" / "h4_vision.yaml"

@@ -11,7 +11,7 @@ import pytest
 from vision_calib.experiment.camera_step import intrinsics_sensitivity, projected_remeasure, shifted_camera
 from vision_calib.experiment.steps import identify_measurements
 from vision_calib.experiment.synthetic import run_synthetic
-from vision_calib.io.report import build_report
+from vision_calib.report.build import build_report
 from vision_calib.rig import SCENES_DIR, load_scene
 from vision_calib.rig.serial import SerialSetup
 from vision_calib.targets import load_target

@@ -12,7 +12,8 @@ from vision_calib import cli
 from vision_calib import frames as F
 from vision_calib.experiment.poses import process_poses
 from vision_calib.experiment.steps import analyze_setup, identify_measurements, rngs, scene_truth, truth_poses
-from vision_calib.io.measured_poses import read_measured_poses, write_measured_poses
+from vision_calib.io.measured_poses import read_measured_poses
+from vision_calib.io.measured_poses_writer import write_measured_poses
 from vision_calib.io.model_export import load_calibrated_model
 from vision_calib.rig import SCENES_DIR, load_scene, scene_poses, true_parameters
 

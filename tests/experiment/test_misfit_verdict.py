@@ -16,8 +16,9 @@ from vision_calib.experiment.poses import process_poses
 from vision_calib.experiment.prepare import prepare_setup
 from vision_calib.experiment.steps import identify_measurements, scene_truth
 from vision_calib.experiment.synthetic import identify_synthetic_json, run_synthetic
-from vision_calib.io.measured_poses import write_measured_poses
-from vision_calib.io.report import summary_text, verdict
+from vision_calib.io.measured_poses_writer import write_measured_poses
+from vision_calib.report.build import verdict
+from vision_calib.report.summary import summary_text
 from vision_calib.rig import SCENES_DIR, load_scene, scene_poses
 
 VISION = str(SCENES_DIR / "h4_vision.yaml")
@@ -151,7 +152,7 @@ def test_summary_parameter_table_has_units_values_and_z():
     in simulation, the true value and z; its numbers are the report's rows converted from SI."""
     import pytest
 
-    from vision_calib.io.report import parameter_table_text
+    from vision_calib.report.summary import parameter_table_text
 
     rows = [{"name": "d3", "unit": "m", "nominal": 0.45, "true": 0.4502, "identified": 0.45023, "std": 2e-5,
              "free": True},

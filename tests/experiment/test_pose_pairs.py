@@ -19,7 +19,8 @@ from vision_calib.experiment.handeye_sim import TAG_STD_DEG, TAG_STD_MM, simulat
 from vision_calib.experiment.handeye_step import identify_handeye
 from vision_calib.experiment.poses import process_poses
 from vision_calib.identify.handeye_problem import mount_G, solve_handeye, x_from_transforms
-from vision_calib.io.measured_poses import read_measured_poses, write_pose_pairs
+from vision_calib.io.measured_poses import read_measured_poses
+from vision_calib.io.measured_poses_writer import write_pose_pairs
 from vision_calib.measure.handeye import closed_forms
 
 
@@ -105,7 +106,7 @@ def test_process_poses_on_pose_pairs_end_to_end(tmp_path, capsys):
     training fold, the held-out block against the closed form, the noise block, a report valid for the schema."""
     import jsonschema
 
-    from vision_calib.io.report import SCHEMA_PATH
+    from vision_calib.report.build import SCHEMA_PATH
 
     d = simulate_pose_pairs(30, 4, "fixed")
     M = d.T_cam_target.copy()

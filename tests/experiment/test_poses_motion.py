@@ -14,7 +14,8 @@ from vision_calib.experiment.checks import motion_consistency
 from vision_calib.experiment.gross import GROSS_CHI2_DOF
 from vision_calib.experiment.poses import process_poses
 from vision_calib.experiment.steps import identify_measurements, rngs, scene_truth
-from vision_calib.io.measured_poses import read_measured_poses, write_measured_poses
+from vision_calib.io.measured_poses import read_measured_poses
+from vision_calib.io.measured_poses_writer import write_measured_poses
 from vision_calib.rig import SCENES_DIR, Measurements, load_scene, scene_poses
 
 RX90 = str(SCENES_DIR / "rx90_eye_in_hand.yaml")

@@ -13,7 +13,7 @@ from vision_calib import frames as F
 from vision_calib.errors import ConfigError
 from vision_calib.experiment.steps import scene_truth
 from vision_calib.config import Section
-from vision_calib.io.measured_poses import write_measured_poses
+from vision_calib.io.measured_poses_writer import write_measured_poses
 from vision_calib.rig import load_scene
 from vision_calib.rig.scene import scene_from_section
 from vision_calib.rig.urdf import default_links

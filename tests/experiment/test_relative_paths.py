@@ -12,7 +12,8 @@ import pytest
 import yaml
 
 from vision_calib.cli import main
-from vision_calib.io.measured_poses import read_measured_poses, write_measured_poses
+from vision_calib.io.measured_poses import read_measured_poses
+from vision_calib.io.measured_poses_writer import write_measured_poses
 from vision_calib.io.model_export import load_calibrated_model
 from vision_calib.rig import SCENES_DIR, load_scene
 

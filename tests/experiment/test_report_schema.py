@@ -1,5 +1,5 @@
 """report.json of real runs (simulate, process of its exported recording, process of a hand-eye recording,
-process-poses) validates against the shipped JSON Schema (io/report_schema.json); the schema itself is a
+process-poses) validates against the shipped JSON Schema (report/schema.json); the schema itself is a
 valid draft 2020-12 schema that refuses reports missing what every run writes."""
 
 import copy
@@ -9,7 +9,7 @@ import jsonschema
 import pytest
 
 from vision_calib.cli import main
-from vision_calib.io.report import SCHEMA_PATH
+from vision_calib.report.build import SCHEMA_PATH
 from vision_calib.rig import SCENES_DIR
 
 from flange_folder import flange_pose_folder, measured_pose_file  # noqa: E402 (tests/experiment helper)

@@ -29,7 +29,7 @@ def test_import_and_process_visp_eye_to_hand(tmp_path, capsys):
     assert he["converged"]
     cam = he["transforms"]["T_base_cam"]
     # camera about 1 m from the base, known within a few mm: the std are the jackknife std of the 8 leave-one-out
-    # fits where those exceed the noise model's by more than 1.3x (here up to 2.5x: docs/real_data.md)
+    # fits where those exceed the noise model's by more than 1.3x (here up to 2.5x: vision_calib/docs/real_data.md)
     assert 0.8 < np.linalg.norm(cam["xyz_m"]) < 1.3
     assert max(cam["std_xyz_m"]) < 0.008
     assert he["deletion_test"]["jackknife_ratio"] and max(he["deletion_test"]["jackknife_ratio"].values()) > 1.3

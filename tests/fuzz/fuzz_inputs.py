@@ -21,7 +21,7 @@ import yaml
 
 from vision_calib import frames as F
 from vision_calib.experiment.steps import rngs, scene_truth
-from vision_calib.io.measured_poses import write_measured_poses
+from vision_calib.io.measured_poses_writer import write_measured_poses
 from vision_calib.rig import SCENES_DIR, load_scene, scene_poses
 
 REPO = Path(__file__).resolve().parents[2]

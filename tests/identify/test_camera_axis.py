@@ -13,7 +13,8 @@ from vision_calib.identify import solve_lse
 from vision_calib.identify.camera_axis import estimate_camera_axis, robot_with_camera_axis
 from vision_calib.identify.h4_problem import h4_igm_problem, synthetic_h4_measurements
 from vision_calib.kinematics import h4_variants
-from vision_calib.kinematics.h4 import random_workspace_poses, yaw_of
+from vision_calib.kinematics.h4 import random_workspace_poses
+from vision_calib.kinematics.h4_camera import yaw_of
 from vision_calib.kinematics.h4_io import load_h4_robot
 
 SCENE = Path(__file__).resolve().parents[2] / "scenes" / "robots" / "h4.yaml"

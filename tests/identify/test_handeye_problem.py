@@ -13,7 +13,7 @@ from vision_calib.errors import ConfigError, DataError
 from vision_calib.identify import solve_lse
 from vision_calib.identify.handeye_problem import (handeye_initial_guess, handeye_problem,
                                                    solve_handeye, stack_measurements, transforms_from_x)
-from vision_calib.io.report_handeye import handeye_report
+from vision_calib.report.handeye import handeye_report
 
 
 # ----------------------------------------------------------------------------- synthetic scenes

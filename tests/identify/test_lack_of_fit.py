@@ -12,7 +12,8 @@ from toy_models import NAMES, planar_model, planar_params, planar_problem, true_
 from vision_calib.errors import ConfigError
 from vision_calib.identify import solve_lse
 from vision_calib.identify.lack_of_fit import lack_of_fit, parameter_shift
-from vision_calib.io.report import verdict, verdict_line
+from vision_calib.report.build import verdict
+from vision_calib.report.summary import verdict_line
 
 #: base.theta and q0_1 enter only through their sum: identify q0_1
 FREE = [n for n in NAMES if n != "base.theta"]

@@ -10,7 +10,7 @@ from vision_calib import frames
 from vision_calib.identify import solve_ekf, solve_lse
 from vision_calib.identify.h4_problem import h4_igm_problem, synthetic_h4_measurements
 from vision_calib.identify.handeye_problem import solve_handeye
-from vision_calib.io.report_handeye import handeye_report
+from vision_calib.report.handeye import handeye_report
 from vision_calib.identify.problem import NOISE_ESTIMATED
 from vision_calib.identify.serial_problem import serial_problem, synthetic_pose_measurements
 from vision_calib.kinematics.h4 import random_workspace_poses

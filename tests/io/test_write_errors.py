@@ -14,7 +14,7 @@ import pytest
 from vision_calib import frames as F
 from vision_calib.cli import main
 from vision_calib.experiment.steps import rngs, scene_truth
-from vision_calib.io.measured_poses import write_measured_poses
+from vision_calib.io.measured_poses_writer import write_measured_poses
 from vision_calib.rig import SCENES_DIR, load_scene, scene_poses
 from vision_calib.serialize import write_text_atomic
 
@@ -77,7 +77,7 @@ def test_an_output_that_cannot_be_written_is_an_error(measured, tmp_path, monkey
 
 def test_a_plot_that_cannot_be_drawn_is_a_printed_warning(measured, tmp_path, monkeypatch, capsys):
     """Not a write error (a drawing bug): the run keeps its report and model; the warning is printed too."""
-    from vision_calib.io import plots
+    from vision_calib.report import plots
 
     monkeypatch.setattr(plots, "plot_residuals", lambda *a: (_ for _ in ()).throw(ValueError("cannot draw")))
     assert main(["process-poses", str(measured), "--out", str(tmp_path / "out")]) == 0

@@ -18,8 +18,8 @@ from vision_calib.kinematics.h4 import (
     model31_names,
     pose_grid_81,
     random_workspace_poses,
-    yaw_of,
 )
+from vision_calib.kinematics.h4_camera import yaw_of
 from vision_calib.kinematics.h4_io import load_h4_robot
 from vision_calib.frames import rot_x, rot_z
 
@@ -314,7 +314,7 @@ def test_condition_numbers_table1(r12, r31):
     """Seed table 1 analogue (X known in B, geometric parameters only, 100 random poses, unit
     columns). What must agree with the paper (physics): full rank, model 12 better conditioned
     than model 31, d never improving it. What our invented geometry gives instead of the paper's
-    magnitudes (docs/h4_fidelity.md): 197 / 1046 / 1110 (paper 257 / 421 / 1900); the weakest
+    magnitudes (vision_calib/docs/h4_fidelity.md): 197 / 1046 / 1110 (paper 257 / 421 / 1900); the weakest
     directions, checked here against their analytic form, explain it."""
     X = random_workspace_poses(100, np.random.default_rng(1))
     n12, n31 = list(r12.names[:12]), list(r31.names[:31])

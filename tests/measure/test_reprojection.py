@@ -6,7 +6,7 @@ import pytest
 
 from vision_calib import frames
 from vision_calib.identify.handeye_problem import solve_handeye
-from vision_calib.io.report_handeye import handeye_report
+from vision_calib.report.handeye import handeye_report
 from vision_calib.measure import Detection
 from vision_calib.measure.reprojection import chain_reprojection
 

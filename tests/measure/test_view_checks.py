@@ -96,7 +96,7 @@ def test_single_tag_target_keeps_its_four_corners():
 
 
 def test_dropped_corners_and_rejections_reach_the_report(charuco):
-    from vision_calib.io.report import measurements_block
+    from vision_calib.report.build import measurements_block
 
     _, dets = _view(charuco, move=(17, np.array([4.0, -3.0])))
     good = measure_pose(dets, charuco, DIST_INTR, pose_id="a")

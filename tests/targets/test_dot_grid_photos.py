@@ -182,7 +182,7 @@ def test_detection_failures_count_in_the_verdict():
     """9 of 15 views not detected (60 %): the verdict is a warning naming the count, not 'ok'; 4 of 15 stays ok."""
     from types import SimpleNamespace
 
-    from vision_calib.io.report import verdict
+    from vision_calib.report.build import verdict
 
     res = SimpleNamespace(free=np.ones(2, bool), identified=np.zeros(2), std=np.ones(2), cost_final=1.0,
                           converged=True, warnings=(), message="")

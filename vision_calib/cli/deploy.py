@@ -9,7 +9,7 @@ from ..errors import VisionCalibError
 from .options import add_command, add_json, tcp
 
 
-#: the export formats (``io.controller_export.FORMATS``, named here so that parsing imports nothing)
+#: the export formats (``deploy.export.FORMATS``, named here so that parsing imports nothing)
 EXPORT_FORMATS = ("urdf", "dh", "ur_yaml", "ros_tf")
 #: the runs that take ``--export NAME`` (the export runs on their output folder after them)
 EXPORTING_RUNS = ("simulate", "process", "process-poses")
@@ -128,7 +128,7 @@ def cmd_inverse(args) -> int:
 
 def cmd_export(args) -> int:
     from ..config import check_output_apart
-    from ..io.controller_export import export_verified, verified_text
+    from ..deploy.export import export_verified, verified_text
     from ..serialize import to_json
 
     r = Path(args.result)
@@ -150,7 +150,7 @@ def exporting(run):
         if code != 0:
             print(f"vision-calib: warning: --export {fmt} skipped: the run did not give a usable result", file=sys.stderr)
             return code
-        from ..io.controller_export import FORMATS, export_verified, verified_text
+        from ..deploy.export import FORMATS, export_verified, verified_text
 
         try:
             done = export_verified(args.out, fmt, Path(args.out) / FORMATS[fmt].file)

@@ -26,7 +26,8 @@ def add_plan_parser(sub) -> None:
         "recording.yaml and images/<pose_id>/ (a recording to fill, then `process DIR`), plan.json and report.html "
         "(the predicted accuracy against random poses). --check reports your own poses.csv the same way (exit 3 "
         "when a pose is not usable or a move collides)."))
-    p.add_argument("scene", help="scene YAML file of the cell (obstacles: and planning: keys, docs/formats.md)")
+    p.add_argument("scene", help="scene YAML file of the cell (obstacles: and planning: keys; vision-calib docs "
+                                 "formats)")
     p.add_argument("--poses", type=count, default=None, help="number of poses to plan (default: the scene's "
                                                               "poses.count, else 20)")
     p.add_argument("--out", required=True, metavar="DIR",

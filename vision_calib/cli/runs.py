@@ -59,7 +59,8 @@ def add_run_parsers(sub) -> None:
     p = add_command(sub, "process", "measure -> identify -> report on a recorded image folder", """
   vision-calib process recording/ --out out/run
   vision-calib process recording/ --out out/run --camera camera.yaml --no-plots --json""")
-    p.add_argument("folder", help="recorded folder (recording.yaml, poses.csv, images; format: docs/formats.md)")
+    p.add_argument("folder", help="recorded folder (recording.yaml, poses.csv, images; format: vision-calib docs "
+                                  "formats)")
     p.add_argument("--out", required=True, metavar="DIR",
                    help="output folder (report.json, summary.txt, plots, calibrated model)")
     p.add_argument("--method", choices=["lse", "ekf", "igm"], default=None, help=METHOD_HELP)
@@ -77,11 +78,12 @@ def add_run_parsers(sub) -> None:
   vision-calib calibrate-camera images/ --target targets/charuco_a5.yaml --out camera.yaml""")
     p.add_argument("folder", help="folder of images (searched recursively: png, jpg, jpeg, bmp, tif, tiff)")
     p.add_argument("--target", required=True, help="target YAML (see targets/)")
-    p.add_argument("--out", required=True, metavar="FILE", help="camera YAML to write (format: docs/workflows.md)")
+    p.add_argument("--out", required=True, metavar="FILE",
+                   help="camera YAML to write (format: vision-calib docs workflows)")
     add_json(p)
 
     p = add_command(sub, "process-poses", "joints + measured poses (no images) -> identify -> k-fold report "
-                    "(format: docs/measured_poses.md)", """
+                    "(format: vision-calib docs measured_poses)", """
   vision-calib process-poses measured.yaml --out out/poses
   vision-calib process-poses measured.yaml --out out/poses --method ekf --folds 5 --json""")
     p.add_argument("file", help="measured-pose YAML (with its CSV beside it)")
@@ -112,7 +114,7 @@ def add_run_parsers(sub) -> None:
 def add_noise_parser(sub) -> None:
     """Subcommand noise (added after export-rosi: its place in ``vision-calib --help``)."""
     p = add_command(sub, "noise", "camera noise from repeated frames of a static target: corner and pose scatter, and "
-                    "the simulator settings that reproduce it (docs/noise.md)", """
+                    "the simulator settings that reproduce it (vision-calib docs noise)", """
   vision-calib noise rosi_noise_qualification/ --out out/noise
   vision-calib noise frames/ --target targets/charuco_a5.yaml --camera camera.yaml --out out/noise --json""")
     p.add_argument("folder", help="ROS-I noise-qualification folder (cal_data.yaml), or a folder of images of one "
@@ -251,7 +253,7 @@ def _summary_identifiability(out: dict) -> str:
 
 
 def _summary_synthetic(out: dict) -> str:
-    from ..io.report import verdict_line
+    from ..report.summary import verdict_line
 
     b, a = out["accuracy"]["before"], out["accuracy"]["after"]
     return (

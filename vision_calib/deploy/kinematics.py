@@ -24,7 +24,8 @@ import numpy as np
 
 from .. import frames as F
 from ..errors import ConfigError, UnreachablePoseError
-from ..kinematics.h4 import EXTERNAL_NAMES, TILT_NAMES, H4Robot, nacelle_T, yaw_of
+from ..kinematics.h4 import EXTERNAL_NAMES, TILT_NAMES, H4Robot
+from ..kinematics.h4_camera import nacelle_T, yaw_of
 from ..kinematics.protocols import ChainModel
 from ..kinematics.serial import SerialChain
 from ..kinematics.urdf import URDFChain

@@ -21,7 +21,7 @@ from numpy.typing import ArrayLike
 
 from .. import frames as F
 from ..errors import DataError, ParameterError
-from ..io.controller_export import find_result
+from .export import find_result
 from ..io.model_export import CalibratedModel, joint_offsets, read_calibrated_model
 from ..kinematics.protocols import JointOffsetForm, PrismaticJoints
 from .kinematics import PoseNotReachedError, kinematics_for, raise_not_reached
@@ -52,7 +52,7 @@ STATUSES = ("corrected", "near_singularity", "outside_limits", "not_corrected")
 
 
 def model_path(path) -> Path:
-    """The calibrated_model.yaml of a result folder (or ``path`` itself, such a file): ``io.controller_export.
+    """The calibrated_model.yaml of a result folder (or ``path`` itself, such a file): ``deploy.export.
     find_result``; DataError naming the folder when it holds none (a failed fit writes no model) or only a hand-eye
     result (no robot kinematics: export its mounts with ``vision-calib export RESULT --format ros_tf``)."""
     p = find_result(path)

@@ -41,7 +41,7 @@ class HandeyeIdentified:
     (kept poses, final weights), rejected [(label, reason)], adequacy (``model_adequacy`` before scaling),
     variance_factor, fit (``HandeyeFit`` of the kept poses: robot std, closed-form comparison), nuisance
     (the shared error's block or None); no lack-of-fit test or method check (None). The report's
-    ``io.report.IdentifiedFit``."""
+    ``report.build.IdentifiedFit``."""
 
     result: IdentificationResult
     A: np.ndarray

@@ -1,5 +1,5 @@
 """``vision-calib noise FOLDER``: camera noise from repeated frames of a static target, and the simulator
-settings that reproduce it (docs/noise.md).
+settings that reproduce it (vision-calib docs noise).
 
 Input: a ROS-I noise-qualification set (``cal_data.yaml`` with ``data: [{image: ...}]``, ``intrinsics``,
 ``target_finder``; :func:`vision_calib.io.rosi.read_rosi_image_set`), or any folder of images with

@@ -20,7 +20,8 @@ import numpy as np
 
 from ..errors import ConfigError, DataError, VisionCalibError
 from ..io.measured_poses import PosePairs, chain_direction, misreadings, read_measured_poses
-from ..io.report import build_report, parameters_table, residual_stats, write_report
+from ..report.build import build_report, parameters_table, residual_stats
+from ..report.write import write_report
 from .checks import (copies_warning, drop_copies, drop_inconsistent, duplicate_poses, handeye_motions, motion_verdict,
                      pair_copies)
 from .gross import gross_failure
@@ -241,7 +242,7 @@ def process_pose_pairs(pp: PosePairs, out_dir, folds: int | None = None, plots: 
     """Hand-eye identification of a pose-pair file (module docstring); writes DIR/report.json (kind
     ``process_pose_pairs``: the ``handeye`` block with the measured poses' estimated noise, ``holdout``),
     summary.txt, report.html. folds: k of the held-out validation (default the file's)."""
-    from ..io.report_handeye import handeye_report
+    from ..report.handeye import handeye_report
     from .handeye_gross import alternative_readings, handeye_gross_failure
     from .handeye_step import handeye_blocks, identify_handeye
     from .holdout import holdout_failure

@@ -20,8 +20,8 @@ from ..errors import ConfigError, DataError, IdentifiabilityError
 from ..serialize import write_json_atomic
 from ..io.portable import relative_ref
 from ..io.recording import Recording, read_recording
-from ..io.report import (REPORT_VERSION, build_report, measurements_block, parameters_table, residual_stats,
-                         write_report)
+from ..report.build import REPORT_VERSION, build_report, measurements_block, parameters_table, residual_stats
+from ..report.write import write_report
 from ..rig import Measurements, load_scene
 from .checks import drop_copies, duplicate_poses, screen_measurements
 from .gross import gross_failure
@@ -281,7 +281,7 @@ def _overlay_source(rec, dets, setup=None, result=None):
     """report.html's overlay images of a recorded folder: its files and detections; the calibrated model's
     reprojection from the pose's joint readings when a usable ``setup`` is given (through the recording's
     intrinsics, as the measured poses)."""
-    from ..io.overlay import OverlaySource, recording_frames
+    from ..report.overlay import OverlaySource, recording_frames
 
     index = {str(p): i for i, p in enumerate(rec.pose_ids)}
 
@@ -319,7 +319,7 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None, folds=No
     measured poses (``poses.pair_holdout``, ``folds``: default ``holdout.DEFAULT_FOLDS``). write_first: called
     before the report is written (the measurements when they were not written before the fit)."""
     from ..identify.handeye_problem import handeye_problem, stack_measurements
-    from ..io.report_handeye import handeye_report
+    from ..report.handeye import handeye_report
     from .camera_step import fitted_camera, intrinsics_directions, residual_response
     from .checks import copies_warning, handeye_motions, pair_copies
     from .handeye_gross import alternative_readings, handeye_gross_failure

@@ -22,7 +22,8 @@ import numpy as np
 from .. import frames as F
 from ..errors import DataError
 from ..serialize import write_json_atomic
-from ..io.report import REPORT_VERSION, build_report, measurements_block, parameters_table, write_report
+from ..report.build import REPORT_VERSION, build_report, measurements_block, parameters_table
+from ..report.write import write_report
 from ..rig import Measurements, Scene, SCENES_DIR, load_scene, scene_poses
 from .image_chain import ImageChain, ImagePool, InlineImagePool, measure_poses, start_fork_server
 from .checks import screen_measurements
@@ -179,7 +180,7 @@ def _preload(plots: bool):
             import scipy.stats  # noqa: F401
 
             if plots:
-                from ..io.plots import preload
+                from ..report.plots import preload
 
                 preload()
         except Exception:  # import or plotting problems surface where the modules are used, not here
@@ -357,7 +358,7 @@ def run_simulation(scene: Scene | str | Path, out_dir: str | Path | None = None,
 def _overlay_source(scene, chain, setup, result, report, T_true, q_true, seed, frames):
     """report.html's overlay images of a simulated run: the few poses shown rendered again (the frames of the run
     are not kept), the model's reprojection from the joint readings q_true through the identified parameters."""
-    from ..io.overlay import OverlaySource
+    from ..report.overlay import OverlaySource
     from ..targets import load_target
     from .image_chain import overlay_frames
 

@@ -21,7 +21,7 @@ from ..identify.identifiability import IdentifiabilityReport
 from ..identify.nuisance import split_nuisance, with_nuisance
 from ..identify.problem import IdentificationProblem, IdentificationResult
 from ..kinematics.params import ParameterSet
-from ..io.report import method_check_line
+from ..report.text import method_check_line
 from ..rig import Measurements, Scene, Setup, scene_poses, true_parameters
 from .prepare import prepare_setup
 

@@ -15,7 +15,7 @@ from numpy.typing import ArrayLike
 
 from ..identify import model_adequacy
 from ..identify.problem import IdentificationProblem, IdentificationResult
-from ..io.report import misfit_message, parameters_table, verdict
+from ..report.build import misfit_message, parameters_table, verdict
 from ..rig import Evaluation, Measurements, Scene, Setup, load_scene, scene_poses
 from .steps import (analyze_setup, base_problem, check_method, lack_of_fit_of, prepare_measured, rngs, scene_truth,
                     shared_truth, solve, unmodelled_truth)

@@ -34,7 +34,8 @@ from numpy.typing import ArrayLike
 
 from ..errors import DataError
 from ..frames import skew, so3_exp
-from ..kinematics.h4 import H4Robot, yaw_of
+from ..kinematics.h4 import H4Robot
+from ..kinematics.h4_camera import yaw_of
 
 EZ = np.array([0.0, 0.0, 1.0])
 

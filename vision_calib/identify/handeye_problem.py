@@ -11,8 +11,8 @@ mount            A (left unknown)       G_k (known)                   B (right u
 ==============  =====================  ============================  =====================
 
 For the eye-in-hand mount the camera mounting the user thinks of is ``T_flange_cam = inv(A)``:
-the problem identifies A (names ``T_cam_flange.*``) and :func:`vision_calib.io.report_handeye.handeye_report` gives both A and
-its inverse, with the covariance carried through :func:`vision_calib.frames.inverse_error_map`.
+the problem identifies A (names ``T_cam_flange.*``) and :func:`vision_calib.report.handeye.handeye_report` gives
+both A and its inverse, with the covariance carried through :func:`vision_calib.frames.inverse_error_map`.
 
 Parameters (12, SI): ``<A>.tx, .ty, .tz, .rx, .ry, .rz`` then the same for B, with the mount
 parametrisation of :mod:`vision_calib.kinematics.serial`: ``T = [R_nom . Exp(r), t]``, ``r`` a

@@ -119,7 +119,7 @@ def serial_problem(
     joint value outside the chain's ``joint_limits`` is a DataError naming the pose and joint, the same
     check (and message) as the pipelines' input files (``check_limits=False`` to fit such data anyway).
     measured: the transform the rows of ``T_meas`` AND their noise (obs_cov / sigmas) hold, in the
-    ``frames.pose_error`` convention of that transform (the convention of ``docs/measured_poses.md``):
+    ``frames.pose_error`` convention of that transform (the convention of ``vision-calib docs measured_poses``):
     ``chain.measured_name`` (default, e.g. ``T_target_cam`` eye-in-hand) or its inverse (e.g.
     ``T_cam_target``, what solvePnP gives); the inverse is carried into the chain's direction exactly
     (poses inverted, covariance ``G C G^T`` with ``frames.inverse_error_map``), so equal sigmas give the

@@ -1,7 +1,7 @@
 """Pose-pair files of other hand-eye tools: the ``TransformPairs`` YAML that handeye_calib_camodocal records
 (``TransformPairsInput.yml``, read back as ``TransformPairsOutput.yml``; the same layout from easy_handeye-style
 samplers), and ``vision-calib import-pairs`` turning one into a pose-pair file for ``process-poses``
-(:func:`vision_calib.io.measured_poses.write_pose_pairs`).
+(:func:`vision_calib.io.measured_poses_writer.write_pose_pairs`).
 
 Layout (OpenCV FileStorage YAML)::
 
@@ -263,11 +263,12 @@ def write_transform_pairs(path, T1, T2) -> Path:
 def import_pairs(path, mount: str, out, units: dict | None = None, folds: int = 5, seed: int = 0,
                  progress: bool = False) -> Path:
     """Write the pose-pair file ``out`` (YAML + ``<stem>.csv`` + ``<stem>_flange.csv``,
-    :func:`vision_calib.io.measured_poses.write_pose_pairs`) of a TransformPairs file: flange poses T1, measured
+    :func:`vision_calib.io.measured_poses_writer.write_pose_pairs`) of a TransformPairs file: flange poses T1, measured
     T_cam_target T2, pose ids ``p000``..; the measured poses' noise is estimated per axis of the target frame
     (their files carry no noise). mount: "eye_in_hand" | "fixed". progress: a bar while the file is read. Returns
     the YAML's path."""
-    from .measured_poses import PAIR_MOUNTS, write_pose_pairs
+    from .measured_poses import PAIR_MOUNTS
+    from .measured_poses_writer import write_pose_pairs
 
     if mount not in PAIR_MOUNTS:
         raise DataError(f"--mount: expected one of {', '.join(PAIR_MOUNTS)}, got {mount!r}")

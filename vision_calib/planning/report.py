@@ -1,6 +1,6 @@
 """The plan's outputs (atomic writes, ``serialize``): ``poses.csv`` + ``recording.yaml`` + ``scene/`` + empty
 ``images/<pose_id>/`` folders (a recording to fill: ``io.recording.write_recording``), ``plan.json``, the 3-D picture
-``plan_poses.png`` and ``report.html`` (one self-contained page: ``io.report_html``'s ``page``, ``table``,
+``plan_poses.png`` and ``report.html`` (one self-contained page: ``vision_calib.report.html``'s ``page``, ``table``,
 ``png_img``). Lengths shown in mm, angles in deg."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.report_html import esc, num, page, png_img, table
+from ..report.html import esc, num, page, png_img, table
 from ..rig.base import ArmFrames
 from ..serialize import write_bytes_atomic, write_json_atomic, write_text_atomic
 

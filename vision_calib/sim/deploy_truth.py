@@ -38,7 +38,7 @@ MIN_SINGULAR = 0.02
 
 def calibrate_scene(name: str, folder, seed: int = 1, n_poses: int | None = None) -> tuple[SyntheticRun, Path]:
     """(run, folder): ``run_synthetic`` on the shipped scene ``name`` (its default poses, ``n_poses`` to change it),
-    the result written into ``folder`` as ``io.report.write_report`` writes it (calibrated_model.yaml with the
+    the result written into ``folder`` as ``report.write.write_report`` writes it (calibrated_model.yaml with the
     fit's covariance, fixed and folded parameters)."""
     run = run_synthetic(SCENES_DIR / f"{name}.yaml", seed=seed, n_poses=n_poses)
     rep, _ = analyze_setup(run.setup, run.poses, run.residual)

@@ -114,7 +114,7 @@ def _run_synthetic(spec: StudySpec, scene, s: dict, seed: int) -> dict:
     the names both models share."""
     from ..experiment.steps import STREAM_TRUTH, analyze_setup, shared_truth
     from ..experiment.synthetic import run_synthetic
-    from ..io.report import parameters_table
+    from ..report.build import parameters_table
     from ..rig import true_parameters
 
     residual = s.get("residual") or scene.identification.residual

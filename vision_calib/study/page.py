@@ -1,6 +1,6 @@
 """index.html of a study's output folder: one self-contained page (no network, images inlined, no script) with
 the per-cell summary table, the parameter spread, the budget, the failed runs and every plot of the study; the
-page helpers are report.html's (``io.report_html``)."""
+page helpers are report.html's (``vision_calib.report.html``)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from collections import Counter
 from pathlib import Path
 
 from ..serialize import write_text_atomic
-from ..io.report_html import esc, num, page, png_img, table
+from ..report.html import esc, num, page, png_img, table
 from .budget import budget_text
 from .spec import StudySpec, format_value
 from .tables import summary_table

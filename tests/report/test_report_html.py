@@ -18,10 +18,10 @@ import numpy as np
 import pytest
 
 from vision_calib.cli import main
-from vision_calib.io.overlay import FULL_MAX_ENLARGE, FULL_MIN_WIDTH_PX, MAX_WIDTH_PX
-from vision_calib.io.report import parameter_table_text, summary_text
-from vision_calib.io.report_html import handeye_section, parameters_section
-from vision_calib.io.report_text import FIGURE_LABELS
+from vision_calib.report.overlay import FULL_MAX_ENLARGE, FULL_MIN_WIDTH_PX, MAX_WIDTH_PX
+from vision_calib.report.summary import parameter_table_text, summary_text
+from vision_calib.report.html import handeye_section, parameters_section
+from vision_calib.report.text import FIGURE_LABELS
 from vision_calib.rig import SCENES_DIR
 
 from headless import browser_probe, console_errors, need_chromium, network_references, screenshot  # noqa: E402
@@ -30,7 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiment"))
 from flange_folder import flange_pose_folder, measured_pose_file  # noqa: E402
 
 RX90 = str(SCENES_DIR / "rx90_eye_in_hand.yaml")
-#: verdict box background of each status (io/report_html.py CSS), RGB
+#: verdict box background of each status (report/html.py CSS), RGB
 STATUS_RGB = {"ok": (0xE8, 0xF6, 0xEA), "warning": (0xFF, 0xF5, 0xDE), "failed": (0xFD, 0xE8, 0xE8)}
 
 
@@ -257,7 +257,7 @@ RAW_KEY = re.compile(r"^[A-Za-z0-9]+(_[A-Za-z0-9]+)+$")
 @pytest.mark.parametrize("name", ALL)
 def test_every_figure_key_shown_has_a_label(runs, name):
     """Every figure key the report emits in a block the page or the text shows by key (validation accuracy, k-fold,
-    per-pose residuals, residual RMS) has its label in the one table (report_text.FIGURE_LABELS), and no table head
+    per-pose residuals, residual RMS) has its label in the one table (report.text.FIGURE_LABELS), and no table head
     of the page is a raw key (V3_m)."""
     rep = json.loads((runs[name] / "report.json").read_text())
     keys = set()
@@ -338,7 +338,7 @@ def test_page_in_a_headless_browser(runs, name, tmp_path):
 def test_failed_and_warning_verdicts_read_first(runs, tmp_path):
     """The page of the same report with a failed (gross input error) and a warning verdict: the state, its reason
     and whether a model was written, in the verdict box."""
-    from vision_calib.io.report_html import report_html
+    from vision_calib.report.html import report_html
 
     rep = json.loads((runs["proc"] / "report.json").read_text())
     failed = {**rep, "verdict": {**rep["verdict"], "status": "failed", "ok": False, "usable": False,

@@ -1,4 +1,4 @@
-"""The shared pieces of summary.txt and report.html (io/report_text.py): the one std formatter (significant digits),
+"""The shared pieces of summary.txt and report.html (report/text.py): the one std formatter (significant digits),
 the one table of figure labels (with a readable fallback), angles in deg wherever a person reads them (an H4 run's
 V1/V2/V3 criteria), and the lack-of-fit line without absurd detectable amplitudes (process --refine-intrinsics of
 the shipped example, issue 25: 'q2 0.011-1.9e+06')."""
@@ -11,7 +11,7 @@ import pytest
 
 from vision_calib.cli import main
 from vision_calib.identify.lack_of_fit import MAX_DETECTABLE_DEG
-from vision_calib.io.report_text import FIGURE_LABELS, figure_head, figure_label, fmt_sig, lack_of_fit_line
+from vision_calib.report.text import FIGURE_LABELS, figure_head, figure_label, fmt_sig, lack_of_fit_line
 from vision_calib.rig import SCENES_DIR
 
 ROOT = SCENES_DIR.parent

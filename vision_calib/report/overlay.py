@@ -66,7 +66,7 @@ def overlay_selection(report: dict, n_worst: int = 3, max_rejected: int = 6) -> 
             if pid not in seen and len(out) < max_rejected:
                 seen.add(pid)
                 out.append((pid, role, str(it.get("reason") or "")))
-    from .report_text import figure_label
+    from .text import figure_label
 
     worst = [p for p in (report.get("pose_residuals") or {}).get("poses", []) if p["pose_id"] not in seen]
     for p in worst[:max(0, int(n_worst))]:

@@ -1,4 +1,4 @@
-"""Summary-text pieces shared by ``summary.txt`` (:mod:`.report`) and ``report.html`` (:mod:`.report_html`):
+"""Summary-text pieces shared by ``summary.txt`` (:mod:`.build`) and ``report.html`` (:mod:`.html`):
 display units of parameter kinds, the one formatter of standard deviations (:func:`fmt_sig`), the one table of
 what each figure key means (:data:`FIGURE_LABELS`, :func:`figure_label`), and the one-line summaries of the
 lack-of-fit and method-check blocks.
@@ -54,7 +54,7 @@ def decimals_of(std, default: int, most: int = 6) -> int:
 FIGURE_LABELS = {
     # validation accuracy (rig.base.Evaluation.to_dict; the model vs the truth on held-out poses), the held-out
     # k-fold residuals (experiment.holdout.holdout_validation) and the residual RMS per axis after the
-    # fit (io.report.residual_stats): the table or line names which
+    # fit (report.build.residual_stats): the table or line names which
     "position_mean_mm": ("position mean", "mm", 1.0),
     "position_rms_mm": ("position RMS", "mm", 1.0),
     "position_max_mm": ("position max", "mm", 1.0),
@@ -116,7 +116,7 @@ def figure_value(key: str, value):
 
 
 def handeye_values(t: dict) -> tuple[list, list]:
-    """([(x, std) mm text] * 3, [(angle, std) deg text] * 3) of a hand-eye transform dict (``io.report_handeye``):
+    """([(x, std) mm text] * 3, [(angle, std) deg text] * 3) of a hand-eye transform dict (``report.handeye``):
     each std to 2 significant digits (:func:`fmt_sig`), its value to the same decimal place (1 decimal mm /
     2 decimals deg without a std); summary.txt and report.html print these."""
     def pairs(values, stds, f, default):

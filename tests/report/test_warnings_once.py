@@ -4,7 +4,8 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from vision_calib.io.report import summary_text, verdict
+from vision_calib.report.build import verdict
+from vision_calib.report.summary import summary_text
 
 
 def _result(warnings):

@@ -1,4 +1,4 @@
-"""Overlay images of report.html (io/overlay.py): which poses, what is drawn where (against OpenCV's own
+"""Overlay images of report.html (report/overlay.py): which poses, what is drawn where (against OpenCV's own
 projection), the frame shown of a recording, and the simulated frame rendered again = the frame the run measured."""
 
 import cv2
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from vision_calib.camera import CameraIntrinsics
-from vision_calib.io.overlay import FULL_MAX_ENLARGE, FULL_MAX_WIDTH_PX, FULL_MIN_WIDTH_PX, MAX_WIDTH_PX, \
+from vision_calib.report.overlay import FULL_MAX_ENLARGE, FULL_MAX_WIDTH_PX, FULL_MIN_WIDTH_PX, MAX_WIDTH_PX, \
     build_overlays, draw_overlay, overlay_selection, recording_frames, OverlaySource
 from vision_calib.measure import Detection
 from vision_calib.rig import SCENES_DIR

@@ -4,7 +4,7 @@ import json
 from pathlib import Path
 
 from vision_calib.experiment.process import process_folder
-from vision_calib.io.report import on_disk
+from vision_calib.report.write import on_disk
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "rx90_eye_in_hand"
 

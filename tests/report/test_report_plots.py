@@ -1,11 +1,11 @@
-"""What the report plots draw (io/plots.py), read back from the matplotlib figures: each error-map panel on its
+"""What the report plots draw (report/plots.py), read back from the matplotlib figures: each error-map panel on its
 own labelled colour scale spanning its own errors, one parameter axis per unit (and z-scores against the truth),
 residual histograms with labelled axes and a rotation row."""
 
 import numpy as np
 import pytest
 
-from vision_calib.io import plots
+from vision_calib.report import plots
 
 
 @pytest.fixture

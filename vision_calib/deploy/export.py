@@ -43,7 +43,7 @@ from ..kinematics.protocols import ChainModel
 from ..kinematics.serial import SerialChain
 from ..kinematics.urdf import URDFChain, calibrated_origins, export_urdf, load_urdf_robot
 from ..serialize import write_text_atomic
-from .model_export import OFFSET_CONVENTION, CalibratedModel, read_calibrated_model
+from ..io.model_export import OFFSET_CONVENTION, CalibratedModel, read_calibrated_model
 
 #: the file of a result folder holding the calibrated model, and the hand-eye report
 MODEL_FILE = "calibrated_model.yaml"

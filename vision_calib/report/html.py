@@ -2,8 +2,8 @@
 images as base64 data URIs, no script; the files beside it are linked only as optional downloads), built from the
 report.json dict (:mod:`.report`) beside which it is written. Each overlay opens at full size on the page itself
 (a CSS ``:target`` lightbox holding the full-size image). Units a person reads: lengths in mm, angles in deg;
-figure keys by their labels (:data:`.report_text.FIGURE_LABELS`); standard deviations to 2 significant digits
-(:func:`.report_text.fmt_sig`).
+figure keys by their labels (:data:`.text.FIGURE_LABELS`); standard deviations to 2 significant digits
+(:func:`.text.fmt_sig`).
 
 Order: the verdict (ok / warning / failed, and the warnings in words), the parameter table, identifiability
 (rank, what cannot be identified and what it is coupled with, the condition number and what it is computed
@@ -21,7 +21,7 @@ import re
 from pathlib import Path
 
 from ..serialize import write_text_atomic
-from .report_text import (KIND_UNITS, figure_head, figure_label, fmt_sig, handeye_values, lack_of_fit_line,
+from .text import (KIND_UNITS, figure_head, figure_label, fmt_sig, handeye_values, lack_of_fit_line,
                           method_check_line)
 
 #: the file name beside report.json
@@ -130,7 +130,7 @@ def verdict_section(report: dict) -> str:
     v = report["verdict"]
     status = v.get("status", "ok" if v.get("ok") else "failed")
     state = STATE_WORDS.get(status, esc(status))
-    if status == "failed":  # as io.report.verdict_line names it
+    if status == "failed":  # as report.summary.verdict_line names it
         state += (f" ({esc(v['failure'])})" if v.get("failure") else ": not finite" if not v.get("finite", True)
                   else ": not converged")
     counts = (f"{v.get('n_rejected_poses', 0)} poses rejected ({v.get('n_outliers', 0)} as outliers); model "
@@ -200,7 +200,7 @@ def parameters_section(report: dict) -> str:
 def handeye_section(report: dict) -> str:
     he = report["handeye"]
     tf = he.get("transforms") or {}
-    # the two transforms the summary names (io.report: the identified A, B for eye-in-hand; else the base-camera
+    # the two transforms the summary names (report.summary: the identified A, B for eye-in-hand; else the base-camera
     # and flange-target ones); the inverses stay in report.json
     names = ((he.get("A"), he.get("B")) if (report.get("settings") or {}).get("mount") == "eye_in_hand"
              else ("T_base_cam", "T_flange_target"))
@@ -408,7 +408,7 @@ def overlays_section(overlays) -> str:
 
 def figures_table(columns, what: str = "figure") -> str:
     """<table> of figure dicts [(column name, {key: value})]: one row per key of the first dict (not n_poses),
-    named by its label and display unit, its values converted to that unit (:func:`.report_text.figure_label`);
+    named by its label and display unit, its values converted to that unit (:func:`.text.figure_label`);
     ``what``: the head of the label column."""
     keys = [k for k in columns[0][1] if k != "n_poses"]
     rows = []
