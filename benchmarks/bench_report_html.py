@@ -1,5 +1,5 @@
 """What report.html adds to a run: the demo (scenes/h4_vision.yaml, seed 0) run once with its plots, then, on its
-report, the overlays (the worst poses rendered again from their seeds, detected, drawn; io/overlay.py) and the page
+report, the overlays (the worst poses rendered again from their seeds, detected, drawn; report/overlay.py) and the page
 (report/html.py) timed (CPU and wall, best of --repeats), beside the run's own total as the baseline; sizes of
 report.html and its overlay JPEGs.
 

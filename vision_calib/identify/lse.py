@@ -434,9 +434,8 @@ def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gto
                     try:
                         if normal is None:
                             gr = J.T @ r
-                        else:  # no J kept: the normal equations at the last iterate (also its covariance)
-                            A, gr = normal(z, r)
-                            njev += 1
+                        else:  # no J kept: the normal equations at the last iterate (its covariance; as the
+                            A, gr = normal(z, r)  # Jacobian at the solution of the other path, not an iteration)
                             A_end = A if np.all(np.isfinite(A)) and np.all(np.isfinite(gr)) else None
                         dz = -cho_solve(cho_factor(A), gr)
                         r2 = np.asarray(fun(z + dz), float)
