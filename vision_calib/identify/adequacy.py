@@ -42,6 +42,8 @@ def _chi2():
 DEFAULT_LEVEL = 0.01
 #: robust losses accepted by :func:`fit_rejecting_outliers`
 ROBUST_LOSSES = ("soft_l1", "cauchy", "huber", "arctan")
+#: relative tolerances (x, f, g) of the robust fits of :func:`fit_rejecting_outliers`, which only rank the poses
+ROBUST_TOL = 1e-8
 
 
 #: range [lo, hi] of the factor k by which the true covariance of an image-measured pose may differ from the
@@ -205,10 +207,15 @@ def fit_rejecting_outliers(
     for key in ("loss", "f_scale", "method"):
         if key in lse_kwargs:
             raise ConfigError(f"fit_rejecting_outliers: {key!r} is chosen by the procedure, do not pass it")
-    robust = solve_lse(problem, x0, loss=loss, f_scale=1.0, **lse_kwargs)
+    # the robust fits only rank the poses (their residuals against a threshold): tolerances of ROBUST_TOL, not
+    # the final fit's (scipy's trf crawls from 1e-8 to 1e-12 relative for nothing a threshold can see)
+    rkw = {**lse_kwargs, **{k: max(float(lse_kwargs.get(k, ROBUST_TOL)), ROBUST_TOL) for k in ("xtol", "ftol", "gtol")}}
+    plain = solve_lse(problem, x0, **lse_kwargs)  # the answer when no pose is rejected; the robust fits start there
+    start = plain.identified if np.all(np.isfinite(plain.identified)) else x0
+    robust = solve_lse(problem, start, loss=loss, f_scale=1.0, **rkw)
     if scale == "auto":
         s = _robust_scale(problem, robust)
-        robust = solve_lse(problem, robust.identified, loss=loss, f_scale=s, **lse_kwargs)
+        robust = solve_lse(problem, robust.identified, loss=loss, f_scale=s, **rkw)
     else:
         s = float(scale)
         if not (np.isfinite(s) and s > 0):
@@ -226,7 +233,7 @@ def fit_rejecting_outliers(
         raise DataError(f"{bad.size} of {n_obs} poses fail the outlier test (more than {max_reject_fraction:.0%}): "
                         f"the model or the measurement covariance is wrong, not a few outliers; first: {labels[bad[0]]}")
     keep = np.setdiff1d(np.arange(n_obs), bad)
-    final = solve_lse(problem.subset(keep) if bad.size else problem, x0, **lse_kwargs)
+    final = solve_lse(problem.subset(keep), x0, **lse_kwargs) if bad.size else plain
     info = dict(final.info, outliers={"level": float(level), "loss": loss, "scale": s, "threshold": thr,
                                       "pose_chi2_robust": d, "rejected": [lab for lab, _ in rejected]})
     warnings = final.warnings + tuple(f"pose {lab} rejected as an outlier: {why}" for lab, why in rejected)
