@@ -66,6 +66,8 @@ MOUNT_SUFFIXES = ("tx", "ty", "tz", "rx", "ry", "rz")
 #: mount names a scene may use (left = parent of the robot base, right = child of the flange)
 KNOWN_LEFT = ("T_world_base", "T_target_base", "T_cam_base")
 KNOWN_RIGHT = ("T_flange_tool", "T_flange_cam", "T_flange_target")
+#: poses per block of the forward walk (``SerialChain._walk``): a block's (B, 4, 4) temporaries stay in cache
+WALK_BLOCK = 4096
 
 
 def _tz(v):
@@ -341,26 +343,35 @@ class SerialChain(JointChainChecks):
     def _walk(self, q, x, keep: bool = True):
         """Frames (n+2, N, 4, 4) in `left`, joint-major: [base, link 1..n (n = flange), right]; keep=False: only
         the last (``right``) is stored, (1, N, 4, 4). Per joint one BLAS product with the constant prefix and the
-        Rz(theta + q) Tz(d) columns written out (no per-pose 4x4 products)."""
+        Rz(theta + q) Tz(d) columns written out (no per-pose 4x4 products), over blocks of :data:`WALK_BLOCK`
+        poses (a block's temporaries stay in cache)."""
         N = q.shape[0]
         out = np.empty((self.n_joints + 2 if keep else 1, N, 4, 4))
         TL, TR = self.nominal_transforms(x)
-        F = np.broadcast_to(TL, (N, 4, 4))
+        parts = [self._link_parts(x, i) for i in range(1, self.n_joints + 1)]
+        for a in range(0, max(N, 1), WALK_BLOCK):
+            b = min(a + WALK_BLOCK, N)
+            self._walk_block(q[a:b], TL, TR, parts, out[:, a:b], keep)
+        return out
+
+    def _walk_block(self, q, TL, TR, parts, out, keep: bool) -> None:
+        """:meth:`_walk` of one block of poses q (B, n) into out ((n+2 or 1), B, 4, 4)."""
+        B = q.shape[0]
+        F = np.broadcast_to(TL, (B, 4, 4))
         if keep:
             out[0] = F
-        for i in range(1, self.n_joints + 1):
-            C, theta, d = self._link_parts(x, i)
-            FC = (F.reshape(-1, 4) @ C).reshape(N, 4, 4)
+        FC = np.empty((B, 4, 4))
+        for i, (C, theta, d) in enumerate(parts, start=1):
+            np.matmul(F.reshape(-1, 4), C, out=FC.reshape(-1, 4))
             # (F C) Rz(theta + q) Tz(d): columns x, y rotated about z, origin moved by d along z
             ang = theta + q[:, i - 1]
             c, sn = np.cos(ang)[:, None], np.sin(ang)[:, None]
-            F = out[i] if keep else np.empty((N, 4, 4))
+            F = out[i] if keep else np.empty((B, 4, 4))
             F[:, :, 0] = FC[:, :, 0] * c + FC[:, :, 1] * sn
             F[:, :, 1] = FC[:, :, 1] * c - FC[:, :, 0] * sn
             F[:, :, 2] = FC[:, :, 2]
             F[:, :, 3] = FC[:, :, 2] * d + FC[:, :, 3]
         np.matmul(F.reshape(-1, 4), TR, out=out[-1].reshape(-1, 4))
-        return out
 
     def forward(self, q, x=None) -> np.ndarray:
         """T_left_right (N, 4, 4) [m] for joint sets q (N, n) rad and full parameter vector x (n_params,)
