@@ -204,10 +204,11 @@ def serial_problem(
         return J
 
     def _jacobian(x, idx):
-        Jm = chain.pose_jacobian(q[_idx(idx)], x)
+        T, Jm = chain.pose_and_jacobian(q[_idx(idx)], x)
         J = -Jm[:, :m, :]
-        if m == 6:
-            rho = errors(x, idx)[:, 3:]
+        if m == 6:  # the pose errors' rotations: those of the residual at this x (kept), else from this walk
+            rho = last["e"][_idx(idx), 3:] if last.get("x") == np.asarray(x, float).tobytes() else \
+                pose_error(T, T_meas[_idx(idx)])[:, 3:]
             J[:, 3:, :] = np.matmul(so3_right_jacobian_inv(rho), J[:, 3:, :])
         return J
 

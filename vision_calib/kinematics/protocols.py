@@ -15,7 +15,8 @@ from .params import ParameterSet
 class ChainModel(Protocol):
     """A serial chain with mounts: name, ``params`` (ParameterSet: arm + mount parameters, SI units),
     ``forward(q, x) -> (N, 4, 4)`` the measured transform (left mount . arm . right mount) for joints q (N, n)
-    rad, ``pose_jacobian(q, x) -> (N, 6, p)`` its parameter Jacobian in the ``frames.pose_error`` convention,
+    rad, ``pose_jacobian(q, x) -> (N, 6, p)`` its parameter Jacobian in the ``frames.pose_error`` convention
+    (``pose_and_jacobian(q, x)``: both from one walk),
     ``check_joints(q) -> (N, n)`` (DataError naming the bad value), ``redundant_pairs()`` the exactly redundant
     parameter pairs (name, name, why). ``n_joints``: n; ``joint_limits``: (n, 2) [min, max] (rad, or m for a
     prismatic joint) or None (no limits)."""
@@ -28,6 +29,8 @@ class ChainModel(Protocol):
     def forward(self, q, x=None) -> np.ndarray: ...
 
     def pose_jacobian(self, q, x=None) -> np.ndarray: ...
+
+    def pose_and_jacobian(self, q, x=None) -> tuple[np.ndarray, np.ndarray]: ...
 
     def check_joints(self, q) -> np.ndarray: ...
 

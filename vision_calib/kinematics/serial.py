@@ -401,6 +401,11 @@ class SerialChain(JointChainChecks):
         Rows: [dt (m), dtheta (rad)] expressed in frame ``left`` (frames.pose_error convention);
         columns: every parameter of ``params`` (free or not), in ``params.names`` order.
         """
+        return self.pose_and_jacobian(q, x)[1]
+
+    def pose_and_jacobian(self, q, x=None) -> tuple[np.ndarray, np.ndarray]:
+        """(T_left_right (N, 4, 4) as :meth:`forward` gives it, :meth:`pose_jacobian` (N, 6, n_params)) from one
+        walk of the chain."""
         q = self.check_joints(q)
         x = self._x(x)
         N = q.shape[0]
@@ -458,7 +463,7 @@ class SerialChain(JointChainChecks):
         p_right = of + np.einsum("nij,j->ni", Rf, TR[:3, 3])
         for a, s in enumerate(("rx", "ry", "rz")):
             rot_col(ix[f"{self.right}.{s}"], WR[:, :, a], p_right)
-        return Jt.transpose(2, 1, 0)  # a view: the caller's first selection copies it
+        return frames[-1], Jt.transpose(2, 1, 0)  # J a view: the caller's first selection copies it
 
     def position_jacobian(self, q, x=None) -> np.ndarray:
         """(N, 3, n_params): translation rows of :meth:`pose_jacobian` (m per unit parameter, in ``left``)."""

@@ -287,6 +287,11 @@ class URDFChain(JointChainChecks):
         order. Rotation about unit axis w through p: ``[w x (p_end - p), w]``; translation along w:
         ``[w, 0]``; rotation-vector parameters use the SO(3) right Jacobian (exact at any x).
         """
+        return self.pose_and_jacobian(q, x)[1]
+
+    def pose_and_jacobian(self, q, x=None) -> tuple[np.ndarray, np.ndarray]:
+        """(T_left_right (N, 4, 4) as :meth:`forward` gives it, :meth:`pose_jacobian` (N, 6, n_params)) from one
+        walk of the chain."""
         q, x = self.check_joints(q), self._x(x)
         N, n = q.shape[0], self.n_joints
         frames, placed = self._walk(q, x)
@@ -319,7 +324,7 @@ class URDFChain(JointChainChecks):
         Rf = frames[:, n, :3, :3]
         J[:, :3, ixR[:3]] = Rf
         rot_cols(ixR[3:], Rf @ (TR[:3, :3] @ so3_right_jacobian(x[ixR[3:]])), p_end)
-        return J
+        return frames[:, -1], J
 
     def position_jacobian(self, q, x=None) -> np.ndarray:
         """(N, 3, n_params): translation rows of :meth:`pose_jacobian` (m per unit parameter, in ``left``)."""
