@@ -154,8 +154,10 @@ def pose_labels(problem: IdentificationProblem, idx: ArrayLike) -> list[str]:
     return [str(problem.labels[i]) if problem.labels else f"#{int(i)}" for i in idx]
 
 
-def check_problem(problem: IdentificationProblem, x: ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Validate data at ``x`` (n,) (default nominal); return (residual (n_obs, m), jacobian (n_obs, m, n)).
+def check_problem(problem: IdentificationProblem, x: ArrayLike | None = None,
+                  jacobian: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+    """Validate data at ``x`` (n,) (default nominal); return (residual (n_obs, m), jacobian (n_obs, m, n), or None
+    with ``jacobian=False``: then the Jacobian is checked block by block where it is used, :func:`whitened_gram`).
 
     Raises DataError naming the poses (labels) whose residual, Jacobian or covariance is not
     finite / not positive definite, or when shapes disagree.
@@ -176,9 +178,13 @@ def check_problem(problem: IdentificationProblem, x: ArrayLike | None = None) ->
     bad = np.flatnonzero(~np.all(np.isfinite(cov), axis=(1, 2)))
     if bad.size:
         raise DataError(f"measurement covariance is not finite for poses {pose_labels(problem, bad)}")
-    eig_min = np.linalg.eigvalsh(0.5 * (cov + np.swapaxes(cov, 1, 2)))[:, 0]
-    bad = np.flatnonzero(eig_min <= 0)
-    if bad.size:
+    try:  # the whitening's Cholesky factors exist exactly when every covariance is positive definite
+        W = problem.whitening()
+        pd = bool(np.all(np.isfinite(W)))
+    except np.linalg.LinAlgError:
+        pd = False
+    if not pd:  # name the poses, one by one
+        bad = np.array([k for k in range(n_obs) if not _whitenable(cov[k])], int)
         raise DataError(f"measurement covariance is not positive definite for poses {pose_labels(problem, bad)}")
     r = np.asarray(problem.residual(x), float)
     if r.shape != (n_obs, m):
@@ -188,13 +194,62 @@ def check_problem(problem: IdentificationProblem, x: ArrayLike | None = None) ->
         raise DataError(
             f"residual (measured - model) is not finite (NaN/inf measurement?) for poses {pose_labels(problem, bad)}"
         )
+    if not jacobian:
+        return r, None
     J = np.asarray(problem.jacobian(x), float)
-    if J.shape != (n_obs, m, n):
-        raise DataError(f"jacobian has shape {J.shape}, expected ({n_obs}, {m}, {n})")
+    _check_jacobian_block(problem, J, 0, n_obs)
+    return r, J
+
+
+def _whitenable(c: np.ndarray) -> bool:
+    """Whether the covariance c (m, m) has a finite inverse Cholesky factor (positive definite to rounding)."""
+    try:
+        return bool(np.linalg.eigvalsh(0.5 * (c + c.T))[0] > 0 and np.all(np.isfinite(np.linalg.inv(np.linalg.cholesky(c)))))
+    except np.linalg.LinAlgError:
+        return False
+
+
+def _check_jacobian_block(problem: IdentificationProblem, J: np.ndarray, a: int, b: int) -> None:
+    """DataError for a Jacobian block J of poses a..b-1 of the wrong shape or not finite (naming the poses)."""
+    shape = (b - a, problem.m, len(problem.params))
+    if J.shape != shape:
+        raise DataError(f"jacobian has shape {J.shape}, expected {shape}")
     bad = np.flatnonzero(~np.all(np.isfinite(J), axis=(1, 2)))
     if bad.size:
-        raise DataError(f"jacobian is not finite for poses {pose_labels(problem, bad)}")
-    return r, J
+        raise DataError(f"jacobian is not finite for poses {pose_labels(problem, a + bad)}")
+
+
+def whitened_gram(problem: IdentificationProblem, x: ArrayLike, block: int | None = None) -> np.ndarray:
+    """(n_free, n_free) Gram matrix (Jw S)^T (Jw S) of the whitened free Jacobian at x (n,) with the columns
+    times their scales (S = diag(params.scale[free])), prior rows included, summed over blocks of ``block``
+    poses (default :data:`GRAM_BLOCK_POSES`) of ``problem.jacobian(x, idx)``, each block checked (DataError
+    naming its non-finite poses): no (N, n_free) matrix held. :func:`analyze` takes it (``gram=``)."""
+    block = int(block or GRAM_BLOCK_POSES)
+    W = problem.whitening()
+    fi = problem.params.free_index
+    scale = problem.params.scale[fi]
+    x = np.asarray(x, float)
+    G = np.zeros((fi.size, fi.size))
+    for a in range(0, problem.n_obs, block):
+        b = min(a + block, problem.n_obs)
+        J = np.asarray(problem.jacobian(x, np.arange(a, b)), float)
+        _check_jacobian_block(problem, J, a, b)
+        Aw = np.matmul(W[a:b], J[:, :, fi]).reshape(-1, fi.size) * scale
+        G += Aw.T @ Aw
+    if problem.prior_rows:
+        P = problem.prior_jacobian() * scale[None, :]
+        G += P.T @ P
+    return G
+
+
+def gram_factor(G: np.ndarray) -> np.ndarray | None:
+    """R (n, n) with R^T R = G when its Cholesky factor is finite and conditioned below ``GRAM_COND_MAX`` (the
+    same factor :func:`row_compressed` takes), else None (the Jacobian itself is needed)."""
+    try:
+        R = np.linalg.cholesky(G).T
+    except np.linalg.LinAlgError:
+        return None
+    return R if np.all(np.isfinite(R)) and np.linalg.cond(R) < GRAM_COND_MAX else None
 
 
 def whitened_free_jacobian(problem: IdentificationProblem, J: np.ndarray, W: np.ndarray | None = None) -> np.ndarray:
@@ -247,13 +302,8 @@ def compressed_whitened_jacobian(problem: IdentificationProblem, J: np.ndarray, 
     if problem.prior_rows:
         P = problem.prior_jacobian() * scale[None, :]
         G += P.T @ P
-    try:
-        R = np.linalg.cholesky(G).T
-        if np.all(np.isfinite(R)) and np.linalg.cond(R) < GRAM_COND_MAX:
-            return R
-    except np.linalg.LinAlgError:
-        pass
-    return row_compressed(whitened_free_jacobian(problem, J, W) * scale[None, :])
+    R = gram_factor(G)
+    return R if R is not None else row_compressed(whitened_free_jacobian(problem, J, W) * scale[None, :])
 
 
 def observability_indices(s: np.ndarray, n_poses: int) -> dict[str, float]:
@@ -333,6 +383,7 @@ def analyze(
     selection: str = "order",
     jacobian: np.ndarray | None = None,
     weighting: str | None = None,
+    gram: np.ndarray | None = None,
 ) -> IdentifiabilityReport:
     """Identifiability of the free parameters of ``problem`` at ``x`` (n,) (default nominal).
 
@@ -341,6 +392,8 @@ def analyze(
     selection: "order" (default: prefer earlier parameters, stable over pose subsets) or "pivot"
         (QR with column pivoting).
     jacobian: (n_obs, m, n) Jacobian at x already validated by :func:`check_problem` (skips a recompute).
+    gram: (n_free, n_free) :func:`whitened_gram` at x instead (a large problem: no Jacobian held); used when
+    :func:`gram_factor` accepts it, else the Jacobian is computed.
     weighting: how the rows are weighted, in words, for ``condition_of`` (default WEIGHTING_COV).
     Raises IdentifiabilityError when there are fewer scalar equations than free parameters,
     ParameterError when nothing is free, DataError on non-finite data (naming the poses).
@@ -357,9 +410,11 @@ def analyze(
             f"{N} scalar equations ({problem.n_obs} poses x {problem.m} components) for {n} free parameters: "
             f"need at least {n} equations (more poses or fewer free parameters)"
         )
-    J = check_problem(problem, x)[1] if jacobian is None else jacobian
     scale = params.scale[params.free_index]
-    A = compressed_whitened_jacobian(problem, J, scale)  # below: only column norms, spans, fits, singular values
+    A = None if gram is None else gram_factor(gram)
+    if A is None:
+        J = check_problem(problem, x)[1] if jacobian is None else jacobian
+        A = compressed_whitened_jacobian(problem, J, scale)  # below: only column norms, spans, fits, singular values
     col_norms = np.linalg.norm(A, axis=0)
     if normalize:
         A = A / np.where(col_norms > 0, col_norms, 1.0)[None, :]

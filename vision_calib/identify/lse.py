@@ -27,8 +27,8 @@ from numpy.typing import ArrayLike
 from scipy.optimize import least_squares
 
 from ..errors import ConfigError, DataError, ParameterError, VisionCalibError
-from .identifiability import (GRAM_COND_MAX, IdentifiabilityReport, analyze, base_problem, check_problem,
-                              pose_labels, row_compressed, whitened_free_jacobian)
+from .identifiability import (GRAM_BLOCK_POSES, GRAM_COND_MAX, IdentifiabilityReport, analyze, base_problem,
+                              check_problem, pose_labels, row_compressed, whitened_free_jacobian, whitened_gram)
 from .problem import NOISE_ESTIMATED, STATUS_CONVERGED, STATUS_NOT_FINITE, IdentificationProblem, IdentificationResult
 from .threads import single_threaded_blas
 
@@ -64,14 +64,20 @@ def prepare(
         raise ParameterError("no free parameter left to identify (every parameter is fixed)")
     problem = problem.with_params(params)
     x0 = params.nominal.copy() if x0 is None else np.asarray(x0, float).reshape(-1).copy()
-    r0, J0 = check_problem(problem, x0)
+    big = problem.n_obs > GRAM_BLOCK_POSES  # no (n_obs, m, n) Jacobian held: its Gram matrix, block by block
+    r0, J0 = check_problem(problem, x0, jacobian=not big)
     check_start_cost(problem, r0)
-    report = analyze(problem, x0, jacobian=J0, selection=selection)
+    G0 = whitened_gram(problem, x0) if big else None
+    report = analyze(problem, x0, jacobian=J0, selection=selection, gram=G0)
     warnings: tuple[str, ...] = ()
     if report.non_identifiable:
         if fix_unidentifiable:
+            kept = problem.params.free_names
             problem, report, warnings = base_problem(problem, report)
-            report = analyze(problem, x0, jacobian=J0, selection=selection)
+            if G0 is not None:  # the base set's columns of the same Gram matrix
+                sel = [kept.index(nm) for nm in problem.params.free_names]
+                G0 = G0[np.ix_(sel, sel)]
+            report = analyze(problem, x0, jacobian=J0, selection=selection, gram=G0)
         else:
             warnings = (
                 "parameters not identifiable from these poses were left free (fix_unidentifiable=False): "
