@@ -26,7 +26,9 @@ def test_square_on_board_figures():
     w, h = TARGET.pattern_size_m()
     assert f["front"][0] and f["distance_m"][0] == pytest.approx(d) and f["incidence_deg"][0] == pytest.approx(0, abs=1e-6)
     assert f["square_px"][0] == pytest.approx(1000 * 0.025 / d, rel=1e-9)
-    half = np.array([w, h]) / 2 + TARGET.margin_m  # the whole board, margin included, to the image border
+    _, pts = TARGET.corner_points()  # the measured corners' bounding box (what the scene's sampler keeps in view)
+    half = (pts.max(axis=0) - pts.min(axis=0))[:2] / 2
+    assert np.allclose((pts.max(axis=0) + pts.min(axis=0))[:2] / 2, [w / 2, h / 2])  # centred on the pattern
     assert f["margin_px"][0] == pytest.approx(min(511.5 - 1000 * half[0] / d, 383.5 - 1000 * half[1] / d), rel=1e-9)
 
 

@@ -3,8 +3,9 @@ over poses (numpy), and the limits the planner holds them to (the scene's ``plan
 
 Figures per pose:
 
-- ``margin_px``: the smallest distance from the board's projected outline (the whole board, margin included) to the
-  image border (negative: a corner outside the image), distortion included;
+- ``margin_px``: the smallest distance from the projected bounding box of the points the measurement uses (the
+  corners; the scene's own pose sampler holds the same box in view) to the image border (negative: a corner
+  outside the image), distortion included;
 - ``distance_m``: camera centre to board centre;
 - ``incidence_deg``: angle between the board's normal and the viewing ray to its centre (0: seen square on);
 - ``square_px``: the smallest projected side of one feature cell (a square of a ChArUco board or chessboard, a tag
@@ -50,8 +51,11 @@ class ViewLimits:
 
 
 def _outline(target) -> np.ndarray:
-    x0, y0, x1, y1 = target.texture_extent_m()
-    return np.array([[x0, y0, 0], [x1, y0, 0], [x1, y1, 0], [x0, y1, 0]], float)
+    """(4, 3) [m, target frame]: the bounding box of the points the measurement uses (corners, dot centres) --
+    the outline the scenes' own pose sampler keeps in view (``rig.serial``), not the printed board's margin."""
+    _, pts = target.corner_points()
+    lo, hi = np.min(pts, axis=0), np.max(pts, axis=0)
+    return np.array([[lo[0], lo[1], 0], [hi[0], lo[1], 0], [hi[0], hi[1], 0], [lo[0], hi[1], 0]], float)
 
 
 def _probes(target) -> tuple[np.ndarray, float]:
