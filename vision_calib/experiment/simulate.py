@@ -346,6 +346,10 @@ def run_simulation(scene: Scene | str | Path, out_dir: str | Path | None = None,
         result=result, identified=ident, motion=motion, accuracy=evals, timings=timings,
         extra={**extra, "holdout": hold}, failure=inconsistency_failure(ident) or holdout_failure(hold) or truth_failure(evals))
     report["summary_text"] += "\n" + "\n".join(holdout_lines(hold))
+    from .accuracy_map import add_accuracy_map, map_rng  # the map of the calibrated tool over the workspace
+
+    add_accuracy_map(report, setup, result, meas_used.select(problem.labels).joints, tcp=tcp,
+                     sigma_q_rad=scene.measurement.sigma_q_rad, truth_setup=tsetup, x_true=x_true, rng=map_rng(seed))
     if out_dir is not None:
         preloading.join()
         write_report(out_dir, report, setup, result, problem, evals, plots=plots,
