@@ -5,7 +5,8 @@ Points: a grid of tool positions over the box of the calibration poses' tool pos
 :data:`MARGIN` of its size, at least :data:`MIN_MARGIN_M` (:data:`PER_AXIS` positions per axis); each grid position is held with the
 tool orientation of the nearest calibration pose and turned into a joint set by the calibrated model's inverse
 kinematics (``deploy.kinematics``, started from that pose's joints; positions it does not reach are left out). A
-point outside the convex hull of the calibration tool positions is ``extrapolated``.
+point outside the convex hull of the calibration tool positions is ``extrapolated``; the calibration poses themselves
+are points of the map too (``calibration``: true).
 
 At each joint set q the tool pose T_base_tool(q) (``deploy.kinematics``: the robot alone, base frame, tool =
 flange + tcp; the camera and target mounts are not in it, so their uncertainty, a nuisance here, drops out) has
@@ -172,8 +173,9 @@ def _inside_hull(P: np.ndarray, X: np.ndarray) -> np.ndarray:
 def workspace_grid(kin, x: np.ndarray, q_cal: np.ndarray, per_axis: int = PER_AXIS,
                    margin: float = MARGIN) -> dict:
     """The map's joint sets (module docstring) around the calibration joint sets q_cal (K, n_joints) on the model of
-    x (kin's parameter order): {q (M, n), T (M, 4, 4) tool poses [m, base frame], ijk (M, 3) grid indices, axes
-    [3 x (per_axis,)] grid coordinates [m], extrapolated (M,) bool, cal_xyz (K, 3) [m], goals (per_axis^3), reached}."""
+    x (kin's parameter order): {q (M, n), T (M, 4, 4) tool poses [m, base frame], ijk (M, 3) grid indices (-1 for
+    the calibration poses, appended last), axes [3 x (per_axis,)] grid coordinates [m], extrapolated (M,) bool,
+    calibration (M,) bool, cal_xyz (K, 3) [m], goals (per_axis^3), reached (grid positions reached)}."""
     q_cal = np.asarray(q_cal, float)
     T_cal = kin.tool(q_cal, x)
     P = T_cal[:, :3, 3]
@@ -194,7 +196,12 @@ def workspace_grid(kin, x: np.ndarray, q_cal: np.ndarray, per_axis: int = PER_AX
     ok = (np.asarray(why) == "") & np.all(np.isfinite(q), axis=1)
     q = q[ok]
     T = kin.tool(q, x) if len(q) else np.zeros((0, 4, 4))
-    return {"q": q, "T": T, "ijk": ijk[ok], "axes": axes, "extrapolated": ~_inside_hull(P, T[:, :3, 3]),
+    ext = ~_inside_hull(P, T[:, :3, 3])
+    # the calibration poses themselves, last: the points of the map where the model was measured (grid index -1)
+    return {"q": np.concatenate([q, q_cal]), "T": np.concatenate([T, T_cal]),
+            "ijk": np.concatenate([ijk[ok], np.full((len(q_cal), 3), -1)]), "axes": axes,
+            "extrapolated": np.concatenate([ext, np.zeros(len(q_cal), bool)]),
+            "calibration": np.concatenate([np.zeros(len(q), bool), np.ones(len(q_cal), bool)]),
             "cal_xyz": P, "goals": int(len(X)), "reached": int(ok.sum())}
 
 
@@ -297,7 +304,7 @@ def build_map(kin, names: Sequence[str], x: ArrayLike, cov: ArrayLike, q_cal: Ar
     r_deg = np.degrees(norm_quantile(C[:, 3:, 3:]))
     ext = g["extrapolated"]
     pts = [{"xyz_m": [float(v) for v in T[k, :3, 3]], "q_rad": [float(v) for v in q[k]],
-            "ijk": [int(v) for v in g["ijk"][k]], "extrapolated": bool(ext[k]),
+            "ijk": [int(v) for v in g["ijk"][k]], "extrapolated": bool(ext[k]), "calibration": bool(g["calibration"][k]),
             "r95_mm": float(r_mm[k]), "r95_deg": float(r_deg[k])} for k in range(len(q))]
     block = {
         "level": LEVEL, "tcp_m": [float(v) for v in (np.zeros(3) if tcp is None else np.asarray(tcp, float))],

@@ -156,11 +156,12 @@ def parameter_test(names, d: np.ndarray, S: np.ndarray, level: float = LEVEL) ->
 
 def _map_points(ra, rb, rep_a, rep_b, names, d, S) -> dict:
     """The normalised map (module docstring) over both results' map joint sets."""
-    pts_q, src = [], []
+    pts_q, src, flags = [], [], []
     for tag, rep in (("A", rep_a), ("B", rep_b)):
         for p in rep["accuracy_map"]["points"]:
             pts_q.append(p["q_rad"])
             src.append(tag)
+            flags.append((bool(p.get("extrapolated")), bool(p.get("calibration"))))
     q = np.asarray(pts_q, float)
     qreg = np.concatenate([np.asarray(r["accuracy_map"].get("calibration_q_rad") or [], float).reshape(-1, ra.n_joints)
                            for r in (rep_a, rep_b)])
@@ -191,22 +192,14 @@ def _map_points(ra, rb, rep_a, rep_b, names, d, S) -> dict:
                "difference_mm": float(np.linalg.norm(e[k, :3]) * 1e3),
                "difference_deg": float(np.degrees(np.linalg.norm(e[k, 3:]))),
                "r95_mm": float(r_mm[k]), "r95_deg": float(r_deg[k]), "normalised": float(z[k]),
-               "extrapolated": bool(_extrapolated(rep_a if src[k] == "A" else rep_b, q[k]))}
+               "extrapolated": flags[k][0], "calibration": flags[k][1]}
               for k in range(len(q))]
     return {"points": points, "n_points": len(points), "share_beyond_95": float(np.mean(beyond)),
             "max_normalised": float(z.max()), "max_difference_mm": float(np.max(np.linalg.norm(e[:, :3], axis=1)) * 1e3),
-            "calibration_xyz_m": [p for r in (rep_a, rep_b) for p in r["accuracy_map"].get("calibration_xyz_m", [])],
             "how": "tool pose of B minus A at each joint set (first order through the compared parameters; both base "
                    "frames registered on the calibration poses of both runs), its predicted 95 % radius from C_A + C_B, "
                    "normalised: sqrt(e^T C^-1 e) of the position (about 1.6 on average, above 2.8 at 5 % of the points "
                    "when nothing changed)"}
-
-
-def _extrapolated(rep, q) -> bool:
-    for p in rep["accuracy_map"]["points"]:
-        if np.allclose(p["q_rad"], q, atol=0, rtol=0):
-            return bool(p.get("extrapolated"))
-    return False
 
 
 def compare_results(a, b, out_dir=None, level: float = LEVEL) -> dict:

@@ -4,7 +4,7 @@ of ``vision-calib compare`` (report.html beside compare.json), drawn from the JS
 
 The picture: three slices of the tool positions through the calibration poses' centre (x-y seen from above, x-z and
 y-z from the side), each cell coloured by its value (r95, or the normalised difference), the calibration poses' tool
-positions as black dots (all, projected) and the box they span dashed; positions outside the
+positions as dots (all, projected; coloured by their own value where they have one) and the box they span dashed; positions outside the
 convex hull of the calibration poses (extrapolated) carry a small white dot. Matplotlib (Agg), PNG inlined as a data
 URI: the page needs no file beside it.
 """
@@ -48,10 +48,11 @@ def _spacing(v: np.ndarray) -> float:
     return float(np.median(np.diff(u))) if len(u) > 1 else 1.0
 
 
-def map_picture(xyz_m, values, extrapolated, cal_xyz_m, label: str, title: str = "") -> str:
+def map_picture(xyz_m, values, extrapolated, cal_xyz_m, label: str, title: str = "", cal_values=None) -> str:
     """Data URI of the three-view picture (module docstring) of points xyz_m (M, 3) [m] with ``values`` (M,) (colour,
-    named by ``label``), extrapolated (M,) bool, the calibration tool positions cal_xyz_m (K, 3) [m]; positions in mm
-    on the axes, each point a cell of the grid spacing, the largest value on top."""
+    named by ``label``), extrapolated (M,) bool, the calibration tool positions cal_xyz_m (K, 3) [m] (cal_values (K,):
+    their own values, as the dots' colours; default black); positions in mm on the axes, each point a cell of the
+    grid spacing."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -64,7 +65,8 @@ def map_picture(xyz_m, values, extrapolated, cal_xyz_m, label: str, title: str =
     ext = np.asarray(extrapolated, bool)
     K = np.asarray(cal_xyz_m, float).reshape(-1, 3) * 1e3
     ok = np.isfinite(v)
-    vmax = float(np.nanmax(v[ok])) if ok.any() else 1.0
+    cv = None if cal_values is None else np.asarray(cal_values, float)
+    vmax = float(np.nanmax(np.concatenate([v[ok], [] if cv is None else cv[np.isfinite(cv)]]), initial=0.0))
     norm = Normalize(vmin=0.0, vmax=vmax if vmax > 0 else 1.0)
     cmap = plt.get_cmap("viridis")
     fig, axs = plt.subplots(1, 3, figsize=(13.5, 4.6))
@@ -87,7 +89,8 @@ def map_picture(xyz_m, values, extrapolated, cal_xyz_m, label: str, title: str =
         lo = np.minimum(P[:, [a, b]].min(axis=0) - [wa, wb], K[:, [a, b]].min(axis=0) if len(K) else np.inf)
         hi = np.maximum(P[:, [a, b]].max(axis=0) + [wa, wb], K[:, [a, b]].max(axis=0) if len(K) else -np.inf)
         if len(K):
-            ax.scatter(K[:, a], K[:, b], s=14, c="black", marker="o", label="calibration poses")
+            ax.scatter(K[:, a], K[:, b], s=18, c="black" if cv is None else cmap(norm(cv)), edgecolors="black",
+                       linewidths=0.8, marker="o", label="calibration poses")
             kl, kh = K[:, [a, b]].min(axis=0), K[:, [a, b]].max(axis=0)
             ax.plot([kl[0], kh[0], kh[0], kl[0], kl[0]], [kl[1], kl[1], kh[1], kh[1], kl[1]], "k--", lw=0.8)
         ax.set_xlim(lo[0], hi[0])
@@ -114,7 +117,8 @@ def accuracy_map_section(report: dict) -> str:
     m = report.get("accuracy_map")
     if not isinstance(m, dict) or not m.get("points"):
         return ""
-    pts = m["points"]
+    pts = [p for p in m["points"] if not p.get("calibration")]
+    cal = [p for p in m["points"] if p.get("calibration")]
     xyz = [p["xyz_m"] for p in pts]
     ext = [bool(p.get("extrapolated")) for p in pts]
     out = [f'<section id="accuracy-map"><h2>{HEADING}</h2>',
@@ -123,13 +127,17 @@ def accuracy_map_section(report: dict) -> str:
            f"outside the calibration poses' convex hull: extrapolated), tool point {_esc(m.get('tcp_m'))} m in the "
            "flange frame, relative to the base frame registered on the calibration poses.</p>"]
     try:
-        uri = map_picture(xyz, [p["r95_mm"] for p in pts], ext, m.get("calibration_xyz_m") or [], "r95 position [mm]")
-        out.append(f'<figure><img src="{uri}" alt="accuracy map"><figcaption>r95 of the tool position [mm]; black dots: '
-                   "the calibration poses (dashed: their box); white dots: extrapolated positions.</figcaption></figure>")
+        uri = map_picture(xyz, [p["r95_mm"] for p in pts], ext, [p["xyz_m"] for p in cal], "r95 position [mm]",
+                          cal_values=[p["r95_mm"] for p in cal])
+        out.append(f'<figure><img src="{uri}" alt="accuracy map"><figcaption>r95 of the tool position [mm] on three '
+                   "slices through the calibration poses' centre; circles: the calibration poses (all, projected; "
+                   "coloured by their own r95; dashed: their box); white dots: extrapolated positions (outside the "
+                   "calibration poses' convex hull); blank cells: positions the model does not reach with the "
+                   "orientation of the nearest calibration pose.</figcaption></figure>")
     except Exception as exc:  # a picture that cannot be drawn must never cost the page
         out.append(f"<p class=\"muted\">(picture not drawn: {_esc(exc)})</p>")
     rows = []
-    for where in ("inside", "extrapolated"):
+    for where in ("inside", "extrapolated"):  # inside: the calibration poses and the grid within their hull
         rows.append(f"<tr><td class=\"l\">{where}</td><td>{_stats_cell(m['r95_mm'].get(where))}</td>"
                     f"<td>{_stats_cell(m['r95_deg'].get(where), '.2g')}</td></tr>")
     out.append("<table><thead><tr><th class=\"l\">tool positions</th><th>r95 position [mm] median / 95 % / max</th>"
@@ -176,14 +184,16 @@ def compare_body(out: dict) -> str:
                     + ".</p>")
     body.append(f"<p class=\"muted\">{_esc(p['how'])}.</p>")
     body.append(f"<h2>{HEADING}: normalised difference of the tool poses</h2>")
-    pts = m["points"]
+    pts = [q for q in m["points"] if not q.get("calibration") and q.get("from") == "A"]  # one grid: A's
+    cal = [q for q in m["points"] if q.get("calibration")]
     try:
         uri = map_picture([q["xyz_m"] for q in pts], [q["normalised"] for q in pts],
-                          [q["extrapolated"] for q in pts], m.get("calibration_xyz_m") or [],
-                          "normalised difference (position)")
+                          [q["extrapolated"] for q in pts], [q["xyz_m"] for q in cal],
+                          "normalised difference (position)", cal_values=[q["normalised"] for q in cal])
         body.append(f'<figure><img src="{uri}" alt="normalised difference map"><figcaption>normalised tool position '
-                    "difference B - A (above 2.8: beyond the 95 % radius of the combined uncertainty); black dots: the "
-                    "calibration poses of both runs.</figcaption></figure>")
+                    "difference B - A (above 2.8: beyond the 95 % radius of the combined uncertainty) on three slices of "
+                    "A's map grid through the calibration poses' centre; circles: the calibration poses of both runs (coloured by "
+                    "their own value).</figcaption></figure>")
     except Exception as exc:  # a picture that cannot be drawn must never cost the page
         body.append(f"<p class=\"muted\">(picture not drawn: {_esc(exc)})</p>")
     body.append(f"<p>{m['n_points']} joint sets: largest difference {_num(m['max_difference_mm'])} mm; normalised "
