@@ -424,23 +424,33 @@ def add_accuracy_map(report: dict, setup, result, q_cal: ArrayLike, **kw) -> Non
     report["summary_text"] = report.get("summary_text", "") + "\n" + summary_line(block)
 
 
-def planned_map(scene, names: Sequence[str], information: ArrayLike, scale: ArrayLike, joints: ArrayLike,
+def planned_map(scene, names: Sequence[str], information: ArrayLike, joints: ArrayLike,
                 identifiability: dict | None = None) -> dict:
     """The map ``plan`` predicts before any image: the nominal model, the base parameters' covariance
-    diag(scale) M^-1 diag(scale) of the planned poses' information M (L, L) in scaled units (``planning.design``:
-    whitened by the image model's pose covariance), ``names`` (L,) and ``scale`` (L,) of its columns, the planned
-    joint sets (K, n) as the calibration poses."""
+    diag(s) M^-1 diag(s) of the planned poses' information M (L, L) in scaled units (``planning.design``: whitened by
+    the image model's pose covariance; s: the parameters' scale, the columns' unit), ``names`` (L,) its columns, the
+    planned joint sets (K, n) as the calibration poses; the scene's joint repeatability (measurement.sigma_q_deg)."""
     setup = scene.setup
     kin, rnames = model_kinematics(setup)
-    s = np.asarray(scale, float)
+    own = dict(zip(setup.params.names, setup.params.scale))
+    s = np.array([own.get(n, 1.0) for n in names], float)  # a name the robot lacks (a tilt) is dropped below
     cov = np.linalg.pinv(np.asarray(information, float), hermitian=True) * np.outer(s, s)
     return build_map(kin, rnames, robot_x(setup, rnames, setup.params.nominal),
-                     embed_covariance(rnames, list(names), cov), joints, sigma_q_rad=float(
-                         getattr(scene.measurement, "sigma_q_rad", 0.0)), identifiability=identifiability,
+                     embed_covariance(rnames, list(names), cov), joints,
+                     sigma_q_rad=float(scene.measurement.sigma_q_rad), identifiability=identifiability,
                      covariance_of="predicted for the planned poses before any image (first order: the inverse of "
                                    "their information under the image measurement model, at the nominal geometry)")
 
 
-__all__ = ["LEVEL", "MARGIN", "PER_AXIS", "STREAM_MAP", "add_accuracy_map", "base_motion_lever", "build_map",
+def add_planned_map(plan: dict, scene, names: Sequence[str], information: ArrayLike, joints: ArrayLike,
+                    identifiability: dict | None = None) -> None:
+    """plan.json's ``accuracy_map`` (:func:`planned_map`); a map that cannot be computed is a warning of the plan."""
+    try:
+        plan["accuracy_map"] = planned_map(scene, names, information, joints, identifiability)
+    except (VisionCalibError, np.linalg.LinAlgError, ValueError) as exc:
+        plan.setdefault("warnings", []).append(f"accuracy map not computed: {exc}")
+
+
+__all__ = ["LEVEL", "MARGIN", "PER_AXIS", "STREAM_MAP", "add_accuracy_map", "add_planned_map", "base_motion_lever", "build_map",
            "embed_covariance", "map_rng", "model_kinematics", "norm_quantile", "planned_map", "registered_error",
            "registration", "run_map", "summary_line", "tool_covariance", "workspace_grid"]
