@@ -61,7 +61,9 @@ def _chi2_3_cdf(x: np.ndarray) -> np.ndarray:
     from scipy.special import erf
 
     x = np.maximum(x, 0.0)
-    return erf(np.sqrt(x / 2)) - np.sqrt(2 * x / np.pi) * np.exp(-x / 2)
+    with np.errstate(invalid="ignore", over="ignore"):  # x = inf (a zero direction): 1 - 0
+        out = erf(np.sqrt(x / 2)) - np.sqrt(2 * x / np.pi) * np.exp(-x / 2)
+    return np.where(np.isinf(x), 1.0, out)
 
 
 def _octant_nodes(n: int = QUAD_NODES) -> tuple[np.ndarray, np.ndarray]:
