@@ -125,7 +125,8 @@ def main() -> None:
                         c = compare_results(a_dir, jd)
                         flagged = not c["decision"]["consistent"]
                         changed.setdefault(j, []).append(flagged)
-                        named = j in c["decision"]["moved"]
+                        named = j in c["decision"]["moved"] or any(
+                            j in r.get("or", []) for r in c["parameters"]["compared"] if r["moved"])
                         line += f"; {j} +{args.offset_deg:g} deg: {'flagged' if flagged else 'missed'}" + \
                                 (" (named)" if named else "")
                     if args.other_truth:

@@ -160,7 +160,10 @@ def test_compare_exit_codes(results, tmp_path, capsys):
     assert "<h2>Accuracy map: normalised difference" in (tmp_path / "ab" / "report.html").read_text()
     assert main(["compare", str(results["A"]), str(results["C"]), "--out", str(tmp_path / "ac")]) == 3
     ac = json.loads((tmp_path / "ac" / "compare.json").read_text())
-    assert not ac["decision"]["consistent"] and "theta3" in ac["decision"]["moved"]
+    assert not ac["decision"]["consistent"]
+    assert ac["decision"]["moved"][0] == "theta3"  # C's truth: theta3 + 0.2 deg (and a3 + 0.5 mm, 1.5 std)
+    t3 = next(r for r in ac["parameters"]["compared"] if r["name"] == "theta3")
+    assert abs(t3["moved_by"] - np.radians(0.2)) < 4 * t3["moved_by_std"]
     assert ac["map"]["share_beyond_95"] > ab["map"]["share_beyond_95"]
     capsys.readouterr()
     # bad input: named, exit 2
@@ -196,3 +199,4 @@ def test_parameter_test_of_a_result_against_itself_and_one_shift():
     t = parameter_test(names, d, S)
     assert t["differ"] and t["rows"][2]["shift_z"] == pytest.approx(8.0)
     assert max(t["rows"], key=lambda r: abs(r["shift_z"]))["name"] == "p2"
+    assert t["moved"][0] == "p2" and t["rows"][2]["moved_by"] == pytest.approx(d[2])  # named first, its shift exact

@@ -15,8 +15,10 @@ d = x_B - x_A (L,) and S = C_A + C_B (L, L):
 - chi-square test: d^T S^+ d against chi2 with rank(S) degrees of freedom (p-value ``chi2_p``);
 - each parameter's z = d_i / sqrt(S_ii) (its own difference in combined std) and its ``shift_z`` = (S^+ d)_i /
   sqrt((S^+)_ii), the z of the hypothesis that it alone moved (the best test of one parameter that moved: the
-  others' correlated differences are accounted for); a parameter *moved* when its shift_z is significant after a
-  Bonferroni correction over the L parameters (two-sided).
+  others' correlated differences are accounted for), with its Bonferroni p over the L parameters (two-sided);
+- the parameters that *moved*: selected forward (:func:`moved_stepwise`), the most significant shift first, then
+  the next given it, while the Bonferroni p stays below :data:`LEVEL`: one moved joint offset is named alone, not
+  with every parameter correlated with it; each with its estimated shift and std.
 
 Decision: the results differ (exit 3) when the chi-square p-value or the smallest Bonferroni p-value is below
 :data:`LEVEL` (a family-wise false alarm of at most 2 LEVEL when the covariances are right); consistent (exit 0)
@@ -42,6 +44,8 @@ from .accuracy_map import base_motion_lever, norm_quantile
 FORMAT = "vision_calib.compare/1"
 #: level of each of the two tests (chi-square; the smallest Bonferroni p of the shift z)
 LEVEL = 0.01
+#: z^2 difference below which another parameter's shift explains the difference as well (chi2 with 1 dof, 95 %)
+INDISTINGUISHABLE = 3.841
 #: eigenvalues of S below this share of the largest are not counted in the chi-square (rank)
 RANK_TOL = 1e-10
 
@@ -128,8 +132,54 @@ def compared_parameters(ra, rb) -> tuple[list[str], list[dict]]:
     return names, left
 
 
+def moved_stepwise(d: np.ndarray, W: np.ndarray, level: float = LEVEL) -> list[dict]:
+    """The parameters that moved, by forward selection: the parameter whose shift best explains the difference
+    d (L,) not yet explained (score z of its shift given the shifts already selected, weight W = S^+) is selected
+    while its Bonferroni p (over the parameters left) is below ``level``; the selected shifts are estimated together
+    (generalised least squares). Returns [{index, z (score z when selected), p_bonferroni, alternatives (indices of
+    the parameters whose shift would explain it about as well: z^2 within INDISTINGUISHABLE), shift, shift_std}] in
+    the order selected: the smallest set of single-parameter moves that explains the difference (a parameter that only
+    correlates with a moved one is not in it)."""
+    from scipy.stats import norm
+
+    L = len(d)
+    active: list[int] = []
+    steps = []
+    Wd = W @ d
+    for _ in range(L):
+        if active:
+            WAA = W[np.ix_(active, active)]
+            shift = np.linalg.solve(WAA, Wd[active])
+            r = d.copy()
+            r[active] -= shift
+            WiA = W[:, active]
+            var = np.diag(W) - np.einsum("ia,ab,ib->i", WiA, np.linalg.inv(WAA), WiA)
+        else:
+            r, var = d, np.diag(W).copy()
+        u = W @ r
+        cand = [i for i in range(L) if i not in active and var[i] > 0]
+        if not cand:
+            break
+        z = {i: u[i] / np.sqrt(var[i]) for i in cand}
+        best = max(cand, key=lambda i: abs(z[i]))
+        p = float(min(1.0, len(cand) * 2 * norm.sf(abs(z[best]))))
+        if not p < level:
+            break
+        active.append(best)
+        # the others whose single shift explains the difference about as well (likelihood ratio below chi2_1(95 %))
+        alt = [i for i in cand if i != best and z[best] ** 2 - z[i] ** 2 < INDISTINGUISHABLE]
+        steps.append({"index": best, "z": float(z[best]), "p_bonferroni": p, "alternatives": alt})
+    if active:
+        WAA = W[np.ix_(active, active)]
+        shift, cov = np.linalg.solve(WAA, Wd[active]), np.linalg.inv(WAA)
+        for k, st in enumerate(steps):
+            st["shift"], st["shift_std"] = float(shift[k]), float(np.sqrt(max(cov[k, k], 0.0)))
+    return steps
+
+
 def parameter_test(names, d: np.ndarray, S: np.ndarray, level: float = LEVEL) -> dict:
-    """The chi-square and per-parameter tests of a difference d (L,) with covariance S (L, L) (module docstring)."""
+    """The chi-square and per-parameter tests of a difference d (L,) with covariance S (L, L) (module docstring);
+    ``moved``: :func:`moved_stepwise`."""
     from scipy.stats import chi2, norm
 
     S = 0.5 * (S + S.T)
@@ -144,13 +194,20 @@ def parameter_test(names, d: np.ndarray, S: np.ndarray, level: float = LEVEL) ->
     wdiag = np.diag(W)
     rows = []
     L = len(names)
+    steps = moved_stepwise(d, W, level)
+    chosen = {st["index"]: st for st in steps}
     for i, nm in enumerate(names):
         z = float(d[i] / sd[i]) if sd[i] > 0 else float("nan")
         sz = float(wd[i] / np.sqrt(wdiag[i])) if wdiag[i] > 0 else float("nan")
         pb = float(min(1.0, L * 2 * norm.sf(abs(sz)))) if np.isfinite(sz) else float("nan")
-        rows.append({"name": nm, "z": z, "shift_z": sz, "p_bonferroni": pb, "moved": bool(pb < level)})
+        row = {"name": nm, "z": z, "shift_z": sz, "p_bonferroni": pb, "moved": i in chosen}
+        if i in chosen:
+            row |= {"moved_by": chosen[i]["shift"], "moved_by_std": chosen[i]["shift_std"],
+                    "or": [names[k] for k in chosen[i]["alternatives"]]}
+        rows.append(row)
     pmin = min((r["p_bonferroni"] for r in rows if np.isfinite(r["p_bonferroni"])), default=float("nan"))
     return {"chi2": stat, "dof": dof, "chi2_p": p, "min_p_bonferroni": pmin, "rows": rows,
+            "moved": [names[st["index"]] for st in steps],
             "differ": bool((np.isfinite(p) and p < level) or (np.isfinite(pmin) and pmin < level))}
 
 
@@ -223,7 +280,6 @@ def compare_results(a, b, out_dir=None, level: float = LEVEL) -> dict:
               "std_a": float(np.sqrt(ra.covariance[i, i])), "std_b": float(np.sqrt(rb.covariance[j, j])),
               "kind": "angle" if _is_angle(ra, r["name"]) else "length"}
     amap = _map_points(ra, rb, rep_a, rep_b, names, d, S)
-    moved = sorted((r for r in test["rows"] if r["moved"]), key=lambda r: -abs(r["shift_z"]))
     differ = test["differ"]
     why = (f"chi-square {test['chi2']:.4g} on {test['dof']} parameters, p = {test['chi2_p']:.3g}; smallest Bonferroni "
            f"p of one parameter moved {test['min_p_bonferroni']:.3g} (level {level:g} each)")
@@ -233,13 +289,15 @@ def compare_results(a, b, out_dir=None, level: float = LEVEL) -> dict:
         "robot": {"kind": ra.model.kind, "name": getattr(ra.model.nominal_robot, "name", None)},
         "level": level,
         "decision": {"consistent": not differ, "why": why,
-                     "moved": [r["name"] for r in moved]},
+                     "moved": test["moved"]},
         "parameters": {"compared": test["rows"], "not_compared": left, "chi2": test["chi2"], "dof": test["dof"],
                        "chi2_p": test["chi2_p"], "min_p_bonferroni": test["min_p_bonferroni"],
                        "how": "d = x_B - x_A on the robot parameters identified in both (mounts and the parameters "
                               "carrying a mount parameter left out), S = C_A + C_B; chi2 = d^T S^+ d on rank(S) "
                               "degrees of freedom; z = d_i / sqrt(S_ii); shift_z: the z of parameter i alone moved, "
-                              "(S^+ d)_i / sqrt((S^+)_ii), p Bonferroni-corrected over the parameters"},
+                              "(S^+ d)_i / sqrt((S^+)_ii), p Bonferroni-corrected over the parameters; moved: "
+                              "forward selection of single-parameter shifts (each given those before it) while "
+                              "significant, moved_by: their joint estimate"},
         "map": amap,
         "tcp_m": list(rep_a["accuracy_map"].get("tcp_m") or [0.0, 0.0, 0.0]),
         "notes": _notes(rep_a, rep_b),
@@ -275,9 +333,14 @@ def summary_text(out: dict) -> str:
              f"parameters compared: {len(p['compared'])}; left out: {len(p['not_compared'])}"
              + (" (" + "; ".join(f"{r['name']}: {r['why']}" for r in p["not_compared"][:4]) + ")"
                 if p["not_compared"] else "")]
+    moved = [r for nm in dec["moved"] for r in p["compared"] if r["name"] == nm]
+    if moved:
+        lines.append("moved (selected forward, each given those before): " + ", ".join(
+            f"{r['name']} {_value(r, 'moved_by')} +- {_value(r, 'moved_by_std').lstrip('+')}"
+            + (f" (or, as well explained here: {', '.join(r['or'])})" if r.get("or") else "") for r in moved))
     rows = sorted(p["compared"], key=lambda r: -abs(r["shift_z"]) if np.isfinite(r["shift_z"]) else 0)[:5]
-    lines.append("largest: " + ", ".join(f"{r['name']} {_value(r, 'difference')} (z {r['z']:+.2f}, shift z "
-                                         f"{r['shift_z']:+.2f}{', MOVED' if r['moved'] else ''})" for r in rows))
+    lines.append("largest shift z: " + ", ".join(f"{r['name']} {_value(r, 'difference')} (z {r['z']:+.2f}, shift z "
+                                                 f"{r['shift_z']:+.2f})" for r in rows))
     lines.append(f"tool map: {m['n_points']} joint sets, largest difference {m['max_difference_mm']:.3g} mm, "
                  f"normalised difference above its 95 % value at {100 * m['share_beyond_95']:.0f} % of them "
                  f"(max {m['max_normalised']:.2f})")
@@ -299,4 +362,4 @@ def write_compare(out_dir, out: dict) -> Path:
 
 
 __all__ = ["FORMAT", "LEVEL", "compare_results", "compared_parameters", "parameter_test", "summary_text",
-           "write_compare"]
+           "moved_stepwise", "write_compare"]

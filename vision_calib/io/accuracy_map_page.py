@@ -174,10 +174,13 @@ def compare_body(out: dict) -> str:
                     f"<td>{_num(r['a'] * f, '.6g')}</td><td>{_num(r['b'] * f, '.6g')}</td>"
                     f"<td>{_num(r['difference'] * f, '+.4g')} {u}</td><td>{_num(r['std_a'] * f, '.2g')}</td>"
                     f"<td>{_num(r['std_b'] * f, '.2g')}</td><td>{_num(r['z'], '+.2f')}</td>"
-                    f"<td>{_num(r['shift_z'], '+.2f')}</td><td>{_num(r['p_bonferroni'], '.3g')}</td></tr>")
+                    f"<td>{_num(r['shift_z'], '+.2f')}</td><td>{_num(r['p_bonferroni'], '.3g')}</td>"
+                    + (f"<td class=\"l\">{_num(r['moved_by'] * f, '+.4g')} &plusmn; {_num(r['moved_by_std'] * f, '.2g')} "
+                       f"{u}" + (f" (or {_esc(', '.join(r['or']))})" if r.get("or") else "") + "</td>"
+                       if r["moved"] else "<td></td>") + "</tr>")
     body.append(f"<h2>Parameters (chi-square {_num(p['chi2'], '.4g')} on {p['dof']}, p = {_num(p['chi2_p'])})</h2>"
                 "<table><thead><tr><th class=\"l\">parameter</th><th>A</th><th>B</th><th>B - A</th><th>std A</th>"
-                "<th>std B</th><th>z</th><th>shift z</th><th>p (Bonferroni)</th></tr></thead><tbody>"
+                "<th>std B</th><th>z</th><th>shift z</th><th>p (Bonferroni)</th><th>moved by</th></tr></thead><tbody>"
                 + "".join(rows) + "</tbody></table>")
     if p["not_compared"]:
         body.append("<p>Not compared: " + "; ".join(f"{_esc(r['name'])}: {_esc(r['why'])}" for r in p["not_compared"])
