@@ -1,9 +1,9 @@
 """Where is the calibrated robot accurate? The predicted tool-point accuracy over its workspace (report.json
 ``accuracy_map``, report.html "Accuracy map", ``plan`` before any image).
 
-Points: a grid of tool positions over the box of the calibration poses' tool positions, widened on every side by
-:data:`MARGIN` of its size, at least :data:`MIN_MARGIN_M` (:data:`PER_AXIS` positions per axis); each grid position is held with the
-tool orientation of the nearest calibration pose and turned into a joint set by the calibrated model's inverse
+Points: a grid of tool positions (:data:`PER_AXIS` per axis) over the box of the calibration poses' tool positions,
+widened on every side by :data:`MARGIN` of its size, at least :data:`MIN_MARGIN_M`; each grid position is held with
+the tool orientation of the nearest calibration pose and turned into a joint set by the calibrated model's inverse
 kinematics (``deploy.kinematics``, started from that pose's joints; positions it does not reach are left out). A
 point outside the convex hull of the calibration tool positions is ``extrapolated``; the calibration poses themselves
 are points of the map too (``calibration``: true).
@@ -19,10 +19,14 @@ The measurement noise of a camera is not in it: the map is the error of the mode
 commanding q gets; the held-out figures of the report are the errors of a measurement.
 
 Frames: the model's base frame, whose convention the parameters that no pose identifies fix at their nominal
-values; the ``not_covered`` entries name those whose deviation the tool pose carries (e.g. a camera mount's offset
-along the flange axis, folded into d6): the map assumes them nominal. In a simulation ``true_error_mm`` /
-``true_error_deg`` are the tool pose errors of the calibrated model against the true robot at each q (a joint error
-drawn with sigma_q where it is not 0), and ``coverage`` the share of points within their r95.
+values, registered on the calibration poses (:func:`registration`: their mean tool pose error removed, what a base
+or mount transform absorbs; an eye-in-hand calibration sees the tool well relative to where it was calibrated, the
+robot's base poorly). The ``not_covered`` entries name the parameters no pose identifies whose deviation the tool
+pose carries (e.g. a camera mount's offset along the flange axis, folded into d6): the map assumes them nominal. In
+a simulation ``true_error_mm`` / ``true_error_deg`` are the tool pose errors of the calibrated model against the
+true robot at each q (a joint error drawn with sigma_q where it is not 0), registered the same way
+(:func:`registered_error`), ``true_error_z`` their normalised position error, and ``coverage`` the share of points
+within their r95.
 """
 
 from __future__ import annotations
@@ -311,18 +315,20 @@ def build_map(kin, names: Sequence[str], x: ArrayLike, cov: ArrayLike, q_cal: Ar
     r_deg = np.degrees(norm_quantile(C[:, 3:, 3:]))
     ext = g["extrapolated"]
     pts = [{"xyz_m": [float(v) for v in T[k, :3, 3]], "q_rad": [float(v) for v in q[k]],
-            "ijk": [int(v) for v in g["ijk"][k]], "extrapolated": bool(ext[k]), "calibration": bool(g["calibration"][k]),
-            "r95_mm": float(r_mm[k]), "r95_deg": float(r_deg[k])} for k in range(len(q))]
+            "ijk": [int(v) for v in g["ijk"][k]], "extrapolated": bool(ext[k]),
+            "calibration": bool(g["calibration"][k]), "r95_mm": float(r_mm[k]), "r95_deg": float(r_deg[k])}
+           for k in range(len(q))]
     block = {
         "level": LEVEL, "tcp_m": [float(v) for v in (np.zeros(3) if tcp is None else np.asarray(tcp, float))],
-        "frame": "the robot's base frame (the model's), tool = flange + tcp",
+        "frame": "the robot's base frame (the model's) registered on the calibration poses (their mean tool pose "
+                 "error removed: what a base or mount transform absorbs), tool = flange + tcp",
         "how": ("r95: radius holding 95 % of the tool pose error of N(0, J C J^T + sigma_q^2 J_q J_q^T) at each "
                 "joint set (exact quantile of the norm of the 3-D Gaussian); C: " + (covariance_of or
                 "the identified parameters' covariance") + "; the mounts (camera, target) are not in the tool pose, "
                 "their uncertainty drops out; no camera measurement noise (the error of the model's tool pose)"),
         "repeatability_sigma_q_deg": float(np.degrees(sigma_q_rad)),
-        "grid": {"per_axis": int(per_axis), "margin": float(margin), "axes_m": [[float(v) for v in a] for a in g["axes"]],
-                 "goals": g["goals"], "reached": g["reached"],
+        "grid": {"per_axis": int(per_axis), "margin": float(margin),
+                 "axes_m": [[float(v) for v in a] for a in g["axes"]], "goals": g["goals"], "reached": g["reached"],
                  "how": f"tool positions on the box of the calibration tool positions widened on every side by the "
                         f"margin (share of its size), at least {MIN_MARGIN_M * 1e3:g} mm, each with the tool "
                         "orientation of the nearest calibration pose, joint sets by the model's inverse kinematics "
@@ -463,6 +469,7 @@ def add_planned_map(plan: dict, scene, names: Sequence[str], information: ArrayL
         plan.setdefault("warnings", []).append(f"accuracy map not computed: {exc}")
 
 
-__all__ = ["LEVEL", "MARGIN", "PER_AXIS", "STREAM_MAP", "add_accuracy_map", "add_planned_map", "base_motion_lever", "build_map",
-           "embed_covariance", "map_rng", "model_kinematics", "norm_quantile", "planned_map", "registered_error",
-           "registration", "run_map", "summary_line", "tool_covariance", "workspace_grid"]
+__all__ = ["LEVEL", "MARGIN", "PER_AXIS", "STREAM_MAP", "add_accuracy_map", "add_planned_map", "base_motion_lever",
+           "build_map", "embed_covariance", "map_rng", "model_kinematics", "norm_quantile", "planned_map",
+           "registered_error", "registered_jacobian", "registration", "run_map", "summary_line", "tool_covariance",
+           "workspace_grid"]
