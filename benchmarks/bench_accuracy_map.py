@@ -19,6 +19,7 @@ measure, identify), no plots, no synthetic reference, written to a temporary fol
 from __future__ import annotations
 
 import argparse
+import shutil
 import tempfile
 import time
 from dataclasses import replace
@@ -81,8 +82,19 @@ def main() -> None:
     ap.add_argument("--joints", default=None, help="joint offsets to move (default: every one compare tests)")
     ap.add_argument("--no-compare", action="store_true", help="coverage only")
     ap.add_argument("--other-truth", action="store_true", help="also compare against another true robot")
+    ap.add_argument("--keep", action="store_true", help="keep the result folders (their path is printed)")
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="bench_map_"))
+    try:
+        run_scenes(args, tmp)
+    finally:
+        if args.keep:
+            print(f"result folders kept in {tmp}")
+        else:
+            shutil.rmtree(tmp, ignore_errors=True)
+
+
+def run_scenes(args, tmp: Path) -> None:
     for name in args.scenes.split(","):
         scene0 = load_scene(SCENES_DIR / f"{name}.yaml")
         t0 = time.perf_counter()
