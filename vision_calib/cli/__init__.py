@@ -2,8 +2,8 @@
 through :data:`COMMANDS`), cut by command family: ``runs`` (identifiability, identify-synthetic, simulate, demo,
 process, calibrate-camera, process-poses, study, noise), ``imports`` (import-visp, import-rosi, export-rosi,
 import-bag, import-pairs), ``cell`` (init, target), ``deploy`` (compensate, inverse, export, ``--export``),
-``plan``, ``docs`` (the documentation pages); shared by them: ``options`` (argument types, common options),
-``locking`` (inputs, outputs, the output lock), ``exits`` (exit codes).
+``plan``, ``docs`` (the documentation pages), ``compare``; shared by them: ``options`` (argument types, common
+options), ``locking`` (inputs, outputs, the output lock), ``exits`` (exit codes).
 
 Outputs: every command that writes a folder takes ``--out DIR`` (``import-rosi SRC DST`` / ``export-rosi SRC
 DST`` still accept the old positional DST, with a deprecation note on stderr); ``target`` and
@@ -35,7 +35,7 @@ import sys  # noqa: E402
 
 from .. import __version__  # noqa: E402
 from ..errors import VisionCalibError  # noqa: E402
-from . import cell, deploy, docs, imports, plan, runs  # noqa: E402
+from . import cell, compare, deploy, docs, imports, plan, runs  # noqa: E402
 from .deploy import EXPORT_FORMATS, EXPORTING_RUNS, exporting  # noqa: E402
 from .exits import EXIT_CODES, EXIT_NOT_CONVERGED  # noqa: E402
 from .locking import run_locked  # noqa: E402
@@ -63,6 +63,7 @@ def build_parser() -> argparse.ArgumentParser:
     imports.add_import_pairs_parser(sub)
     plan.add_plan_parser(sub)
     docs.add_docs_parser(sub)
+    compare.add_compare_parser(sub)
     for p in sub.choices.values():  # the one rule for paths named in files (config.confine): the user's allowance
         p.add_argument("--allow-path", action="append", default=[], metavar="DIR",
                        help="let files (scene, measured-pose, recording, study, ROS-I files) name files in DIR too "
@@ -93,6 +94,7 @@ COMMANDS = {
     "import-pairs": imports.cmd_import_pairs,
     "plan": plan.cmd_plan,
     "docs": docs.cmd_docs,
+    "compare": compare.cmd_compare,
 }
 
 

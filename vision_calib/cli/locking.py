@@ -42,6 +42,8 @@ def _inputs(args) -> list:
     if c == "noise":
         src = Path(args.folder)
         return [(src if src.is_dir() else src.parent, "folder")] + [(f, "file") for f in (args.target, args.camera) if f]
+    if c == "compare":
+        return [(args.a, "folder"), (args.b, "folder")]
     if c == "process-poses":
         return [(args.file, "file")]
     if c in ("simulate", "identifiability", "identify-synthetic"):

@@ -110,6 +110,10 @@ def process_poses(path: str | Path, out_dir: str | Path | None, method: str | No
         residuals=residual_stats(result.residuals, problem.residual_kind), extra={"holdout": hold},
         timings={"identify": t_id, "total": time.perf_counter() - t0}, failure=failure)
     report["summary_text"] += "\n" + "\n".join(holdout_lines(hold))
+    from .accuracy_map import add_accuracy_map  # the map of the calibrated tool over the workspace
+
+    add_accuracy_map(report, setup, result, screened.select(problem.labels).joints, tcp=tcp,
+                     sigma_q_rad=scene.measurement.sigma_q_rad)
     write_report(Path(out_dir), report, setup, result, problem, plots=plots)
     return report
 

@@ -221,13 +221,14 @@ def run_simulation(scene: Scene | str | Path, out_dir: str | Path | None = None,
                    export_recording: str | Path | None = None, workers: int | None = None, progress: bool = False,
                    overrides: dict | None = None, plots: bool = True, pool: ImagePool | InlineImagePool | None = None,
                    fix_unidentifiable: bool = False, reference: bool = True, folds: int | None = None,
-                   tcp=None) -> dict:
+                   tcp=None, accuracy_map: bool = True) -> dict:
     """The whole simulated experiment; writes ``out_dir/report.json`` (+ plots, calibrated model)
     when out_dir is given and returns the report dict (with ``summary_text``). pool: an image pool to reuse
     (``image_chain.ImagePool``, or ``InlineImagePool``: the chain in this thread, the validation poses measured
     after the identification instead of beside it; same numbers), else one is started for this run (and shared by
     the identification and validation poses). reference: add the report's ``synthetic_reference`` (5 more
-    identifications; a study, which does not record it, leaves it out). folds / tcp: the held-out validation
+    identifications; a study, which does not record it, leaves it out). accuracy_map: add the report's
+    ``accuracy_map`` (:mod:`.accuracy_map`; a study leaves it out too). folds / tcp: the held-out validation
     (:mod:`.holdout`; its decision, and a validation against the truth worse than the nominal model, fail the
     verdict: no calibrated model)."""
     t_start = time.perf_counter()
@@ -347,6 +348,12 @@ def run_simulation(scene: Scene | str | Path, out_dir: str | Path | None = None,
         result=result, identified=ident, motion=motion, accuracy=evals, timings=timings,
         extra={**extra, "holdout": hold}, failure=inconsistency_failure(ident) or holdout_failure(hold) or truth_failure(evals))
     report["summary_text"] += "\n" + "\n".join(holdout_lines(hold))
+    if accuracy_map:  # the map of the calibrated tool over the workspace
+        from .accuracy_map import add_accuracy_map, map_rng
+
+        add_accuracy_map(report, setup, result, meas_used.select(problem.labels).joints, tcp=tcp,
+                         sigma_q_rad=scene.measurement.sigma_q_rad, truth_setup=tsetup, x_true=x_true,
+                         rng=map_rng(seed))
     if out_dir is not None:
         preloading.join()
         write_report(out_dir, report, setup, result, problem, evals, plots=plots,

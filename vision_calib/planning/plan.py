@@ -473,6 +473,9 @@ def plan_cell(scene, n_poses: int, out_dir=None, seed: int = 0, n_candidates: in
         "notes": notes, "warnings": warnings,
         "seconds": None,
     }
+    from ..experiment.accuracy_map import add_planned_map  # the accuracy map before any image
+
+    add_planned_map(plan, scene, info.names, D.info_matrix(A_sel), joints, rep0.to_dict())
     plan["seconds"] = time.perf_counter() - t0
     if out_dir is not None:
         from .report import write_plan

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..report.accuracy_map_page import accuracy_map_section
 from ..report.html import esc, num, page, png_img, table
 from ..rig.base import ArmFrames
 from ..serialize import write_bytes_atomic, write_json_atomic, write_text_atomic
@@ -235,6 +236,7 @@ def plan_html(res: dict, out_dir) -> str:
                           for r in curve["rows"]]))
         out.append(f"<p class=\"muted\">{esc(curve['of'])}" + (f"; target {curve['target_mm']:g} mm (95 %)"
                                                                  if curve.get("target_mm") else "") + ".</p>")
+    out.append(accuracy_map_section(res))  # the accuracy map of the planned poses (report.accuracy_map_page)
     out.append("<h2>Poses</h2>")
     out.append("<p>in tour order; joints to command (nominal model); clearance: smallest distance of the robot's bodies "
                "to the obstacles and to its own non-adjacent links (FCL); view: camera to board centre, board normal "

@@ -21,6 +21,7 @@ import re
 from pathlib import Path
 
 from ..serialize import write_text_atomic
+from .accuracy_map_page import accuracy_map_section
 from .text import (KIND_UNITS, figure_head, figure_label, fmt_sig, handeye_values, lack_of_fit_line,
                           method_check_line)
 
@@ -477,7 +478,7 @@ def report_html(report: dict, out_dir, overlays=None) -> str:
     body = [f"<h1>Calibration report</h1><p class=\"sub\">{esc(_what(report))}</p>",
             verdict_section(report), parameters_section(report), identifiability_section(report),
             adequacy_section(report), residuals_section(report), plots_section(report, out_dir),
-            overlays_section(overlays), more_section(report)]
+            accuracy_map_section(report), overlays_section(overlays), more_section(report)]
     return page(title, "\n".join(b for b in body if b))
 
 

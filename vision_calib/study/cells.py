@@ -174,7 +174,7 @@ def _run_images(spec: StudySpec, scene, s: dict, seed: int) -> dict:
     overrides = {k: s[k] for k in ("noise_grey", "blur_px") if s.get(k) is not None}
     rep = run_simulation(scene, out_dir=None, seed=seed, n_poses=s.get("n_poses"), frames=s.get("frames"),
                          method=s.get("method"), workers=1, progress=False, overrides=overrides,
-                         pool=image_pool(scene), reference=False)
+                         pool=image_pool(scene), reference=False, accuracy_map=False)
     ident = rep["identification"]
     return {"converged": ident["converged"], "iterations": ident["iterations"],
             "seconds": rep.get("timings_s", {}).get("identify", float("nan")),
