@@ -163,7 +163,7 @@ def T_from_xyz_rotvec(v6):
 def xyz_rotvec_from_T(T):
     """(..., 4, 4) -> (..., 6) = [x, y, z (m), rotation vector (rad)]."""
     T = np.asarray(T, dtype=float)
-    rv = Rotation.from_matrix(T[..., :3, :3].reshape(-1, 3, 3)).as_rotvec().reshape(T.shape[:-2] + (3,))
+    rv = rotvec_from_matrix(T[..., :3, :3]).reshape(T.shape[:-2] + (3,))
     return np.concatenate([T[..., :3, 3], rv], axis=-1)
 
 
@@ -182,13 +182,43 @@ def cam_gl_from_cv(T_world_camcv):
 
 
 # ----------------------------------------------------------------------------- errors / perturbation
+def rotvec_from_matrix(R):
+    """Rotation vector(s) (..., 3) [rad, angle in [0, pi]] of rotation matrices (..., 3, 3): Shepperd's stable
+    quaternion (the largest of 1 + tr, 1 + 2 R_ii - tr picks the formula), normalised (an orthonormal matrix to
+    rounding), then 2 atan2(|v|, w) v / |v|; the same as scipy's ``Rotation.from_matrix(R).as_rotvec()`` to
+    ~1e-15 rad, 2-3x faster on stacks of poses (no object, no determinant check)."""
+    R = np.asarray(R, dtype=float)
+    shape = R.shape[:-2]
+    R = R.reshape(-1, 3, 3)
+    d0, d1, d2 = R[:, 0, 0], R[:, 1, 1], R[:, 2, 2]
+    tr = d0 + d1 + d2
+    k = np.argmax(np.stack([tr, d0, d1, d2], axis=1), axis=1)
+    s21, s12, s02, s20, s10, s01 = R[:, 2, 1], R[:, 1, 2], R[:, 0, 2], R[:, 2, 0], R[:, 1, 0], R[:, 0, 1]
+    q = np.empty((R.shape[0], 4))  # x, y, z, w (unnormalised)
+    for case, cols in ((0, (s21 - s12, s02 - s20, s10 - s01, 1 + tr)),
+                       (1, (1 + 2 * d0 - tr, s01 + s10, s02 + s20, s21 - s12)),
+                       (2, (s01 + s10, 1 + 2 * d1 - tr, s12 + s21, s02 - s20)),
+                       (3, (s02 + s20, s12 + s21, 1 + 2 * d2 - tr, s10 - s01))):
+        m = k == case
+        if m.any():
+            q[m] = np.stack([c[m] for c in cols], axis=1)
+    q /= np.linalg.norm(q, axis=1)[:, None]
+    q[q[:, 3] < 0] *= -1.0
+    v, w = q[:, :3], q[:, 3]
+    nv = np.linalg.norm(v, axis=1)
+    small = nv < 1e-4  # angle / |v| by its series (2 / w) (1 - |v|^2 / (3 w^2)), exact to rounding there
+    f = np.where(small, 2.0 / w * (1.0 - nv**2 / (3.0 * w**2)),
+                 2.0 * np.arctan2(nv, w) / np.where(small, 1.0, nv))
+    return (v * f[:, None]).reshape(shape + (3,))
+
+
 def pose_error(T_a, T_b):
     """6-vector(s) (..., 6) from pose T_a to T_b: [t_b - t_a (m), rotvec(R_b R_a^T) (rad)]."""
     T_a = np.asarray(T_a, dtype=float)
     T_b = np.asarray(T_b, dtype=float)
     dR = np.array(T_b[..., :3, :3] @ np.swapaxes(T_a[..., :3, :3], -1, -2))
     shape = dR.shape[:-2]
-    rv = Rotation.from_matrix(dR.reshape(-1, 3, 3)).as_rotvec().reshape(shape + (3,))
+    rv = rotvec_from_matrix(dR).reshape(shape + (3,))
     return np.concatenate([T_b[..., :3, 3] - T_a[..., :3, 3], rv], axis=-1)
 
 

@@ -91,3 +91,26 @@ def test_inverse_error_map_matches_finite_differences():
         minus = F.pose_error(F.inv_T(T), F.inv_T(F.perturb_pose(T, -d)))
         num[:, k] = (plus - minus) / (2 * eps)
     np.testing.assert_allclose(G, num, atol=1e-7)
+
+
+def test_rotvec_from_matrix_matches_scipy_at_every_angle():
+    """The log map of pose_error (Shepperd's quaternion) against scipy's, from 1e-12 rad to pi, including the
+    identity and half turns about each axis (where the vector's sign is a convention: compared as rotations)."""
+    from scipy.spatial.transform import Rotation
+
+    from vision_calib.frames import rotvec_from_matrix
+
+    rng = np.random.default_rng(3)
+    axes = rng.normal(size=(400, 3))
+    axes /= np.linalg.norm(axes, axis=1)[:, None]
+    angles = np.concatenate([10.0 ** rng.uniform(-12, 0, 300), np.pi - 10.0 ** rng.uniform(-9, -1, 100)])
+    rv = axes * angles[:, None]
+    R = np.concatenate([Rotation.from_rotvec(rv).as_matrix(), np.eye(3)[None],
+                        np.diag([1.0, -1, -1])[None], np.diag([-1.0, 1, -1])[None], np.diag([-1.0, -1, 1])[None]])
+    ours = rotvec_from_matrix(R)
+    ref = Rotation.from_matrix(R).as_rotvec()
+    between = (Rotation.from_rotvec(ref).inv() * Rotation.from_rotvec(ours)).magnitude()
+    assert np.max(between) < 1e-14
+    assert np.allclose(np.linalg.norm(ours, axis=1), np.linalg.norm(ref, axis=1), rtol=1e-12, atol=1e-15)
+    assert np.allclose(ours[:300], rv[:300], rtol=1e-10, atol=1e-16)  # small and moderate angles: the vector itself
+    assert rotvec_from_matrix(R.reshape(2, -1, 3, 3)).shape == (2, R.shape[0] // 2, 3)

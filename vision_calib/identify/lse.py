@@ -379,7 +379,8 @@ def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gto
     equal to rounding give answers equal to rounding through iterated fits); max_nfev (default
     100 (n + 1)) evaluations of fun. ``normal`` (z, r) -> (J^T J (n, n), J^T r (n,)), when given, replaces jac
     (a problem too large to hold J: :func:`normal_equations`); the final Gauss-Newton step then takes the normal
-    equations at the last iterate, and the result carries them (``A``). Returns an :class:`LMResult` (status
+    equations at the last iterate (or, when ``normal.chord(r)`` is given, J^T r with the last Jacobian it kept: a
+    chord step, no new Jacobian), and the result carries them (``A``). Returns an :class:`LMResult` (status
     1-4 converged, 0 out of evaluations, -1 a non-finite Jacobian)."""
     from scipy.linalg import LinAlgError, cho_factor, cho_solve
 
@@ -440,6 +441,9 @@ def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gto
                     try:
                         if normal is None:
                             gr = J.T @ r
+                        elif getattr(normal, "chord", None) is not None:  # the last Jacobian kept (one block)
+                            gr = normal.chord(r)
+                            A_end = A
                         else:  # no J kept: the normal equations at the last iterate (its covariance; as the
                             A, gr = normal(z, r)  # Jacobian at the solution of the other path, not an iteration)
                             A_end = A if np.all(np.isfinite(A)) and np.all(np.isfinite(gr)) else None
@@ -476,6 +480,8 @@ def normal_equations(problem: IdentificationProblem, W: np.ndarray, x_of, s: np.
     starts = range(0, n_obs, block)
     P = problem.prior_jacobian() * s[None, :] if problem.prior_rows else None
 
+    last = {}
+
     def normal(z, r):
         x = x_of(z)
         A = np.zeros((fi.size, fi.size))
@@ -486,11 +492,19 @@ def normal_equations(problem: IdentificationProblem, W: np.ndarray, x_of, s: np.
             Jw = np.matmul(W[a:b], np.asarray(J, float)[:, :, fi]).reshape(-1, fi.size) * s[None, :]
             A += Jw.T @ Jw
             g += Jw.T @ r[a * m:b * m]
+            if len(starts) == 1:
+                last["Jw"] = Jw
         if P is not None:
             A += P.T @ P
             g += P.T @ r[n_obs * m:]
         return A, g
 
+    def chord(r):
+        # J^T r with the last (whole) Jacobian: LM's final Gauss-Newton step, no new Jacobian
+        g = last["Jw"].T @ r[:n_obs * m]
+        return g + P.T @ r[n_obs * m:] if P is not None else g
+
+    normal.chord = chord if len(starts) == 1 else None  # one block: the Jacobian is held anyway
     return normal
 
 
