@@ -282,7 +282,7 @@ def row_compressed(A: np.ndarray) -> np.ndarray:
 
 
 #: poses per block in :func:`compressed_whitened_jacobian`'s Gram matrix (a block's rows stay in cache)
-GRAM_BLOCK_POSES = 2048
+GRAM_BLOCK_POSES = 8192
 
 
 def compressed_whitened_jacobian(problem: IdentificationProblem, J: np.ndarray, scale: np.ndarray,
