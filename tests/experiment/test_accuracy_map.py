@@ -148,8 +148,11 @@ def test_map_in_report_and_page(results):
     assert m["n_points"] == len(m["points"]) and m["r95_mm"]["inside"]["n"] >= 30
     assert all(p["r95_mm"] > 0 and len(p["q_rad"]) == 6 for p in m["points"])
     assert "accuracy map (" in rep["summary_text"]
-    html = (results["A"] / "report.html").read_text()
-    assert "<h2>Accuracy map</h2>" in html and 'alt="accuracy map"' in html
+    html = (results["A"] / "report.html").read_text()  # a --no-plots run: the table, not the slices
+    assert "<h2>Accuracy map</h2>" in html and "r95 position [mm] median" in html and "not drawn with --no-plots" in html
+    from vision_calib.report.html import report_html
+
+    assert 'alt="accuracy map"' in report_html(rep, results["A"])  # with the pictures
 
 
 def test_compare_exit_codes(results, tmp_path, capsys):

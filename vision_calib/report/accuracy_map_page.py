@@ -108,12 +108,17 @@ def map_picture(xyz_m, values, extrapolated, cal_xyz_m, label: str, title: str =
     return _png(fig)
 
 
+class _NoPicture(Exception):
+    """The map's picture left out on purpose (``--no-plots``)."""
+
+
 def _stats_cell(s, fmt=".3g") -> str:
     return "none" if not s else f"{_num(s['median'], fmt)} / {_num(s['p95'], fmt)} / {_num(s['max'], fmt)}"
 
 
-def accuracy_map_section(report: dict) -> str:
-    """report.html's section of report.json's ``accuracy_map`` block ('' without one)."""
+def accuracy_map_section(report: dict, picture: bool = True) -> str:
+    """report.html's section of report.json's ``accuracy_map`` block ('' without one); picture False (``--no-plots``):
+    the table without the slices (drawing them is most of the section's time)."""
     m = report.get("accuracy_map")
     if not isinstance(m, dict) or not m.get("points"):
         return ""
@@ -127,6 +132,8 @@ def accuracy_map_section(report: dict) -> str:
            f"outside the calibration poses' convex hull: extrapolated), tool point {_esc(m.get('tcp_m'))} m in the "
            "flange frame, relative to the base frame registered on the calibration poses.</p>"]
     try:
+        if not picture:
+            raise _NoPicture("not drawn with --no-plots")
         uri = map_picture(xyz, [p["r95_mm"] for p in pts], ext, [p["xyz_m"] for p in cal], "r95 position [mm]",
                           cal_values=[p["r95_mm"] for p in cal])
         out.append(f'<figure><img src="{uri}" alt="accuracy map"><figcaption>r95 of the tool position [mm] on three '
@@ -135,7 +142,8 @@ def accuracy_map_section(report: dict) -> str:
                    "calibration poses' convex hull); blank cells: positions the model does not reach with the "
                    "orientation of the nearest calibration pose.</figcaption></figure>")
     except Exception as exc:  # a picture that cannot be drawn must never cost the page
-        out.append(f"<p class=\"muted\">(picture not drawn: {_esc(exc)})</p>")
+        out.append(f"<p class=\"muted\">(picture {_esc(exc)})</p>" if isinstance(exc, _NoPicture)
+                   else f"<p class=\"muted\">(picture not drawn: {_esc(exc)})</p>")
     rows = []
     for where in ("inside", "extrapolated"):  # inside: the calibration poses and the grid within their hull
         rows.append(f"<tr><td class=\"l\">{where}</td><td>{_stats_cell(m['r95_mm'].get(where))}</td>"

@@ -471,17 +471,18 @@ def more_section(report: dict) -> str:
     return "\n".join(out) + "</section>"
 
 
-def report_html(report: dict, out_dir, overlays=None) -> str:
+def report_html(report: dict, out_dir, overlays=None, pictures: bool = True) -> str:
     """The page of one report.json dict; out_dir: the folder of its plot files; overlays: the list of
-    :func:`.overlay.build_overlays` (None: no overlay section)."""
+    :func:`.overlay.build_overlays` (None: no overlay section); pictures: False (``--no-plots``) leaves out the
+    pictures drawn for the page (the accuracy map's slices; its table stays)."""
     title = f"vision_calib report: {STATE_WORDS.get(report['verdict'].get('status'), '?')} — {_what(report)}"
     body = [f"<h1>Calibration report</h1><p class=\"sub\">{esc(_what(report))}</p>",
             verdict_section(report), parameters_section(report), identifiability_section(report),
             adequacy_section(report), residuals_section(report), plots_section(report, out_dir),
-            accuracy_map_section(report), overlays_section(overlays), more_section(report)]
+            accuracy_map_section(report, picture=pictures), overlays_section(overlays), more_section(report)]
     return page(title, "\n".join(b for b in body if b))
 
 
-def write_report_html(out_dir, report: dict, overlays=None) -> Path:
-    """Write ``out_dir/report.html`` (atomic) and return its path."""
-    return write_text_atomic(Path(out_dir) / HTML_NAME, report_html(report, out_dir, overlays))
+def write_report_html(out_dir, report: dict, overlays=None, pictures: bool = True) -> Path:
+    """Write ``out_dir/report.html`` (atomic) and return its path (pictures: :func:`report_html`)."""
+    return write_text_atomic(Path(out_dir) / HTML_NAME, report_html(report, out_dir, overlays, pictures))

@@ -87,7 +87,7 @@ def write_report(out_dir, report: dict, setup=None, result=None, problem=None, e
         try:
             from .html import write_report_html
 
-            write_report_html(out, report, shown)
+            write_report_html(out, report, shown, pictures=plots)
         except OSError:
             raise
         except Exception as exc:  # a page that cannot be built must never cost report.json
