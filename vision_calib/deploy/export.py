@@ -97,13 +97,15 @@ def find_result(path) -> Path:
     if (p / MODEL_FILE).is_file():
         return p / MODEL_FILE
     rep = p / REPORT_FILE
-    if rep.is_file() and _report(rep).get("kind") in HANDEYE_KINDS:
+    if rep.is_file() and read_report_json(rep).get("kind") in HANDEYE_KINDS:
         return rep
     raise DataError(f"{p}: no {MODEL_FILE} in this result folder (the fit was not usable: see its report.json "
                     "verdict) and no hand-eye result")
 
 
-def _report(path: Path) -> dict:
+def read_report_json(path: Path) -> dict:
+    """The JSON object of a result folder's report.json at ``path``; DataError naming it when it cannot be read or
+    is not an object."""
     try:
         doc = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError) as exc:
@@ -116,7 +118,7 @@ def _report(path: Path) -> dict:
 def read_handeye(path) -> HandeyeResult:
     """The hand-eye transforms of a hand-eye report.json (:data:`HANDEYE_KINDS`, :class:`HandeyeResult`)."""
     path = Path(path)
-    doc = _report(path)
+    doc = read_report_json(path)
     he = doc.get("handeye")
     if doc.get("kind") not in HANDEYE_KINDS or not isinstance(he, dict):
         raise DataError(f"{path}: not a hand-eye result (report kind {doc.get('kind')!r}); a calibrated robot has "
@@ -551,7 +553,7 @@ def verified_text(v: dict) -> str:
             "from the calibrated model")
 
 
-__all__ = ["FORMATS", "ExportFormat", "FormatNotSupportedError", "HandeyeResult", "check_values", "dh_table_text",
+__all__ = ["FORMATS", "read_report_json", "ExportFormat", "FormatNotSupportedError", "HandeyeResult", "check_values", "dh_table_text",
            "export", "export_verified", "verified_text", "verify_export",
            "find_result", "load_result", "mount_transforms", "read_handeye", "ros_tf_text", "static_transform_args",
            "ur_yaml_text", "urdf_text"]

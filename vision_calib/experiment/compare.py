@@ -32,7 +32,6 @@ normalised difference sqrt(e^T C^-1 e) of the position (a chi with 3 degrees of 
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -54,6 +53,7 @@ def _load(path, which: str):
     """(CalibratedRobot, report.json dict, result folder) of a result folder (or its calibrated_model.yaml); DataError
     naming it when a file is missing or unreadable, or its covariance is absent or not finite."""
     from ..deploy import CalibratedRobot, model_path
+    from ..deploy.export import read_report_json
 
     p = Path(path)
     if not p.exists():
@@ -62,11 +62,9 @@ def _load(path, which: str):
     folder = mp.parent
     rp = folder / "report.json"
     try:
-        report = json.loads(rp.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
-        raise DataError(f"{which} {rp}: cannot be read as report.json ({exc})") from None
-    if not isinstance(report, dict):
-        raise DataError(f"{which} {rp}: not a report.json (expected a JSON object)")
+        report = read_report_json(rp)
+    except DataError as exc:
+        raise DataError(f"{which} {exc}") from None
     amap = report.get("accuracy_map")
     if not isinstance(amap, dict) or not amap.get("points"):
         raise DataError(f"{which} {rp}: no accuracy_map (a result written before the accuracy map, or whose map "
