@@ -27,8 +27,9 @@ from numpy.typing import ArrayLike
 from scipy.optimize import least_squares
 
 from ..errors import ConfigError, DataError, ParameterError, VisionCalibError
-from .identifiability import (GRAM_BLOCK_POSES, GRAM_COND_MAX, IdentifiabilityReport, analyze, base_problem,
-                              check_problem, pose_labels, row_compressed, whitened_free_jacobian, whitened_gram)
+from .identifiability import (BLOCK_POSES, IdentifiabilityReport, analyze, base_problem, check_problem, gram_factor,
+                              pose_labels, row_compressed, scaled_prior_rows, whitened_blocks, whitened_free_jacobian,
+                              whitened_gram)
 from .problem import NOISE_ESTIMATED, STATUS_CONVERGED, STATUS_NOT_FINITE, IdentificationProblem, IdentificationResult
 from .threads import single_threaded_blas
 
@@ -64,7 +65,7 @@ def prepare(
         raise ParameterError("no free parameter left to identify (every parameter is fixed)")
     problem = problem.with_params(params)
     x0 = params.nominal.copy() if x0 is None else np.asarray(x0, float).reshape(-1).copy()
-    big = problem.n_obs > GRAM_BLOCK_POSES  # no (n_obs, m, n) Jacobian held: its Gram matrix, block by block
+    big = problem.n_obs > BLOCK_POSES  # no (n_obs, m, n) Jacobian held: its Gram matrix, block by block
     r0, J0 = check_problem(problem, x0, jacobian=not big)
     check_start_cost(problem, r0)
     G0 = whitened_gram(problem, x0) if big else None
@@ -143,12 +144,9 @@ def covariance_from_normal(A_z: np.ndarray, scale_free: np.ndarray, rows: int) -
     """(n_free, n_free) covariance from the normal matrix A_z = (Jw S)^T (Jw S) (n_free, n_free) of the whitened
     Jacobian in scaled variables (S = diag(scale_free)) over ``rows`` equations: the same numbers as
     :func:`covariance_from_jacobian` takes from its Cholesky factor (``row_compressed``); None when that factor
-    is not finite or its condition number is above ``GRAM_COND_MAX`` (then the Jacobian itself is needed)."""
-    try:
-        R = np.linalg.cholesky(A_z).T
-    except np.linalg.LinAlgError:
-        return None
-    if not (np.all(np.isfinite(R)) and np.linalg.cond(R) < GRAM_COND_MAX):
+    is not finite or too ill-conditioned (``identifiability.gram_factor``: then the Jacobian itself is needed)."""
+    R = gram_factor(A_z)
+    if R is None:
         return None
     cov, full = _covariance_of_rows(R, rows, scale_free)
     return cov if full else None
@@ -463,38 +461,29 @@ def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gto
     return LMResult(z, cost, status, LM_MESSAGES[status], nfev, njev)
 
 
-#: poses per block of :func:`normal_equations` (a block's whitened Jacobian: block x m x n_params doubles, ~16 MB at
-#: 8192 x 6 x 40; no (N, m, n) Jacobian is ever held beyond it). A problem of one block keeps its Jacobian for the
-#: final chord step. RX-90, 30 parameters: 5,000 poses solved in 0.107 s as one block (0.17 s in blocks of 2,048);
-#: 50,000 poses in 1.28 / 1.32 / 1.51 s with blocks of 4,096 / 8,192 / 16,384
-NORMAL_BLOCK_POSES = 8192
-
-
-def normal_equations(problem: IdentificationProblem, W: np.ndarray, x_of, s: np.ndarray,
-                     block: int = NORMAL_BLOCK_POSES):
+def normal_equations(problem: IdentificationProblem, W: np.ndarray, x_of, s: np.ndarray, block: int | None = None):
     """(z, r) -> (A (n_free, n_free), g (n_free,)): J^T J and J^T r of the whitened, scaled residual
-    ``fun`` of :func:`solve_lse` at z (r: its (n_obs m + n_prior,) value at z), accumulated over blocks of
-    ``block`` poses (``problem.jacobian(x, idx)``; one block: the whole Jacobian, which the problem may hold
-    from its last call at that x), the prior rows last. W (n_obs, m, m) whitening, x_of: z -> x (n,), s
-    (n_free,) scales."""
-    fi = problem.params.free_index
+    ``fun`` of :func:`solve_lse` at z (r: its (n_obs m + n_prior,) value at z), accumulated over the
+    :func:`~vision_calib.identify.identifiability.whitened_blocks` of ``block`` poses (default ``BLOCK_POSES``;
+    ``problem.jacobian(x, idx)``; one block: the whole Jacobian, which the problem may hold from its last call at
+    that x), the prior rows last. W (n_obs, m, m) whitening, x_of: z -> x (n,), s (n_free,) scales. A problem of
+    one block keeps its whitened Jacobian: ``normal.chord(r)`` is J^T r with it (LM's final step, no new
+    Jacobian); None otherwise."""
     n_obs, m = problem.n_obs, problem.m
-    starts = range(0, n_obs, block)
-    P = problem.prior_jacobian() * s[None, :] if problem.prior_rows else None
-
+    block = int(block or BLOCK_POSES)
+    one = n_obs <= block
+    P = scaled_prior_rows(problem, s)
     last = {}
 
     def normal(z, r):
         x = x_of(z)
-        A = np.zeros((fi.size, fi.size))
-        g = np.zeros(fi.size)
-        for a in starts:
-            b = min(a + block, n_obs)
-            J = problem.jacobian(x) if b - a == n_obs else problem.jacobian(x, np.arange(a, b))
-            Jw = np.matmul(W[a:b], np.asarray(J, float)[:, :, fi]).reshape(-1, fi.size) * s[None, :]
+        A = np.zeros((s.size, s.size))
+        g = np.zeros(s.size)
+        jac = (lambda a, b: problem.jacobian(x)) if one else (lambda a, b: problem.jacobian(x, np.arange(a, b)))
+        for a, b, Jw in whitened_blocks(problem, jac, s, W, block, check=False):  # LM: status -1 when not finite
             A += Jw.T @ Jw
             g += Jw.T @ r[a * m:b * m]
-            if len(starts) == 1:
+            if one:
                 last["Jw"] = Jw
         if P is not None:
             A += P.T @ P
@@ -502,11 +491,10 @@ def normal_equations(problem: IdentificationProblem, W: np.ndarray, x_of, s: np.
         return A, g
 
     def chord(r):
-        # J^T r with the last (whole) Jacobian: LM's final Gauss-Newton step, no new Jacobian
         g = last["Jw"].T @ r[:n_obs * m]
         return g + P.T @ r[n_obs * m:] if P is not None else g
 
-    normal.chord = chord if len(starts) == 1 else None  # one block: the Jacobian is held anyway
+    normal.chord = chord if one else None
     return normal
 
 

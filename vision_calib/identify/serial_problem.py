@@ -182,12 +182,14 @@ def serial_problem(
 
     last = {}  # the last pose errors (the Jacobian at that x reads their rotations) and Jacobian over all poses
 
-    def errors(x, idx):
-        key = np.asarray(x, float).tobytes() if idx is None else None
-        if key is not None and last.get("x") == key:
-            return last["e"]
-        e = pose_error(chain.forward(q[_idx(idx)], x), T_meas[_idx(idx)])
-        if key is not None:
+    def errors(x, idx, T=None):
+        """Pose errors (k, 6) of the poses idx (None: all) at x: a slice of those kept over all poses at this x,
+        else from T (k, 4, 4) (a walk the caller made at x) or a forward walk; kept when over all poses."""
+        key = np.asarray(x, float).tobytes()
+        if last.get("x") == key:
+            return last["e"] if idx is None else last["e"][_idx(idx)]
+        e = pose_error(chain.forward(q[_idx(idx)], x) if T is None else T, T_meas[_idx(idx)])
+        if idx is None:
             last.update(x=key, e=e)
         return e
 
@@ -206,9 +208,8 @@ def serial_problem(
     def _jacobian(x, idx):
         T, Jm = chain.pose_and_jacobian(q[_idx(idx)], x)
         J = -Jm[:, :m, :]
-        if m == 6:  # the pose errors' rotations: those of the residual at this x (kept), else from this walk
-            rho = last["e"][_idx(idx), 3:] if last.get("x") == np.asarray(x, float).tobytes() else \
-                pose_error(T, T_meas[_idx(idx)])[:, 3:]
+        if m == 6:
+            rho = errors(x, idx, T)[:, 3:]
             J[:, 3:, :] = np.matmul(so3_right_jacobian_inv(rho), J[:, 3:, :])
         return J
 

@@ -50,14 +50,6 @@ class ViewLimits:
         return cls(p.margin_px, p.distance_m, p.max_incidence_rad)
 
 
-def _outline(target) -> np.ndarray:
-    """(4, 3) [m, target frame]: the bounding box of the points the measurement uses (corners, dot centres) --
-    the outline the scenes' own pose sampler keeps in view (``rig.serial``), not the printed board's margin."""
-    _, pts = target.corner_points()
-    lo, hi = np.min(pts, axis=0), np.max(pts, axis=0)
-    return np.array([[lo[0], lo[1], 0], [hi[0], lo[1], 0], [hi[0], hi[1], 0], [lo[0], hi[1], 0]], float)
-
-
 def _probes(target) -> tuple[np.ndarray, float]:
     """(points (5, 3) [m, target frame]: the pattern's corners and centre, feature cell side [m])."""
     w, h = target.pattern_size_m()
@@ -72,7 +64,7 @@ def view_figures(T_cam_target: np.ndarray, camera, target) -> dict:
     T = np.asarray(T_cam_target, float)
     N = T.shape[0]
     R, t = T[:, :3, :3], T[:, :3, 3]
-    outline = _outline(target)
+    outline = target.measured_outline_m()  # the scenes' pose sampler holds the same box in view
     probes, cell = _probes(target)
     steps = np.concatenate([probes, probes + [cell, 0, 0], probes + [0, cell, 0]])  # (15, 3)
     pts = np.concatenate([outline, steps])  # (19, 3)

@@ -229,11 +229,7 @@ class SerialSetup(Setup):
         n = chain.n_joints
         center = ps.floats("center", n, np.zeros(n)) * ctx.Af
         spread = ps.floats("spread", n, np.full(n, 20.0)) * ctx.Af
-        outline = None
-        if ctx.target is not None:
-            ids, pts = ctx.target.corner_points()
-            lo, hi = pts.min(axis=0), pts.max(axis=0)
-            outline = np.array([[lo[0], lo[1], 0], [hi[0], lo[1], 0], [hi[0], hi[1], 0], [lo[0], hi[1], 0]], float)
+        outline = None if ctx.target is None else ctx.target.measured_outline_m()
         return cls(name=ctx.name, params=params, camera=ctx.camera, mount=ctx.mount,
                    meta={"robot_path": str(ctx.robot_path)}, chain=chain.with_params(params),
                    q_center=center, q_spread=spread, target_outline=outline)

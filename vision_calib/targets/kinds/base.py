@@ -256,6 +256,13 @@ class TargetSpec:
         w, h = self.pattern_size_m()
         return w + 2 * self.margin_m, h + 2 * self.margin_m
 
+    def measured_outline_m(self) -> np.ndarray:
+        """(4, 3) [m, target frame, z = 0]: the rectangle bounding the points the measurement uses
+        (:meth:`corner_points`), the outline a pose must hold in view (the scenes' pose sampler, the planner)."""
+        _, pts = self.corner_points()
+        lo, hi = np.min(pts, axis=0), np.max(pts, axis=0)
+        return np.array([[lo[0], lo[1], 0], [hi[0], lo[1], 0], [hi[0], hi[1], 0], [lo[0], hi[1], 0]], float)
+
     def texture_extent_m(self) -> tuple[float, float, float, float]:
         """(x_min, y_min, x_max, y_max) [m, target frame] covered by :meth:`texture` (the whole board)."""
         w, h = self.pattern_size_m()
