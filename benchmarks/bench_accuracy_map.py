@@ -3,7 +3,10 @@ measure, identify), no plots, no synthetic reference, written to a temporary fol
 
 1. coverage: per seed, the share of the map's points whose true tool position error (calibrated model against the
    true robot, registered on the calibration poses as the map is) is within the predicted r95; pooled over the
-   seeds (target 90-98 %), with the mean squared normalised error (1 when the predicted covariance is right);
+   seeds (target 90-98 %), with the mean squared normalised error (1 when the predicted covariance is right), and
+   judged against the coverage a correct map gives (``coverage.under_the_map`` of each report, pooled one draw per
+   seed: ``accuracy_map.pooled_coverage_law``): its 5-95 % interval, the chance of a pooled coverage at least the
+   observed one (near 0: optimistic, near 1: conservative) and the chance a correct map lands in the 90-98 % band;
 2. compare, same robot: run `seed` against run `seed + 1000` of the same truth (other noise): consistent (exit 0)
    in >= 95 % of the pairs;
 3. compare, a changed robot: the same, the second run's true robot with one joint offset moved by --offset-deg
@@ -28,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from vision_calib.errors import VisionCalibError
+from vision_calib.experiment.accuracy_map import pooled_coverage_law
 from vision_calib.experiment.compare import compare_results
 from vision_calib.experiment.simulate import run_simulation
 from vision_calib.experiment.steps import scene_truth
@@ -98,7 +102,7 @@ def run_scenes(args, tmp: Path) -> None:
     for name in args.scenes.split(","):
         scene0 = load_scene(SCENES_DIR / f"{name}.yaml")
         t0 = time.perf_counter()
-        hits, hits_r, z2, n_pts = [], [], [], 0
+        hits, hits_r, z2, n_pts, laws = [], [], [], 0, []
         same, changed, other = [], {}, []
         joints = None if args.joints is None else args.joints.split(",")
         print(f"== {name}: {args.poses} poses x {args.frames} frames, seeds {args.seeds}"
@@ -117,10 +121,13 @@ def run_scenes(args, tmp: Path) -> None:
             hits.append(np.mean(e <= r))
             hits_r.append(np.mean(ed <= rd))
             z2.append(m["coverage"]["mean_z2_over_3"])
+            law = m["coverage"]["under_the_map"]
+            laws.append(law["draws"])
             n_pts += len(e)
             line = (f"seed {s}: {len(e)} points ({m['n_extrapolated']} extrapolated), r95 median "
                     f"{np.median(r):.3f} mm; true error within r95: position {100 * hits[-1]:.1f} %, rotation "
-                    f"{100 * hits_r[-1]:.1f} %; mean z^2/3 {z2[-1]:.2f}")
+                    f"{100 * hits_r[-1]:.1f} %; mean z^2/3 {z2[-1]:.2f}; a correct map: {100 * law['p05']:.1f}-"
+                    f"{100 * law['p95']:.1f} %, P(>= observed) {law['p_at_least_observed']:.2f}")
             if not args.no_compare:
                 b_dir = tmp / f"{name}_{s + PAIR}"
                 if run(sc, s + PAIR, b_dir, args) is not None:
@@ -152,6 +159,12 @@ def run_scenes(args, tmp: Path) -> None:
             print(f"== {name}: coverage of r95 over {len(hits)} seeds ({n_pts} points): position "
                   f"{100 * np.mean(hits):.1f} % (per seed {100 * min(hits):.1f}-{100 * max(hits):.1f} %), rotation "
                   f"{100 * np.mean(hits_r):.1f} %; mean z^2/3 {np.mean(z2):.2f}", flush=True)
+            pooled = pooled_coverage_law(laws, np.random.default_rng(0))
+            obs = float(np.mean(hits))
+            print(f"== {name}: a correct map pooled over these {len(hits)} seeds: mean {100 * pooled.mean():.1f} %, "
+                  f"5-95 % {100 * np.percentile(pooled, 5):.1f}-{100 * np.percentile(pooled, 95):.1f} %; "
+                  f"P(pooled >= observed {100 * obs:.1f} %) {np.mean(pooled >= obs - 1e-12):.2f}; P(in the 90-98 % "
+                  f"band) {np.mean((pooled >= 0.9) & (pooled <= 0.98)):.2f}", flush=True)
         if same:
             print(f"== {name}: compare, same truth: consistent in {sum(same)} of {len(same)} pairs "
                   f"({100 * np.mean(same):.0f} %)", flush=True)

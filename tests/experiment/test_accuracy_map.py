@@ -103,6 +103,35 @@ def test_map_r95_covers_95_percent_of_drawn_errors(fitted):
     assert 0.0 <= b2["coverage"]["position"]["all"] <= 1.0
 
 
+def test_coverage_law_of_a_correct_map(fitted):
+    """The coverage a correct map gives (coverage_law): its mean is the level; one draw per run moves the whole map,
+    so a pooled coverage of 8 runs spreads far wider than a band around 95 %; and truths drawn from the map's own
+    covariance give p_at_least_observed values that are uniform (a correct map is neither flagged nor flattered)."""
+    kin, names, x, cov, q_cal = fitted
+    block = M.build_map(kin, names, x, cov, q_cal)
+    q = np.array([p["q_rad"] for p in block["points"]])
+    r = np.array([p["r95_mm"] for p in block["points"]]) * 1e-3
+    J = M.registered_jacobian(kin, x, q, M.registration(kin, x, q_cal))[:, :3, :]
+    law = M.coverage_law(J, cov, r, np.random.default_rng(5))
+    assert law.mean() == pytest.approx(0.95, abs=0.01)
+    pooled = M.pooled_coverage_law([law] * 8, np.random.default_rng(6))
+    assert pooled.mean() == pytest.approx(0.95, abs=0.01) and np.percentile(pooled, 5) < 0.9
+    # point-independent errors alone (an extra term, e.g. the joints' repeatability): each draw averages M
+    # independent points, the law narrows around the level
+    extra = np.einsum("k,ij->kij", r**2, np.eye(3))
+    ind = M.coverage_law(J, 0.0 * cov, M.norm_quantile(extra), np.random.default_rng(7), draws=400, extra=extra)
+    assert ind.mean() == pytest.approx(0.95, abs=0.01) and ind.std() < 2 * np.sqrt(0.95 * 0.05 / len(r))
+    rng = np.random.default_rng(8)
+    L = np.linalg.cholesky(cov + 1e-30 * np.eye(len(x)))
+    pv = []
+    for _ in range(40):
+        b = M.build_map(kin, names, x, cov, q_cal, truth=(kin, x - L @ rng.normal(size=len(x))))
+        u = b["coverage"]["under_the_map"]
+        assert u["mean"] == pytest.approx(0.95, abs=0.01) and len(u["draws"]) == M.LAW_KEPT
+        pv.append(u["p_at_least_observed"])
+    assert 0.2 < np.mean(pv) < 0.85  # uniform p-values (ties at full coverage push the mean above 0.5)
+
+
 def test_map_refuses_a_non_finite_covariance(fitted):
     kin, names, x, cov, q_cal = fitted
     bad = cov.copy()

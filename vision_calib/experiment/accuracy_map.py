@@ -54,6 +54,10 @@ FLAT_SHARE = 0.25
 MIN_SIZE_M = 0.02
 #: random stream of a simulation's joint errors (sigma_q) at the map's points: numpy default_rng([seed, STREAM_MAP])
 STREAM_MAP = 37
+#: parameter errors drawn from the covariance for the coverage a correct map gives (:func:`coverage_law`), and how
+#: many of those coverages a simulation's report keeps (pooling over runs: a draw per run)
+LAW_DRAWS = 4000
+LAW_KEPT = 200
 #: Gauss-Legendre nodes per angle of the sphere quadrature of :func:`norm_quantile`, and its Newton steps
 QUAD_NODES = 24
 NEWTON_STEPS = 8
@@ -268,6 +272,36 @@ def tool_covariance(kin, x: np.ndarray, cov: np.ndarray, q: np.ndarray, sigma_q_
     return 0.5 * (C + np.swapaxes(C, 1, 2))
 
 
+def coverage_law(J: np.ndarray, cov: np.ndarray, r95: np.ndarray, rng: np.random.Generator,
+                 draws: int = LAW_DRAWS, extra: np.ndarray | None = None) -> np.ndarray:
+    """(draws,) the share of the M points whose position error is within its r95 (M,) [m] when the parameter error is
+    drawn from the map's own law N(0, cov) (cov (n, n)) through the registered Jacobian J (M, 3, n), plus, per point
+    and independently, N(0, extra) (extra (M, 3, 3): e.g. the joints' repeatability term): the coverage a correct
+    map gives. Its mean is the level; its spread is wide because every point of one calibration shares the
+    same parameter error (one draw moves the whole map), so a pooled coverage of a few runs is judged against this
+    law, not against a band around the level."""
+    w, V = np.linalg.eigh(0.5 * (cov + cov.T))
+    D = rng.standard_normal((draws, w.size)) * np.sqrt(np.clip(w, 0.0, None)) @ V.T
+    L = None
+    if extra is not None:
+        we, Ve = np.linalg.eigh(0.5 * (extra + np.swapaxes(extra, 1, 2)))
+        L = Ve * np.sqrt(np.clip(we, 0.0, None))[:, None, :]
+    out = np.empty(draws)
+    for a in range(0, draws, 500):  # (500, M, 3) at a time
+        E = np.einsum("kin,dn->dki", J, D[a:a + 500])
+        if L is not None:
+            E += np.einsum("kij,dkj->dki", L, rng.standard_normal(E.shape))
+        out[a:a + 500] = np.mean(np.linalg.norm(E, axis=2) <= r95, axis=1)
+    return out
+
+
+def pooled_coverage_law(laws: Sequence[Sequence[float]], rng: np.random.Generator, draws: int = 20000) -> np.ndarray:
+    """(draws,) the mean coverage over R runs when each run's coverage follows its own law (``laws``: R samples of
+    :func:`coverage_law`, e.g. ``coverage.under_the_map.draws`` of R reports): one draw per run, averaged."""
+    laws = [np.asarray(v, float) for v in laws]
+    return np.mean([v[rng.integers(0, v.size, draws)] for v in laws], axis=0)
+
+
 # --------------------------------------------------------------------------------------------------- the block
 def _stats(v: np.ndarray) -> dict | None:
     v = v[np.isfinite(v)]
@@ -356,16 +390,28 @@ def build_map(kin, names: Sequence[str], x: ArrayLike, cov: ArrayLike, q_cal: Ar
         z = np.sqrt(np.einsum("ki,ki->k", e[:, :3], np.linalg.solve(C[:, :3, :3] + 1e-30 * np.eye(3),
                                                                     e[:, :3, None])[..., 0]))
         e_deg = np.degrees(np.linalg.norm(e[:, 3:], axis=1))
+        cov_pos = float(np.mean(e_mm <= r_mm))
+        Jr = registered_jacobian(kin, x, q, reg)[:, :3, :]
+        extra = C[:, :3, :3] - np.einsum("kin,nm,kjm->kij", Jr, cov, Jr) if sigma_q_rad > 0 else None
+        law = coverage_law(Jr, cov, r_mm * 1e-3, np.random.default_rng([STREAM_MAP, len(q)]), extra=extra)
         for k, p in enumerate(pts):
             p["true_error_mm"] = float(e_mm[k])
             p["true_error_deg"] = float(e_deg[k])
             p["true_error_z"] = float(z[k])
         block["coverage"] = {
-            "position": {"all": float(np.mean(e_mm <= r_mm)),
+            "position": {"all": cov_pos,
                          "inside": float(np.mean(e_mm[~ext] <= r_mm[~ext])) if (~ext).any() else None,
                          "extrapolated": float(np.mean(e_mm[ext] <= r_mm[ext])) if ext.any() else None},
             "rotation": {"all": float(np.mean(e_deg <= r_deg))},
             "mean_z2_over_3": float(np.mean(z**2) / 3),
+            "under_the_map": {
+                "mean": float(law.mean()), "p05": float(np.percentile(law, 5)), "p95": float(np.percentile(law, 95)),
+                "p_at_least_observed": float(np.mean(law >= cov_pos - 1e-12)),
+                "draws": [round(float(v), 4) for v in law[:LAW_KEPT]],
+                "of": "the position coverage a correct map gives (parameter errors drawn from the map's own covariance "
+                      "through the registered Jacobian): its mean is the level, its spread wide since all points of "
+                      "one calibration share one parameter error; p_at_least_observed: the chance of a coverage at "
+                      "least the observed one (near 0: the map is optimistic); draws: a sample of it, to pool runs"},
             "of": "share of the points whose true tool error (calibrated model vs the true robot, registered as the "
                   "map) is within r95; mean_z2_over_3: the mean squared Mahalanobis distance of the true position "
                   "errors over 3 (1 when the predicted covariance describes them; true_error_z per point)"}
@@ -469,7 +515,8 @@ def add_planned_map(plan: dict, scene, names: Sequence[str], information: ArrayL
         plan.setdefault("warnings", []).append(f"accuracy map not computed: {exc}")
 
 
-__all__ = ["LEVEL", "MARGIN", "PER_AXIS", "STREAM_MAP", "add_accuracy_map", "add_planned_map", "base_motion_lever",
+__all__ = ["LAW_DRAWS", "LAW_KEPT", "LEVEL", "MARGIN", "PER_AXIS", "STREAM_MAP", "add_accuracy_map", "add_planned_map",
+           "base_motion_lever", "coverage_law", "pooled_coverage_law",
            "build_map", "embed_covariance", "map_rng", "model_kinematics", "norm_quantile", "planned_map",
            "registered_error", "registered_jacobian", "registration", "run_map", "summary_line", "tool_covariance",
            "workspace_grid"]
