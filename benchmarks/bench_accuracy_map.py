@@ -6,7 +6,7 @@ measure, identify), no plots, no synthetic reference, written to a temporary fol
    seeds (target 90-98 %), with the mean squared normalised error (1 when the predicted covariance is right), and
    judged against the coverage a correct map gives (``coverage.under_the_map`` of each report, pooled one draw per
    seed: ``accuracy_map.pooled_coverage_law``): its 5-95 % interval, the chance of a pooled coverage at least the
-   observed one (near 0: optimistic, near 1: conservative) and the chance a correct map lands in the 90-98 % band;
+   observed one (near 0: conservative, near 1: optimistic) and the chance a correct map lands in the 90-98 % band;
 2. compare, same robot: run `seed` against run `seed + 1000` of the same truth (other noise): consistent (exit 0)
    in >= 95 % of the pairs;
 3. compare, a changed robot: the same, the second run's true robot with one joint offset moved by --offset-deg

@@ -40,24 +40,43 @@ def main() -> None:
         pms, _ = measure_poses(chain, T, [f"{i:03d}" for i in range(len(T))], 7, args.frames, pool=InlineImagePool(chain))
         target = load_target(scene.target_path)
         _, p = target.corner_points()
-        E, CR, U = [], [], []
+        E, CR, U, CM = [], [], [], []
         for Tk, pm in zip(T, pms):
             if pm.valid:
                 E.append(F.pose_error(Tk[None], pm.T_cam_target[None])[0])
+                CM.append(pm.cov)
                 CR.append(image_bound_pose_cov(target, cam, Tk, scene.effects, args.frames))
                 J = reprojection_jacobian(Tk, p, cam)
                 U.append(np.linalg.inv(J.T @ J))
-        E, CR, U = map(np.array, (E, CR, U))
+        E, CR, U, CM = map(np.array, (E, CR, U, CM))
 
         def chi(s):
             return float(np.mean(np.einsum("ki,ki->k", E, np.linalg.solve(CR + s**2 * U, E[..., None])[..., 0])) / 6)
 
         s1 = brentq(lambda s: chi(s) - 1, 1e-4, 5)
+        chi_k = np.einsum("ki,ki->k", E, np.linalg.solve(CR + SYSTEMATIC_CORNER_PX**2 * U, E[..., None])[..., 0]) / 6
+        chi_m = np.einsum("ki,ki->k", E, np.linalg.solve(CM, E[..., None])[..., 0]) / 6
+        # the planner's covariance against the measurement's own per pose: mean generalised eigenvalue (trace ratio)
+        ratio = np.mean([np.trace(np.linalg.solve(CR[k] + SYSTEMATIC_CORNER_PX**2 * U[k], CM[k])) / 6
+                         for k in range(len(E))])
+        iCM = np.linalg.inv(CM)
+
+        def info(s):  # the planner's information against the measurement's own: mean tr(Cm^-1 Cp(s)) / 6
+            return float(np.mean(np.einsum("kij,kji->k", iCM, CR + s**2 * U)) / 6)
+
+        s_info = brentq(lambda s: info(s) - 1, 1e-4, 5)
+        # the information the identification gets from the truth: the measurement's, over its mean chi2/6 of the
+        # true errors (a weighted fit whose weights are off by a common factor c has the information I_m / c)
+        c_m = float(np.mean(chi_m))
+        s_true = brentq(lambda s: info(s) - c_m, 1e-4, 5)
         sd = np.sqrt(np.mean(np.diagonal(CR + SYSTEMATIC_CORNER_PX**2 * U, axis1=1, axis2=2), axis=0))
         rms = np.sqrt(np.mean(E**2, axis=0))
         k = np.array([1e3] * 3 + [np.degrees(1.0)] * 3)
         print(f"{name}: {len(E)} of {len(T)} poses measured ({args.frames} frames); chi2/6 bound alone {chi(0.0):.3g}, "
-              f"with s = {SYSTEMATIC_CORNER_PX:g} px {chi(SYSTEMATIC_CORNER_PX):.3g}; chi2/6 = 1 at s = {s1:.4g} px\n"
+              f"with s = {SYSTEMATIC_CORNER_PX:g} px {chi(SYSTEMATIC_CORNER_PX):.3g} (median {np.median(chi_k):.3g}); "
+              f"chi2/6 = 1 at s = {s1:.4g} px; under the measurement's own covariance {np.mean(chi_m):.3g} (median "
+              f"{np.median(chi_m):.3g}); measurement / planner covariance, mean trace ratio {ratio:.3g}; the planner's "
+              f"information / the measurement's {1 / info(SYSTEMATIC_CORNER_PX):.3g}, equal at s = {s_info:.4g} px; to the true errors' (the measurement's / its chi2/6) at s = {s_true:.4g} px\n"
               f"  RMS  tx ty tz [mm] {np.round(rms[:3] * k[:3], 4)}, rx ry rz [deg] {np.round(rms[3:] * k[3:], 4)}\n"
               f"  model std           {np.round(sd[:3] * k[:3], 4)},                {np.round(sd[3:] * k[3:], 4)}",
               flush=True)

@@ -411,7 +411,8 @@ def build_map(kin, names: Sequence[str], x: ArrayLike, cov: ArrayLike, q_cal: Ar
                 "of": "the position coverage a correct map gives (parameter errors drawn from the map's own covariance "
                       "through the registered Jacobian): its mean is the level, its spread wide since all points of "
                       "one calibration share one parameter error; p_at_least_observed: the chance of a coverage at "
-                      "least the observed one (near 0: the map is optimistic); draws: a sample of it, to pool runs"},
+                      "least the observed one (near 0: conservative, near 1: optimistic); draws: a sample of it, to "
+                      "pool runs"},
             "of": "share of the points whose true tool error (calibrated model vs the true robot, registered as the "
                   "map) is within r95; mean_z2_over_3: the mean squared Mahalanobis distance of the true position "
                   "errors over 3 (1 when the predicted covariance describes them; true_error_z per point)"}
