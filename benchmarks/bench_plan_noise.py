@@ -31,11 +31,16 @@ def main() -> None:
     ap.add_argument("--poses", type=int, default=60)
     ap.add_argument("--frames", type=int, default=2)
     ap.add_argument("--seed", type=int, default=5)
+    ap.add_argument("--by-angle", action="store_true", help="also the information-matched s per 10-degree band of "
+                    "the view angle (the board's normal against the line of sight)")
     args = ap.parse_args()
     for name in args.scenes.split(","):
         scene = load_scene(SCENES_DIR / name.strip())
         setup, cam = scene.setup, scene.setup.camera
-        T = setup.T_cam_target(scene_poses(scene, rngs(args.seed)[0], args.poses), scene_truth(scene))
+        rng = rngs(args.seed)[0]
+        q = setup.sample_poses(rng, args.poses) if scene.poses.kind == "configurations" else \
+            scene_poses(scene, rng, args.poses)  # a named set (thesis): its region's sampler
+        T = setup.T_cam_target(q, scene_truth(scene))
         chain = image_chain_of(scene)
         pms, _ = measure_poses(chain, T, [f"{i:03d}" for i in range(len(T))], 7, args.frames, pool=InlineImagePool(chain))
         target = load_target(scene.target_path)
@@ -80,6 +85,30 @@ def main() -> None:
               f"  RMS  tx ty tz [mm] {np.round(rms[:3] * k[:3], 4)}, rx ry rz [deg] {np.round(rms[3:] * k[3:], 4)}\n"
               f"  model std           {np.round(sd[:3] * k[:3], 4)},                {np.round(sd[3:] * k[3:], 4)}",
               flush=True)
+        if args.by_angle:
+            by_angle(E, CR, U, iCM, T[[k for k, pm in enumerate(pms) if pm.valid]], p)
+
+
+def by_angle(E, CR, U, iCM, T, p) -> None:
+    """Per 10-degree band of the view angle: the s matching the planner's information to the measurement's, and
+    the planner's s(theta) there (``planning.design.systematic_corner_px``)."""
+    from vision_calib.planning.design import SYSTEMATIC_CORNER_PX, systematic_corner_px
+
+    c = 0.5 * (p.min(axis=0) + p.max(axis=0))
+    centre = np.einsum("kij,j->ki", T[:, :3, :3], c) + T[:, :3, 3]
+    ang = np.degrees(np.arccos(np.abs(np.einsum("ki,ki->k", T[:, :3, 2], centre)) / np.linalg.norm(centre, axis=1)))
+    model = systematic_corner_px(T, p)
+    for lo in range(0, 90, 10):
+        m = (ang >= lo) & (ang < lo + 10)
+        if m.sum() < 3:
+            continue
+
+        def info(s):
+            return float(np.mean(np.einsum("kij,kji->k", iCM[m], CR[m] + s**2 * U[m])) / 6) - 1
+
+        s_b = brentq(info, 1e-4, 5) if info(1e-4) < 0 else float("nan")
+        print(f"  view angle {lo}-{lo + 10} deg: {m.sum()} poses, information-matched s {s_b:.4g} px; the planner's "
+              f"s(theta) {np.median(model[m]):.4g} px (constant part {SYSTEMATIC_CORNER_PX:g})", flush=True)
 
 
 if __name__ == "__main__":

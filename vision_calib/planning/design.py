@@ -43,6 +43,12 @@ RESTARTS = 1
 #: its information is a harmonic mean over the poses, larger than that of one common error (at 0.025 px the planner
 #: held 0.62-0.66x the information on the UR5e and RX-90 and predicted their validation RMS ~1.25x too high)
 SYSTEMATIC_CORNER_PX = 0.021
+#: growth of that error on oblique views [px]: s(theta)^2 = SYSTEMATIC_CORNER_PX^2 + (OBLIQUE_CORNER_PX tan theta)^2,
+#: theta the angle between the board's normal and the line of sight to the centre of its corners (foreshortened
+#: squares: the corner refiner's window takes in more of the neighbouring edges). The information-matched s per
+#: 10-degree band of theta (``benchmarks/bench_plan_noise.py --by-angle``, 80 poses a scene): 0.020 px at 0-10 deg
+#: (RX-90), 0.023 px at 30-40 deg and 0.035 px at 40-60 deg (the thesis eye-in-hand scene's steep views)
+OBLIQUE_CORNER_PX = 0.02
 #: noise draws of the first-order validation RMS distribution (:func:`validation_rms_quantiles`)
 RMS_DRAWS = 4000
 #: the validation criterion's exchange stops after this many swaps
@@ -67,9 +73,10 @@ def pose_covariances(scene, poses: np.ndarray, frames: int | None = None) -> np.
     """(K, 6, 6) [m, rad] covariance of the target pose ``measure`` will give at commanded poses (K, .) with
     ``frames`` frames each (default the scene's ``measurement.frames``), at the nominal geometry: the image model's
     Cramér-Rao bound of the frame-averaged corners (``measure.covariance.image_bound_pose_cov``: the scene's camera,
-    target, sensor noise and blur) plus the detector's systematic corner error :data:`SYSTEMATIC_CORNER_PX`, the same
-    in every frame of a pose (the random + systematic model of ``measure.covariance``): + s^2 (J^T J)^-1, J the
-    reprojection Jacobian of the target's corners (2K_c, 6)."""
+    target, sensor noise and blur) plus the detector's systematic corner error s(theta) (:func:`systematic_corner_px`:
+    :data:`SYSTEMATIC_CORNER_PX`, growing on oblique views), the same in every frame of a pose (the random +
+    systematic model of ``measure.covariance``): + s^2 (J^T J)^-1, J the reprojection Jacobian of the target's
+    corners (2K_c, 6)."""
     from ..measure.covariance import image_bound_pose_cov
     from ..measure.pnp import reprojection_jacobian
     from ..targets import load_target
@@ -79,12 +86,25 @@ def pose_covariances(scene, poses: np.ndarray, frames: int | None = None) -> np.
     target = load_target(scene.target_path)
     _, p = target.corner_points()
     T = setup.T_cam_target(np.asarray(poses), setup.params.nominal)
+    s2 = systematic_corner_px(T, p) ** 2
     out = np.empty((len(T), 6, 6))
     for k, Tk in enumerate(T):
         J = reprojection_jacobian(Tk, p, setup.camera)
-        out[k] = image_bound_pose_cov(target, setup.camera, Tk, scene.effects, nf) + \
-            SYSTEMATIC_CORNER_PX**2 * np.linalg.pinv(J.T @ J)
+        out[k] = image_bound_pose_cov(target, setup.camera, Tk, scene.effects, nf) + s2[k] * np.linalg.pinv(J.T @ J)
     return 0.5 * (out + np.swapaxes(out, 1, 2))
+
+
+def systematic_corner_px(T_cam_target: np.ndarray, p_target: np.ndarray) -> np.ndarray:
+    """(K,) the detector's systematic corner error s(theta) [px] (:data:`SYSTEMATIC_CORNER_PX`,
+    :data:`OBLIQUE_CORNER_PX`) of the target seen at poses T_cam_target (K, 4, 4) [m], its corner points p_target
+    (n, 3) [m] (theta at the centre of their box)."""
+    T = np.asarray(T_cam_target, float)
+    p = np.asarray(p_target, float)
+    c = 0.5 * (p.min(axis=0) + p.max(axis=0))
+    centre = np.einsum("kij,j->ki", T[:, :3, :3], c) + T[:, :3, 3]
+    cos = np.abs(np.einsum("ki,ki->k", T[:, :3, 2], centre)) / np.linalg.norm(centre, axis=1)
+    cos = np.clip(cos, 1e-6, 1.0)
+    return np.sqrt(SYSTEMATIC_CORNER_PX**2 + OBLIQUE_CORNER_PX**2 * (1.0 - cos**2) / cos**2)
 
 
 def base_mask(scene, poses: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, object]:
@@ -320,4 +340,5 @@ def refine_for_validation(A: np.ndarray, idx, W: np.ndarray, candidates=None, ma
 
 __all__ = ["Information", "information", "base_mask", "identifiability", "select", "d_criterion", "d_efficiency", "leverages",
            "pool_indices", "info_matrix", "pose_covariances", "validation_blocks", "validation_weight", "validation_mse",
-           "refine_for_validation", "with_axis_tilts", "validation_rms_quantiles", "add_gains", "SYSTEMATIC_CORNER_PX"]
+           "refine_for_validation", "with_axis_tilts", "validation_rms_quantiles", "add_gains", "SYSTEMATIC_CORNER_PX",
+           "OBLIQUE_CORNER_PX", "systematic_corner_px"]

@@ -12,7 +12,8 @@ Steps of a plan (figures and seeds in ``plan.json``):
    candidate's pose covariance from the camera model, the target's corners and the corner noise, for the frames
    the user records), then a Fedorov exchange on the predicted mean squared position error over the validation
    poses (the scene's validation sampler, :data:`CRITERION_POSES` of them, or ``--validate-on``);
-4. the tour (:mod:`.tour`): short in joint-space travel time, its moves checked for collisions;
+4. the tour (:mod:`.tour`): short in joint-space travel time, its moves checked for collisions; a move that
+   collides in every order sends the selection back without one of its ends (:data:`MOVE_REPLANS` times);
 5. clearance, view figures and leverage per pose, identifiability, and the predicted accuracy of the plan against
    random measurable poses (:mod:`.predict`);
 6. outputs (:mod:`.report`): ``poses.csv``, ``recording.yaml`` and ``images/<pose_id>/`` (a recording to fill),
@@ -50,6 +51,8 @@ def no_collision_note(setup) -> str:
             f"({setup.reach_check}) only")
 #: random designs whose D criterion the plan's is compared with (D-efficiency)
 EFFICIENCY_DRAWS = 20
+#: selections again without one end of a move that collides in every order of the tour (then it is named)
+MOVE_REPLANS = 3
 #: validation poses drawn from the scene's validation sampler for the design criterion
 CRITERION_POSES = 200
 #: the most poses --target-accuracy plans
@@ -388,16 +391,26 @@ def plan_cell(scene, n_poses: int, out_dir=None, seed: int = 0, n_candidates: in
         n = smallest_count(quantiles, target_accuracy_m * 1e3, n_min, min(len(sub), MAX_TARGET_POSES))
     elif kept.size < n:
         raise DataError(f"{scene.path}: only {kept.size} candidates kept, fewer than the {n} poses asked")
-    pick = pick_of(n)
-    quantiles(n)
-    chosen = sub[pick]
-    P = pool[chosen]
-    joints = setup.joints(P, setup.params.nominal)
     check = None
     if checker is not None:
         def check(qs):
             return checker.screen(setup.link_frames(setup.commanded_from_joints(qs)))
-    tour = plan_tour(joints, scene.planning.max_joint_speed_rad_s, scene.planning.move_step_rad, check)
+    pick, excluded = pick_of(n), set()
+    for round_ in range(MOVE_REPLANS + 1):  # a move no order frees: select again without one of its ends
+        chosen = sub[pick]
+        P = pool[chosen]
+        joints = setup.joints(P, setup.params.nominal)
+        tour = plan_tour(joints, scene.planning.max_joint_speed_rad_s, scene.planning.move_step_rad, check)
+        if not tour["colliding"] or round_ == MOVE_REPLANS:
+            break
+        excluded |= {int(pick[max(a, b)]) for a, b, _ in tour["colliding"]}
+        allowed = np.setdiff1d(np.arange(len(sub)), sorted(excluded))
+        if allowed.size < n:
+            break
+        pick = picks[n] = _select(scene, info, pool[sub], n, np.random.default_rng([int(seed), 27, n, round_ + 1]), W,
+                                  candidates=allowed)
+        curve.pop(n, None)
+    quantiles(n)
     order = tour["order"]
     P, joints, chosen, pick = P[order], joints[order], chosen[order], pick[order]
     ids = [f"{i:03d}" for i in range(n)]  # the recording's pose ids (io.recording.write_recording), in tour order
