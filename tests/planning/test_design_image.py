@@ -36,6 +36,25 @@ def test_pose_covariance_adds_a_systematic_floor_that_frames_do_not_average():
         assert np.all(np.linalg.eigvalsh(c) > 0)
 
 
+def test_systematic_corner_error_grows_with_the_view_angle():
+    """s(theta): the constant part on a board facing the camera, s0^2 + c^2 tan^2 theta when its normal leans theta
+    away from the line of sight (the same whatever the axis it leans about), larger the steeper."""
+    from vision_calib import frames as F
+
+    p = np.array([[x, y, 0.0] for x in (-0.1, 0.1) for y in (-0.05, 0.05)])  # centre at the origin
+
+    def seen(theta_deg, axis):
+        T = F.T_from_xyz_rotvec(np.r_[0.0, 0.0, 0.6, np.radians(theta_deg) * np.asarray(axis, float)])
+        return D.systematic_corner_px(T[None], p)[0]
+
+    assert seen(0, [1, 0, 0]) == pytest.approx(D.SYSTEMATIC_CORNER_PX, rel=1e-9)
+    for th in (20, 45, 60):
+        want = np.hypot(D.SYSTEMATIC_CORNER_PX, D.OBLIQUE_CORNER_PX * np.tan(np.radians(th)))
+        assert seen(th, [1, 0, 0]) == pytest.approx(want, rel=1e-9)
+        assert seen(th, [0, 1, 0]) == pytest.approx(want, rel=1e-9)
+    assert seen(20, [1, 0, 0]) < seen(45, [1, 0, 0]) < seen(60, [1, 0, 0])
+
+
 def _blocks(rng, K=40, m=6, L=9):
     A = rng.normal(size=(K, m, L)) * rng.uniform(0.2, 2.0, size=(K, 1, 1))
     G = rng.normal(size=(30, 3, L))
