@@ -279,14 +279,19 @@ class ChainKinematics:
         return q, r, ok
 
     def inverse_rows(self, T, x, q_start=None, labels=None, what: str = "calibrated",
-                     x_seed=None) -> tuple[np.ndarray, np.ndarray]:
+                     x_seed=None, branch_only: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """(q (N, n), why (N,) str) of the goals T (N, 4, 4) on the model of x: from q_start (N, n) (the nearest
-        branch), the goals not reached from there as without it; without q_start from the solution of the model of
-        x_seed (the nominal) where it has one, and from several starts elsewhere. A goal not reached: q NaN, why
+        branch), the goals not reached from there as without it (``branch_only``: left not reached, no search from
+        other starts, which may land on another branch of the arm); without q_start from the solution of the model
+        of x_seed (the nominal) where it has one, and from several starts elsewhere. A goal not reached: q NaN, why
         names the pose (``labels``), the residual and a joint held at its limit ("" for a goal reached)."""
         T = np.asarray(T, float)
         if q_start is not None:  # the branch asked for: Newton from q_start; the goals it misses as without one
             q, r, ok = self._solve(T, x, q_start)
+            if branch_only:
+                why = self._not_reached(T, x, q, r, ok, labels, what, False)
+                q[~ok] = np.nan
+                return q, why
             why = np.full(len(T), "", dtype=object)
             miss = np.flatnonzero(~ok)
             if miss.size:
@@ -388,9 +393,9 @@ class H4Kinematics:
         return JX @ self._dX_dx(X, x) + Jx
 
     def inverse_rows(self, T, x, q_start=None, labels=None, what: str = "calibrated",
-                     x_seed=None) -> tuple[np.ndarray, np.ndarray]:
-        """(q (N, 4), why (N,) str) by the closed-form inverse geometric model (q_start, x_seed: unused, it has one
-        solution); a tilted or unreachable goal: q NaN, why names it ("" for a goal reached)."""
+                     x_seed=None, branch_only: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """(q (N, 4), why (N,) str) by the closed-form inverse geometric model (q_start, x_seed, branch_only: unused,
+        it has one solution); a tilted or unreachable goal: q NaN, why names it ("" for a goal reached)."""
         T = np.asarray(T, float) @ F.inv_T(self.T_tcp)
         lab = _labels(labels, len(T))
         q, why = np.full((len(T), self.n_joints), np.nan), np.full(len(T), "", dtype=object)

@@ -49,6 +49,8 @@ residual changes by dR (e.g. the poses re-measured with other camera intrinsics)
 
 from __future__ import annotations
 
+import functools
+
 from typing import Sequence
 
 import numpy as np
@@ -296,19 +298,23 @@ def lack_of_fit(problem: IdentificationProblem, result: IdentificationResult, jo
     return out
 
 
+@functools.lru_cache(maxsize=256)
 def detectable_noncentrality(dof: int, dof_res: int, p_threshold: float, power: float = DETECT_POWER,
                              test: str = "F") -> float:
     """Noncentrality lambda at which the group test (dof columns, threshold p_threshold) flags with probability
-    ``power`` (noncentral F(dof, dof_res - dof) or chi2(dof)); the minimal detectable bias of geodesy."""
+    ``power`` (noncentral F(dof, dof_res - dof) or chi2(dof)); the minimal detectable bias of geodesy. The
+    distributions by their ``scipy.special`` functions (the same values as ``scipy.stats``' ncf / ncx2, without a
+    distribution object per call); cached: the folds of one run ask the same."""
     from scipy.optimize import brentq
+    from scipy.special import chdtri, chndtr, fdtri, ncfdtr
 
-    st = _stats()
     if test == "F":
-        crit = st.f.isf(p_threshold, dof, dof_res - dof)
-        pw = lambda lam: st.ncf.sf(crit, dof, dof_res - dof, lam) - power  # noqa: E731
+        d2 = dof_res - dof
+        crit = float(fdtri(dof, d2, 1.0 - p_threshold))
+        pw = lambda lam: 1.0 - float(ncfdtr(dof, d2, lam, crit)) - power  # noqa: E731
     else:
-        crit = st.chi2.isf(p_threshold, dof)
-        pw = lambda lam: st.ncx2.sf(crit, dof, lam) - power  # noqa: E731
+        crit = float(chdtri(dof, p_threshold))
+        pw = lambda lam: 1.0 - float(chndtr(crit, dof, lam)) - power  # noqa: E731
     hi = 1.0
     while pw(hi) < 0:
         hi *= 2
