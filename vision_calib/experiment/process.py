@@ -266,12 +266,12 @@ def fit_measured(m: Measured, out_dir: str | Path | None, method: str | None = N
                "reprojection": reproj, "holdout": hold, "cause": None},
         timings={"measure": t_meas, "identify": t_id, "total": time.perf_counter() - t0}, failure=failure)
     report["summary_text"] += points_line(report.get("reprojection")) + "\n" + "\n".join(holdout_lines(hold))
-    from .accuracy_map import add_accuracy_map  # the map of the calibrated tool over the workspace
-
-    add_accuracy_map(report, setup, result, meas.select(problem.labels).joints, tcp=tcp,
-                     sigma_q_rad=scene.measurement.sigma_q_rad)
 
     def write(report):
+        from .accuracy_map import add_accuracy_map  # the map of the calibrated tool over the workspace: only for the
+
+        add_accuracy_map(report, setup, result, meas.select(problem.labels).joints, tcp=tcp,  # hypothesis written
+                         sigma_q_rad=scene.measurement.sigma_q_rad)
         if not early_measurements:
             write_measurements()
         write_report(out, report, setup, result, problem, plots=plots,
