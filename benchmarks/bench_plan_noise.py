@@ -86,18 +86,18 @@ def main() -> None:
               f"  model std           {np.round(sd[:3] * k[:3], 4)},                {np.round(sd[3:] * k[3:], 4)}",
               flush=True)
         if args.by_angle:
-            by_angle(E, CR, U, iCM, T[[k for k, pm in enumerate(pms) if pm.valid]], p)
+            by_angle(E, CR, U, iCM, T[[k for k, pm in enumerate(pms) if pm.valid]], target)
 
 
-def by_angle(E, CR, U, iCM, T, p) -> None:
-    """Per 10-degree band of the view angle: the s matching the planner's information to the measurement's, and
-    the planner's s(theta) there (``planning.design.systematic_corner_px``)."""
+def by_angle(E, CR, U, iCM, T, target) -> None:
+    """Per 10-degree band of the view angle (``planning.view.incidence_rad``): the s matching the planner's
+    information to the measurement's, and the planner's s(theta) there (``planning.design.systematic_corner_px``)."""
     from vision_calib.planning.design import SYSTEMATIC_CORNER_PX, systematic_corner_px
+    from vision_calib.planning.view import incidence_rad
 
-    c = 0.5 * (p.min(axis=0) + p.max(axis=0))
-    centre = np.einsum("kij,j->ki", T[:, :3, :3], c) + T[:, :3, 3]
-    ang = np.degrees(np.arccos(np.abs(np.einsum("ki,ki->k", T[:, :3, 2], centre)) / np.linalg.norm(centre, axis=1)))
-    model = systematic_corner_px(T, p)
+    theta = incidence_rad(T, target)
+    ang = np.degrees(theta)
+    model = systematic_corner_px(theta)
     for lo in range(0, 90, 10):
         m = (ang >= lo) & (ang < lo + 10)
         if m.sum() < 3:

@@ -38,14 +38,20 @@ def test_pose_covariance_adds_a_systematic_floor_that_frames_do_not_average():
 
 def test_systematic_corner_error_grows_with_the_view_angle():
     """s(theta): the constant part on a board facing the camera, s0^2 + c^2 tan^2 theta when its normal leans theta
-    away from the line of sight (the same whatever the axis it leans about), larger the steeper."""
+    away from the line of sight to the pattern's centre (view.incidence_rad, the same whatever the axis it leans
+    about), larger the steeper."""
     from vision_calib import frames as F
+    from vision_calib.planning.view import incidence_rad
+    from vision_calib.targets import load_target
 
-    p = np.array([[x, y, 0.0] for x in (-0.1, 0.1) for y in (-0.05, 0.05)])  # centre at the origin
+    target = load_target(load_scene(UR5E).target_path)
+    w, h = target.pattern_size_m()
 
-    def seen(theta_deg, axis):
-        T = F.T_from_xyz_rotvec(np.r_[0.0, 0.0, 0.6, np.radians(theta_deg) * np.asarray(axis, float)])
-        return D.systematic_corner_px(T[None], p)[0]
+    def seen(theta_deg, axis):  # the pattern's centre 0.6 m ahead on the optical axis, the board turned about it
+        R = F.T_from_xyz_rotvec(np.r_[0.0, 0.0, 0.0, np.radians(theta_deg) * np.asarray(axis, float)])[:3, :3]
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = R, np.array([0.0, 0.0, 0.6]) - R @ np.array([w / 2, h / 2, 0.0])
+        return D.systematic_corner_px(incidence_rad(T[None], target))[0]
 
     assert seen(0, [1, 0, 0]) == pytest.approx(D.SYSTEMATIC_CORNER_PX, rel=1e-9)
     for th in (20, 45, 60):

@@ -44,7 +44,7 @@ RESTARTS = 1
 #: held 0.62-0.66x the information on the UR5e and RX-90 and predicted their validation RMS ~1.25x too high)
 SYSTEMATIC_CORNER_PX = 0.021
 #: growth of that error on oblique views [px]: s(theta)^2 = SYSTEMATIC_CORNER_PX^2 + (OBLIQUE_CORNER_PX tan theta)^2,
-#: theta the angle between the board's normal and the line of sight to the centre of its corners (foreshortened
+#: theta the angle between the board's normal and the line of sight to the pattern's centre (foreshortened
 #: squares: the corner refiner's window takes in more of the neighbouring edges). The information-matched s per
 #: 10-degree band of theta (``benchmarks/bench_plan_noise.py --by-angle``, 80 poses a scene): 0.020 px at 0-10 deg
 #: (RX-90), 0.023 px at 30-40 deg and 0.035 px at 40-60 deg (the thesis eye-in-hand scene's steep views)
@@ -80,13 +80,14 @@ def pose_covariances(scene, poses: np.ndarray, frames: int | None = None) -> np.
     from ..measure.covariance import image_bound_pose_cov
     from ..measure.pnp import reprojection_jacobian
     from ..targets import load_target
+    from .view import incidence_rad
 
     setup = scene.setup
     nf = int(frames or scene.measurement.frames)
     target = load_target(scene.target_path)
     _, p = target.corner_points()
     T = setup.T_cam_target(np.asarray(poses), setup.params.nominal)
-    s2 = systematic_corner_px(T, p) ** 2
+    s2 = systematic_corner_px(incidence_rad(T, target)) ** 2
     out = np.empty((len(T), 6, 6))
     for k, Tk in enumerate(T):
         J = reprojection_jacobian(Tk, p, setup.camera)
@@ -94,17 +95,10 @@ def pose_covariances(scene, poses: np.ndarray, frames: int | None = None) -> np.
     return 0.5 * (out + np.swapaxes(out, 1, 2))
 
 
-def systematic_corner_px(T_cam_target: np.ndarray, p_target: np.ndarray) -> np.ndarray:
+def systematic_corner_px(incidence_rad: np.ndarray) -> np.ndarray:
     """(K,) the detector's systematic corner error s(theta) [px] (:data:`SYSTEMATIC_CORNER_PX`,
-    :data:`OBLIQUE_CORNER_PX`) of the target seen at poses T_cam_target (K, 4, 4) [m], its corner points p_target
-    (n, 3) [m] (theta at the centre of their box)."""
-    T = np.asarray(T_cam_target, float)
-    p = np.asarray(p_target, float)
-    c = 0.5 * (p.min(axis=0) + p.max(axis=0))
-    centre = np.einsum("kij,j->ki", T[:, :3, :3], c) + T[:, :3, 3]
-    cos = np.abs(np.einsum("ki,ki->k", T[:, :3, 2], centre)) / np.linalg.norm(centre, axis=1)
-    cos = np.clip(cos, 1e-6, 1.0)
-    return np.sqrt(SYSTEMATIC_CORNER_PX**2 + OBLIQUE_CORNER_PX**2 * (1.0 - cos**2) / cos**2)
+    :data:`OBLIQUE_CORNER_PX`) at the views' incidence angles theta (K,) [rad] (``view.incidence_rad``)."""
+    return np.hypot(SYSTEMATIC_CORNER_PX, OBLIQUE_CORNER_PX * np.tan(np.clip(incidence_rad, 0.0, np.pi / 2 - 1e-6)))
 
 
 def base_mask(scene, poses: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, object]:

@@ -58,6 +58,20 @@ def _probes(target) -> tuple[np.ndarray, float]:
     return np.array([[0, 0, 0], [w, 0, 0], [w, h, 0], [0, h, 0], [w / 2, h / 2, 0]], float), cell
 
 
+def _centre_ray(T: np.ndarray, target) -> tuple[np.ndarray, np.ndarray]:
+    """(distance (N,) [m] camera centre to the pattern's centre, cos (N,) of the angle between the board's +z and
+    the viewing ray to that centre: > 0 for a board seen from its front) at poses T (N, 4, 4)."""
+    centre = np.einsum("nij,j->ni", T[:, :3, :3], _probes(target)[0][4]) + T[:, :3, 3]
+    dist = np.linalg.norm(centre, axis=1)
+    return dist, np.einsum("ni,ni->n", T[:, :3, 2], centre) / np.maximum(dist, 1e-12)
+
+
+def incidence_rad(T_cam_target: np.ndarray, target) -> np.ndarray:
+    """(N,) [rad] angle between the board's normal and the viewing ray to the pattern's centre (0: seen square on)
+    at camera poses of the target T_cam_target (N, 4, 4) [m]: the ``incidence_deg`` of :func:`view_figures`."""
+    return np.arccos(np.clip(np.abs(_centre_ray(np.asarray(T_cam_target, float), target)[1]), 0.0, 1.0))
+
+
 def view_figures(T_cam_target: np.ndarray, camera, target) -> dict:
     """{margin_px, distance_m, incidence_deg, square_px: (N,) float, front: (N,) bool} of camera poses of the target
     T_cam_target (N, 4, 4) [m] with intrinsics ``camera`` (``CameraIntrinsics``) and ``target`` (a TargetSpec)."""
@@ -78,10 +92,7 @@ def view_figures(T_cam_target: np.ndarray, camera, target) -> dict:
                              axis=-1), axis=(1, 2))
     su = uv[:, 4:].reshape(N, 3, 5, 2)
     side = np.minimum(np.linalg.norm(su[:, 1] - su[:, 0], axis=-1), np.linalg.norm(su[:, 2] - su[:, 0], axis=-1))
-    centre = np.einsum("nij,j->ni", R, probes[4]) + t
-    dist = np.linalg.norm(centre, axis=1)
-    normal = R[:, :, 2]  # board +z in the camera frame: away from the camera for a board seen from its front
-    cosang = np.einsum("ni,ni->n", normal, centre) / np.maximum(dist, 1e-12)
+    dist, cosang = _centre_ray(T, target)  # board +z away from the camera for a board seen from its front
     front = front_z & (cosang > 0) & np.isfinite(margin)
     return {"margin_px": np.where(front, margin, np.nan), "distance_m": dist,
             "incidence_deg": np.degrees(np.arccos(np.clip(np.abs(cosang), 0, 1))),
@@ -103,4 +114,4 @@ def measurable(fig: dict, limits: ViewLimits) -> tuple[np.ndarray, dict]:
     return ok, fails
 
 
-__all__ = ["MIN_SQUARE_PX", "ViewLimits", "view_figures", "measurable", "FIGURES"]
+__all__ = ["MIN_SQUARE_PX", "ViewLimits", "incidence_rad", "view_figures", "measurable", "FIGURES"]
