@@ -253,18 +253,29 @@ def registered_jacobian(kin, x: np.ndarray, q: np.ndarray, reg: tuple | None) ->
     return J + base_motion_lever(kin.tool(q, x)[:, :3, 3], c) @ H
 
 
+def joint_term(kin, x: np.ndarray, q: np.ndarray, sigma_q_rad: float) -> np.ndarray | None:
+    """(M, 6, 6) sigma_q^2 J_q J_q^T: the tool pose covariance [m, rad] of the joints' repeatability sigma_q [rad] at
+    joint sets q (M, n), J_q the joint Jacobian of the tool pose on the model of x; None when sigma_q is 0."""
+    if not sigma_q_rad > 0:
+        return None
+    from ..deploy.solve import joint_jacobian
+
+    Jq = joint_jacobian(lambda v: kin.tool(v, x), q, kin.tool(q, x))
+    return sigma_q_rad**2 * np.einsum("kin,kjn->kij", Jq, Jq)
+
+
 def tool_covariance(kin, x: np.ndarray, cov: np.ndarray, q: np.ndarray, sigma_q_rad: float = 0.0,
-                    reg: tuple | None = None) -> np.ndarray:
+                    reg: tuple | None = None, J: np.ndarray | None = None,
+                    joint: np.ndarray | None = None) -> np.ndarray:
     """(M, 6, 6) covariance of the tool pose at joint sets q (M, n) [m, rad; translation then rotation vector, base
     frame]: J_x cov J_x^T (cov (n, n) of x, kin's order; J_x after the registration ``reg``, :func:`registration`)
-    + sigma_q^2 J_q J_q^T (module docstring)."""
-    J = registered_jacobian(kin, x, q, reg)
+    + sigma_q^2 J_q J_q^T (module docstring). J (M, 6, n) / joint (M, 6, 6): J_x and the joint term
+    (:func:`joint_term`) when the caller has them already."""
+    J = registered_jacobian(kin, x, q, reg) if J is None else J
     C = np.einsum("kin,nm,kjm->kij", J, cov, J)
-    if sigma_q_rad > 0:
-        from ..deploy.solve import joint_jacobian
-
-        Jq = joint_jacobian(lambda v: kin.tool(v, x), q, kin.tool(q, x))
-        C = C + sigma_q_rad**2 * np.einsum("kin,kjn->kij", Jq, Jq)
+    joint = joint_term(kin, x, q, sigma_q_rad) if joint is None else joint
+    if joint is not None:
+        C = C + joint
     return 0.5 * (C + np.swapaxes(C, 1, 2))
 
 
@@ -341,7 +352,8 @@ def build_map(kin, names: Sequence[str], x: ArrayLike, cov: ArrayLike, q_cal: Ar
                         "reached by the calibrated model")
     q_cal = np.asarray(q_cal, float)
     reg = registration(kin, x, q_cal)
-    C = tool_covariance(kin, x, cov, q, sigma_q_rad, reg)
+    J, Cq = registered_jacobian(kin, x, q, reg), joint_term(kin, x, q, sigma_q_rad)
+    C = tool_covariance(kin, x, cov, q, reg=reg, J=J, joint=Cq)
     r_mm = norm_quantile(C[:, :3, :3]) * 1e3
     r_deg = np.degrees(norm_quantile(C[:, 3:, 3:]))
     ext = g["extrapolated"]
@@ -380,7 +392,7 @@ def build_map(kin, names: Sequence[str], x: ArrayLike, cov: ArrayLike, q_cal: Ar
             rng = rng or np.random.default_rng(0)
             qt = q + rng.normal(scale=sigma_q_rad, size=q.shape)
         x_true = np.asarray(x_true, float)
-        T_cal = kin.tool(q_cal, x)
+        T_cal = T[g["calibration"]]  # the calibration poses' tool poses on the model, the map's last points
         e = registered_error(F.pose_error(tkin.tool(q_cal, x_true), T_cal), T_cal[:, :3, 3],
                              F.pose_error(tkin.tool(qt, x_true), T), T[:, :3, 3])
         e_mm = np.linalg.norm(e[:, :3], axis=1) * 1e3
@@ -388,9 +400,8 @@ def build_map(kin, names: Sequence[str], x: ArrayLike, cov: ArrayLike, q_cal: Ar
                                                                     e[:, :3, None])[..., 0]))
         e_deg = np.degrees(np.linalg.norm(e[:, 3:], axis=1))
         cov_pos = float(np.mean(e_mm <= r_mm))
-        Jr = registered_jacobian(kin, x, q, reg)[:, :3, :]
-        extra = C[:, :3, :3] - np.einsum("kin,nm,kjm->kij", Jr, cov, Jr) if sigma_q_rad > 0 else None
-        law = coverage_law(Jr, cov, r_mm * 1e-3, np.random.default_rng([STREAM_MAP, len(q)]), extra=extra)
+        law = coverage_law(J[:, :3, :], cov, r_mm * 1e-3, np.random.default_rng([STREAM_MAP, len(q)]),
+                           extra=None if Cq is None else Cq[:, :3, :3])
         for k, p in enumerate(pts):
             p["true_error_mm"] = float(e_mm[k])
             p["true_error_deg"] = float(e_deg[k])
@@ -516,5 +527,6 @@ def add_planned_map(plan: dict, scene, names: Sequence[str], information: ArrayL
 __all__ = ["LAW_DRAWS", "LAW_KEPT", "LEVEL", "MARGIN", "PER_AXIS", "STREAM_MAP", "add_accuracy_map", "add_planned_map",
            "base_motion_lever", "coverage_law", "pooled_coverage_law",
            "build_map", "embed_covariance", "map_rng", "model_kinematics", "norm_quantile", "planned_map",
-           "registered_error", "registered_jacobian", "registration", "run_map", "summary_line", "tool_covariance",
+           "joint_term", "registered_error", "registered_jacobian", "registration", "run_map", "summary_line",
+           "tool_covariance",
            "workspace_grid"]
