@@ -95,6 +95,46 @@ def test_jacobian_is_derivative_of_residual(kind):
     np.testing.assert_allclose(pb0.jacobian(x), -ch.pose_jacobian(q, x)[:, : pb0.m], atol=1e-15)
 
 
+@pytest.mark.parametrize("kind", ["pose", "position"])
+def test_jacobian_factors_multiply_to_the_jacobian(kind):
+    """problem.jacobian_factors (D, Jc): D @ Jc is the Jacobian, over all poses, a subset of them and a subset()
+    problem; a nuisance-augmented problem has none (its Jacobian has extra columns)."""
+    from vision_calib.identify.nuisance import with_nuisance
+
+    ch = _chain("thesis_arm_tripod_probe")
+    q = _q(ch, 7)
+    rng = np.random.default_rng(8)
+    pb = serial_problem(ch, q, ch.forward(q, ch.params.nominal + rng.normal(0, 0.05, len(ch.params))), residual=kind)
+    x = ch.params.nominal + rng.normal(0, 0.03, len(ch.params))
+    for prob, idx in ((pb, None), (pb, [5, 1, 2]), (pb.subset([6, 0, 3]), None), (pb.subset([6, 0, 3]), [2])):
+        D, Jc = prob.jacobian_factors(x, idx)
+        np.testing.assert_allclose(D @ Jc, prob.jacobian(x, idx), rtol=0, atol=1e-15)
+    assert with_nuisance(pb, np.ones((7, pb.m, 1))).jacobian_factors is None
+
+
+@pytest.mark.parametrize("n_poses", [40, 2500])
+def test_lse_is_the_gauss_newton_minimum_and_its_covariance(n_poses):
+    """solve_lse (chord steps, the Jacobian kept from the analysis; 2,500 poses: more than one block of
+    identifiability.BLOCK_POSES) reaches the minimum a plain Gauss-Newton polishes, within 1e-6 of the std, and its
+    covariance is (J^T J)^-1 of the whitened Jacobian there to 1e-6 of the std products."""
+    from vision_calib.identify.identifiability import whitened_free_jacobian
+    from vision_calib.identify.lse import solve_lse
+
+    ch = _chain("thesis_arm_tripod_probe")
+    q = _q(ch, n_poses, seed=11)
+    x_true = _x_true(ch, seed=12)
+    T_meas = synthetic_pose_measurements(ch, q, x_true, 2e-4, 5e-4, np.random.default_rng(13))
+    pb = serial_problem(ch, q, T_meas, free=_free(ch), sigma_t_m=2e-4, sigma_r_rad=5e-4)
+    res = solve_lse(pb)
+    fi = pb.params.free_index
+    x = _gauss_newton(pb, res.identified.copy(), iters=3)
+    Jw = whitened_free_jacobian(pb, pb.jacobian(x))
+    cov = np.linalg.inv(Jw.T @ Jw)
+    std = np.sqrt(np.diag(cov))
+    assert res.converged and np.max(np.abs(res.identified[fi] - x[fi]) / std) < 1e-6
+    np.testing.assert_allclose(res.covariance / np.outer(std, std), cov / np.outer(std, std), rtol=0, atol=1e-6)
+
+
 def test_so3_right_jacobian_inverse():
     rng = np.random.default_rng(3)
     for r in (rng.normal(0, 0.8, 3), np.array([0, 2e-7, 0]), np.zeros(3)):

@@ -236,6 +236,39 @@ def whitened_blocks(problem: IdentificationProblem, jacobian_block, scale: np.nd
         yield a, b, np.matmul(W[a:b], J[:, :, fi]).reshape(-1, fi.size) * scale
 
 
+def whitened_jacobian_blocks(problem: IdentificationProblem, x: ArrayLike, scale: np.ndarray,
+                             W: np.ndarray | None = None, block: int | None = None, check: bool = True):
+    """:func:`whitened_blocks` of the Jacobian at x (n,): from ``problem.jacobian_factors`` when the problem has them
+    (per block one batched product (W D) @ Jc[:, :, free], no (k, m, n) Jacobian formed), else from
+    ``problem.jacobian(x, idx)`` (the whole Jacobian for one block, which the problem may hold from its last call).
+    Yields (a, b, Aw ((b - a) m, n_free)), columns times ``scale``; ``check`` as whitened_blocks (DataError naming the
+    poses whose Jacobian is not finite)."""
+    x = np.asarray(x, float)
+    fac = problem.jacobian_factors
+    if fac is None:
+        one = problem.n_obs <= int(block or BLOCK_POSES)
+        jac = (lambda a, b: problem.jacobian(x)) if one else (lambda a, b: problem.jacobian(x, np.arange(a, b)))
+        yield from whitened_blocks(problem, jac, scale, W, block, check)
+        return
+    block = int(block or BLOCK_POSES)
+    W = problem.whitening() if W is None else W
+    fi = problem.params.free_index
+    n, m = len(problem.params), problem.m
+    for a in range(0, problem.n_obs, block):
+        b = min(a + block, problem.n_obs)
+        D, Jc = fac(x, None if (a, b) == (0, problem.n_obs) else np.arange(a, b))
+        if D.shape[:2] != (b - a, m) or Jc.shape != (b - a, D.shape[2], n):
+            raise DataError(f"jacobian factors have shapes {D.shape} and {Jc.shape}, expected ({b - a}, {m}, c) and "
+                            f"({b - a}, c, {n})")
+        X = np.ascontiguousarray(Jc.transpose(2, 1, 0)[fi].transpose(2, 1, 0))  # (k, c, n_free): a row gather
+        Aw = np.matmul(np.matmul(W[a:b], D), X)
+        if check:
+            bad = np.flatnonzero(~np.all(np.isfinite(Aw), axis=(1, 2)))
+            if bad.size:
+                raise DataError(f"jacobian is not finite for poses {pose_labels(problem, a + bad)}")
+        yield a, b, Aw.reshape(-1, fi.size) * scale
+
+
 def scaled_prior_rows(problem: IdentificationProblem, scale: np.ndarray) -> np.ndarray | None:
     """(p, n_free) the problem's prior rows (``prior_jacobian``) with columns times ``scale``; None without any."""
     return problem.prior_jacobian() * scale[None, :] if problem.prior_rows else None
@@ -247,10 +280,10 @@ def whitened_gram(problem: IdentificationProblem, x: ArrayLike, jacobian: np.nda
     of ``problem.jacobian(x, idx)`` (or of ``jacobian`` (n_obs, m, n) when given): no (N, n_free) matrix held.
     :func:`analyze` takes it (``gram=``)."""
     scale = problem.params.scale[problem.params.free_index]
-    blocks = (lambda a, b: jacobian[a:b]) if jacobian is not None else \
-        (lambda a, b: problem.jacobian(np.asarray(x, float), np.arange(a, b)))
+    blocks = whitened_blocks(problem, lambda a, b: jacobian[a:b], scale) if jacobian is not None else \
+        whitened_jacobian_blocks(problem, x, scale)
     G = np.zeros((scale.size, scale.size))
-    for _, _, Aw in whitened_blocks(problem, blocks, scale):
+    for _, _, Aw in blocks:
         G += Aw.T @ Aw
     P = scaled_prior_rows(problem, scale)
     return G if P is None else G + P.T @ P
@@ -294,7 +327,7 @@ def row_compressed(A: np.ndarray) -> np.ndarray:
 #: ``lse.normal_equations``): a block is ~16 MB at 8192 x 6 x 40 doubles, and no (N, m, n) Jacobian is held beyond
 #: it. RX-90, 30 parameters: 5,000 poses solved in 0.107 s as one block (0.17 s in blocks of 2,048); 50,000 poses
 #: in 1.28 / 1.32 / 1.51 s with blocks of 4,096 / 8,192 / 16,384
-BLOCK_POSES = 8192
+BLOCK_POSES = 2048
 
 
 def compressed_whitened_jacobian(problem: IdentificationProblem, J: np.ndarray) -> np.ndarray:

@@ -28,13 +28,17 @@ from scipy.optimize import least_squares
 
 from ..errors import ConfigError, DataError, ParameterError, VisionCalibError
 from .identifiability import (BLOCK_POSES, IdentifiabilityReport, analyze, base_problem, check_problem, gram_factor,
-                              pose_labels, row_compressed, scaled_prior_rows, whitened_blocks, whitened_free_jacobian,
-                              whitened_gram)
+                              pose_labels, row_compressed, scaled_prior_rows, whitened_free_jacobian, whitened_gram,
+                              whitened_jacobian_blocks)
 from .problem import NOISE_ESTIMATED, STATUS_CONVERGED, STATUS_NOT_FINITE, IdentificationProblem, IdentificationResult
 from .threads import single_threaded_blas
 
 #: |correlation| above which a pair of free parameters is reported
 CORRELATION_WARN = 0.95
+#: largest whitened free Jacobian (bytes, (n_obs m, n_free) doubles) :func:`solve_lse` keeps between its steps (the
+#: first one from the analysis at x0, then the last one for chord steps): 128 MB is ~89,000 poses of 6 components
+#: and 30 parameters; above it the normal equations are accumulated block by block at every step
+KEEP_BYTES = 128 * 2 ** 20
 
 
 # ----------------------------------------------------------------------------- shared with ekf.py
@@ -45,6 +49,7 @@ def prepare(
     fix: Iterable[str] = (),
     fix_unidentifiable: bool = True,
     selection: str = "order",
+    keep: dict | None = None,
 ) -> tuple[IdentificationProblem, np.ndarray, IdentifiabilityReport, tuple[str, ...]]:
     """Common set-up of the solvers.
 
@@ -54,6 +59,9 @@ def prepare(
     poses; "pivot": column-pivoted QR), see :func:`~vision_calib.identify.identifiability.analyze`.
     Unknown names raise ParameterError; bad data (non-finite residual, Jacobian, covariance or
     cost at x0) DataError naming the poses; too few equations IdentifiabilityError.
+    keep: a dict that receives ``"blocks"``, the whitened free Jacobian at x0 of the final free set in blocks
+    [(a, b, Aw ((b - a) m, n_free), columns times ``params.scale``)], when it fits in :data:`KEEP_BYTES` (the
+    solver's first normal equations; the analysis reads their Gram matrix, the same sums it would form).
     """
     params = problem.params
     if free is not None:
@@ -66,18 +74,28 @@ def prepare(
     problem = problem.with_params(params)
     x0 = params.nominal.copy() if x0 is None else np.asarray(x0, float).reshape(-1).copy()
     big = problem.n_obs > BLOCK_POSES  # no (n_obs, m, n) Jacobian held: its Gram matrix, block by block
-    r0, J0 = check_problem(problem, x0, jacobian=not big)
+    fits = keep is not None and kept_jacobian_fits(problem)
+    r0, J0 = check_problem(problem, x0, jacobian=not big and not fits)  # (analyze computes J if it needs it)
     check_start_cost(problem, r0)
-    G0 = whitened_gram(problem, x0) if big else None
+    blocks = None
+    if fits:  # the whitened blocks at x0, for the solver's first step
+        s = params.scale[params.free_index]
+        blocks = list(whitened_jacobian_blocks(problem, x0, s))
+        G0 = gram_of_blocks(blocks, scaled_prior_rows(problem, s)) \
+            if problem.n_obs * problem.m + problem.n_prior > s.size else None  # as analyze's own (few rows: A itself)
+    else:
+        G0 = whitened_gram(problem, x0) if big else None
     report = analyze(problem, x0, jacobian=J0, selection=selection, gram=G0)
     warnings: tuple[str, ...] = ()
     if report.non_identifiable:
         if fix_unidentifiable:
             kept = problem.params.free_names
             problem, report, warnings = base_problem(problem, report)
+            sel = [kept.index(nm) for nm in problem.params.free_names]
             if G0 is not None:  # the base set's columns of the same Gram matrix
-                sel = [kept.index(nm) for nm in problem.params.free_names]
                 G0 = G0[np.ix_(sel, sel)]
+            if blocks is not None:
+                blocks = [(a, b, Aw[:, sel]) for a, b, Aw in blocks]
             report = analyze(problem, x0, jacobian=J0, selection=selection, gram=G0)
         else:
             warnings = (
@@ -85,7 +103,23 @@ def prepare(
                 + ", ".join(report.non_identifiable)
                 + "; their covariance is a pseudo-inverse and their values are arbitrary along the null space",
             )
+    if keep is not None and blocks is not None:
+        keep["blocks"] = blocks
     return problem, x0, report, warnings
+
+
+def kept_jacobian_fits(problem: IdentificationProblem) -> bool:
+    """Whether the whitened free Jacobian of ``problem`` ((n_obs m, n_free) doubles) fits in :data:`KEEP_BYTES`."""
+    return problem.n_obs * problem.m * problem.params.n_free * 8 <= KEEP_BYTES
+
+
+def gram_of_blocks(blocks, P: np.ndarray | None) -> np.ndarray:
+    """(n_free, n_free) sum of Aw^T Aw over blocks [(a, b, Aw ((b - a) m, n_free))] plus P^T P (prior rows, or None):
+    the same sums, in the same order, as :func:`~vision_calib.identify.identifiability.whitened_gram`."""
+    G = np.zeros((blocks[0][2].shape[1],) * 2)
+    for _, _, Aw in blocks:
+        G += Aw.T @ Aw
+    return G if P is None else G + P.T @ P
 
 
 def check_start_cost(problem: IdentificationProblem, r0: np.ndarray) -> None:
@@ -284,7 +318,9 @@ def solve_lse(
     t0 = time.perf_counter()
     method = _lse_method(method, loss, jac)
     original = problem
-    problem, x0, report, warnings = prepare(problem, x0, free, fix, fix_unidentifiable, selection)
+    kept: dict = {}
+    problem, x0, report, warnings = prepare(problem, x0, free, fix, fix_unidentifiable, selection,
+                                            keep=kept if method == "lm" and jac == "analytic" else None)
     params = problem.params
     fi = params.free_index
     s = params.scale[fi]
@@ -308,7 +344,7 @@ def solve_lse(
     cov = J = None
     if method == "lm" and jac == "analytic":  # the normal equations in BLAS, accumulated over blocks of poses
         sol = levenberg_marquardt(fun, None, np.zeros(fi.size), max_nfev, xtol, ftol, gtol,
-                                  normal=normal_equations(problem, W, x_of, s))
+                                  normal=normal_equations(problem, W, x_of, s, start=kept.get("blocks")))
         if sol.A is not None:
             cov = covariance_from_normal(sol.A, s, problem.n_obs * problem.m + problem.n_prior)
     else:
@@ -349,8 +385,8 @@ class LMResult:
     message: str
     nfev: int
     njev: int
-    #: (n, n) normal matrix J^T J at the last iterate before the final Gauss-Newton step (that step moves by
-    #: rounding: the covariance at the solution); None when the normal equations were not given
+    #: (n, n) normal matrix J^T J of the Jacobian the final Gauss-Newton step used (within CHORD_RADIUS of the
+    #: solution: the covariance there); None when the normal equations were not given or there was no final step
     A: np.ndarray | None = None
 
 
@@ -365,21 +401,34 @@ LM_MESSAGES = {0: "the maximum number of function evaluations is exceeded",
 #: levenberg_marquardt's first damping (of the column-equilibrated normal matrix, unit diagonal): nearly Gauss-Newton
 LM_LAMBDA0 = 1e-6
 
+#: levenberg_marquardt takes chord steps (Gauss-Newton steps with the last Jacobian, no new one) while the point stays
+#: within this distance (largest |dz|, scaled units: 1 = one ``params.scale``, 1 mm / 1 mrad by default, so 1e-4 is
+#: 0.1 um / 0.1 urad) of the point where that Jacobian was computed; its final step (the minimum to rounding) and the
+#: covariance use the last Jacobian only within this distance, else a new one. That Jacobian differs from the one at
+#: the solution by ~1e-7 relative, and so do the answer and its covariance from Gauss-Newton's at the solution, in
+#: units of the std (``benchmarks/bench_identify.py`` prints the difference from a full fit)
+CHORD_RADIUS = 1e-4
+#: a chord step is taken only when it is at most this fraction of the step before it (the iteration contracts)
+CHORD_CONTRACTION = 0.25
+
 
 def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gtol=1e-12, normal=None) -> LMResult:
     """Minimise 0.5 |fun(z)|^2 (fun: (n,) -> (M,), jac: (n,) -> (M, n)) from z0 (n,) by Levenberg-Marquardt on the
     normal equations: per iteration J^T J and J^T r (two BLAS products over the M rows) and an (n, n) Cholesky
     solve of (S J^T J S + lam I) y = -S J^T r, dz = S y, S = diag(J^T J)^-1/2 (running maximum, MINPACK's scaling,
     so the solve is that of the column-equilibrated problem), lam raised while a step does not lower the cost.
+    After an accepted step, chord steps (undamped, with the same Jacobian: J^T r only) while each lowers the cost,
+    is at most :data:`CHORD_CONTRACTION` of the one before and stays within :data:`CHORD_RADIUS` of the
+    Jacobian's point; then a new Jacobian.
     Termination as MINPACK's ``lmder`` (scipy's method "lm"): gtol on the largest cosine between the residual and
     a column, ftol on the actual and predicted relative reduction, xtol on the scaled step, then one Gauss-Newton
-    step with the last Jacobian (kept when it does not raise the cost: the minimum to rounding, so that inputs
-    equal to rounding give answers equal to rounding through iterated fits); max_nfev (default
-    100 (n + 1)) evaluations of fun. ``normal`` (z, r) -> (J^T J (n, n), J^T r (n,)), when given, replaces jac
-    (a problem too large to hold J: :func:`normal_equations`); the final Gauss-Newton step then takes the normal
-    equations at the last iterate (or, when ``normal.chord(r)`` is given, J^T r with the last Jacobian it kept: a
-    chord step, no new Jacobian), and the result carries them (``A``). Returns an :class:`LMResult` (status
-    1-4 converged, 0 out of evaluations, -1 a non-finite Jacobian)."""
+    step (kept when it does not raise the cost: the minimum to rounding, so that inputs equal to rounding give
+    answers equal to rounding through iterated fits) with the last Jacobian, or a new one when the point is
+    farther than CHORD_RADIUS from it; max_nfev (default 100 (n + 1)) evaluations of fun. ``normal`` (z, r) ->
+    (J^T J (n, n), J^T r (n,)), when given, replaces jac (a problem too large to hold J: :func:`normal_equations`;
+    ``normal.chord(r)``, J^T r with its last Jacobian, or None: no chord steps, and the final step takes new
+    normal equations), and the result carries the normal matrix of the final step (``A``). Returns an
+    :class:`LMResult` (status 1-4 converged, 0 out of evaluations, -1 a non-finite Jacobian)."""
     from scipy.linalg import LinAlgError, cho_factor, cho_solve
 
     z = np.asarray(z0, float).copy()
@@ -390,13 +439,47 @@ def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gto
     cost = 0.5 * float(r @ r)
     d2 = np.zeros(n)
     lam, status = None, 0
+
+    def finish(z, r, cost, status, A, chord_g, zJ):
+        """The last Gauss-Newton step (module doc), then the result."""
+        nonlocal nfev, njev
+        A_end = None
+        if nfev < max_nfev:
+            try:
+                if chord_g is not None and np.max(np.abs(z - zJ), initial=0.0) <= CHORD_RADIUS:
+                    gr = chord_g(r)
+                else:  # a new Jacobian at z: its covariance, and the step with it
+                    if normal is None:
+                        J = np.asarray(jac(z), float)
+                        A, gr = J.T @ J, J.T @ r
+                    else:
+                        A, gr = normal(z, r)
+                    njev += 1
+                if np.all(np.isfinite(A)) and np.all(np.isfinite(gr)):
+                    A_end = A
+                    dz = -cho_solve(cho_factor(A), gr)
+                    r2 = np.asarray(fun(z + dz), float)
+                    nfev += 1
+                    c2 = 0.5 * float(r2 @ r2) if np.all(np.isfinite(r2)) else np.inf
+                    # kept when it lowers the cost, or raises it by rounding alone (the reduction it predicts,
+                    # -g.dz / 2, is below ftol: the cost cannot tell, the stationary point of the model is the answer)
+                    if c2 <= cost or (np.isfinite(c2) and -0.5 * float(gr @ dz) <= ftol * cost
+                                      and c2 - cost <= ftol * cost):
+                        z, cost = z + dz, c2
+            except (LinAlgError, ValueError):
+                pass
+        return LMResult(z, cost, status, LM_MESSAGES[status], nfev, njev, A_end if normal is not None else None)
+
     while True:
         if normal is None:
             J = np.asarray(jac(z), float)
             A, g = J.T @ J, J.T @ r
+            chord_g = (lambda rr, J=J: J.T @ rr)
         else:
             A, g = normal(z, r)
+            chord_g = getattr(normal, "chord", None)
         njev += 1
+        zJ = z.copy()
         if not (np.all(np.isfinite(A)) and np.all(np.isfinite(g))):
             return LMResult(z, cost, -1, "the Jacobian is not finite at the current point", nfev, njev)
         diag = np.diag(A).copy()
@@ -432,69 +515,87 @@ def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gto
                 lam *= max(0.1, 1.0 - (2.0 * rho - 1.0) ** 3)
             else:
                 lam *= 4.0
-            if f_ok or x_ok:
+            if f_ok or x_ok:  # (a step rejected by rounding alone included: the final step is taken from z)
                 status = 4 if f_ok and x_ok else (2 if f_ok else 3)
-                A_end = None
-                if rho > 1e-4 and nfev < max_nfev:  # a last Gauss-Newton step with the Jacobian at hand (chord)
-                    try:
-                        if normal is None:
-                            gr = J.T @ r
-                        elif getattr(normal, "chord", None) is not None:  # the last Jacobian kept (one block)
-                            gr = normal.chord(r)
-                            A_end = A
-                        else:  # no J kept: the normal equations at the last iterate (its covariance; as the
-                            A, gr = normal(z, r)  # Jacobian at the solution of the other path, not an iteration)
-                            A_end = A if np.all(np.isfinite(A)) and np.all(np.isfinite(gr)) else None
-                        dz = -cho_solve(cho_factor(A), gr)
-                        r2 = np.asarray(fun(z + dz), float)
-                        nfev += 1
-                        c2 = 0.5 * float(r2 @ r2) if np.all(np.isfinite(r2)) else np.inf
-                        if c2 <= cost:
-                            z, r, cost = z + dz, r2, c2
-                    except (LinAlgError, ValueError):
-                        pass
-                return LMResult(z, cost, status, LM_MESSAGES[status], nfev, njev, A_end)
+                return finish(z, r, cost, status, A, chord_g, zJ)
             if nfev >= max_nfev:
                 return LMResult(z, cost, 0, LM_MESSAGES[0], nfev, njev)
             if rho > 1e-4:
                 break
+        if chord_g is None:
+            continue
+        try:  # chord steps with this Jacobian (module doc)
+            factor = cho_factor(A)
+        except (LinAlgError, ValueError):
+            continue
+        prev = step
+        while nfev < max_nfev:
+            gc = chord_g(r)
+            dz = -cho_solve(factor, gc)
+            step = float(np.linalg.norm(np.sqrt(dsafe) * dz))
+            if not (step <= CHORD_CONTRACTION * prev and np.max(np.abs(z + dz - zJ)) <= CHORD_RADIUS):
+                break
+            r_new = np.asarray(fun(z + dz), float)
+            nfev += 1
+            cost_new = 0.5 * float(r_new @ r_new) if np.all(np.isfinite(r_new)) else np.inf
+            pred = -(float(gc @ dz) + 0.5 * float(dz @ A @ dz))
+            actual = cost - cost_new
+            rho = actual / pred if pred > 0 else -1.0
+            f_ok = abs(actual) <= ftol * cost and pred <= ftol * cost and rho <= 2.0  # as the damped steps'
+            x_ok = step <= xtol * float(np.linalg.norm(np.sqrt(dsafe) * z))
+            accepted = cost_new <= cost
+            if accepted:
+                z, r, cost, prev = z + dz, r_new, cost_new, step
+            if f_ok or x_ok:  # (a step rejected by rounding alone: the minimum, to rounding)
+                status = 4 if f_ok and x_ok else (2 if f_ok else 3)
+                return finish(z, r, cost, status, A, chord_g, zJ)
+            if not accepted:
+                break
+        if nfev >= max_nfev:
+            return LMResult(z, cost, 0, LM_MESSAGES[0], nfev, njev)
     return LMResult(z, cost, status, LM_MESSAGES[status], nfev, njev)
 
 
-def normal_equations(problem: IdentificationProblem, W: np.ndarray, x_of, s: np.ndarray, block: int | None = None):
+def normal_equations(problem: IdentificationProblem, W: np.ndarray, x_of, s: np.ndarray, block: int | None = None,
+                     start: list | None = None):
     """(z, r) -> (A (n_free, n_free), g (n_free,)): J^T J and J^T r of the whitened, scaled residual
     ``fun`` of :func:`solve_lse` at z (r: its (n_obs m + n_prior,) value at z), accumulated over the
-    :func:`~vision_calib.identify.identifiability.whitened_blocks` of ``block`` poses (default ``BLOCK_POSES``;
-    ``problem.jacobian(x, idx)``; one block: the whole Jacobian, which the problem may hold from its last call at
-    that x), the prior rows last. W (n_obs, m, m) whitening, x_of: z -> x (n,), s (n_free,) scales. A problem of
-    one block keeps its whitened Jacobian: ``normal.chord(r)`` is J^T r with it (LM's final step, no new
-    Jacobian); None otherwise."""
+    :func:`~vision_calib.identify.identifiability.whitened_jacobian_blocks` of ``block`` poses (default
+    ``BLOCK_POSES``), the prior rows last. W (n_obs, m, m) whitening, x_of: z -> x (n,), s (n_free,) scales. start:
+    the blocks at z = 0 when already computed (``prepare(keep=...)``), used by the first call there. When the
+    whitened Jacobian fits in :data:`KEEP_BYTES` the last call's blocks are kept and ``normal.chord(r)`` is J^T r
+    with them (a chord step: no new Jacobian); else ``normal.chord`` is None."""
     n_obs, m = problem.n_obs, problem.m
     block = int(block or BLOCK_POSES)
-    one = n_obs <= block
     P = scaled_prior_rows(problem, s)
-    last = {}
+    keep = kept_jacobian_fits(problem)
+    last = {"start": start}
 
     def normal(z, r):
-        x = x_of(z)
+        blocks = last.pop("start", None)
+        if blocks is None or np.any(z):  # LM: status -1 when not finite
+            blocks = whitened_jacobian_blocks(problem, x_of(z), s, W, block, check=False)
         A = np.zeros((s.size, s.size))
         g = np.zeros(s.size)
-        jac = (lambda a, b: problem.jacobian(x)) if one else (lambda a, b: problem.jacobian(x, np.arange(a, b)))
-        for a, b, Jw in whitened_blocks(problem, jac, s, W, block, check=False):  # LM: status -1 when not finite
+        kept = []
+        for a, b, Jw in blocks:
             A += Jw.T @ Jw
             g += Jw.T @ r[a * m:b * m]
-            if one:
-                last["Jw"] = Jw
+            if keep:
+                kept.append((a, b, Jw))
         if P is not None:
             A += P.T @ P
             g += P.T @ r[n_obs * m:]
+        last["blocks"] = kept
         return A, g
 
     def chord(r):
-        g = last["Jw"].T @ r[:n_obs * m]
+        g = np.zeros(s.size)
+        for a, b, Jw in last["blocks"]:
+            g += Jw.T @ r[a * m:b * m]
         return g + P.T @ r[n_obs * m:] if P is not None else g
 
-    normal.chord = chord if one else None
+    normal.chord = chord if keep else None
     return normal
 
 

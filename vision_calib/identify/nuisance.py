@@ -67,7 +67,7 @@ def with_nuisance(problem: IdentificationProblem, U: ArrayLike, prefix: str = "n
         return np.concatenate([J, -sel(idx)], axis=2)
 
     meta = dict(problem.meta, nuisance={"n": n, "d": d, "prefix": prefix})
-    return dataclasses.replace(problem, params=params, residual=residual, jacobian=jacobian,
+    return dataclasses.replace(problem, params=params, residual=residual, jacobian=jacobian, jacobian_factors=None,
                                prior_std=np.concatenate([prior, np.ones(d)]),
                                prior_rows=tuple(problem.prior_rows) + names, meta=meta)
 

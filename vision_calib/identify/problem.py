@@ -34,6 +34,7 @@ NOISE_ESTIMATED = "estimated from residuals, not given"
 
 ResidualFn = Callable[..., np.ndarray]  # (x (n,), idx=None) -> (k, m)
 JacobianFn = Callable[..., np.ndarray]  # (x (n,), idx=None) -> (k, m, n)
+FactorsFn = Callable[..., tuple]  # (x (n,), idx=None) -> (D (k, m, c), Jc (k, c, n)): jacobian = D @ Jc
 
 
 @dataclass(frozen=True)
@@ -52,6 +53,10 @@ class IdentificationProblem:
     component_names: names of the m residual components, for reports.
     meta: builder-specific data; ``meta["noise"] == NOISE_ESTIMATED`` marks an obs_cov of relative weights
         (no noise given): the solvers then scale the parameter covariance by chi2/dof.
+    jacobian_factors: optional (x, idx=None) -> (D (k, m, c), Jc (k, c, n_params)) with ``jacobian(x, idx)`` =
+        D @ Jc per observation (a per-pose left factor and the model's own Jacobian, which may be a view in
+        parameter-major layout): the solvers whiten through (W D) @ Jc, one batched product, and select free
+        columns from Jc (:func:`~vision_calib.identify.identifiability.whitened_jacobian_blocks`).
     prior_rows: names of parameters whose prior N(nominal, prior_std^2) enters the least-squares cost as
         one whitened row each, (nominal - x) / prior_std, while they are free (nuisance parameters,
         :mod:`~vision_calib.identify.nuisance`): the equations count N = n_obs * m + their number, so a
@@ -68,6 +73,7 @@ class IdentificationProblem:
     component_names: tuple[str, ...] = ()
     meta: dict = field(default_factory=dict)
     prior_rows: tuple[str, ...] = ()
+    jacobian_factors: FactorsFn | None = None
 
     @property
     def n_obs(self) -> int:
@@ -96,8 +102,16 @@ class IdentificationProblem:
         def jacobian(x, sub=None):
             return jac(x, idx if sub is None else idx[np.asarray(sub, int)])
 
+        factors = None
+        if self.jacobian_factors is not None:
+            fac = self.jacobian_factors
+
+            def factors(x, sub=None):
+                return fac(x, idx if sub is None else idx[np.asarray(sub, int)])
+
         labels = tuple(self.labels[i] for i in idx) if self.labels else ()
-        return replace(self, residual=residual, jacobian=jacobian, obs_cov=self.obs_cov[idx], labels=labels)
+        return replace(self, residual=residual, jacobian=jacobian, obs_cov=self.obs_cov[idx], labels=labels,
+                       jacobian_factors=factors)
 
     def _prior_index(self) -> tuple[np.ndarray, np.ndarray]:
         """(positions in the free vector (p,), positions in the full vector (p,)) of the free prior_rows."""

@@ -213,10 +213,21 @@ def serial_problem(
             J[:, 3:, :] = np.matmul(so3_right_jacobian_inv(rho), J[:, 3:, :])
         return J
 
+    def factors_fn(x, idx=None):
+        """(D (k, m, 6), Jm (k, 6, n)): the chain's pose Jacobian Jm (as the chain returns it: a view) and the map
+        D of its rows to the residual's, -I for translation and -Jr^-1(rho) for rotation, so jacobian = D @ Jm."""
+        T, Jm = chain.pose_and_jacobian(q[_idx(idx)], x)
+        D = np.zeros((Jm.shape[0], m, 6))
+        D[:, :3, :3] = -np.eye(3)
+        if m == 6:
+            D[:, 3:, 3:] = -so3_right_jacobian_inv(errors(x, idx, T)[:, 3:])
+        return D, Jm
+
     return IdentificationProblem(
         params=params,
         residual=residual_fn,
         jacobian=jacobian_fn,
+        jacobian_factors=factors_fn,
         obs_cov=cov,
         residual_kind=residual,
         labels=labels,
