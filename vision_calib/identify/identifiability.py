@@ -266,7 +266,8 @@ def whitened_jacobian_blocks(problem: IdentificationProblem, x: ArrayLike, scale
             bad = np.flatnonzero(~np.all(np.isfinite(Aw), axis=(1, 2)))
             if bad.size:
                 raise DataError(f"jacobian is not finite for poses {pose_labels(problem, a + bad)}")
-        yield a, b, Aw.reshape(-1, fi.size) * scale
+        Aw *= scale
+        yield a, b, Aw.reshape(-1, fi.size)
 
 
 def scaled_prior_rows(problem: IdentificationProblem, scale: np.ndarray) -> np.ndarray | None:
@@ -327,7 +328,7 @@ def row_compressed(A: np.ndarray) -> np.ndarray:
 #: ``lse.normal_equations``): a block is ~16 MB at 8192 x 6 x 40 doubles, and no (N, m, n) Jacobian is held beyond
 #: it. RX-90, 30 parameters: 5,000 poses solved in 0.107 s as one block (0.17 s in blocks of 2,048); 50,000 poses
 #: in 1.28 / 1.32 / 1.51 s with blocks of 4,096 / 8,192 / 16,384
-BLOCK_POSES = 2048
+BLOCK_POSES = 4096
 
 
 def compressed_whitened_jacobian(problem: IdentificationProblem, J: np.ndarray) -> np.ndarray:
@@ -366,6 +367,8 @@ def _select_base(A: np.ndarray, rank: int, tol_abs: float, selection: str, s_wea
         _, _, piv = scipy.linalg.qr(A, mode="economic", pivoting=True)
         return np.sort(piv[:rank])
     if selection == "order":
+        if rank == n:  # every column: each one's part outside the others' span is >= the smallest singular value
+            return np.arange(n)
         kept: list[int] = []
         Q = np.zeros((A.shape[0], 0))
         for tol in dict.fromkeys((max(tol_abs, BASE_KEEP_REL * s_weakest), tol_abs)):
@@ -461,7 +464,7 @@ def analyze(
     null_space = Vt[rank:].T.copy()
 
     base_idx = _select_base(A, rank, tol_abs, selection, float(s[rank - 1])) if rank > 0 else np.zeros(0, int)
-    drop_idx = np.setdiff1d(np.arange(n), base_idx)
+    drop_idx = np.flatnonzero(~np.isin(np.arange(n), base_idx)) if base_idx.size < n else np.zeros(0, int)
     A_base = A[:, base_idx]
     couplings = []
     if drop_idx.size:
@@ -492,7 +495,8 @@ def analyze(
                  "fit_residual": 0.0 if na <= tol_abs else fit_res, "no_effect": bool(na <= tol_abs)}
             )
 
-    s_base = np.linalg.svd(A_base, compute_uv=False) if base_idx.size else np.zeros(0)
+    s_base = s if base_idx.size == n else \
+        (np.linalg.svd(A_base, compute_uv=False) if base_idx.size else np.zeros(0))  # (every column: A's own)
     cond = float(s_base[0] / s_base[-1]) if s_base.size and s_base[-1] > 0 else float("inf")
     scaling = (
         "whitened by the inverse Cholesky factor of obs_cov (noise std units), each column multiplied by "

@@ -200,13 +200,9 @@ def correlation_warnings(names: Sequence[str], cov: np.ndarray, threshold: float
     d = np.sqrt(np.clip(np.diag(cov), 0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = cov / np.outer(d, d)
-    out = []
-    n = len(names)
-    for i in range(n):
-        for j in range(i + 1, n):
-            if np.isfinite(corr[i, j]) and abs(corr[i, j]) > threshold:
-                out.append(f"corr({names[i]}, {names[j]}) = {corr[i, j]:+.3f}")
-    return tuple(out)
+    with np.errstate(invalid="ignore"):
+        hit = np.triu(np.isfinite(corr) & (np.abs(corr) > threshold), k=1)
+    return tuple(f"corr({names[i]}, {names[j]}) = {corr[i, j]:+.3f}" for i, j in zip(*np.nonzero(hit)))
 
 
 def whitened_cost(problem: IdentificationProblem, x: ArrayLike, W: np.ndarray | None = None) -> float:

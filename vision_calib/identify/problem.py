@@ -148,10 +148,30 @@ class IdentificationProblem:
         problem (read-only: the problem is immutable)."""
         W = self.__dict__.get("_whitening")
         if W is None:
-            W = np.linalg.inv(np.linalg.cholesky(self.obs_cov))
+            W = lower_triangular_inverse(np.linalg.cholesky(self.obs_cov))
             W.flags.writeable = False
             object.__setattr__(self, "_whitening", W)
         return W
+
+
+def lower_triangular_inverse(L: np.ndarray) -> np.ndarray:
+    """(..., m, m) inverses of lower-triangular L (..., m, m) by forward substitution on contiguous (...,) rows, one
+    array operation per term (a batch of small factors: a few times faster than ``np.linalg.inv``'s LU); a zero on
+    a diagonal gives inf/NaN."""
+    L = np.asarray(L, float)
+    m = L.shape[-1]
+    Lt = np.ascontiguousarray(np.moveaxis(L, (-2, -1), (0, 1)))  # (m, m, ...)
+    Wt = np.zeros_like(Lt)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv_d = 1.0 / np.stack([Lt[i, i] for i in range(m)])
+        for j in range(m):
+            Wt[j, j] = inv_d[j]
+            for i in range(j + 1, m):  # row i of L @ W = column j of the identity
+                acc = Lt[i, j] * Wt[j, j]
+                for k in range(j + 1, i):
+                    acc += Lt[i, k] * Wt[k, j]
+                np.multiply(acc, -inv_d[i], out=Wt[i, j])
+    return np.ascontiguousarray(np.moveaxis(Wt, (0, 1), (-2, -1)))
 
 
 @dataclass(frozen=True)

@@ -24,10 +24,13 @@ from numpy.typing import ArrayLike
 
 from ..errors import DataError, ParameterError
 from ..frames import inv_T, inverse_error_map, perturb_pose, pose_error, so3_right_jacobian_inv  # noqa: F401
-from ..kinematics.protocols import ChainModel
+from ..kinematics.protocols import ChainModel, WalkFrames
 from .problem import NOISE_ESTIMATED, IdentificationProblem
 
 POSE_COMPONENTS = ("dt_x", "dt_y", "dt_z", "dtheta_x", "dtheta_y", "dtheta_z")
+#: largest walk (bytes: poses x (joints + 2) frames x 128) a serial problem keeps with its last residual, so that the
+#: Jacobian at the same x does not walk the chain again: 64 MB, ~60,000 poses of a 6-joint arm
+FRAMES_KEEP_BYTES = 64 * 2 ** 20
 #: relative weights (not noise) when neither obs_cov nor sigmas are given: 1 mm per 1 mrad (a pose error
 #: of 1 mrad moves a point 1 m away by 1 mm); the noise scale is then estimated from the residuals
 RELATIVE_WEIGHT_T_M = 1e-3
@@ -180,7 +183,11 @@ def serial_problem(
             raise DataError(f"observation index out of range 0..{n - 1}: {idx[(idx < 0) | (idx >= n)][0]}")
         return idx
 
-    last = {}  # the last pose errors (the Jacobian at that x reads their rotations) and Jacobian over all poses
+    # the last pose errors over all poses (the Jacobian at that x reads their rotations), with the walk's frames
+    # when the chain gives them and they fit in FRAMES_KEEP_BYTES (the Jacobian at that x reads them: no second
+    # walk), and the last Jacobian over all poses
+    last = {}
+    keep_frames = isinstance(chain, WalkFrames) and n * (chain.n_joints + 2) * 128 <= FRAMES_KEEP_BYTES
 
     def errors(x, idx, T=None):
         """Pose errors (k, 6) of the poses idx (None: all) at x: a slice of those kept over all poses at this x,
@@ -188,10 +195,24 @@ def serial_problem(
         key = np.asarray(x, float).tobytes()
         if last.get("x") == key:
             return last["e"] if idx is None else last["e"][_idx(idx)]
+        frames = chain.walk_frames(q, x) if T is None and idx is None and keep_frames else None
+        if frames is not None:
+            T = frames[-1]
         e = pose_error(chain.forward(q[_idx(idx)], x) if T is None else T, T_meas[_idx(idx)])
         if idx is None:
-            last.update(x=key, e=e)
+            last.update(x=key, e=e, frames=frames)
         return e
+
+    def kept_frames(x, idx):
+        """The kept walk's frames (k+2, len(idx), 4, 4) of the poses idx (None: all) at x, or None."""
+        if last.get("frames") is None or last.get("x") != np.asarray(x, float).tobytes():
+            return None
+        if idx is None:
+            return last["frames"]
+        i = _idx(idx)
+        if i.size and i[-1] - i[0] == i.size - 1 and np.all(np.diff(i) == 1):  # a range: a view
+            return last["frames"][:, i[0]:i[-1] + 1]
+        return last["frames"][:, i]
 
     def residual_fn(x, idx=None):
         return errors(x, idx)[:, :m].copy()
@@ -216,7 +237,9 @@ def serial_problem(
     def factors_fn(x, idx=None):
         """(D (k, m, 6), Jm (k, 6, n)): the chain's pose Jacobian Jm (as the chain returns it: a view) and the map
         D of its rows to the residual's, -I for translation and -Jr^-1(rho) for rotation, so jacobian = D @ Jm."""
-        T, Jm = chain.pose_and_jacobian(q[_idx(idx)], x)
+        fr = kept_frames(x, idx)
+        T, Jm = chain.pose_and_jacobian(q[_idx(idx)], x) if fr is None else \
+            chain.pose_and_jacobian(q[_idx(idx)], x, frames=fr)
         D = np.zeros((Jm.shape[0], m, 6))
         D[:, :3, :3] = -np.eye(3)
         if m == 6:

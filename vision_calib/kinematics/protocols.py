@@ -38,6 +38,15 @@ class ChainModel(Protocol):
 
 
 @runtime_checkable
+class WalkFrames(Protocol):
+    """Optional capability of a chain: ``walk_frames(q, x) -> (k, N, 4, 4)`` the frames of one walk (the last one
+    is ``forward(q, x)``), which ``pose_and_jacobian(q, x, frames=...)`` takes instead of walking again
+    (``SerialChain``): a solver that evaluated the residual at x gets the Jacobian there without a second walk."""
+
+    def walk_frames(self, q, x=None) -> np.ndarray: ...
+
+
+@runtime_checkable
 class Remountable(Protocol):
     """Optional capability of a chain: the same arm with other mounting transforms (``URDFChain``); a chain
     without it is rebuilt from its MDH table (``rig.serial.remount_chain``)."""

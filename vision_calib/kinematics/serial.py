@@ -340,6 +340,19 @@ class SerialChain(JointChainChecks):
         C = C @ _tx(x[ix[f"a{i}"]])
         return C, x[ix[f"theta{i}"]], x[ix[f"d{i}"]]
 
+    def _constant_parts(self, x):
+        """(T_left_base, T_flange_right, [_link_parts(x, i) for each joint]) at x: the walk's pose-independent
+        matrices, kept for the last x (a solver asks for the residual and the Jacobian at the same x; the pair is
+        read and replaced as one tuple, so concurrent callers at other x only recompute)."""
+        key = x.tobytes()
+        kept = self.__dict__.get("_parts_cache")
+        if kept is not None and kept[0] == key:
+            return kept[1]
+        TL, TR = self.nominal_transforms(x)
+        val = (TL, TR, [self._link_parts(x, i) for i in range(1, self.n_joints + 1)])
+        object.__setattr__(self, "_parts_cache", (key, val))
+        return val
+
     def _walk(self, q, x, keep: bool = True):
         """Frames (n+2, N, 4, 4) in `left`, joint-major: [base, link 1..n (n = flange), right]; keep=False: only
         the last (``right``) is stored, (1, N, 4, 4). Per joint one BLAS product with the constant prefix and the
@@ -347,8 +360,7 @@ class SerialChain(JointChainChecks):
         poses (a block's temporaries stay in cache)."""
         N = q.shape[0]
         out = np.empty((self.n_joints + 2 if keep else 1, N, 4, 4))
-        TL, TR = self.nominal_transforms(x)
-        parts = [self._link_parts(x, i) for i in range(1, self.n_joints + 1)]
+        TL, TR, parts = self._constant_parts(x)
         for a in range(0, max(N, 1), WALK_BLOCK):
             b = min(a + WALK_BLOCK, N)
             self._walk_block(q[a:b], TL, TR, parts, out[:, a:b], keep)
@@ -403,38 +415,47 @@ class SerialChain(JointChainChecks):
         """
         return self.pose_and_jacobian(q, x)[1]
 
-    def pose_and_jacobian(self, q, x=None) -> tuple[np.ndarray, np.ndarray]:
+    def walk_frames(self, q, x=None) -> np.ndarray:
+        """Frames (n+2, N, 4, 4) of one walk of the chain in ``left``, joint-major: [base, link 1..n (n = flange),
+        right]; frames[-1] is :meth:`forward`. :meth:`pose_and_jacobian` takes them (``frames=``) instead of
+        walking again (``kinematics.protocols.WalkFrames``)."""
+        return self._walk(self.check_joints(q), self._x(x))
+
+    def pose_and_jacobian(self, q, x=None, frames=None) -> tuple[np.ndarray, np.ndarray]:
         """(T_left_right (N, 4, 4) as :meth:`forward` gives it, :meth:`pose_jacobian` (N, 6, n_params)) from one
-        walk of the chain."""
+        walk of the chain (``frames``: :meth:`walk_frames` at the same q, x, when the caller has them)."""
         q = self.check_joints(q)
         x = self._x(x)
         N = q.shape[0]
         n_par = len(self.params)
         ix = self._idx
-        frames = self._walk(q, x)  # (n+2, N, 4, 4)
+        if frames is None:
+            frames = self._walk(q, x)  # (n+2, N, 4, 4)
+        elif np.shape(frames) != (self.n_joints + 2, N, 4, 4):
+            raise ParameterError(f"frames have shape {np.shape(frames)}, expected {(self.n_joints + 2, N, 4, 4)} "
+                                 "(walk_frames of the same joint values)")
         p_end = frames[-1, :, :3, 3]  # (N, 3)
         p_end_t = np.ascontiguousarray(p_end.T)  # (3, N)
         Jt = np.zeros((n_par, 6, N))  # filled column by column (contiguous writes), returned transposed
+        rot_k = []  # rotation columns: axis and moment arm p_end - p written now, the cross products at the end
+        V = np.empty((n_par, 3, N))
 
-        def rot_col(k, w, p):  # [w x (p_end - p), w], the cross product written out on contiguous rows
+        def rot_col(k, w, p):  # [w x (p_end - p), w]
             Jt[k, 3:] = w.T
-            w = Jt[k, 3:]
-            v = p_end_t - np.asarray(p).T
-            Jt[k, 0] = w[1] * v[2] - w[2] * v[1]
-            Jt[k, 1] = w[2] * v[0] - w[0] * v[2]
-            Jt[k, 2] = w[0] * v[1] - w[1] * v[0]
+            np.subtract(p_end_t, np.asarray(p).T, out=V[len(rot_k)])
+            rot_k.append(k)
 
         def trans_col(k, w):
             Jt[k, :3] = w.T
 
         # ---- left mount: T_left_base = [R_nom Exp(r), t], parent frame = left (identity)
-        TL, TR = self.nominal_transforms(x)
+        TL, TR, _ = self._constant_parts(x)
         for a, s in enumerate(("tx", "ty", "tz")):
-            trans_col(ix[f"{self.left}.{s}"], np.broadcast_to(np.eye(3)[a], (N, 3)))
+            Jt[ix[f"{self.left}.{s}"], a] = 1.0  # along axis a of left
         rL = np.array([x[ix[f"{self.left}.{s}"]] for s in ("rx", "ry", "rz")])
         WL = TL[:3, :3] @ so3_right_jacobian(rL)  # columns = axes in left
         for a, s in enumerate(("rx", "ry", "rz")):
-            rot_col(ix[f"{self.left}.{s}"], np.broadcast_to(WL[:, a], (N, 3)), np.broadcast_to(TL[:3, 3], (N, 3)))
+            rot_col(ix[f"{self.left}.{s}"], np.broadcast_to(WL[:, a], (N, 3)), TL[:3, 3][:, None].T)
 
         # ---- joints
         F = frames[0]  # (N, 4, 4) frame i-1
@@ -463,6 +484,12 @@ class SerialChain(JointChainChecks):
         p_right = of + np.einsum("nij,j->ni", Rf, TR[:3, 3])
         for a, s in enumerate(("rx", "ry", "rz")):
             rot_col(ix[f"{self.right}.{s}"], WR[:, :, a], p_right)
+        # the cross products of every rotation column at once, written out on contiguous (columns, N) rows
+        K = np.array(rot_k)
+        w, v = Jt[K, 3:], V[:K.size]  # (r, 3, N)
+        Jt[K, 0] = w[:, 1] * v[:, 2] - w[:, 2] * v[:, 1]
+        Jt[K, 1] = w[:, 2] * v[:, 0] - w[:, 0] * v[:, 2]
+        Jt[K, 2] = w[:, 0] * v[:, 1] - w[:, 1] * v[:, 0]
         return frames[-1], Jt.transpose(2, 1, 0)  # J a view: the caller's first selection copies it
 
     def position_jacobian(self, q, x=None) -> np.ndarray:
