@@ -239,3 +239,24 @@ def test_levenberg_marquardt_matches_minpack_on_a_nonlinear_fit():
     assert short.status == 0 and short.nfev == 2 and short.cost < 0.5 * np.sum(fun(z0) ** 2)
     broken = levenberg_marquardt(fun, lambda z: jac(z) * (np.nan if z[1] != 0.2 else 1.0), z0)
     assert broken.status == -1 and "not finite" in broken.message and broken.njev == 2
+
+
+def test_whitening_is_the_inverse_cholesky_factor():
+    """problem.whitening's batched triangular inverse (identify.problem.lower_triangular_inverse) equals
+    np.linalg.inv of the factor for sizes 1..6 and badly scaled covariances; a zero pivot gives non-finite
+    entries (check_problem then names the pose)."""
+    from vision_calib.identify.problem import lower_triangular_inverse
+
+    rng = np.random.default_rng(5)
+    for m in range(1, 7):
+        A = rng.standard_normal((9, m, m))
+        S = np.diag(np.logspace(-5, 0, m))
+        C = S @ (A @ np.swapaxes(A, 1, 2) + 0.1 * np.eye(m)) @ S
+        L = np.linalg.cholesky(C)
+        W = lower_triangular_inverse(L)
+        np.testing.assert_allclose(W, np.linalg.inv(L), rtol=1e-10, atol=1e-13 * np.abs(W).max())
+        np.testing.assert_allclose(W @ C @ np.swapaxes(W, 1, 2), np.broadcast_to(np.eye(m), C.shape), atol=1e-12)
+    L = np.broadcast_to(np.eye(3), (2, 3, 3)).copy()
+    L[1, 1, 1] = 0.0
+    W = lower_triangular_inverse(L)
+    assert np.all(np.isfinite(W[0])) and not np.all(np.isfinite(W[1]))

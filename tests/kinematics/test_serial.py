@@ -177,6 +177,12 @@ def test_analytic_jacobian_matches_central_differences(name):
             np.testing.assert_allclose(J[:, :, k], Jfd[:, :, k], atol=2e-8, err_msg=f"{name}: column {nm}")
         np.testing.assert_allclose(ch.position_jacobian(q, x), Jfd[:, :3, :], atol=2e-8)
 
+        T, Jw = ch.pose_and_jacobian(q, x, frames=ch.walk_frames(q, x))  # the frames of a walk made before
+        np.testing.assert_array_equal(Jw, J)
+        np.testing.assert_array_equal(T, ch.forward(q, x))
+    with pytest.raises(ParameterError, match="frames have shape"):
+        ch.pose_and_jacobian(q, frames=ch.walk_frames(q[:2]))
+
 
 # ----------------------------------------------------------------------------- identifiability
 def _rank_report(ch, names, q, rows):
