@@ -293,11 +293,21 @@ def whitened_gram(problem: IdentificationProblem, x: ArrayLike, jacobian: np.nda
 def gram_factor(G: np.ndarray) -> np.ndarray | None:
     """R (n, n) with R^T R = G when its Cholesky factor is finite and conditioned below ``GRAM_COND_MAX`` (the
     same factor :func:`row_compressed` takes), else None (the Jacobian itself is needed)."""
+    out = gram_factor_svd(G)
+    return None if out is None else out[0]
+
+
+def gram_factor_svd(G: np.ndarray) -> tuple[np.ndarray, tuple] | None:
+    """(R, (U, s, Vt)): :func:`gram_factor` and the SVD of R it judged the condition by (s descending), for a
+    caller that needs that SVD too; None where gram_factor gives None."""
     try:
         R = np.linalg.cholesky(G).T
     except np.linalg.LinAlgError:
         return None
-    return R if np.all(np.isfinite(R)) and np.linalg.cond(R) < GRAM_COND_MAX else None
+    if not np.all(np.isfinite(R)):
+        return None
+    U, s, Vt = np.linalg.svd(R, full_matrices=False)
+    return (R, (U, s, Vt)) if s.size and s[-1] > 0 and s[0] / s[-1] < GRAM_COND_MAX else None
 
 
 def whitened_free_jacobian(problem: IdentificationProblem, J: np.ndarray, W: np.ndarray | None = None) -> np.ndarray:
@@ -449,14 +459,16 @@ def analyze(
             f"need at least {n} equations (more poses or fewer free parameters)"
         )
     scale = params.scale[params.free_index]
-    A = None if gram is None else gram_factor(gram)
-    if A is None:
+    fac = None if gram is None else gram_factor_svd(gram)
+    if fac is None:
         J = check_problem(problem, x)[1] if jacobian is None else jacobian
         A = compressed_whitened_jacobian(problem, J)  # below: only column norms, spans, fits, singular values
+    else:
+        A = fac[0]
     col_norms = np.linalg.norm(A, axis=0)
     if normalize:
         A = A / np.where(col_norms > 0, col_norms, 1.0)[None, :]
-    U, s, Vt = np.linalg.svd(A, full_matrices=False)
+    U, s, Vt = fac[1] if fac is not None and not normalize else np.linalg.svd(A, full_matrices=False)
     s_max = float(s[0]) if s.size else 0.0
     tol_rel = max(N, n) * np.finfo(float).eps * 1e3 if tol is None else float(tol)
     tol_abs = tol_rel * s_max

@@ -27,7 +27,7 @@ from numpy.typing import ArrayLike
 from scipy.optimize import least_squares
 
 from ..errors import ConfigError, DataError, ParameterError, VisionCalibError
-from .identifiability import (BLOCK_POSES, IdentifiabilityReport, analyze, base_problem, check_problem, gram_factor,
+from .identifiability import (BLOCK_POSES, IdentifiabilityReport, analyze, base_problem, check_problem, gram_factor_svd,
                               pose_labels, row_compressed, scaled_prior_rows, whitened_free_jacobian, whitened_gram,
                               whitened_jacobian_blocks)
 from .problem import NOISE_ESTIMATED, STATUS_CONVERGED, STATUS_NOT_FINITE, IdentificationProblem, IdentificationResult
@@ -179,15 +179,15 @@ def covariance_from_normal(A_z: np.ndarray, scale_free: np.ndarray, rows: int) -
     Jacobian in scaled variables (S = diag(scale_free)) over ``rows`` equations: the same numbers as
     :func:`covariance_from_jacobian` takes from its Cholesky factor (``row_compressed``); None when that factor
     is not finite or too ill-conditioned (``identifiability.gram_factor``: then the Jacobian itself is needed)."""
-    R = gram_factor(A_z)
-    if R is None:
+    fac = gram_factor_svd(A_z)
+    if fac is None:
         return None
-    cov, full = _covariance_of_rows(R, rows, scale_free)
+    cov, full = _covariance_of_rows(fac[0], rows, scale_free, svd=fac[1])
     return cov if full else None
 
 
-def _covariance_of_rows(A: np.ndarray, rows: int, scale_free: np.ndarray) -> tuple[np.ndarray, bool]:
-    U, s, Vt = np.linalg.svd(A, full_matrices=False)
+def _covariance_of_rows(A: np.ndarray, rows: int, scale_free: np.ndarray, svd=None) -> tuple[np.ndarray, bool]:
+    U, s, Vt = np.linalg.svd(A, full_matrices=False) if svd is None else svd
     tol = rows * np.finfo(float).eps * 1e3 * (s[0] if s.size else 0.0)
     full = bool(s.size and s[-1] > tol)
     inv_s2 = np.where(s > tol, 1.0 / np.where(s > tol, s, 1.0) ** 2, 0.0)
@@ -453,7 +453,7 @@ def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gto
                     njev += 1
                 if np.all(np.isfinite(A)) and np.all(np.isfinite(gr)):
                     A_end = A
-                    dz = -cho_solve(cho_factor(A), gr)
+                    dz = -cho_solve(cho_factor(A, check_finite=False), gr, check_finite=False)
                     r2 = np.asarray(fun(z + dz), float)
                     nfev += 1
                     c2 = 0.5 * float(r2 @ r2) if np.all(np.isfinite(r2)) else np.inf
@@ -491,7 +491,7 @@ def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gto
             lam = LM_LAMBDA0
         while True:
             try:
-                y = -cho_solve(cho_factor(As + lam * np.eye(n)), gs)
+                y = -cho_solve(cho_factor(As + lam * np.eye(n), check_finite=False), gs, check_finite=False)
             except LinAlgError:
                 lam = max(lam * 10.0, 1e-12)
                 continue
@@ -521,13 +521,13 @@ def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gto
         if chord_g is None:
             continue
         try:  # chord steps with this Jacobian (module doc)
-            factor = cho_factor(A)
+            factor = cho_factor(A, check_finite=False)
         except (LinAlgError, ValueError):
             continue
         prev = step
         while nfev < max_nfev:
             gc = chord_g(r)
-            dz = -cho_solve(factor, gc)
+            dz = -cho_solve(factor, gc, check_finite=False)
             step = float(np.linalg.norm(np.sqrt(dsafe) * dz))
             if not (step <= CHORD_CONTRACTION * prev and np.max(np.abs(z + dz - zJ)) <= CHORD_RADIUS):
                 break
