@@ -335,9 +335,11 @@ def row_compressed(A: np.ndarray) -> np.ndarray:
 
 
 #: poses per block of the whitened Jacobian (:func:`whitened_blocks`: the Gram matrix here, the normal equations of
-#: ``lse.normal_equations``): a block is ~16 MB at 8192 x 6 x 40 doubles, and no (N, m, n) Jacobian is held beyond
-#: it. RX-90, 30 parameters: 5,000 poses solved in 0.107 s as one block (0.17 s in blocks of 2,048); 50,000 poses
-#: in 1.28 / 1.32 / 1.51 s with blocks of 4,096 / 8,192 / 16,384
+#: ``lse.normal_equations``): a block's model Jacobian is ~8 MB at 4096 x 6 x 40 doubles (no (N, m, n) Jacobian is
+#: formed beyond it; ``lse.KEEP_BYTES`` bounds the whitened blocks kept). When chosen (RX-90, 30 parameters, one
+#: thread, machine shared): 50,000 poses solved in 0.98 / 0.91 / 0.87 / 0.89 s with blocks of 1,024 / 2,048 / 4,096
+#: / 8,192 (1.81 s at 8,192 before the Jacobian factors: the transposed copy of a block left the cache), 5,000 in
+#: 0.095 / 0.098 / 0.087 / 0.101 s
 BLOCK_POSES = 4096
 
 
