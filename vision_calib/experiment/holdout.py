@@ -198,7 +198,8 @@ def holdout_validation(setup: Setup, meas: Measurements, method: str, residual: 
                "n_outliers_held_out": int(sum(labels[i] in flagged for i in test))}
         try:
             ident = identify_measurements(setup, meas.subset(train), method, residual, analysis, robust=False,
-                                          context=f"held-out validation, fold {f + 1} of {k}", cross_check=False)
+                                          context=f"held-out validation, fold {f + 1} of {k}", cross_check=False,
+                                          diagnostics=False)  # only the fold's parameters are used
         except VisionCalibError as exc:
             fails.append(f"fold {f + 1} ({len(train)} training poses): {exc}")
             per_fold.append({**rec, "converged": False, "error": str(exc)})
