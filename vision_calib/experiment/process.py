@@ -20,12 +20,13 @@ from ..errors import ConfigError, DataError, IdentifiabilityError
 from ..serialize import write_json_atomic
 from ..io.portable import relative_ref
 from ..io.recording import Recording, read_recording
-from ..report.build import REPORT_VERSION, build_report, measurements_block, parameters_table, residual_stats
+from ..report.build import (REPORT_VERSION, build_report, measurements_block, parameters_table, residual_stats,
+                            result_is_finite)
 from ..report.write import write_report
 from ..rig import Measurements, load_scene
 from .checks import drop_copies, duplicate_poses, screen_measurements
 from .gross import gross_failure
-from .holdout import flagged_labels, holdout_failure, holdout_lines, holdout_validation, with_holdout_warning
+from .holdout import flagged_labels, holdout_failure, holdout_folds, holdout_lines, with_holdout_warning
 from .steps import check_method, identify_measurements, inconsistency_failure, rejection_summary
 
 if TYPE_CHECKING:  # the measure package is imported where poses are measured
@@ -104,20 +105,26 @@ def measure_folder(rec: Recording, refine_intrinsics: bool = False, progress: bo
 
 @dataclass
 class _Fitted:
-    """One hypothesis fitted, its report built, nothing written yet: :meth:`finish` adds the :mod:`.cause` block
-    (when the cause was tested) and writes the report. tail: the summary lines that follow the cause message."""
+    """One hypothesis fitted, nothing written yet. view: what the cause test reads of its report
+    (:func:`.cause.cause_test_applies`, :func:`.cause.compare`: the blocks ``verdict`` (converged, finite),
+    ``reprojection``, ``parameters``, ``intrinsics``, ``holdout`` (residual_of, overall) with the report's values);
+    build() -> (report, tail: the summary lines that follow the cause message): the work only the written report
+    needs (the held-out mounts-only baseline, prediction and decision, the intrinsics sensitivity) is done there,
+    so not for a hypothesis the cause test does not choose. :meth:`finish` builds the report, adds the :mod:`.cause`
+    block (when the cause was tested) and writes it."""
 
-    report: dict
-    tail: str
+    view: dict
+    build: Callable[[], tuple[dict, str]]
     write: Callable[[dict], None]
 
     def finish(self, cause: dict | None = None) -> dict:
+        report, tail = self.build()
         if cause:
-            self.report["cause"] = cause
-            self.report["summary_text"] += "\n" + cause["message"]
-        self.report["summary_text"] += self.tail
-        self.write(self.report)
-        return self.report
+            report["cause"] = cause
+            report["summary_text"] += "\n" + cause["message"]
+        report["summary_text"] += tail
+        self.write(report)
+        return report
 
 
 def _recording_setup(rec):
@@ -153,14 +160,14 @@ def process_folder(folder: str | Path, out_dir: str | Path | None, method: str |
     rec = read_recording(folder, allow_symlinks=allow_symlinks)
     given_m = measure_folder(rec, refine_intrinsics, progress, camera_file)
     given = fit_measured(given_m, out_dir, t0=t0, **kw)
-    if refine_intrinsics or camera_file is not None or not cause_test_applies(given.report):
+    if refine_intrinsics or camera_file is not None or not cause_test_applies(given.view):
         return given.finish()
     try:
         refined, why = fit_measured(measure_folder(rec, True, progress, reuse=given_m), out_dir, t0=t0,
                                     early_measurements=False, **kw), None
     except VisionCalibError as exc:
         refined, why = None, str(exc)
-    block = compare(given.report, None if refined is None else refined.report, why)
+    block = compare(given.view, None if refined is None else refined.view, why)
     return (refined if block["chosen"] == "refined" else given).finish(block)
 
 
@@ -231,18 +238,14 @@ def fit_measured(m: Measured, out_dir: str | Path | None, method: str | None = N
     failure = gross_failure(setup, meas, ident, residual, where,
                             untested=f"a wrong robot file or scene mounts ({scene.path}), joint columns in another "
                                      "order, the target's or camera's description in recording.yaml")
-    hold = None if failure else holdout_validation(nominal, meas, method, residual, rep, folds, 0,
-                                                   outliers=flagged_labels(meas, ident.rejected), tcp=tcp, result=result,
-                                                   fitted_setup=setup)
-    failure = failure or inconsistency_failure(ident) or holdout_failure(hold)
-    result = with_holdout_warning(result, hold)
+    held = None if failure else holdout_folds(nominal, meas, method, residual, rep, folds, 0,
+                                              outliers=flagged_labels(meas, ident.rejected), tcp=tcp, result=result,
+                                              fitted_setup=setup)
     cam_fit = None
     if ident.nuisance is not None:
         cam_fit = fitted_camera(rec.camera, used, ident.nuisance["coefficients"])
         intr = {**intr, "propagated": {**ident.nuisance, "in_fit": True, "how": IN_FIT,
                                        "fitted_values": _camera_values(cam_fit)}}
-    sens = intrinsics_sensitivity(ident, meas, rec.camera, lambda cam, labels: remeasure(
-        dets, labels, rec.target, cam, rec.measure_config()), given_std=intr.get("std") is not None)
     t_id = time.perf_counter() - t1
     kept = {str(lab) for lab in problem.labels}
     used, counts = used_corners(dets, pms, rec.target)
@@ -251,25 +254,41 @@ def fit_measured(m: Measured, out_dir: str | Path | None, method: str | None = N
     if rcheck is not None:
         reproj = {**reproj, "noise_check": rcheck}
     ps = setup.params
-    report = build_report(
-        "process", source={"folder": str(rec.folder), "scene": {"name": scene.name, "path": str(scene.path),
-                                                               "robot_kind": setup.kind}},
-        settings={"poses": len(pms), "frames": rec.frames_per_pose, "method": method, "residual": residual,
-                  "camera": rec.camera.to_dict()},
-        measurements=mblock, warnings=[*rec.notes, *intr["warnings"], *([sens["warning"]] if sens["warning"] else []),
-                                       *duplicate_poses(meas, copies), *([rwarn] if rwarn else [])],
-        identifiability=rep,
-        parameters=parameters_table(ps.names, ps.nominal, None, result, ps.kinds), result=result, identified=ident,
-        motion=motion,
-        residuals=residual_stats(result.residuals, problem.residual_kind),
-        extra={"intrinsics": intr, "intrinsics_sensitivity": sens,
-               "reprojection": reproj, "holdout": hold, "cause": None},
-        timings={"measure": t_meas, "identify": t_id, "total": time.perf_counter() - t0}, failure=failure)
-    report["summary_text"] += points_line(report.get("reprojection")) + "\n" + "\n".join(holdout_lines(hold))
+    view = {"verdict": {"converged": bool(result.converged), "finite": result_is_finite(result)},
+            "reprojection": reproj, "parameters": parameters_table(ps.names, ps.nominal, None, result, ps.kinds),
+            "intrinsics": intr, "holdout": None if held is None else held.figures()}
+    final = {}  # the result with the held-out decision's warning, for write()
+
+    def build():
+        t2 = time.perf_counter()
+        hold = None if held is None else held.block()
+        failed = failure or inconsistency_failure(ident) or holdout_failure(hold)
+        final["result"] = res = with_holdout_warning(result, hold)
+        sens = intrinsics_sensitivity(ident, meas, rec.camera, lambda cam, labels: remeasure(
+            dets, labels, rec.target, cam, rec.measure_config()), given_std=intr.get("std") is not None)
+        report = build_report(
+            "process", source={"folder": str(rec.folder), "scene": {"name": scene.name, "path": str(scene.path),
+                                                                   "robot_kind": setup.kind}},
+            settings={"poses": len(pms), "frames": rec.frames_per_pose, "method": method, "residual": residual,
+                      "camera": rec.camera.to_dict()},
+            measurements=mblock, warnings=[*rec.notes, *intr["warnings"], *([sens["warning"]] if sens["warning"]
+                                                                            else []),
+                                           *duplicate_poses(meas, copies), *([rwarn] if rwarn else [])],
+            identifiability=rep,
+            parameters=parameters_table(ps.names, ps.nominal, None, res, ps.kinds), result=res, identified=ident,
+            motion=motion,
+            residuals=residual_stats(res.residuals, problem.residual_kind),
+            extra={"intrinsics": intr, "intrinsics_sensitivity": sens,
+                   "reprojection": reproj, "holdout": hold, "cause": None},
+            timings={"measure": t_meas, "identify": t_id + time.perf_counter() - t2, "total": time.perf_counter() - t0},
+            failure=failed)
+        report["summary_text"] += points_line(report.get("reprojection")) + "\n" + "\n".join(holdout_lines(hold))
+        return report, ""
 
     def write(report):
         from .accuracy_map import add_accuracy_map  # the map of the calibrated tool over the workspace: only for the
 
+        result = final["result"]
         add_accuracy_map(report, setup, result, meas.select(problem.labels).joints, tcp=tcp,  # hypothesis written
                          sigma_q_rad=scene.measurement.sigma_q_rad)
         if not early_measurements:
@@ -278,7 +297,7 @@ def fit_measured(m: Measured, out_dir: str | Path | None, method: str | None = N
                      overlays=_overlay_source(rec, dets, setup if report["verdict"].get("usable") else None,
                                               result) if plots else None)
 
-    return _Fitted(report, "", write)
+    return _Fitted(view, build, write)
 
 
 def _overlay_source(rec, dets, setup=None, result=None):
@@ -419,7 +438,7 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None, folds=No
             write_first()
         write_report(out, report, plots=plots, overlays=_overlay_source(rec, dets) if plots else None)
 
-    return _Fitted(report, tail, write)
+    return _Fitted(report, lambda: (report, tail), write)
 
 
 #: the chain's reprojection RMS above this many times what its noise model predicts, with intrinsics given (not
