@@ -116,6 +116,7 @@ class _Fitted:
     view: dict
     build: Callable[[], tuple[dict, str]]
     write: Callable[[dict], None]
+    scene: object = None  #: the recording's scene (a joint-pose recording), for the other hypothesis
 
     def finish(self, cause: dict | None = None) -> dict:
         report, tail = self.build()
@@ -127,12 +128,13 @@ class _Fitted:
         return report
 
 
-def _recording_setup(rec):
-    """(scene, setup with the recording's camera) of a joint-pose recording, checked against it."""
+def _recording_setup(rec, scene=None):
+    """(scene, setup with the recording's camera) of a joint-pose recording, checked against it. scene: the
+    recording's scene when already loaded (the cause test's second hypothesis)."""
     where = rec.folder / "recording.yaml"
     if rec.scene_path is None:
         raise ConfigError(f"{where}: scene: needed to know the robot model (joint poses)")
-    scene = load_scene(rec.scene_path)
+    scene = load_scene(rec.scene_path) if scene is None else scene
     setup = scene.setup
     if rec.camera_mount != setup.mount:
         raise ConfigError(f"{where}: camera_mount: {rec.camera_mount!r} but the scene {scene.path} has mount "
@@ -164,7 +166,7 @@ def process_folder(folder: str | Path, out_dir: str | Path | None, method: str |
         return given.finish()
     try:
         refined, why = fit_measured(measure_folder(rec, True, progress, reuse=given_m), out_dir, t0=t0,
-                                    early_measurements=False, **kw), None
+                                    early_measurements=False, scene=given.scene, **kw), None
     except VisionCalibError as exc:
         refined, why = None, str(exc)
     block = compare(given.view, None if refined is None else refined.view, why)
@@ -186,14 +188,16 @@ def process_once(folder: str | Path, out_dir: str | Path | None, method: str | N
 
 def fit_measured(m: Measured, out_dir: str | Path | None, method: str | None = None, progress: bool = False,
                  plots: bool = True, fix_unidentifiable: bool = False, folds: int | None = None, tcp=None,
-                 t0: float | None = None, early_measurements: bool = True) -> _Fitted:
+                 t0: float | None = None, early_measurements: bool = True, scene=None) -> _Fitted:
     """Identify and report a measured folder; the report is written by the returned object's ``finish``:
     DIR/measurements.json (written now when ``early_measurements``, so the measurements are kept when
     identification then fails), DIR/report.json (+ plots, model). The intrinsics used are those of ``m`` (the
     report's ``intrinsics`` block says which: ``process --refine-intrinsics`` calibrates them from the recording's
     images even when recording.yaml gives intrinsics, always done when it gives none; ``--camera FILE`` replaces
     recording.yaml's). folds / tcp: the held-out validation's k and tool point (x, y, z in the flange frame, m),
-    :mod:`.holdout`: its decision can fail the verdict (no calibrated model). t0: the run's start (timings)."""
+    :mod:`.holdout`: its decision can fail the verdict (no calibrated model). t0: the run's start (timings).
+    scene: the recording's scene when the caller has it loaded (``_Fitted.scene`` of the other hypothesis: one
+    model for both, whose generic-pose rank is then computed once)."""
     from .camera_step import SOURCE_CAMERA_FILE, fitted_camera, intrinsics_response, intrinsics_sensitivity, remeasure
 
     t0 = time.perf_counter() - m.seconds if t0 is None else t0
@@ -201,7 +205,7 @@ def fit_measured(m: Measured, out_dir: str | Path | None, method: str | None = N
     out = Path(out_dir)
     if rec.camera_file is not None and intr["source"] == f"{SOURCE_CAMERA_FILE} {rec.camera_file}":
         intr = {**intr, "source": f"{SOURCE_CAMERA_FILE} {relative_ref(rec.camera_file, out)}"}  # relative to report.json
-    scene, setup = _recording_setup(rec) if rec.pose_kind != "flange_pose" else (None, None)
+    scene, setup = _recording_setup(rec, scene) if rec.pose_kind != "flange_pose" else (None, None)
     nominal = setup
     method = None if scene is None else check_method(setup, method or scene.identification.method, "--method")
     mblock = measurements_block(pms, extra_files_ignored=list(rec.extra_files))
@@ -297,7 +301,7 @@ def fit_measured(m: Measured, out_dir: str | Path | None, method: str | None = N
                      overlays=_overlay_source(rec, dets, setup if report["verdict"].get("usable") else None,
                                               result) if plots else None)
 
-    return _Fitted(view, build, write)
+    return _Fitted(view, build, write, scene)
 
 
 def _overlay_source(rec, dets, setup=None, result=None):
