@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Callable
 
 import numpy as np
@@ -117,9 +117,16 @@ class _Fitted:
     build: Callable[[], tuple[dict, str]]
     write: Callable[[dict], None]
     scene: object = None  #: the recording's scene (a joint-pose recording), for the other hypothesis
+    _built: tuple | None = field(default=None, init=False, repr=False)
+
+    def built(self) -> tuple[dict, str]:
+        """(report, tail) of ``build`` (built once)."""
+        if self._built is None:
+            self._built = self.build()
+        return self._built
 
     def finish(self, cause: dict | None = None) -> dict:
-        report, tail = self.build()
+        report, tail = self.built()
         if cause:
             report["cause"] = cause
             report["summary_text"] += "\n" + cause["message"]
@@ -151,8 +158,9 @@ def process_folder(folder: str | Path, out_dir: str | Path | None, method: str |
                    tcp=None) -> dict:
     """Process a recorded folder (:func:`process_once`); with intrinsics given and a reprojection far above its
     noise model, the cause tested (:mod:`.cause`): the intrinsics refined from the same detections, the fit redone,
-    the two hypotheses compared, the decisive one's report written (kept, not recomputed), both in its ``cause``
-    block. Each image is decoded and detected once (:func:`measure_folder`)."""
+    the two hypotheses compared on what both predict (``_Fitted.view``), the chosen one's report built and written
+    (kept, not recomputed), both in its ``cause`` block. Each image is decoded and detected once
+    (:func:`measure_folder`)."""
     from ..errors import VisionCalibError
     from .cause import cause_test_applies, compare
 
@@ -170,6 +178,11 @@ def process_folder(folder: str | Path, out_dir: str | Path | None, method: str |
     except VisionCalibError as exc:
         refined, why = None, str(exc)
     block = compare(given.view, None if refined is None else refined.view, why)
+    if block["chosen"] == "refined":
+        try:  # its report's work, done for the chosen hypothesis only: an error there is one of the refined fit
+            refined.built()
+        except VisionCalibError as exc:
+            block = compare(given.view, None, str(exc))
     return (refined if block["chosen"] == "refined" else given).finish(block)
 
 
