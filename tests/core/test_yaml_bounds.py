@@ -83,3 +83,14 @@ def test_transform_pairs_alias_tree_is_a_data_error(tmp_path):
     p.write_text("%YAML:1.0\n---\nframeCount: " + alias_tree() + "\n")
     with pytest.raises(DataError, match=r"pairs.yml: line 3: not a readable YAML file \(aliases expand beyond"):
         read_transform_pairs(p)
+
+
+def test_a_text_parsed_again_gives_its_values_unshared():
+    """safe_load keeps the values of the texts it parsed: the same text again gives equal values, never the same
+    objects (a caller changing its copy changes no other's)."""
+    text = "robot:\n  links: [{a: 1.5, d: 0.2}, {a: 0.0, d: -0.1}]\n  name: arm\n"
+    a = safe_load(text)
+    a["robot"]["links"][0]["a"] = 99.0
+    b, c = safe_load(text), safe_load(text)
+    assert b == c == {"robot": {"links": [{"a": 1.5, "d": 0.2}, {"a": 0.0, "d": -0.1}], "name": "arm"}}
+    assert b is not c and b["robot"]["links"] is not c["robot"]["links"]

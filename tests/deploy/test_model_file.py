@@ -146,3 +146,22 @@ def test_process_poses_writes_its_fit_covariance(tmp_path):
     corr = C / np.sqrt(np.outer(np.diag(C), np.diag(C)))
     assert np.max(np.abs(corr - np.eye(len(C)))) > 0.3  # off-diagonal terms are there
     assert {f["parameter"] for f in m.folded} >= {"q0_2", "q0_3"}
+
+
+def test_the_file_text_is_pyyamls_own(result):
+    """The model file is written through libyaml's emitter where PyYAML has it (config.safe_dump): the same text
+    as PyYAML's Python emitter gives for the same content."""
+    text = (result.folder / "calibrated_model.yaml").read_text()
+    assert yaml.safe_dump(yaml.safe_load(text), sort_keys=False, default_flow_style=None) == text
+
+
+def test_safe_dump_is_yaml_safe_dump():
+    from vision_calib.config import safe_dump
+
+    doc = {"name": "a " * 70 + "long note", "unicode": "κ ≤ 1 µm", "multi": "line one\nline two", "empty": "",
+           "numbers": [1, -2.5, 1e-300, float("inf"), float("nan"), 0.1 + 0.2], "flags": [True, False, None],
+           "nested": {"m": [[1.0, 2.0], [3.0, 4.0]], "k: colon": "x: y", "q": "'quoted' \"both\"", "t": (1, 2)},
+           "odd": ["yes", "no", "~", "1.0", "-", "a #b", " lead", "trail ", "@at", "%pc", "&amp", "*star"]}
+    for kw in ({}, {"sort_keys": False}, {"sort_keys": False, "default_flow_style": None},
+               {"sort_keys": False, "default_flow_style": None, "width": 1000}):
+        assert safe_dump(doc, **kw) == yaml.safe_dump(doc, **kw)

@@ -299,3 +299,25 @@ def test_kfold_validation_rejects_unknown_outlier_labels(truths):
     meas = setup.synthetic_measurements(q, x_true, np.random.default_rng(0), ST, SR)
     with pytest.raises(ValueError, match="p999"):
         holdout_validation(setup, meas, "lse", "pose", analyze_setup(setup, q), 3, 0, outliers=["p999"])
+
+
+def test_fold_fit_without_diagnostics_and_generic_rank_once(truths):
+    """diagnostics=False (a held-out fold's fit) gives the same parameters without the lack-of-fit tests; the
+    generic poses' rank is the same for a setup and its copy with another camera (computed once)."""
+    from dataclasses import replace
+
+    from vision_calib.experiment.steps import generic_rank
+
+    scene, x_true = truths[RX90]
+    setup = scene.setup
+    q, T = _data(scene, x_true, seed=3, n=30)
+    meas = setup.synthetic_measurements(q, x_true, np.random.default_rng(0), ST, SR)
+    a = identify_measurements(setup, meas, "lse", "pose", robust=False)
+    b = identify_measurements(setup, meas, "lse", "pose", robust=False, diagnostics=False)
+    assert a.lack_of_fit is not None and b.lack_of_fit is None
+    assert np.array_equal(a.result.identified, b.result.identified)
+    assert np.array_equal(a.result.std, b.result.std, equal_nan=True)
+    ref, _ = analyze_setup(setup, setup.generic_poses(np.random.default_rng(12345), 200), "pose")
+    cam = replace(setup.camera, fx=setup.camera.fx * 1.05)
+    assert generic_rank(setup, "pose") == generic_rank(setup.with_camera(cam), "pose") == (
+        ref.rank, tuple(ref.non_identifiable))

@@ -126,6 +126,62 @@ def test_wrong_given_focal_length_warns_and_points_to_refine(recording, tmp_path
     assert full["reprojection"]["noise_check"]["ratio"] < chk["ratio"] / 2
 
 
+@pytest.mark.slow
+def test_the_cause_test_reads_what_the_reports_say(recording, tmp_path):
+    """process's cause test compares each hypothesis' ``view`` (fitted without the work only the written report
+    needs: the held-out mounts-only fits, the intrinsics sensitivity); it holds the figures the reports then say,
+    for both hypotheses (fx, fy 2 % off)."""
+    from vision_calib.experiment.cause import cause_test_applies, hypothesis
+    from vision_calib.experiment.process import fit_measured, measure_folder
+    from vision_calib.io.recording import read_recording
+
+    bad = tmp_path / "rec_fx"
+    shutil.copytree(recording, bad)
+    doc = yaml.safe_load((bad / "recording.yaml").read_text())
+    doc["camera"]["fx"] *= 1.02
+    doc["camera"]["fy"] *= 1.02
+    (bad / "recording.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
+    rec = read_recording(bad)
+    given = measure_folder(rec)
+    fits = [fit_measured(given, tmp_path / "given", plots=False),
+            fit_measured(measure_folder(rec, True, reuse=given), tmp_path / "refined", plots=False)]
+    assert cause_test_applies(fits[0].view)
+    for fit, name in zip(fits, ("given", "refined")):
+        view = fit.view
+        rep = fit.finish()
+        assert "mounts_only" in rep["holdout"] and "mounts_only" not in view["holdout"]
+        assert cause_test_applies(view) == cause_test_applies(rep)
+        assert hypothesis(view, name) == hypothesis(rep, name)
+
+
+@pytest.mark.slow
+def test_an_error_building_the_chosen_refined_report_keeps_the_given_one(recording, tmp_path, monkeypatch):
+    """The refined hypothesis' report is built only once it is chosen: an error there (planted in its intrinsics
+    sensitivity) is one of the refined fit, as when its fit fails: the given intrinsics are kept and the cause block
+    says why."""
+    import vision_calib.experiment.camera_step as camera_step
+    from vision_calib.errors import DataError
+
+    sensitivity = camera_step.intrinsics_sensitivity
+
+    def planted(*a, given_std=None, **k):
+        if given_std:  # the refined hypothesis: intrinsics with their std
+            raise DataError("planted sensitivity error")
+        return sensitivity(*a, given_std=given_std, **k)
+
+    monkeypatch.setattr(camera_step, "intrinsics_sensitivity", planted)
+    bad = tmp_path / "rec_fx"
+    shutil.copytree(recording, bad)
+    doc = yaml.safe_load((bad / "recording.yaml").read_text())
+    doc["camera"]["fx"] *= 1.02
+    doc["camera"]["fy"] *= 1.02
+    (bad / "recording.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
+    rep = process_folder(bad, tmp_path / "out", plots=False)
+    assert rep["cause"]["chosen"] == "given" and "planted sensitivity error" in rep["cause"]["message"]
+    assert rep["intrinsics"]["source"] == "recording.yaml"
+    assert json.loads((tmp_path / "out" / "report.json").read_text())["cause"]["chosen"] == "given"
+
+
 @pytest.mark.skipif(not REAL.is_dir(), reason="real ViSP data not available")
 def test_real_visp_set_notes_its_factory_intrinsics(tmp_path, capsys):
     """The real ViSP eye-to-hand set (read in place): 5-6 px with the camera's factory intrinsics, far above its

@@ -127,3 +127,21 @@ def test_rejections_have_reasons(aprilgrid):
     assert not m.valid and m.reason
     import json
     json.dumps(m.to_dict())
+
+
+@pytest.mark.parametrize("mode", ["corners", "poses"])
+def test_pose_without_covariance_is_the_same_measurement(aprilgrid, mode):
+    """covariance=False (a re-measurement that reads the pose only): the same pose, validity and diagnostics, cov
+    NaN; a rejected pose is rejected for the same reason."""
+    rng = np.random.default_rng(11)
+    T = random_pose(rng, aprilgrid)
+    ids, p = aprilgrid.corner_points()
+    dets = _noisy_detections(T, ids, p, DIST_INTR, 0.05, 3, rng, drop=0.3)
+    for cfg in (MeasureConfig(mode=mode), MeasureConfig(mode=mode, max_rms_px=0.01)):
+        a = measure_pose(dets, aprilgrid, DIST_INTR, config=cfg)
+        b = measure_pose(dets, aprilgrid, DIST_INTR, config=cfg, covariance=False)
+        assert (a.valid, a.reason, a.n_frames_used, a.n_corners) == (b.valid, b.reason, b.n_frames_used, b.n_corners)
+        assert np.array_equal(a.T_cam_target, b.T_cam_target, equal_nan=True)
+        assert a.reprojection_rms_px == b.reprojection_rms_px and a.frames == b.frames
+        assert np.all(np.isnan(b.cov))
+    assert not b.valid and "reprojection RMS" in b.reason

@@ -329,10 +329,10 @@ class ChainKinematics:
         if bad.size:  # the conditioning where the iteration ended: near a singularity it converges slowly or stalls
             J = self.joint_jacobian(q[bad], x) * np.array([1.0, 1.0, 1.0, LEVER_M, LEVER_M, LEVER_M])[:, None]
             amp = amplification_deg_per_mm(np.linalg.svd(J, compute_uv=False)[:, -1])
+            at_limit = np.isclose(q[bad], lim[:, 0], atol=1e-9) | np.isclose(q[bad], lim[:, 1], atol=1e-9)  # (B, n)
         for i, k in enumerate(bad):
-            at = [j for j in range(self.n_joints) if np.isclose(q[k, j], lim[j, 0], atol=1e-9) or
-                  np.isclose(q[k, j], lim[j, 1], atol=1e-9)]
-            held = f"; joint q{at[0] + 1} at its limit [{lim[at[0], 0]:.4g}, {lim[at[0], 1]:.4g}]" if at else ""
+            at = np.flatnonzero(at_limit[i])
+            held = f"; joint q{at[0] + 1} at its limit [{lim[at[0], 0]:.4g}, {lim[at[0], 1]:.4g}]" if at.size else ""
             if amp[i] > AMPLIFIED_DEG_PER_MM:
                 held += f"; near a singularity there ({amp[i]:.3g} deg of joint motion per mm)"
             why[k] = (f"pose {lab[k]} (x={T[k, 0, 3]:.4f}, y={T[k, 1, 3]:.4f}, z={T[k, 2, 3]:.4f} m) is not reached "

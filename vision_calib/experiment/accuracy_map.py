@@ -109,14 +109,24 @@ def norm_quantile(cov: ArrayLike, level: float = LEVEL) -> np.ndarray:
     s1, s2 = rel.sum(axis=1), np.maximum((rel**2).sum(axis=1), 1e-300)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # the start: Welch-Satterthwaite
         t = np.clip(np.nan_to_num(s2 / np.maximum(s1, 1e-300) * chdtri(s1**2 / s2, 1 - level), nan=hi[0]), lo, hi)
-        for _ in range(NEWTON_STEPS):
+        inf_q = not np.all(q > 0)  # x = inf where q = 0
+        for _ in range(NEWTON_STEPS):  # in place, (N, nodes) each: the same arithmetic as the formulas in comments
             x = t[:, None] / q
             sx = np.sqrt(x)
-            g = np.where(np.isfinite(x), sx * np.exp(-x / 2), 0.0)  # sqrt(x) exp(-x / 2); 0 at x = inf
-            p = (erf(sx / np.sqrt(2.0)) - np.sqrt(2.0 / np.pi) * g) @ w - level  # the chi2(3) CDF, closed form
+            g = np.multiply(x, -0.5)  # g = sqrt(x) exp(-x / 2); 0 at x = inf
+            np.exp(g, out=g)
+            g *= sx
+            if inf_q:
+                g[~np.isfinite(x)] = 0.0
+            a = np.divide(sx, np.sqrt(2.0), out=sx)  # p = (erf(sx / sqrt 2) - sqrt(2 / pi) g) @ w - level
+            erf(a, out=a)
+            a -= np.multiply(g, np.sqrt(2.0 / np.pi), out=x)
+            p = a @ w - level  # the chi2(3) CDF, closed form
             if np.all(np.abs(p) <= NEWTON_TOL):
                 break
-            dens = (g / np.sqrt(2 * np.pi) / q) @ w
+            g /= np.sqrt(2 * np.pi)  # dens = (g / sqrt(2 pi) / q) @ w
+            g /= q
+            dens = g @ w
             lo = np.where(p < 0, t, lo)
             hi = np.where(p < 0, hi, t)
             step = t - p / np.where(dens > 0, dens, np.nan)

@@ -122,7 +122,7 @@ def remeasure(dets: dict, labels, target, camera, config):
 
     T = []
     for lab in labels:
-        pm = measure_pose(dets[lab], target, camera, pose_id=lab, config=config)
+        pm = measure_pose(dets[lab], target, camera, pose_id=lab, config=config, covariance=False)
         if not pm.valid:
             return None
         T.append(pm.T_cam_target)

@@ -172,7 +172,18 @@ def holdout_validation(setup: Setup, meas: Measurements, method: str, residual: 
     """k-fold held-out accuracy of ``meas`` (module docstring). ``setup``: the nominal setup ("before");
     ``analysis``: the whole data's IdentifiabilityReport (its base parameters are identified in every fold);
     ``outliers``: labels the whole-data fit flagged; ``result`` / ``fitted_setup``: the whole-data identification
-    (for the predicted accuracy). Returns the report's ``holdout`` block (with ``decision``)."""
+    (for the predicted accuracy). Returns the report's ``holdout`` block (with ``decision``): :func:`holdout_folds`
+    then :meth:`HeldOut.block`."""
+    return holdout_folds(setup, meas, method, residual, analysis, folds, seed, outliers, tcp, result,
+                         fitted_setup).block()
+
+
+def holdout_folds(setup: Setup, meas: Measurements, method: str, residual: str | None,
+                  analysis: IdentifiabilityReport, folds: int | None, seed: int, outliers: Sequence[str] = (),
+                  tcp=None, result=None, fitted_setup: Setup | None = None) -> "HeldOut":
+    """The folds of :func:`holdout_validation` fitted and their held-out poses predicted (same arguments); the
+    mounts-only baseline, the intervals, the predicted accuracy and the decision are left to :meth:`HeldOut.block`
+    (the cause test reads :meth:`HeldOut.figures` of both hypotheses, the block only of the one it chooses)."""
     from .steps import identify_measurements
 
     labels = [str(lab) for lab in (meas.labels if len(meas.labels) else range(len(meas.poses)))]
@@ -189,8 +200,7 @@ def holdout_validation(setup: Setup, meas: Measurements, method: str, residual: 
     fitted_setup = fitted_setup or setup
     base = set(analysis.base_parameters)  # (a prepared setup may have more: the H4's measured tilts)
     params = setup.params.only_free([nm for nm in setup.params.names if nm in base])
-    per_fold, fails = [], []
-    rb, ra, tb, ta, idx_all, rm = [], [], [], [], [], []
+    h = HeldOut(setup, meas, method, residual, labels, flagged, n, k, kind, int(seed), tcp, result, fitted_setup)
     parts = fold_indices(n, k, seed, groups) if k >= 2 else []
     for f, test in enumerate(parts):
         train = np.array(sorted(i for j, p in enumerate(parts) if j != f for i in p if labels[i] not in flagged), int)
@@ -198,85 +208,128 @@ def holdout_validation(setup: Setup, meas: Measurements, method: str, residual: 
                "n_outliers_held_out": int(sum(labels[i] in flagged for i in test))}
         try:
             ident = identify_measurements(setup, meas.subset(train), method, residual, analysis, robust=False,
-                                          context=f"held-out validation, fold {f + 1} of {k}", cross_check=False)
+                                          context=f"held-out validation, fold {f + 1} of {k}", cross_check=False,
+                                          diagnostics=False)  # only the fold's parameters are used
         except VisionCalibError as exc:
-            fails.append(f"fold {f + 1} ({len(train)} training poses): {exc}")
-            per_fold.append({**rec, "converged": False, "error": str(exc)})
+            h.fails.append(f"fold {f + 1} ({len(train)} training poses): {exc}")
+            h.per_fold.append({**rec, "converged": False, "error": str(exc)})
             continue
         res, fsetup = ident.result, ident.setup
         rec |= {"converged": bool(res.converged), "n_identified": int(np.sum(res.free))}
         if not res.converged:
-            fails.append(f"fold {f + 1} ({len(train)} training poses): the identification did not converge "
-                         f"({res.message})")
+            h.fails.append(f"fold {f + 1} ({len(train)} training poses): the identification did not converge "
+                           f"({res.message})")
         elif res.dof <= 0:
-            fails.append(f"fold {f + 1} ({len(train)} training poses): {int(np.sum(res.free))} parameters from "
-                         f"{int(np.sum(res.free)) + int(res.dof)} equations, no redundancy")
+            h.fails.append(f"fold {f + 1} ({len(train)} training poses): {int(np.sum(res.free))} parameters from "
+                           f"{int(np.sum(res.free)) + int(res.dof)} equations, no redundancy")
         before = setup.problem(meas.subset(test), kind, params=params).residual(setup.params.nominal)
         held_out = fsetup.problem(meas.subset(test), kind, params=fsetup.params)
         after = held_out.residual(res.identified)
-        mounts = _mounts_only(fsetup, ident.params, meas.subset(train), method, residual)
-        if mounts is not None:
-            rm.append(held_out.residual(mounts))
-        rb.append(before)
-        ra.append(after)
-        idx_all.append(test)
+        h.mount_fits.append((fsetup, ident.params, meas.subset(train), held_out))
+        h.rb.append(before)
+        h.ra.append(after)
+        h.idx_all.append(test)
         t_b = _tool_errors_mm(setup, meas, test, setup.params.nominal, tcp)
         t_a = _tool_errors_mm(fsetup, meas, test, res.identified, tcp)
         if t_b is not None:
-            tb.append(t_b)
-            ta.append(t_a)
-        per_fold.append({**rec, "before": error_stats(*_norms(before)), "after": error_stats(*_norms(after))})
-    out = {"folds": k, "seed": int(seed), "residual_kind": kind,
-           "residual_of": "T_target_cam" if getattr(setup, "mount", None) == "eye_in_hand" else "T_cam_target",
-           "outliers": [lab for lab in labels if lab in flagged], "per_fold": per_fold,
-           "tcp_m": None if tcp is None or not tb else [float(v) for v in tcp]}
-    if not idx_all:
-        out["decision"] = {"ok": False, "reason": "no fold could be identified: " + "; ".join(fails)
-                           if fails else f"{n} poses cannot be split into 2 folds"}
+            h.tb.append(t_b)
+            h.ta.append(t_a)
+        h.per_fold.append({**rec, "before": error_stats(*_norms(before)), "after": error_stats(*_norms(after))})
+    return h
+
+
+class HeldOut:
+    """The folds of :func:`holdout_folds`: per fold the record, the held-out residuals before (nominal) / after
+    (the fold's fit) (n_test, m), the tool point errors [mm], and what the fold's mounts-only fit needs (fold setup,
+    base parameter set, training measurements, held-out problem); the identification failures."""
+
+    def __init__(self, setup, meas, method, residual, labels, flagged, n, k, kind, seed, tcp, result, fitted_setup):
+        self.setup, self.meas, self.method, self.residual = setup, meas, method, residual
+        self.labels, self.flagged, self.n, self.k, self.kind, self.seed = labels, flagged, n, k, kind, seed
+        self.tcp, self.result, self.fitted_setup = tcp, result, fitted_setup
+        self.per_fold, self.fails, self.mount_fits = [], [], []
+        self.rb, self.ra, self.tb, self.ta, self.idx_all = [], [], [], [], []
+        self._block = None
+
+    def figures(self) -> dict:
+        """The block's ``residual_kind``, ``residual_of`` and ``overall`` (all held-out poses, before / after; absent
+        when no fold was identified): what the cause test compares, without the mounts-only fits."""
+        out = {"residual_kind": self.kind, "residual_of": self._residual_of()}
+        if self.idx_all:
+            out["overall"] = {"n_poses": int(sum(len(i) for i in self.idx_all)),
+                              "before": error_stats(*_norms(np.concatenate(self.rb))),
+                              "after": error_stats(*_norms(np.concatenate(self.ra)))}
         return out
-    idx = np.concatenate(idx_all)
-    rb, ra = np.concatenate(rb), np.concatenate(ra)
-    keep = np.array([labels[i] not in flagged for i in idx])
-    bp, br = _norms(rb)
-    ap, ar = _norms(ra)
-    out["overall"] = {"n_poses": int(len(idx)), "before": error_stats(bp, br), "after": error_stats(ap, ar)}
-    out["without_outliers"] = None if keep.all() else {
-        "n_poses": int(keep.sum()), "excluded": [labels[i] for i in sorted(idx[~keep])],
-        "before": error_stats(bp[keep], None if br is None else br[keep]),
-        "after": error_stats(ap[keep], None if ar is None else ar[keep])}
-    rng = np.random.default_rng([int(seed), 26])
-    inter = {"level": INTERVAL_LEVEL, "draws": BOOTSTRAP_DRAWS, "over": int(keep.sum()),
-             "position_rms_change_mm": _interval(bp[keep], ap[keep], rng)}
-    if br is not None:
-        inter["rotation_rms_change_deg"] = _interval(br[keep], ar[keep], rng)
-    out["interval"] = inter
-    if rm and len(rm) == len(idx_all):  # every fold had the baseline: the robot's share of the calibration
-        mp, mr = _norms(np.concatenate(rm))
-        rng_m = np.random.default_rng([int(seed), 27])  # its own stream: the other intervals stay as they were
-        out["mounts_only"] = {
-            "after": error_stats(mp, mr), "position_rms_change_mm": _interval(mp[keep], ap[keep], rng_m),
-            **({"rotation_rms_change_deg": _interval(mr[keep], ar[keep], rng_m)} if mr is not None else {}),
-            "how": "each fold's training poses fitted again with the robot at its nominal geometry and only the "
-                   "mounting transforms free (Setup.is_mount_parameter): the calibrated model predicting the "
-                   "held-out poses significantly worse than that is refused, neither better nor worse is a warning "
-                   "(change = calibrated - mounts only, 95 % paired-bootstrap interval)"}
-    if tb:
-        tb, ta = np.concatenate(tb), np.concatenate(ta)
-        out["tool"] = {"before": error_stats(tb, None), "after": error_stats(ta, None),
-                       "position_rms_change_mm": _interval(tb[keep], ta[keep], rng)}
-    if result is not None and np.all(np.isfinite(result.covariance)):
-        free = [nm for nm, f in zip(result.names, result.free) if f]
-        pred = predicted_accuracy(fitted_setup, meas, result.identified, free, result.covariance, tcp)
-        pb = fitted_setup.problem(meas, kind, params=fitted_setup.params)
-        meas_var = np.trace(pb.obs_cov[:, :3, :3], axis1=1, axis2=2)
-        fold_var = pred.pop("per_pose_var_m2") * k / max(k - 1, 1)
-        rms_pred = float(np.sqrt(np.mean((fold_var + meas_var)[idx][keep]))) * 1e3
-        obs = float(np.sqrt(np.mean(ap[keep] ** 2)))
-        pred["heldout_position_rms_mm"] = rms_pred
-        pred["ratio_observed_to_predicted"] = obs / rms_pred if rms_pred > 0 else None
-        out["predicted"] = pred
-    out["decision"] = holdout_decision(out, fails)
-    return out
+
+    def _residual_of(self) -> str:
+        return "T_target_cam" if getattr(self.setup, "mount", None) == "eye_in_hand" else "T_cam_target"
+
+    def block(self) -> dict:
+        """The report's ``holdout`` block of :func:`holdout_validation` (computed once)."""
+        if self._block is None:
+            self._block = self._build()
+        return self._block
+
+    def _build(self) -> dict:
+        setup, meas, labels, flagged, k, seed, tcp = self.setup, self.meas, self.labels, self.flagged, self.k, \
+            self.seed, self.tcp
+        kind, result, fitted_setup, fails = self.kind, self.result, self.fitted_setup, self.fails
+        rm = []
+        for fsetup, params, train, held_out in self.mount_fits:
+            mounts = _mounts_only(fsetup, params, train, self.method, self.residual)
+            if mounts is not None:
+                rm.append(held_out.residual(mounts))
+        rb, ra, tb, ta, idx_all = self.rb, self.ra, self.tb, self.ta, self.idx_all
+        out = {"folds": k, "seed": int(seed), "residual_kind": kind, "residual_of": self._residual_of(),
+               "outliers": [lab for lab in labels if lab in flagged], "per_fold": self.per_fold,
+               "tcp_m": None if tcp is None or not tb else [float(v) for v in tcp]}
+        if not idx_all:
+            out["decision"] = {"ok": False, "reason": "no fold could be identified: " + "; ".join(fails)
+                               if fails else f"{self.n} poses cannot be split into 2 folds"}
+            return out
+        idx = np.concatenate(idx_all)
+        rb, ra = np.concatenate(rb), np.concatenate(ra)
+        keep = np.array([labels[i] not in flagged for i in idx])
+        bp, br = _norms(rb)
+        ap, ar = _norms(ra)
+        out["overall"] = {"n_poses": int(len(idx)), "before": error_stats(bp, br), "after": error_stats(ap, ar)}
+        out["without_outliers"] = None if keep.all() else {
+            "n_poses": int(keep.sum()), "excluded": [labels[i] for i in sorted(idx[~keep])],
+            "before": error_stats(bp[keep], None if br is None else br[keep]),
+            "after": error_stats(ap[keep], None if ar is None else ar[keep])}
+        rng = np.random.default_rng([int(seed), 26])
+        inter = {"level": INTERVAL_LEVEL, "draws": BOOTSTRAP_DRAWS, "over": int(keep.sum()),
+                 "position_rms_change_mm": _interval(bp[keep], ap[keep], rng)}
+        if br is not None:
+            inter["rotation_rms_change_deg"] = _interval(br[keep], ar[keep], rng)
+        out["interval"] = inter
+        if rm and len(rm) == len(idx_all):  # every fold had the baseline: the robot's share of the calibration
+            mp, mr = _norms(np.concatenate(rm))
+            rng_m = np.random.default_rng([int(seed), 27])  # its own stream: the other intervals stay as they were
+            out["mounts_only"] = {
+                "after": error_stats(mp, mr), "position_rms_change_mm": _interval(mp[keep], ap[keep], rng_m),
+                **({"rotation_rms_change_deg": _interval(mr[keep], ar[keep], rng_m)} if mr is not None else {}),
+                "how": "each fold's training poses fitted again with the robot at its nominal geometry and only the "
+                       "mounting transforms free (Setup.is_mount_parameter): the calibrated model predicting the "
+                       "held-out poses significantly worse than that is refused, neither better nor worse is a "
+                       "warning (change = calibrated - mounts only, 95 % paired-bootstrap interval)"}
+        if tb:
+            tb, ta = np.concatenate(tb), np.concatenate(ta)
+            out["tool"] = {"before": error_stats(tb, None), "after": error_stats(ta, None),
+                           "position_rms_change_mm": _interval(tb[keep], ta[keep], rng)}
+        if result is not None and np.all(np.isfinite(result.covariance)):
+            free = [nm for nm, f in zip(result.names, result.free) if f]
+            pred = predicted_accuracy(fitted_setup, meas, result.identified, free, result.covariance, tcp)
+            pb = fitted_setup.problem(meas, kind, params=fitted_setup.params)
+            meas_var = np.trace(pb.obs_cov[:, :3, :3], axis1=1, axis2=2)
+            fold_var = pred.pop("per_pose_var_m2") * k / max(k - 1, 1)
+            rms_pred = float(np.sqrt(np.mean((fold_var + meas_var)[idx][keep]))) * 1e3
+            obs = float(np.sqrt(np.mean(ap[keep] ** 2)))
+            pred["heldout_position_rms_mm"] = rms_pred
+            pred["ratio_observed_to_predicted"] = obs / rms_pred if rms_pred > 0 else None
+            out["predicted"] = pred
+        out["decision"] = holdout_decision(out, fails)
+        return out
 
 
 def _mounts_only(fsetup: Setup, params, train: Measurements, method: str, residual: str | None):
@@ -413,5 +466,5 @@ def holdout_lines(h: dict | None) -> list[str]:
     return lines
 
 
-__all__ = ["DEFAULT_FOLDS", "fold_indices", "holdout_decision", "with_holdout_warning", "error_stats", "rms_change_interval", "holdout_validation", "holdout_failure", "holdout_lines",
+__all__ = ["DEFAULT_FOLDS", "fold_indices", "holdout_decision", "with_holdout_warning", "error_stats", "rms_change_interval", "holdout_validation", "holdout_folds", "HeldOut", "holdout_failure", "holdout_lines",
            "predicted_accuracy", "tool_point_supported", "flagged_labels"]

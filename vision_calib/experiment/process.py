@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Callable
 
 import numpy as np
@@ -20,12 +20,13 @@ from ..errors import ConfigError, DataError, IdentifiabilityError
 from ..serialize import write_json_atomic
 from ..io.portable import relative_ref
 from ..io.recording import Recording, read_recording
-from ..report.build import REPORT_VERSION, build_report, measurements_block, parameters_table, residual_stats
+from ..report.build import (REPORT_VERSION, build_report, measurements_block, parameters_table, residual_stats,
+                            result_is_finite)
 from ..report.write import write_report
 from ..rig import Measurements, load_scene
 from .checks import drop_copies, duplicate_poses, screen_measurements
 from .gross import gross_failure
-from .holdout import flagged_labels, holdout_failure, holdout_lines, holdout_validation, with_holdout_warning
+from .holdout import flagged_labels, holdout_failure, holdout_folds, holdout_lines, with_holdout_warning
 from .steps import check_method, identify_measurements, inconsistency_failure, rejection_summary
 
 if TYPE_CHECKING:  # the measure package is imported where poses are measured
@@ -104,28 +105,43 @@ def measure_folder(rec: Recording, refine_intrinsics: bool = False, progress: bo
 
 @dataclass
 class _Fitted:
-    """One hypothesis fitted, its report built, nothing written yet: :meth:`finish` adds the :mod:`.cause` block
-    (when the cause was tested) and writes the report. tail: the summary lines that follow the cause message."""
+    """One hypothesis fitted, nothing written yet. view: what the cause test reads of its report
+    (:func:`.cause.cause_test_applies`, :func:`.cause.compare`: the blocks ``verdict`` (converged, finite),
+    ``reprojection``, ``parameters``, ``intrinsics``, ``holdout`` (residual_of, overall) with the report's values);
+    build() -> (report, tail: the summary lines that follow the cause message): the work only the written report
+    needs (the held-out mounts-only baseline, prediction and decision, the intrinsics sensitivity) is done there,
+    so not for a hypothesis the cause test does not choose. :meth:`finish` builds the report, adds the :mod:`.cause`
+    block (when the cause was tested) and writes it."""
 
-    report: dict
-    tail: str
+    view: dict
+    build: Callable[[], tuple[dict, str]]
     write: Callable[[dict], None]
+    scene: object = None  #: the recording's scene (a joint-pose recording), for the other hypothesis
+    _built: tuple | None = field(default=None, init=False, repr=False)
+
+    def built(self) -> tuple[dict, str]:
+        """(report, tail) of ``build`` (built once)."""
+        if self._built is None:
+            self._built = self.build()
+        return self._built
 
     def finish(self, cause: dict | None = None) -> dict:
+        report, tail = self.built()
         if cause:
-            self.report["cause"] = cause
-            self.report["summary_text"] += "\n" + cause["message"]
-        self.report["summary_text"] += self.tail
-        self.write(self.report)
-        return self.report
+            report["cause"] = cause
+            report["summary_text"] += "\n" + cause["message"]
+        report["summary_text"] += tail
+        self.write(report)
+        return report
 
 
-def _recording_setup(rec):
-    """(scene, setup with the recording's camera) of a joint-pose recording, checked against it."""
+def _recording_setup(rec, scene=None):
+    """(scene, setup with the recording's camera) of a joint-pose recording, checked against it. scene: the
+    recording's scene when already loaded (the cause test's second hypothesis)."""
     where = rec.folder / "recording.yaml"
     if rec.scene_path is None:
         raise ConfigError(f"{where}: scene: needed to know the robot model (joint poses)")
-    scene = load_scene(rec.scene_path)
+    scene = load_scene(rec.scene_path) if scene is None else scene
     setup = scene.setup
     if rec.camera_mount != setup.mount:
         raise ConfigError(f"{where}: camera_mount: {rec.camera_mount!r} but the scene {scene.path} has mount "
@@ -142,8 +158,9 @@ def process_folder(folder: str | Path, out_dir: str | Path | None, method: str |
                    tcp=None) -> dict:
     """Process a recorded folder (:func:`process_once`); with intrinsics given and a reprojection far above its
     noise model, the cause tested (:mod:`.cause`): the intrinsics refined from the same detections, the fit redone,
-    the two hypotheses compared, the decisive one's report written (kept, not recomputed), both in its ``cause``
-    block. Each image is decoded and detected once (:func:`measure_folder`)."""
+    the two hypotheses compared on what both predict (``_Fitted.view``), the chosen one's report built and written
+    (kept, not recomputed), both in its ``cause`` block. Each image is decoded and detected once
+    (:func:`measure_folder`)."""
     from ..errors import VisionCalibError
     from .cause import cause_test_applies, compare
 
@@ -153,14 +170,19 @@ def process_folder(folder: str | Path, out_dir: str | Path | None, method: str |
     rec = read_recording(folder, allow_symlinks=allow_symlinks)
     given_m = measure_folder(rec, refine_intrinsics, progress, camera_file)
     given = fit_measured(given_m, out_dir, t0=t0, **kw)
-    if refine_intrinsics or camera_file is not None or not cause_test_applies(given.report):
+    if refine_intrinsics or camera_file is not None or not cause_test_applies(given.view):
         return given.finish()
     try:
         refined, why = fit_measured(measure_folder(rec, True, progress, reuse=given_m), out_dir, t0=t0,
-                                    early_measurements=False, **kw), None
+                                    early_measurements=False, scene=given.scene, **kw), None
     except VisionCalibError as exc:
         refined, why = None, str(exc)
-    block = compare(given.report, None if refined is None else refined.report, why)
+    block = compare(given.view, None if refined is None else refined.view, why)
+    if block["chosen"] == "refined":
+        try:  # its report's work, done for the chosen hypothesis only: an error there is one of the refined fit
+            refined.built()
+        except VisionCalibError as exc:
+            block = compare(given.view, None, str(exc))
     return (refined if block["chosen"] == "refined" else given).finish(block)
 
 
@@ -179,14 +201,16 @@ def process_once(folder: str | Path, out_dir: str | Path | None, method: str | N
 
 def fit_measured(m: Measured, out_dir: str | Path | None, method: str | None = None, progress: bool = False,
                  plots: bool = True, fix_unidentifiable: bool = False, folds: int | None = None, tcp=None,
-                 t0: float | None = None, early_measurements: bool = True) -> _Fitted:
+                 t0: float | None = None, early_measurements: bool = True, scene=None) -> _Fitted:
     """Identify and report a measured folder; the report is written by the returned object's ``finish``:
     DIR/measurements.json (written now when ``early_measurements``, so the measurements are kept when
     identification then fails), DIR/report.json (+ plots, model). The intrinsics used are those of ``m`` (the
     report's ``intrinsics`` block says which: ``process --refine-intrinsics`` calibrates them from the recording's
     images even when recording.yaml gives intrinsics, always done when it gives none; ``--camera FILE`` replaces
     recording.yaml's). folds / tcp: the held-out validation's k and tool point (x, y, z in the flange frame, m),
-    :mod:`.holdout`: its decision can fail the verdict (no calibrated model). t0: the run's start (timings)."""
+    :mod:`.holdout`: its decision can fail the verdict (no calibrated model). t0: the run's start (timings).
+    scene: the recording's scene when the caller has it loaded (``_Fitted.scene`` of the other hypothesis: one
+    model for both, whose generic-pose rank is then computed once)."""
     from .camera_step import SOURCE_CAMERA_FILE, fitted_camera, intrinsics_response, intrinsics_sensitivity, remeasure
 
     t0 = time.perf_counter() - m.seconds if t0 is None else t0
@@ -194,7 +218,7 @@ def fit_measured(m: Measured, out_dir: str | Path | None, method: str | None = N
     out = Path(out_dir)
     if rec.camera_file is not None and intr["source"] == f"{SOURCE_CAMERA_FILE} {rec.camera_file}":
         intr = {**intr, "source": f"{SOURCE_CAMERA_FILE} {relative_ref(rec.camera_file, out)}"}  # relative to report.json
-    scene, setup = _recording_setup(rec) if rec.pose_kind != "flange_pose" else (None, None)
+    scene, setup = _recording_setup(rec, scene) if rec.pose_kind != "flange_pose" else (None, None)
     nominal = setup
     method = None if scene is None else check_method(setup, method or scene.identification.method, "--method")
     mblock = measurements_block(pms, extra_files_ignored=list(rec.extra_files))
@@ -231,18 +255,14 @@ def fit_measured(m: Measured, out_dir: str | Path | None, method: str | None = N
     failure = gross_failure(setup, meas, ident, residual, where,
                             untested=f"a wrong robot file or scene mounts ({scene.path}), joint columns in another "
                                      "order, the target's or camera's description in recording.yaml")
-    hold = None if failure else holdout_validation(nominal, meas, method, residual, rep, folds, 0,
-                                                   outliers=flagged_labels(meas, ident.rejected), tcp=tcp, result=result,
-                                                   fitted_setup=setup)
-    failure = failure or inconsistency_failure(ident) or holdout_failure(hold)
-    result = with_holdout_warning(result, hold)
+    held = None if failure else holdout_folds(nominal, meas, method, residual, rep, folds, 0,
+                                              outliers=flagged_labels(meas, ident.rejected), tcp=tcp, result=result,
+                                              fitted_setup=setup)
     cam_fit = None
     if ident.nuisance is not None:
         cam_fit = fitted_camera(rec.camera, used, ident.nuisance["coefficients"])
         intr = {**intr, "propagated": {**ident.nuisance, "in_fit": True, "how": IN_FIT,
                                        "fitted_values": _camera_values(cam_fit)}}
-    sens = intrinsics_sensitivity(ident, meas, rec.camera, lambda cam, labels: remeasure(
-        dets, labels, rec.target, cam, rec.measure_config()), given_std=intr.get("std") is not None)
     t_id = time.perf_counter() - t1
     kept = {str(lab) for lab in problem.labels}
     used, counts = used_corners(dets, pms, rec.target)
@@ -251,25 +271,41 @@ def fit_measured(m: Measured, out_dir: str | Path | None, method: str | None = N
     if rcheck is not None:
         reproj = {**reproj, "noise_check": rcheck}
     ps = setup.params
-    report = build_report(
-        "process", source={"folder": str(rec.folder), "scene": {"name": scene.name, "path": str(scene.path),
-                                                               "robot_kind": setup.kind}},
-        settings={"poses": len(pms), "frames": rec.frames_per_pose, "method": method, "residual": residual,
-                  "camera": rec.camera.to_dict()},
-        measurements=mblock, warnings=[*rec.notes, *intr["warnings"], *([sens["warning"]] if sens["warning"] else []),
-                                       *duplicate_poses(meas, copies), *([rwarn] if rwarn else [])],
-        identifiability=rep,
-        parameters=parameters_table(ps.names, ps.nominal, None, result, ps.kinds), result=result, identified=ident,
-        motion=motion,
-        residuals=residual_stats(result.residuals, problem.residual_kind),
-        extra={"intrinsics": intr, "intrinsics_sensitivity": sens,
-               "reprojection": reproj, "holdout": hold, "cause": None},
-        timings={"measure": t_meas, "identify": t_id, "total": time.perf_counter() - t0}, failure=failure)
-    report["summary_text"] += points_line(report.get("reprojection")) + "\n" + "\n".join(holdout_lines(hold))
+    view = {"verdict": {"converged": bool(result.converged), "finite": result_is_finite(result)},
+            "reprojection": reproj, "parameters": parameters_table(ps.names, ps.nominal, None, result, ps.kinds),
+            "intrinsics": intr, "holdout": None if held is None else held.figures()}
+    final = {}  # the result with the held-out decision's warning, for write()
+
+    def build():
+        t2 = time.perf_counter()
+        hold = None if held is None else held.block()
+        failed = failure or inconsistency_failure(ident) or holdout_failure(hold)
+        final["result"] = res = with_holdout_warning(result, hold)
+        sens = intrinsics_sensitivity(ident, meas, rec.camera, lambda cam, labels: remeasure(
+            dets, labels, rec.target, cam, rec.measure_config()), given_std=intr.get("std") is not None)
+        report = build_report(
+            "process", source={"folder": str(rec.folder), "scene": {"name": scene.name, "path": str(scene.path),
+                                                                   "robot_kind": setup.kind}},
+            settings={"poses": len(pms), "frames": rec.frames_per_pose, "method": method, "residual": residual,
+                      "camera": rec.camera.to_dict()},
+            measurements=mblock, warnings=[*rec.notes, *intr["warnings"], *([sens["warning"]] if sens["warning"]
+                                                                            else []),
+                                           *duplicate_poses(meas, copies), *([rwarn] if rwarn else [])],
+            identifiability=rep,
+            parameters=parameters_table(ps.names, ps.nominal, None, res, ps.kinds), result=res, identified=ident,
+            motion=motion,
+            residuals=residual_stats(res.residuals, problem.residual_kind),
+            extra={"intrinsics": intr, "intrinsics_sensitivity": sens,
+                   "reprojection": reproj, "holdout": hold, "cause": None},
+            timings={"measure": t_meas, "identify": t_id + time.perf_counter() - t2, "total": time.perf_counter() - t0},
+            failure=failed)
+        report["summary_text"] += points_line(report.get("reprojection")) + "\n" + "\n".join(holdout_lines(hold))
+        return report, ""
 
     def write(report):
         from .accuracy_map import add_accuracy_map  # the map of the calibrated tool over the workspace: only for the
 
+        result = final["result"]
         add_accuracy_map(report, setup, result, meas.select(problem.labels).joints, tcp=tcp,  # hypothesis written
                          sigma_q_rad=scene.measurement.sigma_q_rad)
         if not early_measurements:
@@ -278,7 +314,7 @@ def fit_measured(m: Measured, out_dir: str | Path | None, method: str | None = N
                      overlays=_overlay_source(rec, dets, setup if report["verdict"].get("usable") else None,
                                               result) if plots else None)
 
-    return _Fitted(report, "", write)
+    return _Fitted(view, build, write, scene)
 
 
 def _overlay_source(rec, dets, setup=None, result=None):
@@ -419,7 +455,7 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None, folds=No
             write_first()
         write_report(out, report, plots=plots, overlays=_overlay_source(rec, dets) if plots else None)
 
-    return _Fitted(report, tail, write)
+    return _Fitted(report, lambda: (report, tail), write)
 
 
 #: the chain's reprojection RMS above this many times what its noise model predicts, with intrinsics given (not

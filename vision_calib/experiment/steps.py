@@ -8,6 +8,7 @@ validation poses from the run seed through independent streams ``default_rng([se
 
 from __future__ import annotations
 
+import dataclasses
 from collections import Counter
 from dataclasses import dataclass, replace
 from typing import Callable, Sequence
@@ -62,16 +63,40 @@ def analyze_setup(setup: Setup, poses: ArrayLike, residual: str | None = None,
     return analyze(problem, selection=BASE_SELECTION, weighting=PLANNING_WEIGHTING), problem
 
 
+#: the generic poses' (rank, non-identifiable names) of :func:`generic_rank`, by setup (its fields but the camera,
+#: which neither the generic poses nor exact measurements read) and residual; the setups are kept with their entry
+_GENERIC_RANK: list[tuple[tuple, tuple, tuple[int, tuple[str, ...]]]] = []
+_GENERIC_RANK_KEPT = 8
+
+
+def generic_rank(setup: Setup, residual: str | None, n_generic: int = 200) -> tuple[int, tuple[str, ...]]:
+    """(rank, non-identifiable names) of the setup's free parameters over ``n_generic`` generic poses
+    (``Setup.generic_poses``, seed 12345; :func:`analyze_setup`): a function of the setup's model, so computed once
+    per setup and residual (the held-out folds and the cause test's second hypothesis, whose setup differs by its
+    camera only, reuse it)."""
+    fields = tuple((f.name, getattr(setup, f.name)) for f in dataclasses.fields(setup) if f.name != "camera")
+    key = (type(setup), tuple((n, id(v)) for n, v in fields), residual, int(n_generic))
+    for k, _, value in _GENERIC_RANK:
+        if k == key:
+            return value
+    ref, _ = analyze_setup(setup, setup.generic_poses(np.random.default_rng(12345), n_generic), residual)
+    value = (int(ref.rank), tuple(ref.non_identifiable))
+    _GENERIC_RANK.append((key, fields, value))  # the field objects kept alive: their ids are not reused
+    del _GENERIC_RANK[:-_GENERIC_RANK_KEPT]
+    return value
+
+
 def structural_rank_check(setup: Setup, rep: IdentifiabilityReport, residual: str | None, where: str,
                           accept: bool = False,
                           n_generic: int = 200) -> list[str]:
     """IdentifiabilityError naming the parameters the user's pose set loses compared with generic poses
-    (``rep``: IdentifiabilityReport of the user's poses), unless ``accept``; returns those names."""
-    ref, _ = analyze_setup(setup, setup.generic_poses(np.random.default_rng(12345), n_generic), residual)
-    lost = [n for n in rep.non_identifiable if n not in ref.non_identifiable]
-    if rep.rank < ref.rank and lost and not accept:
+    (``rep``: IdentifiabilityReport of the user's poses; :func:`generic_rank`), unless ``accept``; returns those
+    names."""
+    ref_rank, ref_non = generic_rank(setup, residual, n_generic)
+    lost = [n for n in rep.non_identifiable if n not in ref_non]
+    if rep.rank < ref_rank and lost and not accept:
         raise IdentifiabilityError(
-            f"{where}: the {rep.n_obs} poses identify {rep.rank} of the {ref.rank} parameters that varied poses "
+            f"{where}: the {rep.n_obs} poses identify {rep.rank} of the {ref_rank} parameters that varied poses "
             f"identify; not identifiable from these poses: {', '.join(lost)}. Use more (and more varied) poses, "
             "or accept fixing them at nominal (--fix-unidentifiable)")
     return lost
@@ -216,7 +241,8 @@ def prepare_measured(setup: Setup, meas: Measurements, residual: str | None, whe
 def identify_measurements(setup: Setup, meas: Measurements, method: str, residual: str | None,
                           analysis: IdentifiabilityReport | None = None, context: str = "", robust: bool = True,
                           where: str = "", fix_unidentifiable: bool = False, rejected: Sequence[tuple[str, str]] = (),
-                          nuisance: Callable | None = None, cross_check: bool = True) -> Identified:
+                          nuisance: Callable | None = None, cross_check: bool = True,
+                          diagnostics: bool = True) -> Identified:
     """Identification of the setup's identifiable free parameters from measured data ``meas`` (``rejected``:
     [(label, reason)] of poses the caller removed before; ``analysis``: the
     IdentifiabilityReport of these poses when the caller has it; a pose set that loses parameters generic
@@ -230,7 +256,10 @@ def identify_measurements(setup: Setup, meas: Measurements, method: str, residua
     pose's residual to one std along each of its d independent directions; U is evaluated once at a first
     plain fit and the error enters every step (outlier test, fit, adequacy, variance factor, covariance) as d
     nuisance coefficients (``identify.nuisance``: the GLS fit with C = obs_cov + U U^T). With ``cross_check``
-    and a method the setup's ``cross_methods`` pairs with another, that one runs too (:func:`method_check`)."""
+    and a method the setup's ``cross_methods`` pairs with another, that one runs too (:func:`method_check`).
+    ``diagnostics``: the lack-of-fit tests of the final fit (:func:`lack_of_fit_of`, a warning when significant);
+    False for a fit whose warnings nobody reads (a held-out fold: only its parameters are used), then
+    ``Identified.lack_of_fit`` is None."""
     from ..identify import fit_rejecting_outliers, model_adequacy
 
     where = where or setup.name
@@ -277,8 +306,8 @@ def identify_measurements(setup: Setup, meas: Measurements, method: str, residua
     extra = tuple(plausibility_warnings(params, result)) + ((prepared["warning"],) if prepared.get("warning") else ())
     if adequacy.get("verdict") == "too large":
         extra += (misfit_warning(adequacy),)
-    lof = lack_of_fit_of(setup, meas, problem, result)
-    if lof.get("significant"):
+    lof = lack_of_fit_of(setup, meas, problem, result) if diagnostics else None
+    if lof is not None and lof.get("significant"):
         extra += (lof["message"],)
     if rejected:
         extra += (f"{len(rejected)} outlier poses rejected: " + "; ".join(f"{lab}: {why}" for lab, why in rejected[:5]),)

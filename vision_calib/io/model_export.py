@@ -37,9 +37,8 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
-import yaml
 
-from ..config import Section, load_yaml
+from ..config import Section, load_yaml, safe_dump
 from ..errors import ConfigError, ParameterError
 from ..serialize import write_text_atomic
 
@@ -134,7 +133,7 @@ def write_calibrated_model(path, setup, x, std=None, free=None, result=None, pro
         offsets = _joint_offsets(Section(d, path), path.parent / ref, setup.params.values(x))
         if offsets:
             d["joint_offsets"] = {"convention": OFFSET_CONVENTION, "offsets": offsets}
-    return write_text_atomic(path, yaml.safe_dump(d, sort_keys=False, default_flow_style=None))
+    return write_text_atomic(path, safe_dump(d, sort_keys=False, default_flow_style=None))
 
 
 def _robots(top: Section, robot_path: Path, values: dict):

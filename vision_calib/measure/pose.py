@@ -128,11 +128,12 @@ def _rms(res: np.ndarray) -> float:
 
 
 def measure_pose(detections: Sequence[Detection], target: TargetSpec, intrinsics: CameraIntrinsics, pose_id=0,
-                 config: MeasureConfig = MeasureConfig()) -> PoseMeasurement:
+                 config: MeasureConfig = MeasureConfig(), covariance: bool = True) -> PoseMeasurement:
     """Average the frames of one pose into a PoseMeasurement (``target.kind`` picks the kind's corner-error
     terms, measure/covariance.py); never raises on bad frames
     (invalid frames are skipped and recorded; an unusable pose gives valid=False + reason). ConfigError for a
-    target whose poses are ambiguous (a 180-degree-symmetric board, ``allow_symmetric``).
+    target whose poses are ambiguous (a 180-degree-symmetric board, ``allow_symmetric``). covariance: False for a
+    re-measurement that reads the pose only (``cov`` NaN (6, 6); pose, validity and diagnostics the same).
     Longer than 80 lines: one pass over the frames' detections (validity, averaging, PnP, residuals, covariance, diagnostics) sharing the per-corner arrays."""
     target.check_pose_measurable()  # ConfigError: a 180-degree-symmetric board gives ambiguous poses
     lookup = target_lookup(target)
@@ -229,9 +230,9 @@ def measure_pose(detections: Sequence[Detection], target: TargetSpec, intrinsics
     else:
         sigma = float(np.sqrt(np.sum(all_res**2) / max(n_res - 6, 1)))
     used = cnt > 0  # random (frame scatter / n) + systematic per-corner (phase-locked) + lens field: covariance.py
-    cov = pose_covariance(T, p_all[used], mean_uv[used], cnt[used], sigma if len(obs) >= 2 else float("nan"),
-                          intrinsics, config.lens_field_std, target.kind, all_ids[used],
-                          corner_estimator(detections), config.phase_share).cov
+    cov = np.full((6, 6), np.nan) if not covariance else pose_covariance(
+        T, p_all[used], mean_uv[used], cnt[used], sigma if len(obs) >= 2 else float("nan"), intrinsics,
+        config.lens_field_std, target.kind, all_ids[used], corner_estimator(detections), config.phase_share).cov
     if not rms <= config.max_rms_px:
         return PoseMeasurement(pose_id, False, f"reprojection RMS {rms:.3f} px > {config.max_rms_px} px",
                                np.full((4, 4), np.nan), np.full((6, 6), np.nan), len(obs), len(all_ids), rms,
