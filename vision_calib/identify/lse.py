@@ -417,7 +417,9 @@ def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gto
     is at most :data:`CHORD_CONTRACTION` of the one before and stays within :data:`CHORD_RADIUS` of the
     Jacobian's point; then a new Jacobian.
     Termination as MINPACK's ``lmder`` (scipy's method "lm"): gtol on the largest cosine between the residual and
-    a column, ftol on the actual and predicted relative reduction, xtol on the scaled step, then one Gauss-Newton
+    a column, ftol on the actual and predicted relative reduction (also, status 2, when the undamped step at a new
+    Jacobian predicts at most ftol: a cost whose own rounding exceeds ftol then stops there instead of dithering
+    until xtol), xtol on the scaled step, then one Gauss-Newton
     step (kept when it does not raise the cost: the minimum to rounding, so that inputs equal to rounding give
     answers equal to rounding through iterated fits) with the last Jacobian, or a new one when the point is
     farther than CHORD_RADIUS from it; max_nfev (default 100 (n + 1)) evaluations of fun. ``normal`` (z, r) ->
@@ -485,6 +487,11 @@ def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gto
         if rn == 0 or np.max(np.abs(g) / (rn * np.sqrt(np.where(diag > 0, diag, np.inf)))) <= gtol:
             status = 1
             break
+        try:  # the undamped (Gauss-Newton) step's predicted reduction at most ftol: no step can reach ftol
+            if 0.5 * float(g @ cho_solve(cho_factor(A, check_finite=False), g, check_finite=False)) <= ftol * cost:
+                return finish(z, r, cost, 2, A, chord_g, zJ)  # (its final step is that Gauss-Newton step)
+        except (LinAlgError, ValueError):
+            pass
         S = 1.0 / np.sqrt(dsafe)
         As, gs = A * np.outer(S, S), g * S
         if lam is None:
@@ -537,7 +544,7 @@ def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gto
             pred = -(float(gc @ dz) + 0.5 * float(dz @ A @ dz))
             actual = cost - cost_new
             rho = actual / pred if pred > 0 else -1.0
-            f_ok = abs(actual) <= ftol * cost and pred <= ftol * cost and rho <= 2.0  # as the damped steps'
+            f_ok = abs(actual) <= ftol * cost and pred <= ftol * cost and rho <= 2.0
             x_ok = step <= xtol * float(np.linalg.norm(np.sqrt(dsafe) * z))
             accepted = cost_new <= cost
             if accepted:
