@@ -98,6 +98,17 @@ def recording(tmp_path_factory):
     return d / "rec"
 
 
+def focal_off(recording, tmp_path, factor=1.02):
+    """A copy of ``recording`` (tmp_path/rec_fx) whose recording.yaml gives fx and fy ``factor`` x the true ones."""
+    bad = tmp_path / "rec_fx"
+    shutil.copytree(recording, bad)
+    doc = yaml.safe_load((bad / "recording.yaml").read_text())
+    doc["camera"]["fx"] *= factor
+    doc["camera"]["fy"] *= factor
+    (bad / "recording.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
+    return bad
+
+
 @pytest.mark.slow
 def test_wrong_given_focal_length_warns_and_points_to_refine(recording, tmp_path):
     """The same images with the recording's fx, fy 2 % off: the reprojection RMS rises above REPROJECTION_K x its
@@ -108,12 +119,7 @@ def test_wrong_given_focal_length_warns_and_points_to_refine(recording, tmp_path
     n = ok["reprojection"]["n_corners"]
     assert ok["reprojection"]["points"] == f"over {n} of {n} points"
     assert "reprojection points: the figures count the points the measurement used" in ok["summary_text"]
-    bad = tmp_path / "rec_fx"
-    shutil.copytree(recording, bad)
-    doc = yaml.safe_load((bad / "recording.yaml").read_text())
-    doc["camera"]["fx"] *= 1.02
-    doc["camera"]["fy"] *= 1.02
-    (bad / "recording.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
+    bad = focal_off(recording, tmp_path)
     rep = process_once(bad, tmp_path / "fx", plots=False)  # the given intrinsics alone
     chk = rep["reprojection"]["noise_check"]
     assert chk["ratio"] > REPROJECTION_K
@@ -135,12 +141,7 @@ def test_the_cause_test_reads_what_the_reports_say(recording, tmp_path):
     from vision_calib.experiment.process import fit_measured, measure_folder
     from vision_calib.io.recording import read_recording
 
-    bad = tmp_path / "rec_fx"
-    shutil.copytree(recording, bad)
-    doc = yaml.safe_load((bad / "recording.yaml").read_text())
-    doc["camera"]["fx"] *= 1.02
-    doc["camera"]["fy"] *= 1.02
-    (bad / "recording.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
+    bad = focal_off(recording, tmp_path)
     rec = read_recording(bad)
     given = measure_folder(rec)
     fits = [fit_measured(given, tmp_path / "given", plots=False),
@@ -170,12 +171,7 @@ def test_an_error_building_the_chosen_refined_report_keeps_the_given_one(recordi
         return sensitivity(*a, given_std=given_std, **k)
 
     monkeypatch.setattr(camera_step, "intrinsics_sensitivity", planted)
-    bad = tmp_path / "rec_fx"
-    shutil.copytree(recording, bad)
-    doc = yaml.safe_load((bad / "recording.yaml").read_text())
-    doc["camera"]["fx"] *= 1.02
-    doc["camera"]["fy"] *= 1.02
-    (bad / "recording.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
+    bad = focal_off(recording, tmp_path)
     rep = process_folder(bad, tmp_path / "out", plots=False)
     assert rep["cause"]["chosen"] == "given" and "planted sensitivity error" in rep["cause"]["message"]
     assert rep["intrinsics"]["source"] == "recording.yaml"
