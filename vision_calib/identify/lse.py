@@ -394,6 +394,9 @@ LM_MESSAGES = {0: "the maximum number of function evaluations is exceeded",
                4: "ftol and xtol are both satisfied"}
 
 
+#: levenberg_marquardt's message when the Gauss-Newton step at a new Jacobian predicts at most ftol (status 2)
+LM_GN_FTOL = "ftol: the Gauss-Newton step predicts a relative reduction of the cost of at most ftol"
+
 #: levenberg_marquardt's first damping (of the column-equilibrated normal matrix, unit diagonal): nearly Gauss-Newton
 LM_LAMBDA0 = 1e-6
 
@@ -438,7 +441,7 @@ def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gto
     d2 = np.zeros(n)
     lam, status = None, 0
 
-    def finish(z, r, cost, status, A, chord_g, zJ):
+    def finish(z, r, cost, status, A, chord_g, zJ, message=None):
         """The last Gauss-Newton step (module doc), then the result."""
         nonlocal nfev, njev
         A_end = None
@@ -466,7 +469,8 @@ def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gto
                         z, cost = z + dz, c2
             except (LinAlgError, ValueError):
                 pass
-        return LMResult(z, cost, status, LM_MESSAGES[status], nfev, njev, A_end if normal is not None else None)
+        return LMResult(z, cost, status, message or LM_MESSAGES[status], nfev, njev,
+                        A_end if normal is not None else None)
 
     while True:
         if normal is None:
@@ -489,7 +493,7 @@ def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gto
             break
         try:  # the undamped (Gauss-Newton) step's predicted reduction at most ftol: no step can reach ftol
             if 0.5 * float(g @ cho_solve(cho_factor(A, check_finite=False), g, check_finite=False)) <= ftol * cost:
-                return finish(z, r, cost, 2, A, chord_g, zJ)  # (its final step is that Gauss-Newton step)
+                return finish(z, r, cost, 2, A, chord_g, zJ, LM_GN_FTOL)  # its final step: that Gauss-Newton step
         except (LinAlgError, ValueError):
             pass
         S = 1.0 / np.sqrt(dsafe)
