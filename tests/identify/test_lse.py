@@ -212,7 +212,7 @@ def test_levenberg_marquardt_matches_minpack_on_a_nonlinear_fit():
     unconverged (status 0), a Jacobian turning non-finite with status -1."""
     from scipy.optimize import least_squares
 
-    from vision_calib.identify.lse import levenberg_marquardt
+    from vision_calib.identify.lm import levenberg_marquardt
 
     t = np.linspace(0, 4, 60)
     y = 3e3 * np.exp(-1.3 * t) + 0.02 * np.sin(7 * t) + 5e-4 * np.cos(3 * t) * 1e3

@@ -283,10 +283,15 @@ def whitened_gram(problem: IdentificationProblem, x: ArrayLike, jacobian: np.nda
     scale = problem.params.scale[problem.params.free_index]
     blocks = whitened_blocks(problem, lambda a, b: jacobian[a:b], scale) if jacobian is not None else \
         whitened_jacobian_blocks(problem, x, scale)
-    G = np.zeros((scale.size, scale.size))
+    return gram_of_blocks(blocks, scaled_prior_rows(problem, scale), scale.size)
+
+
+def gram_of_blocks(blocks, P: np.ndarray | None, n: int) -> np.ndarray:
+    """(n, n) sum of Aw^T Aw over blocks [(a, b, Aw ((b - a) m, n))] (any iterable, e.g. :func:`whitened_blocks`)
+    plus P^T P (prior rows (p, n), or None): the Gram matrix of the stacked rows, none of them held together."""
+    G = np.zeros((n, n))
     for _, _, Aw in blocks:
         G += Aw.T @ Aw
-    P = scaled_prior_rows(problem, scale)
     return G if P is None else G + P.T @ P
 
 

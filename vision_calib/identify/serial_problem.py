@@ -221,17 +221,9 @@ def serial_problem(
         key = np.asarray(x, float).tobytes() if idx is None else None
         if key is not None and last.get("xJ") == key:
             return last["J"].copy()
-        J = _jacobian(x, idx)
+        J = np.matmul(*factors_fn(x, idx))  # (k, m, n): D @ Jm
         if key is not None:
             last.update(xJ=key, J=J.copy())
-        return J
-
-    def _jacobian(x, idx):
-        T, Jm = chain.pose_and_jacobian(q[_idx(idx)], x)
-        J = -Jm[:, :m, :]
-        if m == 6:
-            rho = errors(x, idx, T)[:, 3:]
-            J[:, 3:, :] = np.matmul(so3_right_jacobian_inv(rho), J[:, 3:, :])
         return J
 
     def factors_fn(x, idx=None):
