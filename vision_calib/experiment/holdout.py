@@ -271,8 +271,7 @@ class HeldOut:
         return self._block
 
     def _build(self) -> dict:
-        setup, meas, labels, flagged, k, seed, tcp = self.setup, self.meas, self.labels, self.flagged, self.k, \
-            self.seed, self.tcp
+        meas, labels, flagged, k, seed, tcp = self.meas, self.labels, self.flagged, self.k, self.seed, self.tcp
         kind, result, fitted_setup, fails = self.kind, self.result, self.fitted_setup, self.fails
         rm = []
         for fsetup, params, train, held_out in self.mount_fits:
