@@ -114,3 +114,24 @@ def test_rotvec_from_matrix_matches_scipy_at_every_angle():
     assert np.allclose(np.linalg.norm(ours, axis=1), np.linalg.norm(ref, axis=1), rtol=1e-12, atol=1e-15)
     assert np.allclose(ours[:300], rv[:300], rtol=1e-10, atol=1e-16)  # small and moderate angles: the vector itself
     assert rotvec_from_matrix(R.reshape(2, -1, 3, 3)).shape == (2, R.shape[0] // 2, 3)
+
+
+def test_one_vector_paths_of_so3_exp_and_its_jacobian_equal_the_batched_ones():
+    """so3_exp and so3_right_jacobian of one (3,) vector (scalar arithmetic) equal the (N, 3) path to rounding,
+    about 0, below and above the series' switch and at a half turn, and against scipy's rotation."""
+    from scipy.spatial.transform import Rotation
+
+    from vision_calib.frames import so3_exp, so3_right_jacobian
+
+    rng = np.random.default_rng(8)
+    vecs = np.concatenate([rng.normal(size=(30, 3)) * 2, [[0, 0, 0], [1e-9, -2e-9, 0], [3e-7, 0, 1e-7],
+                                                         [2e-6, 1e-6, 0], [np.pi, 0, 0]]])
+    for r in vecs:
+        np.testing.assert_allclose(so3_exp(r), so3_exp(r[None])[0], rtol=0, atol=4e-15)
+        np.testing.assert_allclose(so3_right_jacobian(r), so3_right_jacobian(r[None])[0], rtol=0, atol=4e-15)
+        np.testing.assert_allclose(so3_exp(r), Rotation.from_rotvec(r).as_matrix(), rtol=0, atol=4e-15)
+        h = 1e-7  # Exp(r + dr) ~= Exp(r) Exp(Jr dr)
+        for e in np.eye(3):
+            lhs = so3_exp(r + h * e)
+            rhs = so3_exp(r) @ so3_exp(h * so3_right_jacobian(r) @ e)
+            assert np.abs(lhs - rhs).max() < 1e-12

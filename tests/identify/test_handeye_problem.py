@@ -355,3 +355,34 @@ def test_robot_cov_enters_the_weights_and_matches_monte_carlo():
     assert reweighted(pb, x).obs_cov == pytest.approx(pb.obs_cov)
     with pytest.raises(DataError, match="robot_cov"):
         handeye_problem(F, M, "eye_in_hand", A0=A, B0=B, sigma_t_m=1e-3, sigma_rot_rad=1e-3, robot_cov=-np.eye(6))
+
+
+# ----------------------------------------------------------------------------- refits from a nearby fit
+@pytest.mark.parametrize("mount", ["fixed", "eye_in_hand"])
+def test_gauss_newton_refit_of_a_subset_equals_the_lse_and_the_cached_residual_is_not_shared(mount):
+    """The deletion test and the IRLS steps refit by Gauss-Newton from a nearby fit (identify.handeye_fit.
+    gauss_newton_refit): on 11 of 12 poses, from the fit of all 12, the same minimum as solve_lse to 1e-8 std,
+    with the same std. The problem's residual, cached for its Jacobian, is a copy the caller may change."""
+    from vision_calib.identify.handeye_fit import gauss_newton_refit
+    from vision_calib.identify.handeye_problem import robot_pose_cov
+
+    rng = np.random.default_rng(11)
+    A, B, F, M = _scene(rng, mount, N=12)
+    cov = _random_cov(rng, 12)
+    Mn = _noisy(rng, M, cov)
+    full = handeye_problem(F, Mn, mount, A0=A, B0=B, pose_cov=cov, robot_cov=robot_pose_cov(2e-4, 3e-4))
+    x_all = solve_lse(full).identified
+    A1, B1 = transforms_from_x(full, x_all)
+    keep = [k for k in range(12) if k != 4]
+    sub = handeye_problem(F[keep], Mn[keep], mount, A0=A1, B0=B1, pose_cov=cov[keep],
+                          robot_cov=robot_pose_cov(2e-4, 3e-4))
+    x0 = sub.params.nominal
+    ref = solve_lse(sub, x0)
+    x, std = gauss_newton_refit(sub, x0, with_std=True)
+    assert np.max(np.abs(x - x0) / ref.std) > 0.01  # pose 4 moved the fit
+    assert np.max(np.abs(x - ref.identified) / ref.std) < 1e-8
+    np.testing.assert_allclose(std, ref.std, rtol=1e-8)
+    r = sub.residual(x)
+    r[:] = 0.0
+    assert np.abs(sub.residual(x)).max() > 0
+    assert gauss_newton_refit(sub, x0, max_iter=1) is None  # not settled in one step: the caller runs the LSE

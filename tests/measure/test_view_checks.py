@@ -105,3 +105,29 @@ def test_dropped_corners_and_rejections_reach_the_report(charuco):
     mb = measurements_block([good, few])
     assert mb["rejected"] == [{"pose_id": "b", "reason": few.reason}] and "4 < 6" in few.reason
     assert [(d["pose_id"], len(d["corners"])) for d in mb["dropped_corners"]] == [("a", 1)] * 3  # 3 frames
+
+
+def test_remeasure_with_a_selection_keeps_the_corners_and_frames_of_the_first_measurement(charuco):
+    """measure_pose(selection=): a re-measurement of the same detections (other intrinsics, e.g. the intrinsics'
+    derivative) keeps the first measurement's frames and corners, without running the view rule again: the same
+    intrinsics give the same pose to rounding; a corner the rule dropped stays dropped, a frame it rejected stays
+    out, even when the rule would now decide otherwise."""
+    from dataclasses import replace
+
+    T, dets = _view(charuco, move=(17, np.array([4.0, -3.0])))
+    dets = [*dets, replace(dets[0], frame_index=3, uv_px=dets[0].uv_px + np.random.default_rng(1).normal(0, 2.0,
+                                                                                                     dets[0].uv_px.shape))]
+    m = measure_pose(dets, charuco, DIST_INTR)
+    assert m.valid and m.n_frames_used == 3 and not m.frames[3]["valid"]  # the noisy frame is rejected
+    again = measure_pose(dets, charuco, DIST_INTR, selection=m.frames, covariance=False)
+    np.testing.assert_allclose(again.T_cam_target, m.T_cam_target, atol=1e-12)
+    assert again.n_frames_used == 3 and again.frames[3]["reason"] == m.frames[3]["reason"]
+    assert again.frames[0]["dropped_corners"] == m.frames[0]["dropped_corners"]
+    # a tighter corner noise: the rule itself would now reject every frame; the selection does not run it
+    strict = MeasureConfig(corner_noise_px=0.005)
+    assert not measure_pose(dets, charuco, DIST_INTR, config=strict).valid
+    kept = measure_pose(dets, charuco, DIST_INTR, config=strict, selection=m.frames, covariance=False)
+    np.testing.assert_allclose(kept.T_cam_target, m.T_cam_target, atol=1e-12)
+    # without the moved corner's selection the pose moves: the selection is what kept it out
+    free = measure_pose(dets, charuco, DIST_INTR, config=MeasureConfig(corner_noise_px=50.0), covariance=False)
+    assert np.abs(frames.pose_error(free.T_cam_target, m.T_cam_target)).max() > 1e-6

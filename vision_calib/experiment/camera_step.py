@@ -112,17 +112,21 @@ def intrinsics_directions(block: dict, camera):
     return out
 
 
-def remeasure(dets: dict, labels, target, camera, config):
+def remeasure(dets: dict, labels, target, camera, config, original: dict | None = None):
     """(N, 4, 4) T_cam_target of the poses ``labels`` re-measured from their detections with ``camera``
     (undistortion + PnP only; no detection; config: measure.MeasureConfig, the recording's
-    ``Recording.measure_config()``); None when one of them is no longer valid."""
+    ``Recording.measure_config()``); None when one of them is no longer valid. original: {label:
+    PoseMeasurement} of these detections: each pose keeps its frames and corners (``measure_pose(selection=)``,
+    the derivative of the measurement, not of its data association); None: the view rule is run again."""
     import numpy as np
 
     from ..measure import measure_pose
 
     T = []
     for lab in labels:
-        pm = measure_pose(dets[lab], target, camera, pose_id=lab, config=config, covariance=False)
+        pm0 = None if original is None else original.get(str(lab))
+        sel = None if pm0 is None else pm0.frames
+        pm = measure_pose(dets[lab], target, camera, pose_id=lab, config=config, covariance=False, selection=sel)
         if not pm.valid:
             return None
         T.append(pm.T_cam_target)
@@ -151,7 +155,7 @@ def fitted_camera(camera, directions, coefficients):
     return CameraIntrinsics(camera.width, camera.height, *t[:4], tuple(float(v) for v in t[4:]))
 
 
-def intrinsics_response(dets: dict, rec, block: dict, used: list | None = None):
+def intrinsics_response(dets: dict, rec, block: dict, used: list | None = None, original: dict | None = None):
     """For intrinsics calibrated from the same recording (``block``): a callable (setup, meas, problem, x) ->
     U (n_obs, m, d), the change of every pose's residual (measured - model, SI; the residual kind of the
     problem given) at x (n,) when the camera
@@ -160,7 +164,8 @@ def intrinsics_response(dets: dict, rec, block: dict, used: list | None = None):
     error is shared by all poses, so it enters the fit as nuisance coefficients (the measurement covariance
     becomes obs_cov + U U^T; first order, independent of the pose noise). A direction under which a pose is
     no longer measurable is left out (None when all are). None when the intrinsics carry no covariance. used: a list
-    that each call refills with the directions (cameras) of U's columns (for :func:`fitted_camera`)."""
+    that each call refills with the directions (cameras) of U's columns (for :func:`fitted_camera`). original: {label:
+    PoseMeasurement}: the corner selection each re-measurement keeps (:func:`remeasure`)."""
     import numpy as np
 
     dirs = intrinsics_directions(block, rec.camera)
@@ -172,23 +177,26 @@ def intrinsics_response(dets: dict, rec, block: dict, used: list | None = None):
         sub = meas.select(labels)
         return residual_response(dirs, dets, labels, rec, x, np.asarray(problem.residual(x), float),
                                  lambda T: setup.problem(replace(sub, T_cam_target=T),
-                                                         problem.residual_kind, params=problem.params), used)
+                                                         problem.residual_kind, params=problem.params), used,
+                                 original)
 
     return response
 
 
-def residual_response(dirs, dets: dict, labels, rec, x, r0, problem_for, used: list | None = None):
+def residual_response(dirs, dets: dict, labels, rec, x, r0, problem_for, used: list | None = None,
+                      original: dict | None = None):
     """U (n_obs, m, d): for each camera of ``dirs`` (``intrinsics_directions``) the change of the residual at x
     (n,) from r0 (n_obs, m) when the poses ``labels`` are re-measured from their detections with that camera
     (``remeasure``) and put into ``problem_for(T (n_obs, 4, 4))``; a direction under which a pose is no
-    longer measurable is left out; None when all are. used: a list refilled with the cameras of U's columns."""
+    longer measurable is left out; None when all are. used: a list refilled with the cameras of U's columns.
+    original: {label: PoseMeasurement}, the corner selection each re-measurement keeps (:func:`remeasure`)."""
     import numpy as np
 
     cols = []
     if used is not None:
         used.clear()
     for cam in dirs:
-        T = remeasure(dets, labels, rec.target, cam, rec.measure_config())
+        T = remeasure(dets, labels, rec.target, cam, rec.measure_config(), original)
         if T is not None:
             cols.append(np.asarray(problem_for(T).residual(x), float) - r0)
             if used is not None:

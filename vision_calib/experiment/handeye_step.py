@@ -173,33 +173,42 @@ def deletion_test(F, M, mount: str, C, labels: Sequence[str], robot_std, fit: Ha
     d, xs = np.full(n, np.inf), np.zeros((n, 12))
     theta = np.square(_theta(fit))
     fits = []  # per k: (x, parameter covariance of the free ones, free mask, robot variances) of the fit without k
+    allp = all_poses_problem(F, M, mount, C, fit.A, fit.B)
     for k in range(n):
         rest = [j for j in range(n) if j != k]
         _, rk, th = deletion_fit(F[rest], M[rest], mount, C[rest], [labels[j] for j in rest], fit.A, fit.B, theta,
                                  robot_std is None and fit.robot["source"] == "estimated")
         xs[k] = rk.identified
         fits.append((rk.identified, rk.covariance, np.asarray(rk.free, bool), th))
-        d[k] = pose_statistic(F, M, mount, C, k, fit.A, fit.B, fits[-1])  # pose k at the fit without it
+        d[k] = pose_statistic(F, M, mount, C, k, fit.A, fit.B, fits[-1], allp)  # pose k at the fit without it
     thr = float(chi2.isf(OUTLIER_LEVEL / n, 6))
     thr = max(thr, OUTLIER_MIN_RATIO**2 * float(np.median(d[np.isfinite(d)]))) if np.isfinite(d).any() else thr
     return {"d": d, "threshold": thr, "x_loo": xs, "labels": [str(lab) for lab in labels], "fits": fits}
 
 
-def pose_statistic(F, M, mount: str, C, idx: int, A, B, fit_k) -> float:
+def pose_statistic(F, M, mount: str, C, idx: int, A, B, fit_k, base=None) -> float:
     """The deletion statistic of pose ``idx`` of (F, M (N, 4, 4), C (N, 6, 6); N >= 3) under a fit that does not
-    contain it (``fit_k`` = (x, covariance, free, robot variances) of :func:`deletion_test`'s ``fits``)."""
-    from ..identify.handeye_problem import handeye_problem, reweighted, robot_pose_cov
+    contain it (``fit_k`` = (x, covariance, free, robot variances) of :func:`deletion_test`'s ``fits``). base: the
+    problem of all N poses at (A, B) without robot pose error (:func:`all_poses_problem`; built when None)."""
+    from ..identify.handeye_problem import reweighted, robot_pose_cov
 
     x, cov, free, th = fit_k
-    allp = handeye_problem(F, M, mount, A, B, C, labels=[str(k) for k in range(len(F))],
-                           robot_cov=robot_pose_cov(*np.sqrt(th)))
-    one = reweighted(allp, x).subset([idx])
+    allp = all_poses_problem(F, M, mount, C, A, B) if base is None else base
+    one = reweighted(allp, x, robot_pose_cov(*np.sqrt(th))).subset([idx])
     r = np.asarray(one.residual(x), float)[0]
     J = np.asarray(one.jacobian(x), float)[0][:, free]
     try:
         return float(r @ np.linalg.solve(one.obs_cov[0] + J @ cov @ J.T, r))
     except np.linalg.LinAlgError:
         return float("inf")
+
+
+def all_poses_problem(F, M, mount: str, C, A, B):
+    """The hand-eye problem of all the poses (F, M (N, 4, 4), C (N, 6, 6)) at (A, B), camera covariance only: the
+    one :func:`pose_statistic` reweights with each fit's robot variances."""
+    from ..identify.handeye_problem import handeye_problem
+
+    return handeye_problem(F, M, mount, A, B, C, labels=[str(k) for k in range(len(F))])
 
 
 def decision_stability(F, M, mount: str, C, labels, keep: list, rejected_idx: list, deletion: dict, robot_std,
@@ -214,10 +223,11 @@ def decision_stability(F, M, mount: str, C, labels, keep: list, rejected_idx: li
     out = []
     theta = np.square(_theta(fit))
     est = robot_std is None and fit.robot["source"] == "estimated"
+    allp = all_poses_problem(F, M, mount, C, fit.A, fit.B)
     for r in rejected_idx:
         flips = []
         for i, k in enumerate(keep):
-            if pose_statistic(F, M, mount, C, r, fit.A, fit.B, deletion["fits"][i]) <= deletion["threshold"]:
+            if pose_statistic(F, M, mount, C, r, fit.A, fit.B, deletion["fits"][i], allp) <= deletion["threshold"]:
                 flips.append(str(labels[k]))
                 sub = [j for j in keep if j != k] + [r]
                 _, rk, _ = deletion_fit(F[sub], M[sub], mount, C[sub], [labels[j] for j in sub], fit.A, fit.B,

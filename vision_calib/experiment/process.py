@@ -248,9 +248,10 @@ def fit_measured(m: Measured, out_dir: str | Path | None, method: str | None = N
         "of poses.csv")
     # intrinsics calibrated from these images: their error is shared by all poses, it goes into the fit
     used = []  # the intrinsics directions of the fit's nuisance coefficients
+    by_id = {str(pm.pose_id): pm for pm in pms}  # the corner selection each re-measurement keeps
     ident = identify_measurements(setup, meas, method, residual, context=rejection_summary(pms), where=where,
                                   fix_unidentifiable=fix_unidentifiable, rejected=inconsistent,
-                                  nuisance=intrinsics_response(dets, rec, intr, used=used))
+                                  nuisance=intrinsics_response(dets, rec, intr, used=used, original=by_id))
     result, problem, rep, setup = ident.result, ident.problem, ident.analysis, ident.setup
     failure = gross_failure(setup, meas, ident, residual, where,
                             untested=f"a wrong robot file or scene mounts ({scene.path}), joint columns in another "
@@ -282,7 +283,7 @@ def fit_measured(m: Measured, out_dir: str | Path | None, method: str | None = N
         failed = failure or inconsistency_failure(ident) or holdout_failure(hold)
         final["result"] = res = with_holdout_warning(result, hold)
         sens = intrinsics_sensitivity(ident, meas, rec.camera, lambda cam, labels: remeasure(
-            dets, labels, rec.target, cam, rec.measure_config()), given_std=intr.get("std") is not None)
+            dets, labels, rec.target, cam, rec.measure_config(), by_id), given_std=intr.get("std") is not None)
         report = build_report(
             "process", source={"folder": str(rec.folder), "scene": {"name": scene.name, "path": str(scene.path),
                                                                    "robot_kind": setup.kind}},
@@ -379,12 +380,13 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None, folds=No
         mblock = {**mblock, "copies": [{"pose_id": lab, "reason": why} for lab, why in copies]}
     dirs = intrinsics_directions(intr, rec.camera) if dets else []
     used = []  # the cameras of the nuisance columns (refilled by residual_response)
+    by_id = {str(pm.pose_id): pm for pm in pms}  # the corner selection each re-measurement keeps
 
     def nuisance(pb, x):  # intrinsics calibrated from these images: their error is shared by all poses
         m = pb.meta
         return residual_response(dirs, dets, [str(lab) for lab in pb.labels], rec, x, np.asarray(pb.residual(x), float),
                                  lambda Tm: handeye_problem(m["T_base_flange"], Tm, mount, m["A0"], m["B0"], pb.obs_cov,
-                                                            labels=pb.labels), used)
+                                                            labels=pb.labels), used, by_id)
 
     from ..identify.adequacy import IMAGE_COV_SCALE
 

@@ -103,34 +103,86 @@ def _reml_terms(problem: IdentificationProblem, x):
     return (J, r, np.asarray(problem.meta["camera_cov"], float), *_robot_blocks(problem, x))
 
 
-def _reml_negll(theta, J, r, known, blocks) -> float:
+def reml_negll(theta, J, r, known, blocks, grad: bool = False):
     """-penalised REML log-likelihood (up to a constant) of the variances theta (k,) for the model linearised at x:
     0.5 (log|C| + log|J^T C^-1 J| + r^T P r) - 0.5 sum_i log theta_i, C = blockdiag(known_k + sum_i theta_i
     blocks_i,k); J (N, m, p), r (N, m), known (N, m, m), blocks (k, N, m, m). The last term is the
     boundary-avoiding prior of Chung et al. (2013, Psychometrika 78: a Gamma(2, rate -> 0) density on each std,
     ``log s_i``): it vanishes against the likelihood where the data resolve a component and keeps its estimate
-    off 0 (about one standard error above it) where they do not."""
+    off 0 (about one standard error above it) where they do not. grad: return (value, gradient (k,) in theta),
+    the gradient ``0.5 (tr(P V_i) - (P r)^T V_i (P r)) - 0.5 / theta_i`` with ``tr(P V_i) = tr(W V_i) -
+    tr(A^-1 J^T W V_i W J)``, A = J^T W J (O(N) sums over the poses; inf and a zero gradient where C or A is not positive definite)."""
     theta = np.asarray(theta, float)
-    C = known + np.einsum("i,inab->nab", theta, blocks)
+    C = known + np.tensordot(theta, blocks, axes=1)
+    bad = (np.inf, np.zeros(theta.shape)) if grad else np.inf
     try:
         L = np.linalg.cholesky(C)
     except np.linalg.LinAlgError:
-        return np.inf
+        return bad
     Li = np.linalg.inv(L)
     Jw = Li @ J  # whitened (N, m, p)
-    rw = np.einsum("kij,kj->ki", Li, r)
-    A = np.einsum("kip,kiq->pq", Jw, Jw)
-    g = np.einsum("kip,ki->p", Jw, rw)
-    sign, logdetA = np.linalg.slogdet(A)
-    if sign <= 0:
-        return np.inf
-    rPr = float(np.sum(rw**2) - g @ np.linalg.solve(A, g))
+    rw = (Li @ r[..., None])[..., 0]
+    n, m, p = Jw.shape
+    Jf, rf = Jw.reshape(n * m, p), rw.reshape(n * m)
+    A = Jf.T @ Jf
+    g = Jf.T @ rf
+    try:
+        cA = np.linalg.cholesky(A)
+    except np.linalg.LinAlgError:
+        return bad
+    beta = np.linalg.solve(A, g)
+    e = rw - Jw @ beta  # whitened P r: Li (r - J beta)
+    rPr = float(rf @ rf - g @ beta)
     prior = 0.5 * float(np.sum(np.log(np.maximum(theta, 1e-300))))
-    return 0.5 * (2.0 * np.sum(np.log(np.diagonal(L, axis1=1, axis2=2))) + logdetA + rPr) - prior
+    f = 0.5 * (2.0 * np.sum(np.log(np.diagonal(L, axis1=1, axis2=2))) + 2.0 * np.sum(np.log(np.diag(cA))) + rPr) \
+        - prior
+    if not grad:
+        return f
+    LV = Li[None] @ blocks @ np.swapaxes(Li, 1, 2)[None]  # (k, N, m, m): L^-1 V_i L^-T
+    trWV = np.trace(LV, axis1=2, axis2=3).sum(axis=1)  # tr(W V_i)
+    JLV = (np.swapaxes(Jw, 1, 2)[None] @ LV @ Jw[None]).sum(axis=1)  # (k, p, p): J^T W V_i W J
+    Ai = np.linalg.inv(A)
+    trAH = np.einsum("pq,kqp->k", Ai, JLV)
+    ePe = np.einsum("ni,knij,nj->k", e, LV, e)  # (P r)^T V_i (P r)
+    return f, 0.5 * (trWV - trAH - ePe) - 0.5 / np.maximum(theta, 1e-300)
+
+
+#: the grid of :func:`_reml_max` is evaluated in chunks of at most this many (grid point, pose) pairs
+REML_GRID_CHUNK = 1 << 15
+
+
+def reml_negll_many(thetas, J, r, known, blocks) -> np.ndarray:
+    """:func:`reml_negll` (values only) at each row of thetas (G, k), batched over the rows (chunks of
+    :data:`REML_GRID_CHUNK` (row, pose) pairs): the same values to rounding; inf where C or A is not positive
+    definite (such a chunk is evaluated row by row)."""
+    thetas = np.atleast_2d(np.asarray(thetas, float))
+    n, m, p = J.shape
+    out = np.empty(len(thetas))
+    step = max(1, REML_GRID_CHUNK // max(n, 1))
+    for s in range(0, len(thetas), step):
+        th = thetas[s:s + step]
+        C = known[None] + np.tensordot(th, blocks, axes=1)  # (g, N, m, m)
+        try:
+            L = np.linalg.cholesky(C)
+            Li = np.linalg.inv(L)
+            Jw = (Li @ J[None]).reshape(len(th), n * m, p)
+            rw = (Li @ r[None, ..., None]).reshape(len(th), n * m)
+            A = np.swapaxes(Jw, 1, 2) @ Jw
+            g = (np.swapaxes(Jw, 1, 2) @ rw[..., None])[..., 0]
+            cA = np.linalg.cholesky(A)
+        except np.linalg.LinAlgError:
+            out[s:s + step] = [reml_negll(t, J, r, known, blocks) for t in th]
+            continue
+        beta = np.linalg.solve(A, g[..., None])[..., 0]
+        rPr = np.sum(rw**2, axis=1) - np.sum(g * beta, axis=1)
+        logC = 2.0 * np.sum(np.log(np.diagonal(L, axis1=2, axis2=3)), axis=(1, 2))
+        logA = 2.0 * np.sum(np.log(np.diagonal(cA, axis1=1, axis2=2)), axis=1)
+        out[s:s + step] = 0.5 * (logC + logA + rPr) - 0.5 * np.sum(np.log(np.maximum(th, 1e-300)), axis=1)
+    return out
 
 
 def _reml_max(J, r, known, blocks, bounds, start=None, grid_axes=None):
-    """theta (k,): the variances maximising the penalised REML likelihood (:func:`_reml_negll`) over the box
+    """theta (k,): the variances maximising the penalised REML likelihood (:func:`reml_negll`) over the box
     ``bounds`` ((lo, hi) std per component, squared here), searched in log theta from the best point of a log grid
     (17 points per axis) over the components ``grid_axes`` (default: all when no ``start``, none with one), the
     other components at ``start`` (k,) or at the geometric middle of their bounds; then a bounded quasi-Newton
@@ -143,7 +195,12 @@ def _reml_max(J, r, known, blocks, bounds, start=None, grid_axes=None):
     hi = np.log([b[1] ** 2 for b in bounds])
 
     def f(u):
-        return _reml_negll(np.exp(u), J, r, known, blocks)
+        return reml_negll(np.exp(u), J, r, known, blocks)
+
+    def fg(u):  # value and gradient in log theta
+        th = np.exp(u)
+        v, gr = reml_negll(th, J, r, known, blocks, grad=True)
+        return v, gr * th
 
     if start is not None:
         base = np.clip(np.log(np.maximum(np.asarray(start, float), 1e-300)), lo, hi)
@@ -152,28 +209,66 @@ def _reml_max(J, r, known, blocks, bounds, start=None, grid_axes=None):
         base = 0.5 * (lo + hi)
         axes = list(range(len(bounds))) if grid_axes is None else list(grid_axes)
     u0, f0 = base, f(base)
-    for pt in product(*[np.linspace(lo[i], hi[i], 17) for i in axes]) if axes else ():
-        u = base.copy()
-        u[axes] = pt
-        fu = f(u)
-        if fu < f0:
-            u0, f0 = u, fu
-    opt = minimize(f, u0, method="L-BFGS-B", bounds=list(zip(lo, hi)))
+    if axes:  # the grid's best point (the first of equal ones), all points in one batched evaluation
+        grid = np.repeat(base[None], 17 ** len(axes), axis=0)
+        grid[:, axes] = np.array(list(product(*[np.linspace(lo[i], hi[i], 17) for i in axes])))
+        fg_ = reml_negll_many(np.exp(grid), J, r, known, blocks)
+        b = int(np.argmin(fg_))
+        if fg_[b] < f0:
+            u0, f0 = grid[b], float(fg_[b])
+    opt = minimize(fg, u0, jac=True, method="L-BFGS-B", bounds=list(zip(lo, hi)))
     u = opt.x if np.isfinite(opt.fun) and opt.fun <= f0 else u0
     return np.exp(u)
 
 
-def _reml_step(problem: IdentificationProblem, result: IdentificationResult, start=None):
-    """(theta (2,), cov (2, 2)): the robot's variances maximising the penalised REML likelihood
-    (:func:`_reml_negll`) of the model linearised at the result's x (camera covariance known), searched over the
-    whole box :data:`THETA_BOUNDS` (:func:`_reml_max`: a log grid, then a bounded quasi-Newton refinement from its
-    best point): the maximum is global on the box, so the estimate neither runs away nor, with the
-    boundary-avoiding prior, collapses to 0; its covariance is the inverse Fisher information
+def _reml_step(problem: IdentificationProblem, result: IdentificationResult, start=None, covariance: bool = True):
+    """(theta (2,), cov (2, 2) or None when not ``covariance``): the robot's variances maximising the penalised
+    REML likelihood (:func:`reml_negll`) of the model linearised at the result's x (camera covariance known),
+    searched over the whole box :data:`THETA_BOUNDS` (:func:`_reml_max`: a log grid, then a bounded quasi-Newton
+    refinement from its best point): the maximum is global on the box, so the estimate neither runs away nor, with
+    the boundary-avoiding prior, collapses to 0; its covariance is the inverse Fisher information
     2 (tr(P V_i P V_j))^-1 at the maximum. ``start``: variances (2,) near the maximum (e.g. the fit of a superset
-    of the poses): a local refinement from there, no grid."""
-    J, r, cam, Vt, Vr = _reml_terms(problem, result.identified)
+    of the poses): a local refinement from there, no grid. ``result``: an IdentificationResult or the x (12,)."""
+    x = getattr(result, "identified", result)
+    J, r, cam, Vt, Vr = _reml_terms(problem, x)
     theta = _reml_max(J, r, cam, np.stack([Vt, Vr]), THETA_BOUNDS, start)
-    return theta, reml_variance_cov(J, cam, np.stack([Vt, Vr]), theta)
+    return theta, reml_variance_cov(J, cam, np.stack([Vt, Vr]), theta) if covariance else None
+
+
+#: Gauss-Newton refits (:func:`gauss_newton_refit`) stop when no free parameter moves by more than this fraction of
+#: its std
+GN_TOL_STD = 1e-9
+
+
+def gauss_newton_refit(problem: IdentificationProblem, x: ArrayLike, max_iter: int = 8,
+                       with_std: bool = False):
+    """x (n,) at the minimum of ``problem``'s weighted cost by undamped Gauss-Newton steps from a nearby x (e.g. a
+    fit of a superset of its poses, or of the same poses under nearby weights), on its free parameters; with_std:
+    (x, std (n_free,) of the free parameters, sqrt(diag((J^T W J)^-1)) at the last step). None when a step is
+    singular, raises the cost, or the steps do not settle (no free parameter moving by more than
+    :data:`GN_TOL_STD` of its std) within ``max_iter``: the caller then runs :func:`.lse.solve_lse`."""
+    free = np.asarray(problem.params.free, bool)
+    W = problem.whitening()
+    x = np.array(x, float)
+    cost = np.inf
+    for _ in range(max_iter):
+        rw = np.einsum("kij,kj->ki", W, np.asarray(problem.residual(x), float)).ravel()
+        c = float(rw @ rw)
+        if not np.isfinite(c) or c > cost * (1 + 1e-12) + 1e-300:
+            return None
+        cost = c
+        Jw = (W @ np.asarray(problem.jacobian(x), float)[:, :, free]).reshape(len(rw), -1)
+        A = Jw.T @ Jw
+        try:
+            Li = np.linalg.inv(np.linalg.cholesky(A))
+        except np.linalg.LinAlgError:
+            return None
+        dx = -(Li.T @ (Li @ (Jw.T @ rw)))
+        x[free] += dx
+        std = np.sqrt(np.sum(Li**2, axis=0))  # sqrt(diag(A^-1)), A = L L^T
+        if np.all(np.abs(dx) <= GN_TOL_STD * std):
+            return (x, std) if with_std else x
+    return None
 
 
 def reml_variance_cov(J, known, blocks, theta) -> np.ndarray:
@@ -212,26 +307,35 @@ def _robot_blocks(problem: IdentificationProblem, x) -> tuple[np.ndarray, np.nda
 
 def _irls(base: IdentificationProblem, x0, theta, estimate: bool, max_iter: int = 50, theta_start=None):
     """(result, problem with the final weights, theta, theta cov or None, iterations) from x0; theta_start: the
-    REML search's start (None: a global search over the box at the first step)."""
+    REML search's start (None: a global search over the box at the first step). The first fit and the last are
+    :func:`.lse.solve_lse`; the minimum under each step's new weights is found by :func:`gauss_newton_refit` from
+    the last one (an LSE where it does not settle)."""
     x = np.asarray(x0, float)
     tcov = None
     pb = reweighted(base, x, _robot_cov(theta))
     res = solve_lse(pb, x)
+    x, free = res.identified, np.asarray(res.free, bool)
     it = 1
     for it in range(1, max_iter + 1):
         t_old = theta.copy()
         if estimate:
-            theta, tcov = _reml_step(pb, res, theta_start if it == 1 else theta)
-        pb = reweighted(base, res.identified, _robot_cov(theta))
-        new = solve_lse(pb, res.identified)
-        free = np.asarray(new.free, bool)
-        dx = np.abs(new.identified - res.identified)[free] / np.where(new.std[free] > 0, new.std[free], np.inf)
+            theta, tcov = _reml_step(pb, x, theta_start if it == 1 else theta)
+        pb = reweighted(base, x, _robot_cov(theta))
+        gn = gauss_newton_refit(pb, x, with_std=True) if free.all() else None
+        if gn is None:
+            res = solve_lse(pb, x)
+            new, std, free = res.identified, res.std, np.asarray(res.free, bool)
+        else:
+            res = None
+            new, std = gn[0], np.zeros(len(x))
+            std[free] = gn[1]
+        dx = np.abs(new - x)[free] / np.where(std[free] > 0, std[free], np.inf)
         tstd = np.sqrt(np.clip(np.diag(tcov), 0, None)) if tcov is not None else np.full(2, np.inf)
         dt = np.abs(theta - t_old) / np.where(tstd > 0, tstd, np.inf)
-        res = new
+        x = new
         if np.all(dx < X_TOL_STD) and np.all(dt < THETA_TOL_STD):
             break
-    return res, pb, theta, tcov, it
+    return (solve_lse(pb, x) if res is None else res), pb, theta, tcov, it
 
 
 def closed_form_comparison(problem: IdentificationProblem, x: ArrayLike, candidates: dict, start: str | None) -> dict:
@@ -327,16 +431,16 @@ def deletion_fit(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: str, 
     ``theta``) when ``estimate``, then the least squares with those weights from (A, B). Returns (problem with
     the final weights, result, theta (2,)); for the deletion test (``experiment.handeye_step``)."""
     theta = np.asarray(theta, float)
-    base = handeye_problem(T_base_flange, T_cam_target, mount, A, B, pose_cov, labels=labels,
-                           robot_cov=_robot_cov(theta))
-    x = x_from_transforms(base, A, B)
-    pb = reweighted(base, x, _robot_cov(theta))
-    res = solve_lse(pb, x)
-    if estimate:
-        theta, _ = _reml_step(pb, res, start=theta)
-        pb = reweighted(base, res.identified, _robot_cov(theta))
-        res = solve_lse(pb, res.identified)
-    return pb, res, theta
+    pb = handeye_problem(T_base_flange, T_cam_target, mount, A, B, pose_cov, labels=labels,
+                         robot_cov=_robot_cov(theta))  # weights at (A, B)
+    x = x_from_transforms(pb, A, B)
+    if estimate:  # the subset's minimum under these weights: Gauss-Newton from the fit of all (LSE if it fails)
+        xs = gauss_newton_refit(pb, x)
+        xs = solve_lse(pb, x).identified if xs is None else xs
+        theta, _ = _reml_step(pb, xs, start=theta, covariance=False)
+        pb = reweighted(pb, xs, _robot_cov(theta))
+        x = xs
+    return pb, solve_lse(pb, x), theta
 
 
 # ----------------------------------------------------------------------- measured poses of unknown noise
@@ -499,4 +603,4 @@ def fit_estimated_noise(T_base_flange: np.ndarray, T_cam_target: np.ndarray, mou
 
 
 __all__ = ["HandeyeFit", "deletion_fit", "DEFAULT_CANDIDATE", "NOISE_FRAMES", "default_candidates", "closed_form_comparison",
-           "reml_variance_cov", "fit_handeye", "fit_estimated_noise", "measured_noise_blocks", "weighted_cost"]
+           "gauss_newton_refit", "reml_negll", "reml_negll_many", "reml_variance_cov", "fit_handeye", "fit_estimated_noise", "measured_noise_blocks", "weighted_cost"]

@@ -286,14 +286,22 @@ def handeye_problem(T_base_flange: ArrayLike, T_cam_target_meas: ArrayLike, moun
     def sel(idx):
         return np.arange(N) if idx is None else np.asarray(idx, dtype=int)
 
+    last: dict = {}  # the model and residual at the last (x, idx): the Jacobian at a residual's x reads them
+
+    def at(x, idx):
+        x = np.asarray(x, dtype=float).reshape(-1)
+        key = (x.tobytes(), None if idx is None else np.asarray(idx, dtype=int).tobytes())
+        if last.get("key") != key:
+            idx = sel(idx)
+            parts = model_parts(x, idx)
+            last.update(key=key, parts=parts, r=frames.pose_error(parts[4], M[idx]), idx=idx)
+        return last["parts"], last["r"], last["idx"]
+
     def residual(x, idx=None):
-        idx = sel(idx)
-        _, _, _, _, Tm = model_parts(x, idx)
-        return frames.pose_error(Tm, M[idx])
+        return at(x, idx)[1].copy()
 
     def jacobian(x, idx=None):
-        idx = sel(idx)
-        x, A, B, AG, Tm = model_parts(x, idx)
+        (x, A, B, AG, Tm), r, idx = at(x, idx)
         k = idx.size
         D = np.zeros((k, 6, 12))  # delta (model pose error) per parameter
         D[:, 0:3, 0:3] = np.eye(3)
@@ -303,7 +311,7 @@ def handeye_problem(T_base_flange: ArrayLike, T_cam_target_meas: ArrayLike, moun
         D[:, 3:6, 3:6] = WA
         D[:, 0:3, 6:9] = AG[:, :3, :3]
         D[:, 3:6, 9:12] = AG[:, :3, :3] @ (B[:3, :3] @ so3_right_jacobian(x[9:12]))
-        e = frames.pose_error(Tm, M[idx])[:, 3:]
+        e = r[:, 3:]
         J = -D
         J[:, 3:, :] = -np.einsum("kij,kjl->kil", _inv_right_jacobian(e), D[:, 3:, :])
         return J

@@ -128,12 +128,16 @@ def _rms(res: np.ndarray) -> float:
 
 
 def measure_pose(detections: Sequence[Detection], target: TargetSpec, intrinsics: CameraIntrinsics, pose_id=0,
-                 config: MeasureConfig = MeasureConfig(), covariance: bool = True) -> PoseMeasurement:
+                 config: MeasureConfig = MeasureConfig(), covariance: bool = True,
+                 selection: Sequence[dict] | None = None) -> PoseMeasurement:
     """Average the frames of one pose into a PoseMeasurement (``target.kind`` picks the kind's corner-error
     terms, measure/covariance.py); never raises on bad frames
     (invalid frames are skipped and recorded; an unusable pose gives valid=False + reason). ConfigError for a
     target whose poses are ambiguous (a 180-degree-symmetric board, ``allow_symmetric``). covariance: False for a
     re-measurement that reads the pose only (``cov`` NaN (6, 6); pose, validity and diagnostics the same).
+    selection: the per-frame diagnostics of a measurement of the same detections (``PoseMeasurement.frames``):
+    each frame's validity and corner selection (the view rule's dropped corners) are kept and the view rule is
+    not run again: a re-measurement under other intrinsics (a derivative) with the same data association.
     Longer than 80 lines: one pass over the frames' detections (validity, averaging, PnP, residuals, covariance, diagnostics) sharing the per-corner arrays."""
     target.check_pose_measurable()  # ConfigError: a 180-degree-symmetric board gives ambiguous poses
     lookup = target_lookup(target)
@@ -141,11 +145,27 @@ def measure_pose(detections: Sequence[Detection], target: TargetSpec, intrinsics
     board_area = hull_area(np.array([p[:2] for p in lookup.values()]))
     fdiag = []
     obs = []  # (frame_index, ids, uv_undist)
+    sel = None if selection is None else {int(f["frame_index"]): f for f in selection}
     for d in detections:
         fd = {"frame_index": int(d.frame_index), "valid": bool(d.valid), "reason": d.reason,
               "n_corners": int(d.n_corners)}
         fdiag.append(fd)
         if not d.valid:
+            continue
+        if sel is not None:  # the selection of the earlier measurement, the view rule not run again
+            prev = sel.get(int(d.frame_index)) or {"valid": False, "reason": "not in the earlier measurement"}
+            if not prev.get("valid"):
+                fd.update(valid=False, reason=prev.get("reason") or "invalid in the earlier measurement")
+                continue
+            fd.update({k: prev[k] for k in ("area_fraction", "homography_rms_px", "dropped_corners") if k in prev})
+            drop = {int(c["id"]) for c in prev.get("dropped_corners", ())}
+            keep = np.array([int(i) in lookup and int(i) not in drop for i in d.ids], dtype=bool)
+            uv_u = undistort_px(d.uv_px[keep], intrinsics)
+            if keep.sum() < config.min_corners or not np.all(np.isfinite(uv_u)):
+                fd.update(valid=False, reason="undistortion produced non-finite coordinates"
+                          if keep.sum() >= config.min_corners else f"too few corners: {int(keep.sum())}")
+                continue
+            obs.append((len(fdiag) - 1, d.ids[keep].astype(int), uv_u))
             continue
         keep = np.array([int(i) in lookup for i in d.ids], dtype=bool)
         if keep.sum() < config.min_corners:
