@@ -362,7 +362,7 @@ def test_robot_cov_enters_the_weights_and_matches_monte_carlo():
 def test_gauss_newton_refit_of_a_subset_equals_the_lse_and_the_cached_residual_is_not_shared(mount):
     """The deletion test and the IRLS steps refit by Gauss-Newton from a nearby fit (identify.handeye_fit.
     gauss_newton_refit): on 11 of 12 poses, from the fit of all 12, the same minimum as solve_lse to 1e-8 std,
-    with the same std. The problem's residual, cached for its Jacobian, is a copy the caller may change."""
+    with the same covariance. The problem's residual, cached for its Jacobian, is a copy the caller may change."""
     from vision_calib.identify.handeye_fit import gauss_newton_refit
     from vision_calib.identify.handeye_problem import robot_pose_cov
 
@@ -378,10 +378,10 @@ def test_gauss_newton_refit_of_a_subset_equals_the_lse_and_the_cached_residual_i
                           robot_cov=robot_pose_cov(2e-4, 3e-4))
     x0 = sub.params.nominal
     ref = solve_lse(sub, x0)
-    x, std = gauss_newton_refit(sub, x0, with_std=True)
+    x, cov = gauss_newton_refit(sub, x0, with_cov=True)
     assert np.max(np.abs(x - x0) / ref.std) > 0.01  # pose 4 moved the fit
     assert np.max(np.abs(x - ref.identified) / ref.std) < 1e-8
-    np.testing.assert_allclose(std, ref.std, rtol=1e-8)
+    np.testing.assert_allclose(cov, ref.covariance, rtol=1e-7, atol=1e-9 * np.abs(ref.covariance).max())
     r = sub.residual(x)
     r[:] = 0.0
     assert np.abs(sub.residual(x)).max() > 0

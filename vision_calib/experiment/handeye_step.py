@@ -65,7 +65,7 @@ def identify_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: s
                      labels: Sequence[str], robot_std: tuple[float, float] | None = None, robust: bool = True,
                      nuisance: Callable | None = None, where: str = "",
                      cov_scale: tuple[float, float] = (1.0, 1.0), noise_frame: str | None = None,
-                     theta_start=None) -> HandeyeIdentified:
+                     theta_start=None, compare: bool = True) -> HandeyeIdentified:
     """Steps of the module docstring. T_base_flange, T_cam_target (N, 4, 4) [m]; pose_cov (N, 6, 6) [m, rad]
     (None with noise_frame); labels (N,); robot_std: (translation m, rotation rad) per axis of the flange pose
     error, or None (estimated); nuisance: callable (problem, x) -> U (n_obs, 6, d) or None, the response of every
@@ -75,13 +75,14 @@ def identify_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: s
     noise_frame: "target" | "camera" when the measured poses' noise is not known: its std per axis of that frame
     is estimated (``identify.handeye_fit.fit_estimated_noise``; outliers then by the robust chi-square test of
     ``identify.fit_rejecting_outliers``, the deletion test needing the noise known). theta_start: the robot's
-    variances of a fit of a superset of these poses (``fit_handeye``: REML refined from there, no global search)."""
+    variances of a fit of a superset of these poses (``fit_handeye``: REML refined from there, no global search).
+    compare: False: ``fit.closed_forms`` says only which closed form the fit started from (``fit_handeye``)."""
     F, M = (np.asarray(a, float) for a in (T_base_flange, T_cam_target))
     C = None if pose_cov is None else np.asarray(pose_cov, float)
     labels = list(labels)
     motion = handeye_motions(F, mount, labels, where or "the hand-eye pose set")
     fit = fit_handeye(F, M, mount, C, labels, robot_std, candidates=closed_forms(F, M, mount), noise_frame=noise_frame,
-                      theta_start=theta_start)
+                      theta_start=theta_start, compare=compare)
     rejected, deletion = [], None
     if robust and noise_frame is None and fit.problem.n_obs * fit.problem.m >= 2 * int(np.sum(fit.result.free)):
         keep = list(range(len(labels)))

@@ -241,12 +241,13 @@ GN_TOL_STD = 1e-9
 
 
 def gauss_newton_refit(problem: IdentificationProblem, x: ArrayLike, max_iter: int = 8,
-                       with_std: bool = False):
+                       with_cov: bool = False):
     """x (n,) at the minimum of ``problem``'s weighted cost by undamped Gauss-Newton steps from a nearby x (e.g. a
-    fit of a superset of its poses, or of the same poses under nearby weights), on its free parameters; with_std:
-    (x, std (n_free,) of the free parameters, sqrt(diag((J^T W J)^-1)) at the last step). None when a step is
-    singular, raises the cost, or the steps do not settle (no free parameter moving by more than
-    :data:`GN_TOL_STD` of its std) within ``max_iter``: the caller then runs :func:`.lse.solve_lse`."""
+    fit of a superset of its poses, or of the same poses under nearby weights), on its free parameters; with_cov:
+    (x, covariance (n_free, n_free) of the free parameters, (J^T W J)^-1 at the last step, as
+    :func:`.lse.solve_lse` gives it). None when a step is singular, raises the cost, or the steps do not settle
+    (no free parameter moving by more than :data:`GN_TOL_STD` of its std) within ``max_iter``: the caller then
+    runs :func:`.lse.solve_lse`."""
     free = np.asarray(problem.params.free, bool)
     W = problem.whitening()
     x = np.array(x, float)
@@ -258,17 +259,27 @@ def gauss_newton_refit(problem: IdentificationProblem, x: ArrayLike, max_iter: i
             return None
         cost = c
         Jw = (W @ np.asarray(problem.jacobian(x), float)[:, :, free]).reshape(len(rw), -1)
-        A = Jw.T @ Jw
         try:
-            Li = np.linalg.inv(np.linalg.cholesky(A))
+            Li = np.linalg.inv(np.linalg.cholesky(Jw.T @ Jw))
         except np.linalg.LinAlgError:
             return None
         dx = -(Li.T @ (Li @ (Jw.T @ rw)))
         x[free] += dx
-        std = np.sqrt(np.sum(Li**2, axis=0))  # sqrt(diag(A^-1)), A = L L^T
+        std = np.sqrt(np.sum(Li**2, axis=0))  # sqrt(diag(A^-1)), A = J^T W J = L L^T
         if np.all(np.abs(dx) <= GN_TOL_STD * std):
-            return (x, std) if with_std else x
+            return (x, Li.T @ Li) if with_cov else x
     return None
+
+
+@dataclass(frozen=True)
+class Refit:
+    """A fit by :func:`gauss_newton_refit`: identified (n,), covariance (n_free, n_free) of the free parameters,
+    free (n,) bool, std (n,) (0 where fixed): the fields of an IdentificationResult the deletion test reads."""
+
+    identified: np.ndarray
+    covariance: np.ndarray
+    free: np.ndarray
+    std: np.ndarray
 
 
 def reml_variance_cov(J, known, blocks, theta) -> np.ndarray:
@@ -321,14 +332,13 @@ def _irls(base: IdentificationProblem, x0, theta, estimate: bool, max_iter: int 
         if estimate:
             theta, tcov = _reml_step(pb, x, theta_start if it == 1 else theta)
         pb = reweighted(base, x, _robot_cov(theta))
-        gn = gauss_newton_refit(pb, x, with_std=True) if free.all() else None
+        gn = gauss_newton_refit(pb, x, with_cov=True) if free.all() else None
         if gn is None:
             res = solve_lse(pb, x)
             new, std, free = res.identified, res.std, np.asarray(res.free, bool)
         else:
             res = None
-            new, std = gn[0], np.zeros(len(x))
-            std[free] = gn[1]
+            new, std = gn[0], np.sqrt(np.diag(gn[1]))
         dx = np.abs(new - x)[free] / np.where(std[free] > 0, std[free], np.inf)
         tstd = np.sqrt(np.clip(np.diag(tcov), 0, None)) if tcov is not None else np.full(2, np.inf)
         dt = np.abs(theta - t_old) / np.where(tstd > 0, tstd, np.inf)
@@ -365,7 +375,7 @@ def closed_form_comparison(problem: IdentificationProblem, x: ArrayLike, candida
 def fit_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: str, pose_cov: ArrayLike | None,
                 labels: Sequence[str] | None = None, robot_std: tuple[float, float] | None = None,
                 estimate_robot: bool = True, candidates: dict | None = None, theta_start=None,
-                noise_frame: str | None = None) -> HandeyeFit:
+                noise_frame: str | None = None, compare: bool = True) -> HandeyeFit:
     """Hand-eye fit with the robot's pose error (module docstring).
 
     T_base_flange (N, 4, 4) reported flange poses [m]; T_cam_target (N, 4, 4) measured; pose_cov (N, 6, 6)
@@ -379,6 +389,8 @@ def fit_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: str, p
     noise_frame: None (the measured poses' covariance is ``pose_cov``), or "target" | "camera": their noise is
     not known and its std per axis (3 translations, 3 rotations) in that frame is estimated with the robot's
     (:func:`fit_estimated_noise`; ``pose_cov`` is not used).
+    compare: False when the caller reads only which closed form the fit started from (the held-out folds):
+    ``closed_forms`` is then {"start": name}, the comparison block not computed.
     DataError when no candidate is a solution (degenerate motions)."""
     F = np.asarray(T_base_flange, float)
     M = np.asarray(T_cam_target, float)
@@ -420,7 +432,8 @@ def fit_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: str, p
         ss = np.where(s > 0, sd / (2 * np.maximum(s, 1e-300)), np.sqrt(sd))
         robot.update(std_translation_mm=1e3 * float(ss[0]), std_rotation_deg=float(np.degrees(ss[1])),
                      method="REML (maximum over a box) with the camera covariance known")
-    return HandeyeFit(res, A, B, pb, robot, closed_form_comparison(pb, res.identified, cands, start), its,
+    cf = closed_form_comparison(pb, res.identified, cands, start) if compare else {"start": start}
+    return HandeyeFit(res, A, B, pb, robot, cf, its,
                       cands)
 
 
@@ -428,8 +441,10 @@ def deletion_fit(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: str, 
                  labels: Sequence[str], A: np.ndarray, B: np.ndarray, theta: ArrayLike, estimate: bool):
     """The fit of a subset of the poses near a fit of all of them (A, B (4, 4), robot variances ``theta`` =
     (s_t^2 [m^2], s_r^2 [rad^2])): the variances re-estimated on the subset (REML refined locally from
-    ``theta``) when ``estimate``, then the least squares with those weights from (A, B). Returns (problem with
-    the final weights, result, theta (2,)); for the deletion test (``experiment.handeye_step``)."""
+    ``theta``) when ``estimate``, then the least squares with those weights from (A, B) (Gauss-Newton from there:
+    the minimum is near). Returns (problem with the final weights, result: a :class:`Refit`, or the
+    IdentificationResult of :func:`.lse.solve_lse` where Gauss-Newton does not settle or a parameter is fixed,
+    theta (2,)); for the deletion test (``experiment.handeye_step``)."""
     theta = np.asarray(theta, float)
     pb = handeye_problem(T_base_flange, T_cam_target, mount, A, B, pose_cov, labels=labels,
                          robot_cov=_robot_cov(theta))  # weights at (A, B)
@@ -440,7 +455,11 @@ def deletion_fit(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: str, 
         theta, _ = _reml_step(pb, xs, start=theta, covariance=False)
         pb = reweighted(pb, xs, _robot_cov(theta))
         x = xs
-    return pb, solve_lse(pb, x), theta
+    free = np.asarray(pb.params.free, bool)
+    gn = gauss_newton_refit(pb, x, with_cov=True) if free.all() else None
+    if gn is None:
+        return pb, solve_lse(pb, x), theta
+    return pb, Refit(gn[0], gn[1], free, np.sqrt(np.diag(gn[1]))), theta
 
 
 # ----------------------------------------------------------------------- measured poses of unknown noise
@@ -603,4 +622,4 @@ def fit_estimated_noise(T_base_flange: np.ndarray, T_cam_target: np.ndarray, mou
 
 
 __all__ = ["HandeyeFit", "deletion_fit", "DEFAULT_CANDIDATE", "NOISE_FRAMES", "default_candidates", "closed_form_comparison",
-           "gauss_newton_refit", "reml_negll", "reml_negll_many", "reml_variance_cov", "fit_handeye", "fit_estimated_noise", "measured_noise_blocks", "weighted_cost"]
+           "gauss_newton_refit", "Refit", "reml_negll", "reml_negll_many", "reml_variance_cov", "fit_handeye", "fit_estimated_noise", "measured_noise_blocks", "weighted_cost"]
