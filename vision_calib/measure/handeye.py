@@ -48,6 +48,11 @@ def opencv_closed_form(T_base_flange, T_cam_target_meas, mount: str = "fixed",
     if F.shape[0] < 3:
         raise DataError(f"hand-eye calibration needs at least 3 poses, got {F.shape[0]}")
     G = mount_G(F, mount)
+    return _closed_form(G, frames.inv_T(G), M, method)
+
+
+def _closed_form(G, Ginv, M, method: str) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`opencv_closed_form` on checked poses: G (N, 4, 4) (``mount_G``), its inverses, M (N, 4, 4)."""
     try:
         if method in _ROBOT_WORLD:
             R_bw, t_bw, R_gc, t_gc = cv2.calibrateRobotWorldHandEye(
@@ -58,7 +63,6 @@ def opencv_closed_form(T_base_flange, T_cam_target_meas, mount: str = "fixed",
         elif method in _HAND_EYE:
             # OpenCV finds X with H_k X M_k = const ("gripper2base" H_k, "target2cam" M_k); ours:
             # inv(G_k) inv(A) M_k = B, so H_k = inv(G_k), X = inv(A), const = B
-            Ginv = frames.inv_T(G)
             R_x, t_x = cv2.calibrateHandEye(list(Ginv[:, :3, :3]), list(Ginv[:, :3, 3]),
                                             list(M[:, :3, :3]), list(M[:, :3, 3]), method=_HAND_EYE[method])
             X = frames.make_T(R_x, np.ravel(t_x))  # H_k X M_k = inv(G_k) inv(A) M_k = B for every k
@@ -92,10 +96,20 @@ def closed_forms(T_base_flange, T_cam_target, mount: str) -> dict:
     if F.ndim == 3 and len(F) > CLOSED_FORM_MAX_POSES:
         pick = np.unique(np.linspace(0, len(F) - 1, CLOSED_FORM_MAX_POSES).round().astype(int))
         F, M = F[pick], M[pick[pick < len(M)]]
+    mount = check_mount(mount)
+    try:
+        F = check_poses("T_base_flange", F)
+        M = check_poses("T_cam_target_meas", M, F.shape[0])
+        if F.shape[0] < 3:
+            raise DataError(f"hand-eye calibration needs at least 3 poses, got {F.shape[0]}")
+    except DataError as exc:  # every method fails the same way: each says why
+        return {m: str(exc) for m in CLOSED_FORM_METHODS}
+    G = mount_G(F, mount)
+    Ginv = frames.inv_T(G)
     out = {}
-    for m in CLOSED_FORM_METHODS:
+    for m in CLOSED_FORM_METHODS:  # the poses checked once, each method on them
         try:
-            out[m] = opencv_closed_form(F, M, mount, m)
+            out[m] = _closed_form(G, Ginv, M, m)
         except DataError as exc:
             out[m] = str(exc)
     return out
