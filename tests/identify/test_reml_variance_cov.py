@@ -72,3 +72,46 @@ def test_reml_likelihood_its_gradient_and_its_batched_grid():
     assert np.isinf(many[7]) and np.isinf(one[7])
     ok = np.isfinite(one)
     np.testing.assert_allclose(many[ok], one[ok], rtol=1e-12, atol=1e-12)
+
+
+def test_reml_hessian_matches_differences_of_the_gradient_and_newton_finds_the_bounded_maximum():
+    """reml_negll(hess=True) against central differences of its gradient; the REML search (projected Newton from the
+    grid's best point) ends where a tight L-BFGS-B ends, and at the bound when a component pushes out of the box."""
+    from scipy.optimize import minimize
+
+    from vision_calib.identify.handeye_fit import THETA_BOUNDS, reml_negll
+    from vision_calib.identify.handeye_fit import reml_max
+
+    rng = np.random.default_rng(2)
+    n, p = 30, 5
+    J = rng.normal(size=(n, 6, p))
+    Q = rng.normal(size=(n, 6, 6))
+    known = 0.05 * Q @ np.swapaxes(Q, 1, 2) + 0.01 * np.eye(6)
+    B = rng.normal(size=(2, n, 6, 3))
+    blocks = B @ np.swapaxes(B, 2, 3)
+    C = known + np.tensordot([0.3, 0.02], blocks, axes=1)
+    r = (np.linalg.cholesky(C) @ rng.normal(size=(n, 6, 1)))[..., 0]
+    theta = np.array([0.2, 0.05])
+    _, _, H = reml_negll(theta, J, r, known, blocks, grad=True, hess=True)
+    h = 1e-6 * theta
+    Hd = np.array([(reml_negll(theta + h[i] * e, J, r, known, blocks, grad=True)[1]
+                    - reml_negll(theta - h[i] * e, J, r, known, blocks, grad=True)[1]) / (2 * h[i])
+                   for i, e in enumerate(np.eye(2))])
+    np.testing.assert_allclose(H, Hd, rtol=1e-6, atol=1e-6 * np.abs(H).max())
+    bounds = ((1e-3, 10.0), (1e-3, 10.0))
+    lo, hi = np.log([b[0] ** 2 for b in bounds]), np.log([b[1] ** 2 for b in bounds])
+
+    def fg(u):
+        v, g = reml_negll(np.exp(u), J, r, known, blocks, grad=True)
+        return v, g * np.exp(u)
+
+    for start in (None, [1.0, 1e-3]):
+        ours = reml_max(J, r, known, blocks, bounds, start)
+        ref = minimize(fg, np.log(ours * 1.5), jac=True, method="L-BFGS-B", bounds=list(zip(lo, hi)),
+                       options={"ftol": 1e-15, "gtol": 1e-12})
+        assert reml_negll(ours, J, r, known, blocks) <= ref.fun + 1e-9
+        np.testing.assert_allclose(ours, np.exp(ref.x), rtol=1e-4)
+    # no information on the second component (its blocks ~0): the prior pushes it up to the box's top
+    weak = reml_max(J, r, known, np.stack([blocks[0], 1e-12 * blocks[1]]), bounds)
+    assert weak[1] == pytest.approx(bounds[1][1] ** 2)
+    assert THETA_BOUNDS[0][0] > 0

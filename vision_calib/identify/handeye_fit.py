@@ -103,7 +103,7 @@ def _reml_terms(problem: IdentificationProblem, x):
     return (J, r, np.asarray(problem.meta["camera_cov"], float), *_robot_blocks(problem, x))
 
 
-def reml_negll(theta, J, r, known, blocks, grad: bool = False):
+def reml_negll(theta, J, r, known, blocks, grad: bool = False, hess: bool = False):
     """-penalised REML log-likelihood (up to a constant) of the variances theta (k,) for the model linearised at x:
     0.5 (log|C| + log|J^T C^-1 J| + r^T P r) - 0.5 sum_i log theta_i, C = blockdiag(known_k + sum_i theta_i
     blocks_i,k); J (N, m, p), r (N, m), known (N, m, m), blocks (k, N, m, m). The last term is the
@@ -111,10 +111,12 @@ def reml_negll(theta, J, r, known, blocks, grad: bool = False):
     ``log s_i``): it vanishes against the likelihood where the data resolve a component and keeps its estimate
     off 0 (about one standard error above it) where they do not. grad: return (value, gradient (k,) in theta),
     the gradient ``0.5 (tr(P V_i) - (P r)^T V_i (P r)) - 0.5 / theta_i`` with ``tr(P V_i) = tr(W V_i) -
-    tr(A^-1 J^T W V_i W J)``, A = J^T W J (O(N) sums over the poses; inf and a zero gradient where C or A is not positive definite)."""
+    tr(A^-1 J^T W V_i W J)``, A = J^T W J (O(N) sums over the poses; inf and a zero gradient where C or A is not
+    positive definite). hess (with grad): also the Hessian (k, k) in theta, ``(P r)^T V_i P V_j (P r) - 0.5
+    tr(P V_i P V_j) + 0.5 delta_ij / theta_i^2``, the traces by the sums of :func:`reml_variance_cov`."""
     theta = np.asarray(theta, float)
     C = known + np.tensordot(theta, blocks, axes=1)
-    bad = (np.inf, np.zeros(theta.shape)) if grad else np.inf
+    bad = ((np.inf, np.zeros(theta.shape)) + ((np.eye(len(theta)),) if hess else ())) if grad else np.inf
     try:
         L = np.linalg.cholesky(C)
     except np.linalg.LinAlgError:
@@ -144,10 +146,23 @@ def reml_negll(theta, J, r, known, blocks, grad: bool = False):
     Ai = np.linalg.inv(A)
     trAH = np.einsum("pq,kqp->k", Ai, JLV)
     ePe = np.einsum("ni,knij,nj->k", e, LV, e)  # (P r)^T V_i (P r)
-    return f, 0.5 * (trWV - trAH - ePe) - 0.5 / np.maximum(theta, 1e-300)
+    gr = 0.5 * (trWV - trAH - ePe) - 0.5 / np.maximum(theta, 1e-300)
+    if not hess:
+        return f, gr
+    k = len(theta)
+    u = (LV @ e[None, :, :, None])[..., 0].reshape(k, n * m)  # whitened V_i P r
+    b = u @ Jf  # (k, p)
+    LVJ = (LV @ Jw[None]).reshape(k, n * m, p)  # whitened V_i W J, the poses' rows stacked
+    LVf = LV.reshape(k, n, m * m)
+    tWW = np.einsum("inx,jnx->ij", LVf, LVf)  # sum_n tr(W V_i W V_j) (LV symmetric)
+    G = np.einsum("ixp,jxq->ijpq", LVJ, LVJ)  # sum_n J^T W V_i W V_j W J
+    AH = Ai[None] @ JLV  # (k, p, p)
+    T = tWW - 2.0 * np.einsum("pq,ijqp->ij", Ai, G) + np.einsum("ipq,jqp->ij", AH, AH)  # tr(P V_i P V_j)
+    H = (u @ u.T - b @ Ai @ b.T) - 0.5 * T + np.diag(0.5 / np.maximum(theta, 1e-300) ** 2)
+    return f, gr, 0.5 * (H + H.T)
 
 
-#: the grid of :func:`_reml_max` is evaluated in chunks of at most this many (grid point, pose) pairs
+#: the grid of :func:`reml_max` is evaluated in chunks of at most this many (grid point, pose) pairs
 REML_GRID_CHUNK = 1 << 15
 
 
@@ -181,12 +196,12 @@ def reml_negll_many(thetas, J, r, known, blocks) -> np.ndarray:
     return out
 
 
-def _reml_max(J, r, known, blocks, bounds, start=None, grid_axes=None):
+def reml_max(J, r, known, blocks, bounds, start=None, grid_axes=None):
     """theta (k,): the variances maximising the penalised REML likelihood (:func:`reml_negll`) over the box
     ``bounds`` ((lo, hi) std per component, squared here), searched in log theta from the best point of a log grid
     (17 points per axis) over the components ``grid_axes`` (default: all when no ``start``, none with one), the
-    other components at ``start`` (k,) or at the geometric middle of their bounds; then a bounded quasi-Newton
-    refinement."""
+    other components at ``start`` (k,) or at the geometric middle of their bounds; then a projected Newton
+    refinement (:func:`_newton_in_box`; the bounded quasi-Newton L-BFGS-B where it does not settle)."""
     from itertools import product
 
     from scipy.optimize import minimize
@@ -216,22 +231,70 @@ def _reml_max(J, r, known, blocks, bounds, start=None, grid_axes=None):
         b = int(np.argmin(fg_))
         if fg_[b] < f0:
             u0, f0 = grid[b], float(fg_[b])
-    opt = minimize(fg, u0, jac=True, method="L-BFGS-B", bounds=list(zip(lo, hi)))
-    u = opt.x if np.isfinite(opt.fun) and opt.fun <= f0 else u0
+    u = _newton_in_box(lambda v: _in_log(v, J, r, known, blocks), u0, f0, lo, hi)
+    if u is None:  # not settled: the bounded quasi-Newton
+        opt = minimize(fg, u0, jac=True, method="L-BFGS-B", bounds=list(zip(lo, hi)))
+        u = opt.x if np.isfinite(opt.fun) and opt.fun <= f0 else u0
     return np.exp(u)
+
+
+def _in_log(u, J, r, known, blocks):
+    """(value, gradient, Hessian) of :func:`reml_negll` in u = log theta: g_u = theta g, H_u = diag(theta) H
+    diag(theta) + diag(theta g)."""
+    th = np.exp(u)
+    v, g, H = reml_negll(th, J, r, known, blocks, grad=True, hess=True)
+    return v, th * g, th[:, None] * H * th[None, :] + np.diag(th * g)
+
+
+#: the Newton search of :func:`reml_max` has settled when half its Newton decrement (the predicted decrease of the
+#: -log-likelihood) is below this
+REML_NEWTON_TOL = 1e-10
+
+
+def _newton_in_box(fgh, u0, f0: float, lo, hi, max_iter: int = 40):
+    """u (k,) minimising f over the box [lo, hi] from u0 (f(u0) = f0): projected Newton steps (the components at a
+    bound with the gradient pointing out are held there) with a backtracking (Armijo) line search; the Hessian
+    made positive definite by raising its eigenvalues to 1e-8 of the largest. None when it does not settle
+    (the caller then runs L-BFGS-B)."""
+    u = np.clip(np.asarray(u0, float), lo, hi)
+    f, g, H = fgh(u)
+    if not np.isfinite(f):
+        return None
+    for _ in range(max_iter):
+        free = ~(((u <= lo) & (g > 0)) | ((u >= hi) & (g < 0)))
+        if not free.any():
+            return u
+        lam, V = np.linalg.eigh(H[np.ix_(free, free)])
+        lam = np.maximum(np.abs(lam), 1e-8 * max(np.abs(lam).max(), 1e-300))
+        d = np.zeros_like(u)
+        d[free] = -(V @ ((V.T @ g[free]) / lam))
+        dec = -float(g @ d)  # Newton decrement squared
+        if dec < 2 * REML_NEWTON_TOL:
+            return u
+        t = 1.0
+        for _ in range(40):
+            un = np.clip(u + t * d, lo, hi)
+            fn, gn, Hn = fgh(un)
+            if np.isfinite(fn) and fn <= f - 1e-4 * t * dec:
+                break
+            t *= 0.5
+        else:
+            return u if dec < 1e-6 else None  # no decrease left to find: settled to rounding
+        u, f, g, H = un, fn, gn, Hn
+    return None
 
 
 def _reml_step(problem: IdentificationProblem, result: IdentificationResult, start=None, covariance: bool = True):
     """(theta (2,), cov (2, 2) or None when not ``covariance``): the robot's variances maximising the penalised
     REML likelihood (:func:`reml_negll`) of the model linearised at the result's x (camera covariance known),
-    searched over the whole box :data:`THETA_BOUNDS` (:func:`_reml_max`: a log grid, then a bounded quasi-Newton
+    searched over the whole box :data:`THETA_BOUNDS` (:func:`reml_max`: a log grid, then a bounded quasi-Newton
     refinement from its best point): the maximum is global on the box, so the estimate neither runs away nor, with
     the boundary-avoiding prior, collapses to 0; its covariance is the inverse Fisher information
     2 (tr(P V_i P V_j))^-1 at the maximum. ``start``: variances (2,) near the maximum (e.g. the fit of a superset
     of the poses): a local refinement from there, no grid. ``result``: an IdentificationResult or the x (12,)."""
     x = getattr(result, "identified", result)
     J, r, cam, Vt, Vr = _reml_terms(problem, x)
-    theta = _reml_max(J, r, cam, np.stack([Vt, Vr]), THETA_BOUNDS, start)
+    theta = reml_max(J, r, cam, np.stack([Vt, Vr]), THETA_BOUNDS, start)
     return theta, reml_variance_cov(J, cam, np.stack([Vt, Vr]), theta) if covariance else None
 
 
@@ -527,12 +590,12 @@ def _noise_irls(base, x0, Vc, theta_cam, s_robot, est_robot: bool, max_iter: int
         r = np.asarray(pb.residual(res.identified), float)
         if est_robot:
             blocks, known = np.stack([*Vc, Vr]), np.zeros_like(Vr)
-            th = _reml_max(J, r, known, blocks, NOISE_BOUNDS + (THETA_BOUNDS[1],), np.r_[th_c, th_r[1]],
+            th = reml_max(J, r, known, blocks, NOISE_BOUNDS + (THETA_BOUNDS[1],), np.r_[th_c, th_r[1]],
                            grid_axes=[6] if it == 1 else None)
             th_c, th_r = _floored(th[:6]), np.array([0.0, th[6]])
         else:
             blocks, known = np.stack(list(Vc)), th_r[0] * Vt + th_r[1] * Vr
-            th = _reml_max(J, r, known, blocks, NOISE_BOUNDS, th_c)
+            th = reml_max(J, r, known, blocks, NOISE_BOUNDS, th_c)
             th_c = _floored(th)
         tcov = reml_variance_cov(J, known, blocks, th)
         pb = _noise_weights(base, res.identified, Vc, th_c, _robot_cov(th_r))
@@ -622,4 +685,4 @@ def fit_estimated_noise(T_base_flange: np.ndarray, T_cam_target: np.ndarray, mou
 
 
 __all__ = ["HandeyeFit", "deletion_fit", "DEFAULT_CANDIDATE", "NOISE_FRAMES", "default_candidates", "closed_form_comparison",
-           "gauss_newton_refit", "Refit", "reml_negll", "reml_negll_many", "reml_variance_cov", "fit_handeye", "fit_estimated_noise", "measured_noise_blocks", "weighted_cost"]
+           "gauss_newton_refit", "Refit", "reml_max", "reml_negll", "reml_negll_many", "reml_variance_cov", "fit_handeye", "fit_estimated_noise", "measured_noise_blocks", "weighted_cost"]
