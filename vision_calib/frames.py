@@ -337,8 +337,9 @@ def so3_right_jacobian_inv(r) -> np.ndarray:
     K = skew(r)
     small = th < 1e-6
     ths = np.where(small, 1.0, th)
-    # 1/th^2 - (1 + cos th) / (2 th sin th), series 1/12 + th^2/720 near 0
-    c = np.where(small, 1.0 / 12.0 + th**2 / 720.0, 1.0 / ths**2 - (1.0 + np.cos(ths)) / (2.0 * ths * np.sin(ths)))
+    # 1/th^2 - (1 + cos th) / (2 th sin th) = 1/th^2 - cot(th/2) / (2 th) (finite at a half turn), series
+    # 1/12 + th^2/720 near 0
+    c = np.where(small, 1.0 / 12.0 + th**2 / 720.0, 1.0 / ths**2 - np.cos(ths / 2) / (2.0 * ths * np.sin(ths / 2)))
     return np.eye(3) + 0.5 * K + c * (K @ K)
 
 

@@ -105,8 +105,9 @@ def mount_G(T_base_flange: np.ndarray, mount: str) -> np.ndarray:
 
 
 def _inv_right_jacobian(e: np.ndarray) -> np.ndarray:
-    """(..., 3, 3) inverse of :func:`so3_right_jacobian` at rotation vectors e (..., 3)."""
-    return np.linalg.inv(so3_right_jacobian(e))
+    """(..., 3, 3) inverse of :func:`so3_right_jacobian` at rotation vectors e (..., 3) (angle <= pi: the closed
+    form ``frames.so3_right_jacobian_inv``)."""
+    return frames.so3_right_jacobian_inv(e)
 
 
 # ----------------------------------------------------------------------------- closed form
