@@ -1,12 +1,19 @@
 """``process`` of a recorded folder against its detection floor (issue 35: measure once).
 
     PYTHONPATH=. .venv/bin/python benchmarks/bench_process_once.py [--poses 16] [--frames 2] [--fx-error 0.05]
-                                                                   [--folder DIR ...] [--repeat 3]
+                                                                   [--image-size W H] [--folder DIR ...] [--repeat 3]
 
 Folders: a simulated RX-90 eye-in-hand recording (``--poses`` x ``--frames``, rendered here, not timed) whose
 recording.yaml gives fx, fy ``--fx-error`` off, so that ``process`` runs the cause test (both hypotheses on the
-intrinsics, :mod:`vision_calib.experiment.cause`), the same folder with the true intrinsics, and any ``--folder``
-given (a recorded folder, e.g. one ``import-rosi`` / ``import-visp`` wrote).
+intrinsics, :mod:`vision_calib.experiment.cause`), the same folder with the true intrinsics, the same images with
+flange poses instead of joints (the true flange poses with a 0.2 mm / 0.02 deg robot pose error, its std not
+given: the hand-eye path that ``import-rosi`` / ``import-visp`` folders take, with the robot's pose error
+estimated; true intrinsics and fx off), and any ``--folder`` given (a recorded folder, e.g. one ``import-rosi`` /
+``import-visp`` wrote).
+
+``--image-size W H``: the scene's camera rescaled to W x H px with the same field of view (focal lengths and
+principal point times W / its width): e.g. 1600 1200, the AVT Mako of the ROS-I ``test_set_charuco`` set (16
+images at fx 1352 px), whose decoding and detection cost more per image than the scene's 1024 x 768.
 
 Per folder, measured in this run: the floor, every pose's images decoded, detected and solved by PnP once
 (``measure.measure_images`` per pose, the recording's intrinsics), and ``process`` (``process_folder``, no plots),
@@ -22,6 +29,7 @@ import argparse
 import importlib
 import os
 import shutil
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -33,7 +41,8 @@ from vision_calib.experiment.simulate import run_simulation
 from vision_calib.io.recording import read_recording
 from vision_calib.measure import measure_images
 
-SCENE = Path(__file__).resolve().parents[1] / "scenes" / "rx90_eye_in_hand.yaml"
+REPO = Path(__file__).resolve().parents[1]
+SCENE = REPO / "scenes" / "rx90_eye_in_hand.yaml"
 D = importlib.import_module("vision_calib.measure.detect")
 
 
@@ -69,27 +78,59 @@ def process_s(folder: Path, out: Path) -> tuple[float, dict, int, int]:
         D.load_gray, D._find_corners = load, find
 
 
+def scene_at(size):
+    """The RX-90 scene, its camera rescaled to size (W, H) px with the same field of view (None: as it is)."""
+    from dataclasses import replace
+
+    from vision_calib.rig.scene import load_scene
+
+    scene = load_scene(SCENE)
+    if size is None:
+        return scene
+    c = scene.setup.camera
+    k = size[0] / c.width
+    cam = replace(c, width=int(size[0]), height=int(size[1]), fx=c.fx * k, fy=c.fy * k, cx=c.cx * k, cy=c.cy * k)
+    return replace(scene, setup=replace(scene.setup, camera=cam))
+
+
+def with_fx_error(src: Path, dst: Path, error: float) -> Path:
+    """A copy of the recorded folder src at dst whose recording.yaml gives fx and fy ``error`` (relative) off."""
+    shutil.copytree(src, dst)
+    doc = yaml.safe_load((dst / "recording.yaml").read_text())
+    doc["camera"] = {**doc["camera"], "fx": doc["camera"]["fx"] * (1 + error), "fy": doc["camera"]["fy"] * (1 + error)}
+    (dst / "recording.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
+    return dst
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--poses", type=int, default=16)
     ap.add_argument("--frames", type=int, default=2)
     ap.add_argument("--fx-error", type=float, default=0.05)
+    ap.add_argument("--image-size", nargs=2, type=int, default=None, metavar=("W", "H"))
     ap.add_argument("--folder", nargs="*", default=[])
     ap.add_argument("--repeat", type=int, default=3)
     a = ap.parse_args()
     print(f"load average {os.getloadavg()[0]:.2f} (2 cores shared: wall times move with it)")
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
-        run_simulation(SCENE, out_dir=d / "sim", seed=7, n_poses=a.poses, frames=a.frames, export_recording=d / "rec",
-                       workers=1, progress=False, plots=False)
-        bad = d / "rec_fx"
-        shutil.copytree(d / "rec", bad)
-        doc = yaml.safe_load((bad / "recording.yaml").read_text())
-        doc["camera"] = {**doc["camera"], "fx": doc["camera"]["fx"] * (1 + a.fx_error),
-                         "fy": doc["camera"]["fy"] * (1 + a.fx_error)}
-        (bad / "recording.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
-        folders = [(f"simulated RX-90, {a.poses} poses x {a.frames} frame(s), fx {a.fx_error:+.0%}", bad),
-                   (f"simulated RX-90, {a.poses} poses x {a.frames} frame(s), true intrinsics", d / "rec"),
+        run_simulation(scene_at(a.image_size), out_dir=d / "sim", seed=7, n_poses=a.poses, frames=a.frames,
+                       export_recording=d / "rec", workers=1, progress=False, plots=False)
+        sys.path.insert(0, str(REPO / "tests"))
+        from flange_folder import flange_pose_folder  # the test suite's writer of flange-pose folders
+
+        flange_pose_folder(d / "rec", d / "flange", robot_std_mm=0.2, robot_std_deg=0.02)
+        bad, flange_bad = with_fx_error(d / "rec", d / "rec_fx", a.fx_error), with_fx_error(d / "flange",
+                                                                                            d / "flange_fx", a.fx_error)
+        size = f"{a.poses} poses x {a.frames} frame(s)"
+        px = "" if a.image_size is None else f", {a.image_size[0]} x {a.image_size[1]} px"
+        joints = [(f"simulated RX-90, {size}, fx {a.fx_error:+.0%}", bad),
+                  (f"simulated RX-90, {size}, true intrinsics", d / "rec")]
+        if a.image_size is not None:  # the joint folders name the scene, whose camera is not this one
+            print("--image-size: the hand-eye folders only (a joint folder's scene has the scene's camera)")
+        folders = [*(joints if a.image_size is None else []),
+                   (f"simulated RX-90 images{px}, flange poses (hand-eye), {size}, fx {a.fx_error:+.0%}", flange_bad),
+                   (f"the same images{px}, flange poses (hand-eye), true intrinsics", d / "flange"),
                    *((str(f), Path(f)) for f in a.folder)]
         for name, folder in folders:
             n_img = sum(len(v) for v in read_recording(folder).images.values())
