@@ -13,8 +13,9 @@ import numpy as np
 import pytest
 import yaml
 
-from vision_calib.experiment.process import (REPROJECTION_K, label_points, process_folder, process_once,
-                                             reprojection_noise_check, used_corners)
+from vision_calib.experiment.process import process_folder, process_once
+from vision_calib.experiment.reprojection_check import (REPROJECTION_K, label_points, reprojection_noise_check,
+                                                        used_corners)
 from vision_calib.measure.detect import Detection
 from vision_calib.measure.reprojection import chain_reprojection
 from vision_calib.rig import SCENES_DIR, load_scene

@@ -2,7 +2,7 @@
 against intrinsics refined from the same images + robot pose error.
 
 When ``process`` ran with intrinsics given (recording.yaml) and the chain's reprojection is far above what its
-noise model predicts (``process.reprojection_noise_check``: the ratio, or, with a robot pose error estimated
+noise model predicts (``reprojection_check.reprojection_noise_check``: the ratio, or, with a robot pose error estimated
 by the hand-eye fit, the ratio to the corner noise alone, above ``REPROJECTION_K``), both hypotheses are fitted
 and compared on what both predict: the image corners. Each hypothesis h gives a per-coordinate corner variance
 ``s_h^2 = sigma_c^2 + robot_px_h^2 / 2`` (corner noise, and its own robot pose error in pixels) and residuals of
