@@ -155,9 +155,10 @@ def reml_negll(theta, J, r, known, blocks, grad: bool = False, hess: bool = Fals
     LVJ = (LV @ Jw[None]).reshape(k, n * m, p)  # whitened V_i W J, the poses' rows stacked
     LVf = LV.reshape(k, n, m * m)
     tWW = np.einsum("inx,jnx->ij", LVf, LVf)  # sum_n tr(W V_i W V_j) (LV symmetric)
-    G = np.einsum("ixp,jxq->ijpq", LVJ, LVJ)  # sum_n J^T W V_i W V_j W J
+    # tr(A^-1 G_ij), G_ij = sum_n J^T W V_i W V_j W J: the rows of (W V_i W J) A^-1 against those of W V_j W J
+    trAG = (LVJ @ Ai).reshape(k, -1) @ LVJ.reshape(k, -1).T
     AH = Ai[None] @ JLV  # (k, p, p)
-    T = tWW - 2.0 * np.einsum("pq,ijqp->ij", Ai, G) + np.einsum("ipq,jqp->ij", AH, AH)  # tr(P V_i P V_j)
+    T = tWW - 2.0 * trAG + np.einsum("ipq,jqp->ij", AH, AH)  # tr(P V_i P V_j)
     H = (u @ u.T - b @ Ai @ b.T) - 0.5 * T + np.diag(0.5 / np.maximum(theta, 1e-300) ** 2)
     return f, gr, 0.5 * (H + H.T)
 
