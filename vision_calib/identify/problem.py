@@ -84,11 +84,13 @@ class IdentificationProblem:
         return int(self.obs_cov.shape[1])
 
     def with_params(self, params: ParameterSet) -> "IdentificationProblem":
-        """Same observations, another parameter set (e.g. other free mask / starting point); the whitening
-        already computed is kept."""
+        """Same observations, another parameter set (e.g. other free mask / starting point), sharing the whitening
+        (computed here once for both: a problem solved again, e.g. from another start, whitens once)."""
         out = replace(self, params=params)
-        if "_whitening" in self.__dict__:
-            object.__setattr__(out, "_whitening", self.__dict__["_whitening"])
+        try:
+            object.__setattr__(out, "_whitening", self.whitening())
+        except np.linalg.LinAlgError:  # a covariance that is not positive definite: check_problem names its poses
+            pass
         return out
 
     def subset(self, idx: ArrayLike) -> "IdentificationProblem":
