@@ -386,3 +386,69 @@ def test_gauss_newton_refit_of_a_subset_equals_the_lse_and_the_cached_residual_i
     r[:] = 0.0
     assert np.abs(sub.residual(x)).max() > 0
     assert gauss_newton_refit(sub, x0, max_iter=1) is None  # not settled in one step: the caller runs the LSE
+
+
+# ----------------------------------------------------------------------------- all leave-one-out fits at once
+@pytest.mark.parametrize("mount", ["fixed", "eye_in_hand"])
+def test_batched_model_equals_the_problem_closures(mount):
+    """identify.handeye_loo.model_many at K parameter vectors equals the problem's residual, Jacobian and flange error
+    map at each of them (one pose per row too)."""
+    from vision_calib.identify.handeye_loo import model_many
+    from vision_calib.identify.handeye_problem import flange_error_map
+
+    rng = np.random.default_rng(4)
+    A, B, F, M = _scene(rng, mount, N=7)
+    pb = handeye_problem(F, _noisy(rng, M, _random_cov(rng, 7)), mount, A0=A, B0=B, pose_cov=_random_cov(rng, 7))
+    X = pb.params.nominal + rng.normal(scale=0.01, size=(3, 12))
+    r, J, D = model_many(pb, X)
+    for k, x in enumerate(X):
+        np.testing.assert_allclose(r[k], pb.residual(x), atol=1e-14)
+        np.testing.assert_allclose(J[k], pb.jacobian(x), atol=1e-12)
+        np.testing.assert_allclose(D[k], flange_error_map(pb, x), atol=1e-12)
+    r1, J1, D1 = model_many(pb, X, poses=[4, 0, 6])
+    for k, p in enumerate([4, 0, 6]):
+        np.testing.assert_allclose(r1[k, 0], r[k, p], atol=1e-15)
+        np.testing.assert_allclose(J1[k, 0], J[k, p], atol=1e-15)
+        np.testing.assert_allclose(D1[k, 0], D[k, p], atol=1e-15)
+
+
+@pytest.mark.parametrize("mount, estimate, chunk", [("fixed", True, 4096), ("eye_in_hand", True, 20),
+                                                    ("eye_in_hand", False, 4096)])
+def test_leave_one_out_at_once_equals_the_fits_one_by_one(mount, estimate, chunk, monkeypatch):
+    """The deletion test's N fits without one pose each, batched (identify.handeye_loo.leave_one_out: chunks of
+    subsets too) against handeye_fit.deletion_fit run per subset, with an outlier among the poses and the robot's
+    variances re-estimated or not: the same parameters (1e-8 std), covariance, variances and deletion
+    statistics (against experiment.handeye_step.pose_statistic)."""
+    import vision_calib.identify.handeye_loo as loo
+    from vision_calib.experiment.handeye_step import all_poses_problem, pose_statistic
+    from vision_calib.identify.handeye_fit import deletion_fit, fit_handeye
+    from vision_calib.identify.handeye_problem import x_from_transforms
+
+    monkeypatch.setattr(loo, "LOO_CHUNK", chunk)
+    rng = np.random.default_rng(9)
+    N = 12
+    A, B, F, M = _scene(rng, mount, N=N)
+    cov = _random_cov(rng, N, 2e-4, 4e-4)
+    Fr = frames.perturb_pose(F, np.concatenate([rng.normal(scale=3e-4, size=(N, 3)),
+                                                rng.normal(scale=5e-4, size=(N, 3))], axis=1))  # robot error
+    Mn = _noisy(rng, M, cov)
+    Mn[5] = frames.perturb_pose(Mn[5], np.r_[0.01, 0, 0, 0, 0.02, 0])  # an outlier
+    labels = [f"p{k}" for k in range(N)]
+    fit = fit_handeye(Fr, Mn, mount, cov, labels, None if estimate else (3e-4, 5e-4))
+    theta = np.square([fit.robot["translation_mm"] * 1e-3, np.radians(fit.robot["rotation_deg"])])
+    allp = all_poses_problem(Fr, Mn, mount, cov, fit.A, fit.B)
+    X, C, th, ok = loo.leave_one_out(allp, x_from_transforms(allp, fit.A, fit.B), theta, estimate)
+    d = loo.deletion_statistics(allp, X, C, th)
+    assert ok.all()
+    for k in range(N):
+        rest = [j for j in range(N) if j != k]
+        _, rk, thk = deletion_fit(Fr[rest], Mn[rest], mount, cov[rest], [labels[j] for j in rest], fit.A, fit.B,
+                                  theta, estimate)
+        std = np.sqrt(np.diag(rk.covariance))
+        assert np.max(np.abs(X[k] - rk.identified) / std) < 1e-8
+        np.testing.assert_allclose(C[k], rk.covariance, rtol=1e-7, atol=1e-9 * np.abs(rk.covariance).max())
+        np.testing.assert_allclose(th[k], thk, rtol=1e-6)
+        ref = pose_statistic(Fr, Mn, mount, cov, k, fit.A, fit.B, (rk.identified, rk.covariance,
+                                                                   np.asarray(rk.free, bool), thk), allp)
+        assert d[k] == pytest.approx(ref, rel=1e-7)
+    assert int(np.argmax(d)) == 5  # the outlier stands out

@@ -161,7 +161,9 @@ def _theta(fit: HandeyeFit) -> tuple[float, float]:
 
 def deletion_test(F, M, mount: str, C, labels: Sequence[str], robot_std, fit: HandeyeFit) -> dict:
     """Each pose k tested against the fit WITHOUT it (``identify.handeye_fit.deletion_fit``: the robot's pose-error
-    variances re-estimated without it, refined from ``fit``'s, and the least squares with those weights): the deletion (externally studentized) statistic ``d_k = r_k^T S_k^-1 r_k``, r_k the
+    variances re-estimated without it, refined from ``fit``'s, and the least squares with those weights; all N fits
+    at once by ``identify.handeye_loo.leave_one_out``): the deletion (externally studentized) statistic
+    ``d_k = r_k^T S_k^-1 r_k``, r_k the
     residual of pose k under the fit without it, ``S_k = C_k + J_k Sigma_(-k) J_k^T`` (C_k: camera + robot pose
     error at that fit; Sigma_(-k) its parameter covariance), against chi2(6) at the family-wise level
     ``OUTLIER_LEVEL`` over the N poses (and ``OUTLIER_MIN_RATIO`` x the median). An outlier cannot inflate the
@@ -169,19 +171,31 @@ def deletion_test(F, M, mount: str, C, labels: Sequence[str], robot_std, fit: Ha
     from scipy.stats import chi2
 
     from ..identify.handeye_fit import deletion_fit
+    from ..identify.handeye_loo import deletion_statistics, leave_one_out
+    from ..identify.handeye_problem import x_from_transforms
 
     n = len(labels)
     d, xs = np.full(n, np.inf), np.zeros((n, 12))
     theta = np.square(_theta(fit))
+    est = robot_std is None and fit.robot["source"] == "estimated"
     fits = []  # per k: (x, parameter covariance of the free ones, free mask, robot variances) of the fit without k
     allp = all_poses_problem(F, M, mount, C, fit.A, fit.B)
+    # all the subsets' fits at once (identify.handeye_loo: deletion_fit's steps, batched); one that does not settle
+    # is refitted alone
+    X, cov, th_k, settled = leave_one_out(allp, x_from_transforms(allp, fit.A, fit.B), theta, est)
+    d_all = deletion_statistics(allp, X, cov, th_k)  # pose k at the fit without it
     for k in range(n):
-        rest = [j for j in range(n) if j != k]
-        _, rk, th = deletion_fit(F[rest], M[rest], mount, C[rest], [labels[j] for j in rest], fit.A, fit.B, theta,
-                                 robot_std is None and fit.robot["source"] == "estimated")
-        xs[k] = rk.identified
-        fits.append((rk.identified, rk.covariance, np.asarray(rk.free, bool), th))
-        d[k] = pose_statistic(F, M, mount, C, k, fit.A, fit.B, fits[-1], allp)  # pose k at the fit without it
+        if settled[k]:
+            fk = (X[k], cov[k], np.ones(12, bool), th_k[k])
+            d[k] = d_all[k]
+        else:
+            rest = [j for j in range(n) if j != k]
+            _, rk, th = deletion_fit(F[rest], M[rest], mount, C[rest], [labels[j] for j in rest], fit.A, fit.B,
+                                     theta, est)
+            fk = (rk.identified, rk.covariance, np.asarray(rk.free, bool), th)
+            d[k] = pose_statistic(F, M, mount, C, k, fit.A, fit.B, fk, allp)
+        xs[k] = fk[0]
+        fits.append(fk)
     thr = float(chi2.isf(OUTLIER_LEVEL / n, 6))
     thr = max(thr, OUTLIER_MIN_RATIO**2 * float(np.median(d[np.isfinite(d)]))) if np.isfinite(d).any() else thr
     return {"d": d, "threshold": thr, "x_loo": xs, "labels": [str(lab) for lab in labels], "fits": fits}
