@@ -391,9 +391,9 @@ def test_gauss_newton_refit_of_a_subset_equals_the_lse_and_the_cached_residual_i
 # ----------------------------------------------------------------------------- all leave-one-out fits at once
 @pytest.mark.parametrize("mount", ["fixed", "eye_in_hand"])
 def test_batched_model_equals_the_problem_closures(mount):
-    """identify.handeye_loo.model_many at K parameter vectors equals the problem's residual, Jacobian and flange error
+    """identify.handeye_problem.model_many at K parameter vectors equals the problem's residual, Jacobian and flange error
     map at each of them (one pose per row too)."""
-    from vision_calib.identify.handeye_loo import model_many
+    from vision_calib.identify.handeye_problem import model_many
     from vision_calib.identify.handeye_problem import flange_error_map
 
     rng = np.random.default_rng(4)

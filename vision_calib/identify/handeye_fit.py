@@ -37,10 +37,10 @@ from numpy.typing import ArrayLike
 
 from .. import frames
 from ..errors import DataError
-from .handeye_problem import (handeye_initial_guess, handeye_problem, reweighted, robot_pose_cov, transforms_from_x,
-                              flange_error_map, x_from_transforms)
+from .handeye_problem import (flange_error_map, handeye_initial_guess, handeye_problem, model_many, reweighted,
+                              robot_pose_cov, transforms_from_x, x_from_transforms)
 from .lse import solve_lse
-from .problem import IdentificationProblem, IdentificationResult
+from .problem import IdentificationProblem, IdentificationResult, lower_triangular_inverse
 
 #: name of the candidate start when the caller gives none (:func:`.handeye_problem.handeye_initial_guess`)
 DEFAULT_CANDIDATE = "shah_numpy"
@@ -83,6 +83,21 @@ def weighted_cost(problem: IdentificationProblem, x: ArrayLike) -> float:
     """0.5 sum_k |W_k r_k(x)|^2 with the problem's obs_cov (the LSE cost)."""
     rw = np.einsum("kij,kj->ki", problem.whitening(), np.asarray(problem.residual(np.asarray(x, float)), float))
     return 0.5 * float(np.sum(rw**2))
+
+
+def candidate_costs(problem: IdentificationProblem, X: ArrayLike, robot_cov: ArrayLike | None = None) -> np.ndarray:
+    """(K,) :func:`weighted_cost` at each row of X (K, 12) of a hand-eye problem, all rows in one batched evaluation
+    (``handeye_problem.model_many``): with the problem's own weights, or, given ``robot_cov`` (6, 6), with the
+    weights at each row itself (camera + robot pose error there, :func:`.handeye_problem.reweighted`)."""
+    X = np.asarray(X, float).reshape(-1, 12)
+    r, _, D = model_many(problem, X, flange_map=robot_cov is not None)
+    if robot_cov is None:
+        W = problem.whitening()[None]
+    else:
+        C = np.asarray(problem.meta["camera_cov"], float)[None] + D @ np.asarray(robot_cov, float) @ np.swapaxes(D, 2, 3)
+        W = lower_triangular_inverse(np.linalg.cholesky(0.5 * (C + np.swapaxes(C, 2, 3))))
+    rw = (W @ r[..., None])[..., 0]
+    return 0.5 * np.einsum("kni,kni->k", rw, rw)
 
 
 def _robot_cov(theta) -> np.ndarray:
@@ -472,14 +487,12 @@ def fit_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: str, p
     first = next(iter(ok.values()))
     base = handeye_problem(F, M, mount, first[0], first[1], pose_cov, labels=labels, robot_cov=_robot_cov(theta))
 
-    def cost_at(v):  # weights at the candidate itself
-        xc = x_from_transforms(base, *v)
-        return weighted_cost(reweighted(base, xc, _robot_cov(theta)), xc)
-
-    start = min(ok, key=lambda m: cost_at(ok[m]))
-    res, pb, th, tcov, its = _irls(base, x_from_transforms(base, *ok[start]), theta, estimate, theta_start=theta_start)
+    names = list(ok)
+    Xc = np.array([x_from_transforms(base, *ok[m]) for m in names])  # (pb below shares base's parametrization)
+    start = names[int(np.argmin(candidate_costs(base, Xc, _robot_cov(theta))))]  # weights at each candidate
+    res, pb, th, tcov, its = _irls(base, Xc[names.index(start)], theta, estimate, theta_start=theta_start)
     # never worse than a closed form under the final weights: restart from one that is lower
-    costs = {m: weighted_cost(pb, x_from_transforms(pb, *v)) for m, v in ok.items()}
+    costs = dict(zip(names, candidate_costs(pb, Xc)))
     best = min(costs, key=costs.get)
     if costs[best] < res.cost_final * (1 - 1e-9):
         r2 = _irls(base, x_from_transforms(base, *ok[best]), theta, estimate, theta_start=theta_start)
@@ -686,4 +699,4 @@ def fit_estimated_noise(T_base_flange: np.ndarray, T_cam_target: np.ndarray, mou
 
 
 __all__ = ["HandeyeFit", "deletion_fit", "DEFAULT_CANDIDATE", "NOISE_FRAMES", "default_candidates", "closed_form_comparison",
-           "gauss_newton_refit", "Refit", "reml_max", "reml_negll", "reml_negll_many", "reml_variance_cov", "fit_handeye", "fit_estimated_noise", "measured_noise_blocks", "weighted_cost"]
+           "gauss_newton_refit", "Refit", "reml_max", "reml_negll", "reml_negll_many", "reml_variance_cov", "candidate_costs", "fit_handeye", "fit_estimated_noise", "measured_noise_blocks", "weighted_cost"]

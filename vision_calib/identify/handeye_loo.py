@@ -5,11 +5,11 @@ For a fit of N poses at x with the robot's variances theta, the fit without pose
 (:func:`vision_calib.identify.handeye_fit.deletion_fit`, the same steps): the weights at x, Gauss-Newton from x to
 the subset's minimum under them, the robot's variances re-estimated there (REML refined from theta, when they are
 estimated), the weights at that point with those variances, and Gauss-Newton to the minimum under them, whose
-normal matrix gives the covariance. Here the N subsets' models, residuals and Jacobians are evaluated together
-(:func:`model_many`: K parameter vectors x N poses in one array pass) and their Gauss-Newton steps are batched
-(:func:`gauss_newton_many`); only the REML search runs per subset, on terms sliced from those arrays. The answers
-are those of ``deletion_fit`` to rounding; a subset whose steps do not settle is reported as such and the caller
-refits it with ``deletion_fit``. numpy only.
+normal matrix gives the covariance. Here the subsets' models, residuals and Jacobians are evaluated together
+(``handeye_problem.model_many``: K parameter vectors x N poses in one array pass), and their Gauss-Newton steps
+(:func:`gauss_newton_many`) and REML searches (:func:`reml_newton_many`) are batched. The answers are those of
+``deletion_fit`` to rounding; a subset whose steps do not settle is reported as such and the caller refits it with
+``deletion_fit``. numpy only.
 """
 
 from __future__ import annotations
@@ -17,53 +17,9 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .. import frames
 from .handeye_fit import GN_TOL_STD, THETA_BOUNDS
-from .handeye_problem import robot_pose_cov
+from .handeye_problem import model_many, robot_pose_cov
 from .problem import IdentificationProblem, lower_triangular_inverse
-
-
-def model_many(problem: IdentificationProblem, X: ArrayLike, flange_map: bool = True, poses=None):
-    """The hand-eye problem's residual, Jacobian and flange error map at each row of X (K, 12), for all its N
-    poses: (r (K, N, 6), J (K, N, 6, 12), D (K, N, 6, 6) or None without ``flange_map``), the formulas of
-    :func:`.handeye_problem.handeye_problem`'s closures and of :func:`.handeye_problem.flange_error_map`.
-    poses: (K,) one pose per row instead (the arrays then have N = 1)."""
-    m = problem.meta
-    X = np.asarray(X, float).reshape(-1, 12)
-    G, M, F = m["G"], m["T_cam_target_meas"], m["T_base_flange"]
-    if poses is not None:
-        p = np.asarray(poses, int)
-        G, M, F = G[p][:, None], M[p][:, None], F[p][:, None]  # (K, 1, 4, 4): pose p_j for row j
-    else:
-        G, M, F = G[None], M[None], F[None]
-    RA = m["R_A_nominal"] @ frames.so3_exp(X[:, 3:6])  # (K, 3, 3)
-    RB = m["R_B_nominal"] @ frames.so3_exp(X[:, 9:12])
-    A, B = frames.make_T(RA, X[:, 0:3]), frames.make_T(RB, X[:, 6:9])
-    AG = A[:, None] @ G  # (K, N, 4, 4)
-    Tm = AG @ B[:, None]
-    r = frames.pose_error(Tm, M)
-    Jri = frames.so3_right_jacobian_inv(r[..., 3:])  # (K, N, 3, 3)
-    K, N = r.shape[:2]
-    D = np.zeros((K, N, 6, 12))
-    D[..., 0:3, 0:3] = np.eye(3)
-    WA = RA @ frames.so3_right_jacobian(X[:, 3:6])  # (K, 3, 3)
-    D[..., 0:3, 3:6] = -frames.skew(Tm[..., :3, 3] - A[:, None, :3, 3]) @ WA[:, None]
-    D[..., 3:6, 3:6] = WA[:, None]
-    D[..., 0:3, 6:9] = AG[..., :3, :3]
-    D[..., 3:6, 9:12] = AG[..., :3, :3] @ (RB @ frames.so3_right_jacobian(X[:, 9:12]))[:, None]
-    J = -D
-    J[..., 3:, :] = -(Jri @ D[..., 3:, :])
-    if not flange_map:
-        return r, J, None
-    L = np.zeros((K, N, 6, 6))
-    L[..., :3, :3] = RA[:, None]
-    L[..., 3:, 3:] = RA[:, None]
-    L[..., :3, 3:] = -(RA[:, None] @ frames.skew((G[..., :3, :3] @ B[:, None, :3, 3, None])[..., 0]))
-    if m["mount"] == "eye_in_hand":
-        L = L @ frames.inverse_error_map(F)
-    Dfl = -L
-    Dfl[..., 3:, :] = -(Jri @ L[..., 3:, :])
-    return r, J, Dfl
 
 
 def _whitening(cov: np.ndarray) -> np.ndarray:
@@ -306,5 +262,5 @@ def deletion_statistics(problem: IdentificationProblem, X: ArrayLike, cov: Array
     return d
 
 
-__all__ = ["model_many", "gauss_newton_many", "reml_terms_many", "reml_newton_many", "leave_one_out",
+__all__ = ["gauss_newton_many", "reml_terms_many", "reml_newton_many", "leave_one_out",
            "deletion_statistics"]

@@ -345,6 +345,49 @@ def flange_error_map(problem: IdentificationProblem, x: ArrayLike) -> np.ndarray
     return D
 
 
+def model_many(problem: IdentificationProblem, X: ArrayLike, flange_map: bool = True, poses=None):
+    """The hand-eye problem's residual, Jacobian and flange error map at each row of X (K, 12), for all its N
+    poses: (r (K, N, 6), J (K, N, 6, 12), D (K, N, 6, 6) or None without ``flange_map``), the formulas of
+    :func:`.handeye_problem.handeye_problem`'s closures and of :func:`.handeye_problem.flange_error_map`.
+    poses: (K,) one pose per row instead (the arrays then have N = 1)."""
+    m = problem.meta
+    X = np.asarray(X, float).reshape(-1, 12)
+    G, M, F = m["G"], m["T_cam_target_meas"], m["T_base_flange"]
+    if poses is not None:
+        p = np.asarray(poses, int)
+        G, M, F = G[p][:, None], M[p][:, None], F[p][:, None]  # (K, 1, 4, 4): pose p_j for row j
+    else:
+        G, M, F = G[None], M[None], F[None]
+    RA = m["R_A_nominal"] @ frames.so3_exp(X[:, 3:6])  # (K, 3, 3)
+    RB = m["R_B_nominal"] @ frames.so3_exp(X[:, 9:12])
+    A, B = frames.make_T(RA, X[:, 0:3]), frames.make_T(RB, X[:, 6:9])
+    AG = A[:, None] @ G  # (K, N, 4, 4)
+    Tm = AG @ B[:, None]
+    r = frames.pose_error(Tm, M)
+    Jri = frames.so3_right_jacobian_inv(r[..., 3:])  # (K, N, 3, 3)
+    K, N = r.shape[:2]
+    D = np.zeros((K, N, 6, 12))
+    D[..., 0:3, 0:3] = np.eye(3)
+    WA = RA @ frames.so3_right_jacobian(X[:, 3:6])  # (K, 3, 3)
+    D[..., 0:3, 3:6] = -frames.skew(Tm[..., :3, 3] - A[:, None, :3, 3]) @ WA[:, None]
+    D[..., 3:6, 3:6] = WA[:, None]
+    D[..., 0:3, 6:9] = AG[..., :3, :3]
+    D[..., 3:6, 9:12] = AG[..., :3, :3] @ (RB @ frames.so3_right_jacobian(X[:, 9:12]))[:, None]
+    J = -D
+    J[..., 3:, :] = -(Jri @ D[..., 3:, :])
+    if not flange_map:
+        return r, J, None
+    L = np.zeros((K, N, 6, 6))
+    L[..., :3, :3] = RA[:, None]
+    L[..., 3:, 3:] = RA[:, None]
+    L[..., :3, 3:] = -(RA[:, None] @ frames.skew((G[..., :3, :3] @ B[:, None, :3, 3, None])[..., 0]))
+    if m["mount"] == "eye_in_hand":
+        L = L @ frames.inverse_error_map(F)
+    Dfl = -L
+    Dfl[..., 3:, :] = -(Jri @ L[..., 3:, :])
+    return r, J, Dfl
+
+
 def reweighted(problem: IdentificationProblem, x: ArrayLike,
                robot_cov: ArrayLike | None = None) -> IdentificationProblem:
     """The problem with obs_cov = camera_cov + D_k robot_cov D_k^T at x (12,) (:func:`flange_error_map`);
