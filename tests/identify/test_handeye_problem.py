@@ -452,3 +452,23 @@ def test_leave_one_out_at_once_equals_the_fits_one_by_one(mount, estimate, chunk
                                                                    np.asarray(rk.free, bool), thk), allp)
         assert d[k] == pytest.approx(ref, rel=1e-7)
     assert int(np.argmax(d)) == 5  # the outlier stands out
+
+
+def test_candidate_costs_batched_equal_the_weighted_cost_one_by_one():
+    """identify.handeye_fit.candidate_costs: the weighted cost of each closed form at its own weights (robot pose
+    error given) and under the problem's weights, equal to weighted_cost of the reweighted problem, one by one."""
+    from vision_calib.identify.handeye_fit import candidate_costs, weighted_cost
+    from vision_calib.identify.handeye_problem import reweighted, robot_pose_cov
+
+    rng = np.random.default_rng(12)
+    A, B, F, M = _scene(rng, "eye_in_hand", N=9)
+    cov = _random_cov(rng, 9)
+    R = robot_pose_cov(3e-4, 5e-4)
+    pb = handeye_problem(F, _noisy(rng, M, cov), "eye_in_hand", A0=A, B0=B, pose_cov=cov, robot_cov=R)
+    X = pb.params.nominal + rng.normal(scale=0.02, size=(5, 12))
+    own = candidate_costs(pb, X, R)
+    fixed = candidate_costs(pb, X)
+    for k, x in enumerate(X):
+        assert own[k] == pytest.approx(weighted_cost(reweighted(pb, x, R), x), rel=1e-12)
+        assert fixed[k] == pytest.approx(weighted_cost(pb, x), rel=1e-12)
+    assert not np.allclose(own, fixed)
