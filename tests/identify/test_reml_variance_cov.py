@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.linalg import block_diag
 
-from vision_calib.identify.handeye_fit import reml_variance_cov
+from vision_calib.identify.reml import reml_variance_cov
 
 
 def _dense(J, known, blocks, theta):
@@ -47,7 +47,7 @@ def _dense_negll(J, r, known, blocks, theta):
 def test_reml_likelihood_its_gradient_and_its_batched_grid():
     """reml_negll against the dense formula; its analytic gradient against central differences; reml_negll_many
     (the grid's batched evaluation) equal to it row by row, inf where C is not positive definite."""
-    from vision_calib.identify.handeye_fit import reml_negll, reml_negll_many
+    from vision_calib.identify.reml import reml_negll, reml_negll_many
 
     rng = np.random.default_rng(5)
     n, k = 9, 3
@@ -79,8 +79,8 @@ def test_reml_hessian_matches_differences_of_the_gradient_and_newton_finds_the_b
     grid's best point) ends where a tight L-BFGS-B ends, and at the bound when a component pushes out of the box."""
     from scipy.optimize import minimize
 
-    from vision_calib.identify.handeye_fit import THETA_BOUNDS, reml_negll
-    from vision_calib.identify.handeye_fit import reml_max
+    from vision_calib.identify.handeye_fit import THETA_BOUNDS
+    from vision_calib.identify.reml import reml_max, reml_negll
 
     rng = np.random.default_rng(2)
     n, p = 30, 5

@@ -40,7 +40,8 @@ from ..errors import DataError
 from .handeye_problem import (flange_error_map, handeye_initial_guess, handeye_problem, model_many, reweighted,
                               robot_pose_cov, transforms_from_x, x_from_transforms)
 from .lse import solve_lse
-from .problem import IdentificationProblem, IdentificationResult, lower_triangular_inverse
+from .problem import IdentificationProblem, IdentificationResult, whitening_of
+from .reml import reml_max, reml_variance_cov
 
 #: name of the candidate start when the caller gives none (:func:`.handeye_problem.handeye_initial_guess`)
 DEFAULT_CANDIDATE = "shah_numpy"
@@ -94,8 +95,8 @@ def candidate_costs(problem: IdentificationProblem, X: ArrayLike, robot_cov: Arr
     if robot_cov is None:
         W = problem.whitening()[None]
     else:
-        C = np.asarray(problem.meta["camera_cov"], float)[None] + D @ np.asarray(robot_cov, float) @ np.swapaxes(D, 2, 3)
-        W = lower_triangular_inverse(np.linalg.cholesky(0.5 * (C + np.swapaxes(C, 2, 3))))
+        W = whitening_of(np.asarray(problem.meta["camera_cov"], float)[None]
+                         + D @ np.asarray(robot_cov, float) @ np.swapaxes(D, 2, 3))
     rw = (W @ r[..., None])[..., 0]
     return 0.5 * np.einsum("kni,kni->k", rw, rw)
 
@@ -118,192 +119,10 @@ def _reml_terms(problem: IdentificationProblem, x):
     return (J, r, np.asarray(problem.meta["camera_cov"], float), *_robot_blocks(problem, x))
 
 
-def reml_negll(theta, J, r, known, blocks, grad: bool = False, hess: bool = False):
-    """-penalised REML log-likelihood (up to a constant) of the variances theta (k,) for the model linearised at x:
-    0.5 (log|C| + log|J^T C^-1 J| + r^T P r) - 0.5 sum_i log theta_i, C = blockdiag(known_k + sum_i theta_i
-    blocks_i,k); J (N, m, p), r (N, m), known (N, m, m), blocks (k, N, m, m). The last term is the
-    boundary-avoiding prior of Chung et al. (2013, Psychometrika 78: a Gamma(2, rate -> 0) density on each std,
-    ``log s_i``): it vanishes against the likelihood where the data resolve a component and keeps its estimate
-    off 0 (about one standard error above it) where they do not. grad: return (value, gradient (k,) in theta),
-    the gradient ``0.5 (tr(P V_i) - (P r)^T V_i (P r)) - 0.5 / theta_i`` with ``tr(P V_i) = tr(W V_i) -
-    tr(A^-1 J^T W V_i W J)``, A = J^T W J (O(N) sums over the poses; inf and a zero gradient where C or A is not
-    positive definite). hess (with grad): also the Hessian (k, k) in theta, ``(P r)^T V_i P V_j (P r) - 0.5
-    tr(P V_i P V_j) + 0.5 delta_ij / theta_i^2``, the traces by the sums of :func:`reml_variance_cov`."""
-    theta = np.asarray(theta, float)
-    C = known + np.tensordot(theta, blocks, axes=1)
-    bad = ((np.inf, np.zeros(theta.shape)) + ((np.eye(len(theta)),) if hess else ())) if grad else np.inf
-    try:
-        L = np.linalg.cholesky(C)
-    except np.linalg.LinAlgError:
-        return bad
-    Li = np.linalg.inv(L)
-    Jw = Li @ J  # whitened (N, m, p)
-    rw = (Li @ r[..., None])[..., 0]
-    n, m, p = Jw.shape
-    Jf, rf = Jw.reshape(n * m, p), rw.reshape(n * m)
-    A = Jf.T @ Jf
-    g = Jf.T @ rf
-    try:
-        cA = np.linalg.cholesky(A)
-    except np.linalg.LinAlgError:
-        return bad
-    beta = np.linalg.solve(A, g)
-    e = rw - Jw @ beta  # whitened P r: Li (r - J beta)
-    rPr = float(rf @ rf - g @ beta)
-    prior = 0.5 * float(np.sum(np.log(np.maximum(theta, 1e-300))))
-    f = 0.5 * (2.0 * np.sum(np.log(np.diagonal(L, axis1=1, axis2=2))) + 2.0 * np.sum(np.log(np.diag(cA))) + rPr) \
-        - prior
-    if not grad:
-        return f
-    LV = Li[None] @ blocks @ np.swapaxes(Li, 1, 2)[None]  # (k, N, m, m): L^-1 V_i L^-T
-    trWV = np.trace(LV, axis1=2, axis2=3).sum(axis=1)  # tr(W V_i)
-    JLV = (np.swapaxes(Jw, 1, 2)[None] @ LV @ Jw[None]).sum(axis=1)  # (k, p, p): J^T W V_i W J
-    Ai = np.linalg.inv(A)
-    trAH = np.einsum("pq,kqp->k", Ai, JLV)
-    ePe = np.einsum("ni,knij,nj->k", e, LV, e)  # (P r)^T V_i (P r)
-    gr = 0.5 * (trWV - trAH - ePe) - 0.5 / np.maximum(theta, 1e-300)
-    if not hess:
-        return f, gr
-    k = len(theta)
-    u = (LV @ e[None, :, :, None])[..., 0].reshape(k, n * m)  # whitened V_i P r
-    b = u @ Jf  # (k, p)
-    LVJ = (LV @ Jw[None]).reshape(k, n * m, p)  # whitened V_i W J, the poses' rows stacked
-    LVf = LV.reshape(k, n, m * m)
-    tWW = np.einsum("inx,jnx->ij", LVf, LVf)  # sum_n tr(W V_i W V_j) (LV symmetric)
-    # tr(A^-1 G_ij), G_ij = sum_n J^T W V_i W V_j W J: the rows of (W V_i W J) A^-1 against those of W V_j W J
-    trAG = (LVJ @ Ai).reshape(k, -1) @ LVJ.reshape(k, -1).T
-    AH = Ai[None] @ JLV  # (k, p, p)
-    T = tWW - 2.0 * trAG + np.einsum("ipq,jqp->ij", AH, AH)  # tr(P V_i P V_j)
-    H = (u @ u.T - b @ Ai @ b.T) - 0.5 * T + np.diag(0.5 / np.maximum(theta, 1e-300) ** 2)
-    return f, gr, 0.5 * (H + H.T)
-
-
-#: the grid of :func:`reml_max` is evaluated in chunks of at most this many (grid point, pose) pairs
-REML_GRID_CHUNK = 1 << 15
-
-
-def reml_negll_many(thetas, J, r, known, blocks) -> np.ndarray:
-    """:func:`reml_negll` (values only) at each row of thetas (G, k), batched over the rows (chunks of
-    :data:`REML_GRID_CHUNK` (row, pose) pairs): the same values to rounding; inf where C or A is not positive
-    definite (such a chunk is evaluated row by row)."""
-    thetas = np.atleast_2d(np.asarray(thetas, float))
-    n, m, p = J.shape
-    out = np.empty(len(thetas))
-    step = max(1, REML_GRID_CHUNK // max(n, 1))
-    for s in range(0, len(thetas), step):
-        th = thetas[s:s + step]
-        C = known[None] + np.tensordot(th, blocks, axes=1)  # (g, N, m, m)
-        try:
-            L = np.linalg.cholesky(C)
-            Li = np.linalg.inv(L)
-            Jw = (Li @ J[None]).reshape(len(th), n * m, p)
-            rw = (Li @ r[None, ..., None]).reshape(len(th), n * m)
-            A = np.swapaxes(Jw, 1, 2) @ Jw
-            g = (np.swapaxes(Jw, 1, 2) @ rw[..., None])[..., 0]
-            cA = np.linalg.cholesky(A)
-        except np.linalg.LinAlgError:
-            out[s:s + step] = [reml_negll(t, J, r, known, blocks) for t in th]
-            continue
-        beta = np.linalg.solve(A, g[..., None])[..., 0]
-        rPr = np.sum(rw**2, axis=1) - np.sum(g * beta, axis=1)
-        logC = 2.0 * np.sum(np.log(np.diagonal(L, axis1=2, axis2=3)), axis=(1, 2))
-        logA = 2.0 * np.sum(np.log(np.diagonal(cA, axis1=1, axis2=2)), axis=1)
-        out[s:s + step] = 0.5 * (logC + logA + rPr) - 0.5 * np.sum(np.log(np.maximum(th, 1e-300)), axis=1)
-    return out
-
-
-def reml_max(J, r, known, blocks, bounds, start=None, grid_axes=None):
-    """theta (k,): the variances maximising the penalised REML likelihood (:func:`reml_negll`) over the box
-    ``bounds`` ((lo, hi) std per component, squared here), searched in log theta from the best point of a log grid
-    (17 points per axis) over the components ``grid_axes`` (default: all when no ``start``, none with one), the
-    other components at ``start`` (k,) or at the geometric middle of their bounds; then a projected Newton
-    refinement (:func:`_newton_in_box`; the bounded quasi-Newton L-BFGS-B where it does not settle)."""
-    from itertools import product
-
-    from scipy.optimize import minimize
-
-    lo = np.log([b[0] ** 2 for b in bounds])
-    hi = np.log([b[1] ** 2 for b in bounds])
-
-    def f(u):
-        return reml_negll(np.exp(u), J, r, known, blocks)
-
-    def fg(u):  # value and gradient in log theta
-        th = np.exp(u)
-        v, gr = reml_negll(th, J, r, known, blocks, grad=True)
-        return v, gr * th
-
-    if start is not None:
-        base = np.clip(np.log(np.maximum(np.asarray(start, float), 1e-300)), lo, hi)
-        axes = [] if grid_axes is None else list(grid_axes)
-    else:
-        base = 0.5 * (lo + hi)
-        axes = list(range(len(bounds))) if grid_axes is None else list(grid_axes)
-    u0, f0 = base, f(base)
-    if axes:  # the grid's best point (the first of equal ones), all points in one batched evaluation
-        grid = np.repeat(base[None], 17 ** len(axes), axis=0)
-        grid[:, axes] = np.array(list(product(*[np.linspace(lo[i], hi[i], 17) for i in axes])))
-        fg_ = reml_negll_many(np.exp(grid), J, r, known, blocks)
-        b = int(np.argmin(fg_))
-        if fg_[b] < f0:
-            u0, f0 = grid[b], float(fg_[b])
-    u = _newton_in_box(lambda v: _in_log(v, J, r, known, blocks), u0, f0, lo, hi)
-    if u is None:  # not settled: the bounded quasi-Newton
-        opt = minimize(fg, u0, jac=True, method="L-BFGS-B", bounds=list(zip(lo, hi)))
-        u = opt.x if np.isfinite(opt.fun) and opt.fun <= f0 else u0
-    return np.exp(u)
-
-
-def _in_log(u, J, r, known, blocks):
-    """(value, gradient, Hessian) of :func:`reml_negll` in u = log theta: g_u = theta g, H_u = diag(theta) H
-    diag(theta) + diag(theta g)."""
-    th = np.exp(u)
-    v, g, H = reml_negll(th, J, r, known, blocks, grad=True, hess=True)
-    return v, th * g, th[:, None] * H * th[None, :] + np.diag(th * g)
-
-
-#: the Newton search of :func:`reml_max` has settled when half its Newton decrement (the predicted decrease of the
-#: -log-likelihood) is below this
-REML_NEWTON_TOL = 1e-10
-
-
-def _newton_in_box(fgh, u0, f0: float, lo, hi, max_iter: int = 40):
-    """u (k,) minimising f over the box [lo, hi] from u0 (f(u0) = f0): projected Newton steps (the components at a
-    bound with the gradient pointing out are held there) with a backtracking (Armijo) line search; the Hessian
-    made positive definite by raising its eigenvalues to 1e-8 of the largest. None when it does not settle
-    (the caller then runs L-BFGS-B)."""
-    u = np.clip(np.asarray(u0, float), lo, hi)
-    f, g, H = fgh(u)
-    if not np.isfinite(f):
-        return None
-    for _ in range(max_iter):
-        free = ~(((u <= lo) & (g > 0)) | ((u >= hi) & (g < 0)))
-        if not free.any():
-            return u
-        lam, V = np.linalg.eigh(H[np.ix_(free, free)])
-        lam = np.maximum(np.abs(lam), 1e-8 * max(np.abs(lam).max(), 1e-300))
-        d = np.zeros_like(u)
-        d[free] = -(V @ ((V.T @ g[free]) / lam))
-        dec = -float(g @ d)  # Newton decrement squared
-        if dec < 2 * REML_NEWTON_TOL:
-            return u
-        t = 1.0
-        for _ in range(40):
-            un = np.clip(u + t * d, lo, hi)
-            fn, gn, Hn = fgh(un)
-            if np.isfinite(fn) and fn <= f - 1e-4 * t * dec:
-                break
-            t *= 0.5
-        else:
-            return u if dec < 1e-6 else None  # no decrease left to find: settled to rounding
-        u, f, g, H = un, fn, gn, Hn
-    return None
-
-
 def _reml_step(problem: IdentificationProblem, result: IdentificationResult, start=None, covariance: bool = True):
     """(theta (2,), cov (2, 2) or None when not ``covariance``): the robot's variances maximising the penalised
-    REML likelihood (:func:`reml_negll`) of the model linearised at the result's x (camera covariance known),
-    searched over the whole box :data:`THETA_BOUNDS` (:func:`reml_max`: a log grid, then a bounded quasi-Newton
+    REML likelihood (``reml.reml_negll``) of the model linearised at the result's x (camera covariance known),
+    searched over the whole box :data:`THETA_BOUNDS` (``reml.reml_max``: a log grid, then a projected Newton
     refinement from its best point): the maximum is global on the box, so the estimate neither runs away nor, with
     the boundary-avoiding prior, collapses to 0; its covariance is the inverse Fisher information
     2 (tr(P V_i P V_j))^-1 at the maximum. ``start``: variances (2,) near the maximum (e.g. the fit of a superset
@@ -359,33 +178,6 @@ class Refit:
     covariance: np.ndarray
     free: np.ndarray
     std: np.ndarray
-
-
-def reml_variance_cov(J, known, blocks, theta) -> np.ndarray:
-    """2 (tr(P V_i P V_j))^-1 (k, k) over the variances theta (k,) of the blocks (k, N, m, m) (pseudo-inverse: an
-    unseen component gets 0, not inf). P = W - U M U^T with W = blockdiag(C_n^-1), U = W J, M = (J^T W J)^+, so
-    tr(P V_i P V_j) = sum_n tr(W_n V_in W_n V_jn) - tr(M G_ij) - tr(M G_ji) + tr(M H_i M H_j), G_ij =
-    sum_n U_n^T V_in W_n V_jn U_n, H_i = sum_n U_n^T V_in U_n: sums over the poses, O(N) time and memory (never
-    the (N m)^2 matrix P)."""
-    blocks = np.asarray(blocks, float)
-    k, n, m = blocks.shape[:3]
-    p = J.shape[-1]
-    C = known + np.tensordot(np.asarray(theta, float), blocks, axes=1)
-    W = np.linalg.inv(C)  # (N, m, m)
-    U = W @ J  # (N, m, p)
-    M = np.linalg.pinv(J.reshape(-1, p).T @ U.reshape(-1, p))
-    WV = W[None] @ blocks  # (k, N, m, m): W_n V_in
-    VU = (blocks @ U[None]).reshape(k, n * m, p)  # V_in U_n, the poses' rows stacked
-    WVU = (W[None] @ VU.reshape(k, n, m, p)).reshape(k, n * m, p)  # W_n V_in U_n
-    H = [U.reshape(-1, p).T @ VU[i] for i in range(k)]  # (p, p) each: sum_n U_n^T V_in U_n
-    T = np.empty((k, k))
-    for i in range(k):
-        for j in range(k):
-            t1 = float(np.sum(WV[i] * np.swapaxes(WV[j], 1, 2)))
-            G = VU[i].T @ WVU[j]  # sum_n U_n^T V_in W_n V_jn U_n
-            T[i, j] = t1 - 2.0 * float(np.sum(M * G.T)) + float(np.sum((M @ H[i]) * (M @ H[j]).T))
-    T = 0.5 * (T + T.T)
-    return 2.0 * np.linalg.pinv(T)
 
 
 def _robot_blocks(problem: IdentificationProblem, x) -> tuple[np.ndarray, np.ndarray]:
@@ -699,4 +491,4 @@ def fit_estimated_noise(T_base_flange: np.ndarray, T_cam_target: np.ndarray, mou
 
 
 __all__ = ["HandeyeFit", "deletion_fit", "DEFAULT_CANDIDATE", "NOISE_FRAMES", "default_candidates", "closed_form_comparison",
-           "gauss_newton_refit", "Refit", "reml_max", "reml_negll", "reml_negll_many", "reml_variance_cov", "candidate_costs", "fit_handeye", "fit_estimated_noise", "measured_noise_blocks", "weighted_cost"]
+           "gauss_newton_refit", "Refit", "candidate_costs", "fit_handeye", "fit_estimated_noise", "measured_noise_blocks", "weighted_cost"]

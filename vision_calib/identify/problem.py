@@ -156,6 +156,14 @@ class IdentificationProblem:
         return W
 
 
+def whitening_of(cov: np.ndarray) -> np.ndarray:
+    """(..., m, m) inverse Cholesky factors W of the symmetrised covariances cov (..., m, m): W sym(cov) W^T = I (as
+    :meth:`IdentificationProblem.whitening` for covariances not held by a problem); LinAlgError when one is not
+    positive definite."""
+    cov = np.asarray(cov, float)
+    return lower_triangular_inverse(np.linalg.cholesky(0.5 * (cov + np.swapaxes(cov, -1, -2))))
+
+
 def lower_triangular_inverse(L: np.ndarray) -> np.ndarray:
     """(..., m, m) inverses of lower-triangular L (..., m, m) by forward substitution on contiguous (...,) rows, one
     array operation per term (a batch of small factors: a few times faster than ``np.linalg.inv``'s LU); a zero on
