@@ -281,8 +281,8 @@ def so3_exp(r) -> np.ndarray:
     """Rotation matrices (..., 3, 3) of rotation vectors r (..., 3) rad (Rodrigues: cos th I + sinc th [r]x +
     (1 - cos th) / th^2 r r^T, the series below th = 1e-8)."""
     r = np.asarray(r, dtype=float)
-    if r.shape == (3,):  # one vector (a mount's or a joint's rotation): scalar arithmetic, the same formula
-        return _so3_exp_one(float(r[0]), float(r[1]), float(r[2]))
+    if r.size == 3 and r.shape[-1:] == (3,):  # one vector (a mount's or a joint's rotation): scalar arithmetic
+        return _so3_exp_one(*(float(v) for v in r.reshape(3))).reshape(r.shape[:-1] + (3, 3))
     th2 = np.einsum("...i,...i->...", r, r)[..., None, None]
     th = np.sqrt(th2)
     small = th < 1e-8
@@ -309,8 +309,8 @@ def _so3_exp_one(x: float, y: float, z: float) -> np.ndarray:
 def so3_right_jacobian(r) -> np.ndarray:
     """Right Jacobian (..., 3, 3) of Exp at r (..., 3): Exp(r + dr) ~= Exp(r) Exp(Jr(r) dr)."""
     r = np.asarray(r, dtype=float)
-    if r.shape == (3,):  # one vector: scalar arithmetic, the same formula
-        x, y, z = float(r[0]), float(r[1]), float(r[2])
+    if r.size == 3 and r.shape[-1:] == (3,):  # one vector: scalar arithmetic, the same formula
+        x, y, z = (float(v) for v in r.reshape(3))
         th2 = x * x + y * y + z * z
         th = math.sqrt(th2)
         if th < 1e-6:
@@ -320,7 +320,7 @@ def so3_right_jacobian(r) -> np.ndarray:
         d = 1.0 - c * th2  # I + c K^2 = (1 - c th^2) I + c r r^T
         return np.array([[d + c * x * x, b * z + c * x * y, -b * y + c * x * z],
                          [-b * z + c * x * y, d + c * y * y, b * x + c * y * z],
-                         [b * y + c * x * z, -b * x + c * y * z, d + c * z * z]])
+                         [b * y + c * x * z, -b * x + c * y * z, d + c * z * z]]).reshape(r.shape[:-1] + (3, 3))
     th = np.linalg.norm(r, axis=-1)[..., None, None]
     K = skew(r)
     small = th < 1e-6

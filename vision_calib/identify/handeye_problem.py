@@ -104,12 +104,6 @@ def mount_G(T_base_flange: np.ndarray, mount: str) -> np.ndarray:
     return T_base_flange if mount == "fixed" else frames.inv_T(T_base_flange)
 
 
-def _inv_right_jacobian(e: np.ndarray) -> np.ndarray:
-    """(..., 3, 3) inverse of :func:`so3_right_jacobian` at rotation vectors e (..., 3) (angle <= pi: the closed
-    form ``frames.so3_right_jacobian_inv``)."""
-    return frames.so3_right_jacobian_inv(e)
-
-
 # ----------------------------------------------------------------------------- closed form
 #: relative gap below which the two largest singular values of the rotation system count as equal (no unique
 #: rotation: rotations about one axis only), and relative smallest singular value of the translation system
@@ -277,45 +271,16 @@ def handeye_problem(T_base_flange: ArrayLike, T_cam_target_meas: ArrayLike, moun
     G = mount_G(F, mount)
     RA0, RB0 = A0[:3, :3].copy(), B0[:3, :3].copy()
 
-    def model_parts(x, idx):
-        x = np.asarray(x, dtype=float).reshape(-1)
-        A = frames.make_T(RA0 @ so3_exp(x[3:6]), x[0:3])
-        B = frames.make_T(RB0 @ so3_exp(x[9:12]), x[6:9])
-        AG = A @ G[idx]
-        return x, A, B, AG, AG @ B
-
     def sel(idx):
         return np.arange(N) if idx is None else np.asarray(idx, dtype=int)
 
-    last: dict = {}  # the model and residual at the last (x, idx): the Jacobian at a residual's x reads them
-
-    def at(x, idx):
-        x = np.asarray(x, dtype=float).reshape(-1)
-        key = (x.tobytes(), None if idx is None else np.asarray(idx, dtype=int).tobytes())
-        if last.get("key") != key:
-            idx = sel(idx)
-            parts = model_parts(x, idx)
-            last.update(key=key, parts=parts, r=frames.pose_error(parts[4], M[idx]), idx=idx)
-        return last["parts"], last["r"], last["idx"]
-
     def residual(x, idx=None):
-        return at(x, idx)[1].copy()
+        idx = sel(idx)
+        return _model(RA0, RB0, G[idx][None], M[idx][None], None, mount, x, False, False)[0][0]
 
     def jacobian(x, idx=None):
-        (x, A, B, AG, Tm), r, idx = at(x, idx)
-        k = idx.size
-        D = np.zeros((k, 6, 12))  # delta (model pose error) per parameter
-        D[:, 0:3, 0:3] = np.eye(3)
-        WA = A[:3, :3] @ so3_right_jacobian(x[3:6])  # (3, 3) axes phi per unit rA, camera frame
-        arm = Tm[:, :3, 3] - A[:3, 3]  # (k, 3)
-        D[:, 0:3, 3:6] = np.einsum("kij,jl->kil", -frames.skew(arm), WA)  # phi x arm = -arm x phi
-        D[:, 3:6, 3:6] = WA
-        D[:, 0:3, 6:9] = AG[:, :3, :3]
-        D[:, 3:6, 9:12] = AG[:, :3, :3] @ (B[:3, :3] @ so3_right_jacobian(x[9:12]))
-        e = r[:, 3:]
-        J = -D
-        J[:, 3:, :] = -np.einsum("kij,kjl->kil", _inv_right_jacobian(e), D[:, 3:, :])
-        return J
+        idx = sel(idx)
+        return _model(RA0, RB0, G[idx][None], M[idx][None], None, mount, x, True, False)[1][0]
 
     problem = IdentificationProblem(
         params=params, residual=residual, jacobian=jacobian, obs_cov=cov, residual_kind="pose", labels=labels,
@@ -330,62 +295,62 @@ def handeye_problem(T_base_flange: ArrayLike, T_cam_target_meas: ArrayLike, moun
 def flange_error_map(problem: IdentificationProblem, x: ArrayLike) -> np.ndarray:
     """(N, 6, 6) d r_k / d d_k at x (12,): the residual's response to the flange pose error d_k [m, rad]
     (``perturb_pose`` on T_base_flange,k; module docstring), for all N poses of the problem."""
-    A, B = transforms_from_x(problem, x)
-    G, F = problem.meta["G"], problem.meta["T_base_flange"]
-    RA = A[:3, :3]
-    L = np.zeros((G.shape[0], 6, 6))
-    L[:, :3, :3] = RA
-    L[:, 3:, 3:] = RA
-    L[:, :3, 3:] = -np.einsum("ij,kjl->kil", RA, frames.skew(G[:, :3, :3] @ B[:3, 3]))
-    if problem.meta["mount"] == "eye_in_hand":
-        L = L @ frames.inverse_error_map(F)
-    e = frames.pose_error(A @ G @ B, problem.meta["T_cam_target_meas"])[:, 3:]
-    D = -L
-    D[:, 3:, :] = -np.einsum("kij,kjl->kil", _inv_right_jacobian(e), L[:, 3:, :])
-    return D
+    return model_many(problem, np.asarray(x, float)[None], jacobian=False)[2][0]
 
 
-def model_many(problem: IdentificationProblem, X: ArrayLike, flange_map: bool = True, poses=None):
+def _model(RA0, RB0, G, M, F, mount: str, X, jacobian: bool = True, flange_map: bool = True):
+    """The hand-eye model at each row of X (K, 12) (rotations relative to RA0, RB0 (3, 3)) for the poses G, M, F
+    (K or 1, N, 4, 4): (r (K, N, 6), J (K, N, 6, 12) or None, D (K, N, 6, 6) or None): the residual
+    ``pose_error(A G B, M)``, its Jacobian in the 12 parameters and its response to the flange pose error (F: the
+    flange poses, read for eye_in_hand)."""
+    X = np.asarray(X, float).reshape(-1, 12)
+    RA = RA0 @ so3_exp(X[:, 3:6])  # (K, 3, 3)
+    RB = RB0 @ so3_exp(X[:, 9:12])
+    A, B = frames.make_T(RA, X[:, 0:3]), frames.make_T(RB, X[:, 6:9])
+    AG = A[:, None] @ G  # (K, N, 4, 4)
+    Tm = AG @ B[:, None]
+    r = frames.pose_error(Tm, M)
+    if not (jacobian or flange_map):
+        return r, None, None
+    Jri = frames.so3_right_jacobian_inv(r[..., 3:])  # (K, N, 3, 3)
+    K, N = r.shape[:2]
+    J = Dfl = None
+    if jacobian:
+        D = np.zeros((K, N, 6, 12))  # delta (model pose error) per parameter
+        D[..., 0:3, 0:3] = np.eye(3)
+        WA = RA @ so3_right_jacobian(X[:, 3:6])  # (K, 3, 3): axes phi per unit rA, camera frame
+        D[..., 0:3, 3:6] = -frames.skew(Tm[..., :3, 3] - A[:, None, :3, 3]) @ WA[:, None]  # phi x arm
+        D[..., 3:6, 3:6] = WA[:, None]
+        D[..., 0:3, 6:9] = AG[..., :3, :3]
+        D[..., 3:6, 9:12] = AG[..., :3, :3] @ (RB @ so3_right_jacobian(X[:, 9:12]))[:, None]
+        J = -D
+        J[..., 3:, :] = -(Jri @ D[..., 3:, :])
+    if flange_map:
+        L = np.zeros((K, N, 6, 6))
+        L[..., :3, :3] = RA[:, None]
+        L[..., 3:, 3:] = RA[:, None]
+        L[..., :3, 3:] = -(RA[:, None] @ frames.skew((G[..., :3, :3] @ B[:, None, :3, 3, None])[..., 0]))
+        if mount == "eye_in_hand":
+            L = L @ frames.inverse_error_map(F)
+        Dfl = -L
+        Dfl[..., 3:, :] = -(Jri @ L[..., 3:, :])
+    return r, J, Dfl
+
+
+def model_many(problem: IdentificationProblem, X: ArrayLike, flange_map: bool = True, poses=None,
+               jacobian: bool = True):
     """The hand-eye problem's residual, Jacobian and flange error map at each row of X (K, 12), for all its N
-    poses: (r (K, N, 6), J (K, N, 6, 12), D (K, N, 6, 6) or None without ``flange_map``), the formulas of
-    :func:`.handeye_problem.handeye_problem`'s closures and of :func:`.handeye_problem.flange_error_map`.
+    poses: (r (K, N, 6), J (K, N, 6, 12) or None without ``jacobian``, D (K, N, 6, 6) or None without
+    ``flange_map``): the problem's own model (its closures and :func:`flange_error_map` read the same).
     poses: (K,) one pose per row instead (the arrays then have N = 1)."""
     m = problem.meta
-    X = np.asarray(X, float).reshape(-1, 12)
     G, M, F = m["G"], m["T_cam_target_meas"], m["T_base_flange"]
     if poses is not None:
         p = np.asarray(poses, int)
         G, M, F = G[p][:, None], M[p][:, None], F[p][:, None]  # (K, 1, 4, 4): pose p_j for row j
     else:
         G, M, F = G[None], M[None], F[None]
-    RA = m["R_A_nominal"] @ frames.so3_exp(X[:, 3:6])  # (K, 3, 3)
-    RB = m["R_B_nominal"] @ frames.so3_exp(X[:, 9:12])
-    A, B = frames.make_T(RA, X[:, 0:3]), frames.make_T(RB, X[:, 6:9])
-    AG = A[:, None] @ G  # (K, N, 4, 4)
-    Tm = AG @ B[:, None]
-    r = frames.pose_error(Tm, M)
-    Jri = frames.so3_right_jacobian_inv(r[..., 3:])  # (K, N, 3, 3)
-    K, N = r.shape[:2]
-    D = np.zeros((K, N, 6, 12))
-    D[..., 0:3, 0:3] = np.eye(3)
-    WA = RA @ frames.so3_right_jacobian(X[:, 3:6])  # (K, 3, 3)
-    D[..., 0:3, 3:6] = -frames.skew(Tm[..., :3, 3] - A[:, None, :3, 3]) @ WA[:, None]
-    D[..., 3:6, 3:6] = WA[:, None]
-    D[..., 0:3, 6:9] = AG[..., :3, :3]
-    D[..., 3:6, 9:12] = AG[..., :3, :3] @ (RB @ frames.so3_right_jacobian(X[:, 9:12]))[:, None]
-    J = -D
-    J[..., 3:, :] = -(Jri @ D[..., 3:, :])
-    if not flange_map:
-        return r, J, None
-    L = np.zeros((K, N, 6, 6))
-    L[..., :3, :3] = RA[:, None]
-    L[..., 3:, 3:] = RA[:, None]
-    L[..., :3, 3:] = -(RA[:, None] @ frames.skew((G[..., :3, :3] @ B[:, None, :3, 3, None])[..., 0]))
-    if m["mount"] == "eye_in_hand":
-        L = L @ frames.inverse_error_map(F)
-    Dfl = -L
-    Dfl[..., 3:, :] = -(Jri @ L[..., 3:, :])
-    return r, J, Dfl
+    return _model(m["R_A_nominal"], m["R_B_nominal"], G, M, F, m["mount"], X, jacobian, flange_map)
 
 
 def reweighted(problem: IdentificationProblem, x: ArrayLike,

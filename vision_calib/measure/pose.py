@@ -152,22 +152,15 @@ def measure_pose(detections: Sequence[Detection], target: TargetSpec, intrinsics
         fdiag.append(fd)
         if not d.valid:
             continue
-        if sel is not None:  # the selection of the earlier measurement, the view rule not run again
+        drop = None  # the view rule's choice of the earlier measurement (selection), else run here
+        if sel is not None:
             prev = sel.get(int(d.frame_index)) or {"valid": False, "reason": "not in the earlier measurement"}
             if not prev.get("valid"):
                 fd.update(valid=False, reason=prev.get("reason") or "invalid in the earlier measurement")
                 continue
             fd.update({k: prev[k] for k in ("area_fraction", "homography_rms_px", "dropped_corners") if k in prev})
             drop = {int(c["id"]) for c in prev.get("dropped_corners", ())}
-            keep = np.array([int(i) in lookup and int(i) not in drop for i in d.ids], dtype=bool)
-            uv_u = undistort_px(d.uv_px[keep], intrinsics)
-            if keep.sum() < config.min_corners or not np.all(np.isfinite(uv_u)):
-                fd.update(valid=False, reason="undistortion produced non-finite coordinates"
-                          if keep.sum() >= config.min_corners else f"too few corners: {int(keep.sum())}")
-                continue
-            obs.append((len(fdiag) - 1, d.ids[keep].astype(int), uv_u))
-            continue
-        keep = np.array([int(i) in lookup for i in d.ids], dtype=bool)
+        keep = np.array([int(i) in lookup and (drop is None or int(i) not in drop) for i in d.ids], dtype=bool)
         if keep.sum() < config.min_corners:
             fd.update(valid=False, reason=f"too few corners: {int(keep.sum())} < {config.min_corners}")
             continue
@@ -176,12 +169,14 @@ def measure_pose(detections: Sequence[Detection], target: TargetSpec, intrinsics
             fd.update(valid=False, reason="undistortion produced non-finite coordinates")
             continue
         ids_k = d.ids[keep].astype(int)
-        kv, why, vdiag = check_view(ids_k, np.array([lookup[int(i)] for i in ids_k]), uv_u, need,
-                                    config.min_area_fraction, board_area, config.corner_noise_px)
-        fd.update(vdiag)
-        if why:
-            fd.update(valid=False, reason=why)
-            continue
+        kv = np.ones(len(ids_k), bool)
+        if drop is None:
+            kv, why, vdiag = check_view(ids_k, np.array([lookup[int(i)] for i in ids_k]), uv_u, need,
+                                        config.min_area_fraction, board_area, config.corner_noise_px)
+            fd.update(vdiag)
+            if why:
+                fd.update(valid=False, reason=why)
+                continue
         obs.append((len(fdiag) - 1, ids_k[kv], uv_u[kv]))
     if not obs:
         reasons = sorted({f["reason"] for f in fdiag if f["reason"]})
