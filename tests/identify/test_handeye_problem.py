@@ -472,3 +472,68 @@ def test_candidate_costs_batched_equal_the_weighted_cost_one_by_one():
         assert own[k] == pytest.approx(weighted_cost(reweighted(pb, x, R), x), rel=1e-12)
         assert fixed[k] == pytest.approx(weighted_cost(pb, x), rel=1e-12)
     assert not np.allclose(own, fixed)
+
+
+def test_candidate_costs_over_a_subset_and_given_weights():
+    """candidate_costs with a pose mask equals the cost of the subset's own problem; with the whitening W given it
+    equals the cost under those weights (here the problem's own)."""
+    from vision_calib.identify.handeye_fit import candidate_costs, weighted_cost
+    from vision_calib.identify.handeye_problem import reweighted, robot_pose_cov
+
+    rng = np.random.default_rng(13)
+    A, B, F, M = _scene(rng, "fixed", N=9)
+    cov = _random_cov(rng, 9)
+    R = robot_pose_cov(3e-4, 5e-4)
+    pb = handeye_problem(F, _noisy(rng, M, cov), "fixed", A0=A, B0=B, pose_cov=cov, robot_cov=R)
+    X = pb.params.nominal + rng.normal(scale=0.02, size=(4, 12))
+    keep = [0, 2, 3, 7, 8]
+    mask = np.isin(np.arange(9), keep)[None]
+    sub = pb.subset(keep)
+    masked = candidate_costs(pb, X, R, mask=mask)
+    given = candidate_costs(pb, X, W=pb.whitening()[None], mask=mask)
+    for k, x in enumerate(X):
+        assert masked[k] == pytest.approx(weighted_cost(reweighted(pb, x, R).subset(keep), x), rel=1e-12)
+        assert given[k] == pytest.approx(weighted_cost(sub, x), rel=1e-12)
+
+
+@pytest.mark.parametrize("mount, estimate", [("fixed", True), ("eye_in_hand", True), ("eye_in_hand", False)])
+def test_subset_fits_at_once_reach_the_fits_from_the_closed_forms(mount, estimate):
+    """identify.handeye_loo.subset_fits (the held-out folds' training sets, fitted together from the fit of all the
+    poses) against fit_handeye of each subset alone (started from its closed forms): the same minimum to the
+    iteration's tolerance (1e-3 std each, so 1e-2 std here), the same robot variances (1 %), and the same
+    covariance; the start of the iteration (the fit of all) is far from each subset's minimum."""
+    from vision_calib.experiment.handeye_step import all_poses_problem
+    from vision_calib.identify.handeye_fit import fit_handeye
+    from vision_calib.identify.handeye_loo import subset_fits
+    from vision_calib.identify.handeye_problem import x_from_transforms
+    from vision_calib.measure.handeye import closed_forms
+
+    rng = np.random.default_rng(21)
+    N = 15
+    A, B, F, M = _scene(rng, mount, N=N)
+    cov = _random_cov(rng, N, 2e-4, 4e-4)
+    Fr = frames.perturb_pose(F, np.concatenate([rng.normal(scale=3e-4, size=(N, 3)),
+                                                rng.normal(scale=5e-4, size=(N, 3))], axis=1))
+    Mn = _noisy(rng, M, cov)
+    labels = [f"p{k}" for k in range(N)]
+    given = None if estimate else (3e-4, 5e-4)
+    fit = fit_handeye(Fr, Mn, mount, cov, labels, given)
+    theta = np.square([fit.robot["translation_mm"] * 1e-3, np.radians(fit.robot["rotation_deg"])])
+    allp = all_poses_problem(Fr, Mn, mount, cov, fit.A, fit.B)
+    subsets = [np.arange(0, 12), np.arange(3, 15), np.r_[0:5, 8:15]]
+    mask = np.zeros((3, N), bool)
+    for j, s in enumerate(subsets):
+        mask[j, s] = True
+    X, C, th, ok = subset_fits(allp, x_from_transforms(allp, fit.A, fit.B), theta, estimate, mask)
+    assert ok.all()
+    x_all = x_from_transforms(allp, fit.A, fit.B)
+    for j, s in enumerate(subsets):
+        ref = fit_handeye(Fr[s], Mn[s], mount, cov[s], [labels[i] for i in s], given,
+                          candidates=closed_forms(Fr[s], Mn[s], mount))
+        xr = x_from_transforms(allp, ref.A, ref.B)
+        std = np.sqrt(np.diag(C[j]))
+        assert np.max(np.abs(x_all - xr) / std) > 0.05  # the start is not the answer
+        assert np.max(np.abs(X[j] - xr) / std) < 1e-2
+        np.testing.assert_allclose(std, ref.result.std, rtol=1e-2)
+        t_ref = np.square([ref.robot["translation_mm"] * 1e-3, np.radians(ref.robot["rotation_deg"])])
+        np.testing.assert_allclose(th[j], t_ref, rtol=1e-2)

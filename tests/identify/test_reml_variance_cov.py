@@ -115,3 +115,39 @@ def test_reml_hessian_matches_differences_of_the_gradient_and_newton_finds_the_b
     weak = reml_max(J, r, known, np.stack([blocks[0], 1e-12 * blocks[1]]), bounds)
     assert weak[1] == pytest.approx(bounds[1][1] ** 2)
     assert THETA_BOUNDS[0][0] > 0
+
+
+def test_batched_newton_from_per_problem_starts_and_its_log_covariance():
+    """reml_newton of K problems with one start per problem reaches each problem's own maximum (reml_max alone), and
+    its log_cov is the inverse of the -log-likelihood's Hessian in log theta there (from reml_negll's Hessian and
+    gradient: diag(theta) H diag(theta) + diag(theta g)), close to the expected information's covariance of log
+    theta (reml_variance_cov / theta theta^T)."""
+    from vision_calib.identify.reml import reml_max, reml_negll, reml_newton
+
+    rng = np.random.default_rng(5)
+    n, p, K = 40, 4, 3
+    bounds = ((1e-3, 10.0), (1e-3, 10.0))
+    Js, rs, knowns, blocks_k = [], [], [], []
+    for k in range(K):
+        J = rng.normal(size=(n, 6, p))
+        Q = rng.normal(size=(n, 6, 6))
+        known = 0.05 * Q @ np.swapaxes(Q, 1, 2) + 0.01 * np.eye(6)
+        B = rng.normal(size=(2, n, 6, 3))
+        blocks = B @ np.swapaxes(B, 2, 3)
+        C = known + np.tensordot([0.3, 0.02 * (k + 1)], blocks, axes=1)
+        Js.append(J)
+        rs.append((np.linalg.cholesky(C) @ rng.normal(size=(n, 6, 1)))[..., 0])
+        knowns.append(known)
+        blocks_k.append(blocks)
+    starts = np.array([[0.1, 0.1], [1.0, 1e-3], [0.3, 0.05]])
+    th, ok, lc = reml_newton(np.stack(Js), np.stack(rs), np.stack(knowns), np.stack(blocks_k, axis=1), starts,
+                             bounds, log_cov=True)
+    assert ok.all()
+    for k in range(K):
+        alone = reml_max(Js[k], rs[k], knowns[k], blocks_k[k], bounds)
+        np.testing.assert_allclose(th[k], alone, rtol=1e-5)
+        _, g, H = reml_negll(th[k], Js[k], rs[k], knowns[k], blocks_k[k], grad=True, hess=True)
+        Hu = th[k][:, None] * H * th[k][None, :] + np.diag(th[k] * g)
+        np.testing.assert_allclose(lc[k], np.linalg.inv(Hu), rtol=1e-6)
+        expected = reml_variance_cov(Js[k], knowns[k], blocks_k[k], th[k]) / np.outer(th[k], th[k])
+        np.testing.assert_allclose(np.sqrt(np.diag(lc[k])), np.sqrt(np.diag(expected)), rtol=0.5)

@@ -127,7 +127,59 @@ def _pair_errors(A, B, F, M, mount: str) -> np.ndarray:
     return pose_error(A @ mount_G(F, mount) @ B, M)
 
 
-def pair_holdout(pp: PosePairs, folds: int, seed: int, outliers=(), theta_start=None) -> dict:
+def _folds_from_fit(pp, trains: list, fit) -> dict:
+    """{fold index: (A, B, closed-form start name, (A, B) of that closed form)}: the folds' training sets fitted
+    together from the whole-data fit ``fit`` (a ``HandeyeFit``; ``identify.handeye_loo.subset_fits``: the iteration
+    of ``fit_handeye`` from that fit instead of a closed form), with the start each fold's own fit would take (the
+    closed form of least weighted cost, weights at each one) for the "before" figures. A fold is left out (the
+    caller fits it alone, ``identify_handeye``) when its motions are degenerate, no closed form solves it, its
+    iteration does not settle, or one of its closed forms is below it under its final weights (another minimum)."""
+    from ..errors import VisionCalibError
+    from ..identify.handeye_fit import _robot_cov, candidate_costs
+    from ..identify.handeye_loo import subset_fits, subset_weights
+    from ..identify.handeye_problem import transforms_from_x, x_from_transforms
+    from ..measure.handeye import closed_forms
+    from .checks import handeye_motions
+    from .handeye_step import _theta, all_poses_problem
+
+    if pp.cov is None or not np.all(fit.result.free):
+        return {}
+    F, M, n = pp.T_base_flange, pp.T_cam_target, len(pp.ids)
+    allp = all_poses_problem(F, M, pp.mount, pp.cov, fit.A, fit.B)
+    estimate = pp.robot_std is None
+    theta = np.square(_theta(fit)) if estimate else np.square(np.asarray(pp.robot_std, float))
+    start_cov = _robot_cov(np.zeros(2) if estimate else theta)  # fit_handeye's weights when choosing its start
+    cands = {}
+    for f, train in enumerate(trains):
+        try:
+            handeye_motions(F[train], pp.mount, [str(pp.ids[i]) for i in train], "")
+        except VisionCalibError:
+            continue
+        ok = {m: v for m, v in closed_forms(F[train], M[train], pp.mount).items() if not isinstance(v, str)}
+        if ok:
+            cands[f] = (list(ok), np.array([x_from_transforms(allp, *v) for v in ok.values()]), ok)
+    if not cands:
+        return {}
+    fs = list(cands)
+    mask = np.zeros((len(fs), n), bool)
+    for j, f in enumerate(fs):
+        mask[j, trains[f]] = True
+    X, _, th, settled = subset_fits(allp, x_from_transforms(allp, fit.A, fit.B), theta, estimate, mask)
+    out = {}
+    for j, f in enumerate(fs):
+        if not settled[j]:
+            continue
+        names, Xc, ok = cands[f]
+        start = names[int(np.argmin(candidate_costs(allp, Xc, start_cov, mask=mask[j:j + 1])))]
+        c = candidate_costs(allp, np.vstack([X[j:j + 1], Xc]), mask=mask[j:j + 1],
+                            W=subset_weights(allp, X[j:j + 1], th[j:j + 1]))
+        if np.min(c[1:]) < c[0] * (1 - 1e-9):
+            continue
+        out[f] = (*transforms_from_x(allp, X[j]), start, ok[start])
+    return out
+
+
+def pair_holdout(pp: PosePairs, folds: int, seed: int, outliers=(), theta_start=None, fit=None) -> dict:
     """k-fold held-out validation of a pose-pair fit (``pp``: a PosePairs, or any object with its ids,
     T_base_flange, T_cam_target, cov, noise_frame, mount, robot_std and path): the poses split by
     ``holdout.fold_indices``; each fold's
@@ -137,7 +189,9 @@ def pair_holdout(pp: PosePairs, folds: int, seed: int, outliers=(), theta_start=
     [deg] norms (``holdout.error_stats``), overall and without the flagged outliers; the paired-bootstrap interval
     of the RMS change. Decision not ok (the verdict fails): a fold that cannot be identified, or our model
     predicting held-out poses significantly worse than the closed form. theta_start: the robot's variances of the
-    fit of all the poses: each fold's REML search starts there (``identify_handeye``)."""
+    fit of all the poses: each fold's REML search starts there (``identify_handeye``). fit: that fit (a
+    ``HandeyeFit`` of the poses not flagged): the folds are then fitted together from it (:func:`_folds_from_fit`;
+    the same minimum as from their closed forms, to the iteration's tolerance), a fold it cannot settle alone."""
     from .handeye_step import identify_handeye
     from .holdout import error_stats, fold_indices, rms_change_interval
 
@@ -147,29 +201,37 @@ def pair_holdout(pp: PosePairs, folds: int, seed: int, outliers=(), theta_start=
     frame = pp.noise_frame if C is None else None
     per_fold, fails, rb, ra, idx_all = [], [], [], [], []
     parts = fold_indices(n, folds, seed)
+    trains = [np.array(sorted(i for j, q in enumerate(parts) if j != f for i in q if labels[i] not in flagged), int)
+              for f in range(len(parts))]
+    near = {} if fit is None else _folds_from_fit(pp, trains, fit)
     for f, test in enumerate(parts):
-        train = np.array(sorted(i for j, q in enumerate(parts) if j != f for i in q if labels[i] not in flagged), int)
+        train = trains[f]
         rec = {"fold": f + 1, "n_train": int(len(train)), "n_test": int(len(test)),
                "n_outliers_held_out": int(sum(labels[i] in flagged for i in test))}
-        try:
-            fi = identify_handeye(F[train], M[train], pp.mount, None if C is None else C[train],
-                                  [labels[i] for i in train], pp.robot_std, robust=False, noise_frame=frame,
-                                  where=f"{pp.path}: held-out validation, fold {f + 1} of {folds}",
-                                  theta_start=theta_start, compare=False)
-        except VisionCalibError as exc:
-            fails.append(f"fold {f + 1} ({len(train)} training poses): {exc}")
-            per_fold.append({**rec, "converged": False, "error": str(exc)})
-            continue
-        start = fi.fit.closed_forms["start"]
-        Acf, Bcf = fi.fit.candidates[start]
-        if not fi.result.converged:
-            fails.append(f"fold {f + 1} ({len(train)} training poses): the fit did not converge ({fi.result.message})")
-        before, after = _pair_errors(Acf, Bcf, F[test], M[test], pp.mount), _pair_errors(fi.A, fi.B, F[test],
-                                                                                         M[test], pp.mount)
+        if f in near:
+            A_f, B_f, start, (Acf, Bcf) = near[f]
+            converged = True
+        else:
+            try:
+                fi = identify_handeye(F[train], M[train], pp.mount, None if C is None else C[train],
+                                      [labels[i] for i in train], pp.robot_std, robust=False, noise_frame=frame,
+                                      where=f"{pp.path}: held-out validation, fold {f + 1} of {folds}",
+                                      theta_start=theta_start, compare=False)
+            except VisionCalibError as exc:
+                fails.append(f"fold {f + 1} ({len(train)} training poses): {exc}")
+                per_fold.append({**rec, "converged": False, "error": str(exc)})
+                continue
+            start, (A_f, B_f), converged = fi.fit.closed_forms["start"], (fi.A, fi.B), bool(fi.result.converged)
+            Acf, Bcf = fi.fit.candidates[start]
+            if not converged:
+                fails.append(f"fold {f + 1} ({len(train)} training poses): the fit did not converge "
+                             f"({fi.result.message})")
+        before, after = _pair_errors(Acf, Bcf, F[test], M[test], pp.mount), _pair_errors(A_f, B_f, F[test], M[test],
+                                                                                         pp.mount)
         rb.append(before)
         ra.append(after)
         idx_all.append(test)
-        per_fold.append({**rec, "converged": bool(fi.result.converged), "closed_form": start,
+        per_fold.append({**rec, "converged": converged, "closed_form": start,
                          "before": error_stats(*_norms(before)), "after": error_stats(*_norms(after))})
     out = {"folds": int(folds), "seed": int(seed), "residual_kind": "pose", "residual_of": "T_cam_target",
            "before_is": "the OpenCV closed form each fold's fit started from (measure.handeye.closed_forms)",
@@ -270,7 +332,7 @@ def process_pose_pairs(pp: PosePairs, out_dir, folds: int | None = None, plots: 
     he = handeye_report(result, A, B, problem)
     he.update(handeye_blocks(ident))
     t_id = time.perf_counter() - t0
-    hold = pair_holdout(pp, folds, pp.seed, outliers=[lab for lab, _ in ident.rejected])
+    hold = pair_holdout(pp, folds, pp.seed, outliers=[lab for lab, _ in ident.rejected], fit=ident.fit)
     failure = handeye_gross_failure(pp.T_base_flange, pp.T_cam_target, pp.mount, ident, str(pp.path),
                                     alternatives=alternative_readings(pp.T_base_flange, pp.T_cam_target, pp.mount,
                                                                       "the pose-pair file", "measured poses"))

@@ -86,18 +86,21 @@ def weighted_cost(problem: IdentificationProblem, x: ArrayLike) -> float:
     return 0.5 * float(np.sum(rw**2))
 
 
-def candidate_costs(problem: IdentificationProblem, X: ArrayLike, robot_cov: ArrayLike | None = None) -> np.ndarray:
+def candidate_costs(problem: IdentificationProblem, X: ArrayLike, robot_cov: ArrayLike | None = None,
+                    mask: ArrayLike | None = None, W: ArrayLike | None = None) -> np.ndarray:
     """(K,) :func:`weighted_cost` at each row of X (K, 12) of a hand-eye problem, all rows in one batched evaluation
-    (``handeye_problem.model_many``): with the problem's own weights, or, given ``robot_cov`` (6, 6), with the
-    weights at each row itself (camera + robot pose error there, :func:`.handeye_problem.reweighted`)."""
+    (``handeye_problem.model_many``): with the problem's own weights, or the whitening ``W`` (K or 1, N, 6, 6), or,
+    given ``robot_cov`` (6, 6), with the weights at each row itself (camera + robot pose error there,
+    :func:`.handeye_problem.reweighted`). mask (K or 1, N) bool: each row's cost over those poses only."""
     X = np.asarray(X, float).reshape(-1, 12)
-    r, _, D = model_many(problem, X, flange_map=robot_cov is not None)
-    if robot_cov is None:
-        W = problem.whitening()[None]
-    else:
+    r, _, D = model_many(problem, X, flange_map=robot_cov is not None, jacobian=False)
+    if robot_cov is not None:
         W = whitening_of(np.asarray(problem.meta["camera_cov"], float)[None]
                          + D @ np.asarray(robot_cov, float) @ np.swapaxes(D, 2, 3))
+    W = problem.whitening()[None] if W is None else np.asarray(W, float)
     rw = (W @ r[..., None])[..., 0]
+    if mask is not None:
+        rw = rw * np.asarray(mask, bool)[..., None]
     return 0.5 * np.einsum("kni,kni->k", rw, rw)
 
 

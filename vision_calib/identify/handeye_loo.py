@@ -1,5 +1,5 @@
-"""Leave-one-out refits of a hand-eye fit, every subset at once (the deletion test of
-``experiment.handeye_step``).
+"""Refits of a hand-eye fit on subsets of its poses, every subset at once: the leave-one-out fits of the deletion
+test (``experiment.handeye_step``) and the training sets of the held-out folds (``experiment.poses.pair_holdout``).
 
 For a fit of N poses at x with the robot's variances theta, the fit without pose k (k = 1..N) is
 (:func:`vision_calib.identify.handeye_fit.deletion_fit`, the same steps): the weights at x, Gauss-Newton from x to
@@ -9,7 +9,11 @@ normal matrix gives the covariance. Here the subsets' models, residuals and Jaco
 (``handeye_problem.model_many``: K parameter vectors x N poses in one array pass), and their Gauss-Newton steps
 (:func:`gauss_newton_many`) and REML searches (``reml.reml_newton``) are batched. The answers are those of
 ``deletion_fit`` to rounding; a subset whose steps do not settle is reported as such and the caller refits it with
-``deletion_fit``. numpy only.
+``deletion_fit``.
+
+A held-out fold's training set is fitted by :func:`subset_fits`: the iteration of ``handeye_fit.fit_handeye`` (the
+minimum under the weights, the variances re-estimated, reweighting, until the point and the variances stop moving),
+started from the fit of all the poses instead of a closed form, every fold at once. numpy only.
 """
 
 from __future__ import annotations
@@ -17,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .handeye_fit import GN_TOL_STD, THETA_BOUNDS
+from .handeye_fit import GN_TOL_STD, THETA_BOUNDS, THETA_TOL_STD, X_TOL_STD
 from .handeye_problem import model_many, robot_pose_cov
 from .reml import reml_newton
 from .problem import IdentificationProblem, whitening_of
@@ -113,6 +117,64 @@ def leave_one_out(problem: IdentificationProblem, x: ArrayLike, theta: ArrayLike
     return X, cov, thetas, settled
 
 
+def subset_weights(problem: IdentificationProblem, X: ArrayLike, thetas: ArrayLike) -> np.ndarray:
+    """W (K, N, 6, 6): the whitening of every pose's camera covariance plus the robot's pose error at each row of X
+    (K, 12) with the variances thetas (K, 2) (m^2, rad^2): the weights of ``handeye_problem.reweighted``."""
+    _, _, D = model_many(problem, X, jacobian=False)
+    th = np.asarray(thetas, float)
+    C = np.asarray(problem.meta["camera_cov"], float)[None] + (
+        th[:, 0, None, None, None] * (D[..., :3] @ np.swapaxes(D[..., :3], 2, 3))
+        + th[:, 1, None, None, None] * (D[..., 3:] @ np.swapaxes(D[..., 3:], 2, 3)))
+    return whitening_of(0.5 * (C + np.swapaxes(C, 2, 3)))
+
+
+def subset_fits(problem: IdentificationProblem, x: ArrayLike, theta: ArrayLike, estimate: bool, mask: ArrayLike,
+                max_iter: int = 50):
+    """The fits of the pose subsets ``mask`` (K, N) bool of ``problem`` (a hand-eye problem of N poses, camera
+    covariance in ``meta["camera_cov"]``, all 12 parameters free) from its fit x (12,) with the robot's variances
+    theta (2,) (m^2, rad^2), each by the iteration of ``handeye_fit.fit_handeye``: the minimum under the weights at
+    x (Gauss-Newton), then, until no parameter moves by more than ``X_TOL_STD`` of its std and no variance by more
+    than ``THETA_TOL_STD`` of its std (in log theta, observed information): the variances re-estimated there (REML
+    refined from the last ones, when ``estimate``), the weights at the point with them, the minimum under those.
+    Returns (X (K, 12), covariance (K, 12, 12) of the last minimum, theta (K, 2), settled (K,) bool: False where a
+    step failed or the iteration did not settle within ``max_iter``: the caller fits that subset alone)."""
+    x = np.asarray(x, float)
+    theta = np.asarray(theta, float)
+    mask = np.asarray(mask, bool)
+    K = mask.shape[0]
+    cam = np.asarray(problem.meta["camera_cov"], float)
+    known = np.where(mask[..., None, None], cam[None], np.eye(6))  # a pose out of the subset: nothing of it
+    w = mask[..., None].astype(float)
+    X, cov, active = gauss_newton_many(problem, np.tile(x, (K, 1)), subset_weights(problem, x[None], theta[None]),
+                                       mask)
+    thetas, settled = np.tile(theta, (K, 1)), np.zeros(K, bool)
+    for _ in range(max_iter):
+        idx = np.flatnonzero(active)
+        if not idx.size:
+            break
+        r, J, D = model_many(problem, X[idx])
+        Dm = D * w[idx][..., None]
+        blocks = np.stack([Dm[..., :3] @ np.swapaxes(Dm[..., :3], 2, 3), Dm[..., 3:] @ np.swapaxes(Dm[..., 3:], 2, 3)])
+        if estimate:
+            th, ok, lc = reml_newton(J * w[idx][..., None], r * w[idx], known[idx], blocks, thetas[idx], THETA_BOUNDS,
+                                     log_cov=True)
+            du = np.abs(np.log(th) - np.log(thetas[idx]))
+            su = np.sqrt(np.clip(np.diagonal(lc, axis1=1, axis2=2), 0, None))
+            dt = np.where(du > 0, du / np.where(su > 0, su, 1e-300), 0.0)
+        else:
+            th, ok, dt = thetas[idx], np.ones(idx.size, bool), np.zeros((idx.size, 2))
+        C = known[idx] + np.einsum("ki,iknab->knab", th, blocks)
+        Xn, cn, ok2 = gauss_newton_many(problem, X[idx], whitening_of(0.5 * (C + np.swapaxes(C, 2, 3))), mask[idx])
+        std = np.sqrt(np.clip(np.diagonal(cn, axis1=1, axis2=2), 0, None))
+        dx = np.abs(Xn - X[idx]) / np.where(std > 0, std, 1e-300)
+        good = ok & ok2
+        X[idx], cov[idx], thetas[idx] = Xn, cn, th
+        done = good & np.all(dx < X_TOL_STD, axis=1) & np.all(dt < THETA_TOL_STD, axis=1)
+        settled[idx[done]] = True
+        active[idx[done | ~good]] = False
+    return X, cov, thetas, settled
+
+
 def deletion_statistics(problem: IdentificationProblem, X: ArrayLike, cov: ArrayLike, thetas: ArrayLike) -> np.ndarray:
     """d (K,): for each subset k (X[k] (12,), its covariance cov[k] (12, 12), robot variances thetas[k] (2,)), pose
     k's ``r^T (C + J cov J^T)^-1 r`` at X[k], C its camera covariance plus the robot's pose error there (the
@@ -137,5 +199,4 @@ def deletion_statistics(problem: IdentificationProblem, X: ArrayLike, cov: Array
     return d
 
 
-__all__ = ["gauss_newton_many", "leave_one_out",
-           "deletion_statistics"]
+__all__ = ["gauss_newton_many", "leave_one_out", "subset_weights", "subset_fits", "deletion_statistics"]

@@ -50,6 +50,7 @@ def prepare(
     fix_unidentifiable: bool = True,
     selection: str = "order",
     keep: dict | None = None,
+    keep_jacobian: bool = True,
 ) -> tuple[IdentificationProblem, np.ndarray, IdentifiabilityReport, tuple[str, ...]]:
     """Common set-up of the solvers.
 
@@ -59,9 +60,10 @@ def prepare(
     poses; "pivot": column-pivoted QR), see :func:`~vision_calib.identify.identifiability.analyze`.
     Unknown names raise ParameterError; bad data (non-finite residual, Jacobian, covariance or
     cost at x0) DataError naming the poses; too few equations IdentifiabilityError.
-    keep: a dict that receives ``"blocks"``, the whitened free Jacobian at x0 of the final free set in blocks
-    [(a, b, Aw ((b - a) m, n_free), columns times ``params.scale``)], when it fits in :data:`KEEP_BYTES` (the
-    solver's first normal equations; the analysis reads their Gram matrix, the same sums it would form).
+    keep: a dict that receives ``"r0"``, the residual (n_obs, m) at x0 checked here, and ``"blocks"``, the
+    whitened free Jacobian at x0 of the final free set in blocks [(a, b, Aw ((b - a) m, n_free), columns times
+    ``params.scale``)], when it fits in :data:`KEEP_BYTES` (the solver's first normal equations; the analysis reads
+    their Gram matrix, the same sums it would form; not with ``keep_jacobian=False``).
     """
     params = problem.params
     if free is not None:
@@ -74,7 +76,7 @@ def prepare(
     problem = problem.with_params(params)
     x0 = params.nominal.copy() if x0 is None else np.asarray(x0, float).reshape(-1).copy()
     big = problem.n_obs > BLOCK_POSES  # no (n_obs, m, n) Jacobian held: its Gram matrix, block by block
-    fits = keep is not None and kept_jacobian_fits(problem)
+    fits = keep is not None and keep_jacobian and kept_jacobian_fits(problem)
     r0, J0 = check_problem(problem, x0, jacobian=not big and not fits)  # (analyze computes J if it needs it)
     check_start_cost(problem, r0)
     blocks = None
@@ -103,8 +105,10 @@ def prepare(
                 + ", ".join(report.non_identifiable)
                 + "; their covariance is a pseudo-inverse and their values are arbitrary along the null space",
             )
-    if keep is not None and blocks is not None:
-        keep["blocks"] = blocks
+    if keep is not None:
+        keep["r0"] = r0
+        if blocks is not None:
+            keep["blocks"] = blocks
     return problem, x0, report, warnings
 
 
@@ -133,17 +137,18 @@ def pose_chi2(problem: IdentificationProblem, r: np.ndarray, W: np.ndarray | Non
 
 
 def final_check(problem: IdentificationProblem, x: np.ndarray, cov: np.ndarray, W: np.ndarray,
-                J: np.ndarray | None = None) -> tuple[np.ndarray | None, str]:
-    """Residuals (n_obs, m) at the solution x (n,) (None if they cannot be evaluated) and "" when x, the
-    residuals, the cost, J (n_obs, m, n) (if given) and cov are all finite; else the cause, naming the
-    parameters or poses (pose labels)."""
+                J: np.ndarray | None = None, r: np.ndarray | None = None) -> tuple[np.ndarray | None, str]:
+    """Residuals (n_obs, m) at the solution x (n,) (None if they cannot be evaluated; ``r`` when the solver already
+    has them there) and "" when x, the residuals, the cost, J (n_obs, m, n) (if given) and cov are all finite; else
+    the cause, naming the parameters or poses (pose labels)."""
     params = problem.params
     if not np.all(np.isfinite(x)):
         return None, f"parameters are not finite at the solution: {[params.names[i] for i in np.flatnonzero(~np.isfinite(x))]}"
-    try:
-        r = np.asarray(problem.residual(x), float)
-    except VisionCalibError as exc:
-        return None, f"the residual cannot be evaluated at the solution: {exc}"
+    if r is None:
+        try:
+            r = np.asarray(problem.residual(x), float)
+        except VisionCalibError as exc:
+            return None, f"the residual cannot be evaluated at the solution: {exc}"
     bad = np.flatnonzero(~np.all(np.isfinite(r), axis=1))
     if bad.size:
         return r, f"residual is not finite at the solution for poses {pose_labels(problem, bad)}"
@@ -196,16 +201,18 @@ def correlation_warnings(names: Sequence[str], cov: np.ndarray, threshold: float
     return tuple(f"corr({names[i]}, {names[j]}) = {corr[i, j]:+.3f}" for i, j in zip(*np.nonzero(hit)))
 
 
-def whitened_cost(problem: IdentificationProblem, x: ArrayLike, W: np.ndarray | None = None) -> float:
-    """0.5 * sum of squared whitened residuals at x (n,), prior rows included."""
+def whitened_cost(problem: IdentificationProblem, x: ArrayLike, W: np.ndarray | None = None,
+                  r: np.ndarray | None = None) -> float:
+    """0.5 * sum of squared whitened residuals at x (n,), prior rows included (``r``: the residual (n_obs, m) at x
+    when already computed)."""
     W = problem.whitening() if W is None else W
-    rw = np.einsum("kij,kj->ki", W, problem.residual(x))
+    rw = np.einsum("kij,kj->ki", W, problem.residual(x) if r is None else r)
     return 0.5 * float(np.sum(rw**2) + np.sum(problem.prior_residual(x) ** 2))
 
 
 def finish_result(method, original, problem, x0, x, cov, cost0, iterations, converged, warnings, t0, info, W=None,
-                  status=None, message="", J=None):
-    """Build the IdentificationResult (shared by LSE and EKF).
+                  status=None, message="", J=None, r=None):
+    """Build the IdentificationResult (shared by LSE and EKF); r: the residual (n_obs, m) at x when the solver has it.
 
     status/message: the solver's verdict (status default: 1 when converged else 0). Whatever the solver
     says, non-finite parameters, residuals, cost, Jacobian J (n_obs, m, n) (if given) or covariance at
@@ -215,7 +222,7 @@ def finish_result(method, original, problem, x0, x, cov, cost0, iterations, conv
     fi = params.free_index
     W = problem.whitening() if W is None else W
     status = (STATUS_CONVERGED if converged else 0) if status is None else int(status)
-    r, bad = final_check(problem, np.asarray(x, float), cov, W, J)
+    r, bad = final_check(problem, np.asarray(x, float), cov, W, J, r)
     warnings = list(warnings)
     if bad:
         converged, status, message = False, STATUS_NOT_FINITE, bad
@@ -306,13 +313,14 @@ def solve_lse(
     method = _lse_method(method, loss, jac)
     original = problem
     kept: dict = {}
-    problem, x0, report, warnings = prepare(problem, x0, free, fix, fix_unidentifiable, selection,
-                                            keep=kept if method == "lm" and jac == "analytic" else None)
+    problem, x0, report, warnings = prepare(problem, x0, free, fix, fix_unidentifiable, selection, keep=kept,
+                                            keep_jacobian=method == "lm" and jac == "analytic")
     params = problem.params
     fi = params.free_index
     s = params.scale[fi]
     W = problem.whitening()
     x0_free = x0[fi]
+    last = {"z": np.zeros(fi.size), "r": kept["r0"]}  # the residual (n_obs, m) at the last z evaluated
 
     def x_of(z):
         x = x0.copy()
@@ -321,13 +329,16 @@ def solve_lse(
 
     def fun(z):
         x = x_of(z)
-        rw = np.einsum("kij,kj->ki", W, problem.residual(x)).ravel()
+        if not np.array_equal(z, last["z"]):
+            last["z"], last["r"] = np.array(z, float), None
+            last["r"] = np.asarray(problem.residual(x), float)
+        rw = np.einsum("kij,kj->ki", W, last["r"]).ravel()
         return np.concatenate([rw, problem.prior_residual(x)]) if problem.prior_rows else rw
 
     def jac_fn(z):
         return whitened_free_jacobian(problem, problem.jacobian(x_of(z)), W) * s[None, :]
 
-    cost0 = whitened_cost(problem, x0, W)
+    cost0 = whitened_cost(problem, x0, W, kept["r0"])
     cov = J = None
     if method == "lm" and jac == "analytic":  # the normal equations in BLAS, accumulated over blocks of poses
         sol = levenberg_marquardt(fun, None, np.zeros(fi.size), max_nfev, xtol, ftol, gtol,
@@ -358,8 +369,9 @@ def solve_lse(
     status = 1 if sol.status > 0 else (0 if sol.status == 0 else -1)
     message = (f"Levenberg-Marquardt (normal equations): {sol.message}" if isinstance(sol, LMResult)
                else f"scipy least_squares ({method}): {sol.message}")
+    r = last["r"] if np.array_equal(sol.x, last["z"]) else None
     return finish_result("lse", original, problem, x0, x, cov, cost0, iterations, converged, warnings, t0, info, W,
-                         status=status, message=message, J=J)
+                         status=status, message=message, J=J, r=r)
 
 
 def normal_equations(problem: IdentificationProblem, W: np.ndarray, x_of, s: np.ndarray, block: int | None = None,

@@ -125,12 +125,13 @@ def reml_negll_many(thetas, J, r, known, blocks) -> np.ndarray:
                            for s in range(0, len(thetas), step)]) if len(thetas) else np.zeros(0)
 
 
-def newton_in_box(fgh, u0, lo, hi, max_iter: int = 40):
+def newton_in_box(fgh, u0, lo, hi, max_iter: int = 40, hessian: bool = False):
     """u (K, k) minimising K functions over the box [lo, hi] (k,) from u0 (K, k): projected Newton steps (the
     components at a bound with the gradient pointing out held there) with a backtracking (Armijo) line search per
     problem, the Hessian made positive definite by raising its eigenvalues to 1e-8 of the largest. fgh(u (K', k),
     rows (K',)) -> (f (K',), gradient (K', k), Hessian (K', k, k)) of the problems ``rows``. Returns (u, settled
-    (K,) bool: False where the search did not settle, the caller's fallback)."""
+    (K,) bool: False where the search did not settle, the caller's fallback), and with ``hessian`` the Hessian
+    (K, k, k) at u."""
     u = np.clip(np.array(u0, float), lo, hi)
     K, k = u.shape
     f, g, H = fgh(u, np.arange(K))
@@ -167,7 +168,7 @@ def newton_in_box(fgh, u0, lo, hi, max_iter: int = 40):
         stuck = idx[search]  # no decrease found: settled to rounding when the decrease left was tiny, else not
         settled[stuck[dec[search] < 1e-6]] = True
         active[stuck] = False
-    return u, settled
+    return (u, settled, H) if hessian else (u, settled)
 
 
 def _log_terms(J, r, known, blocks):
@@ -186,15 +187,18 @@ def _log_box(bounds) -> tuple[np.ndarray, np.ndarray]:
     return np.log([b[0] ** 2 for b in bounds]), np.log([b[1] ** 2 for b in bounds])
 
 
-def reml_newton(J, r, known, blocks, theta0, bounds, max_iter: int = 40):
+def reml_newton(J, r, known, blocks, theta0, bounds, max_iter: int = 40, log_cov: bool = False):
     """The variances maximising :func:`reml_terms` for K problems (its arguments) over the box ``bounds`` ((lo, hi)
-    std per component), by :func:`newton_in_box` in log theta from theta0 (k,) (no grid). Returns (theta (K, k),
-    settled (K,) bool: False where the search did not settle, to be redone alone)."""
+    std per component), by :func:`newton_in_box` in log theta from theta0 (k,) (every problem) or (K, k) (no grid).
+    Returns (theta (K, k), settled (K,) bool: False where the search did not settle, to be redone alone), and with
+    ``log_cov`` the inverse Hessian (K, k, k) of the -log-likelihood in log theta there (the covariance of
+    log theta, observed information; pseudo-inverse)."""
     lo, hi = _log_box(bounds)
     K = max(J.shape[0], r.shape[0], known.shape[0], blocks.shape[1])
-    u0 = np.tile(np.clip(np.log(np.maximum(np.asarray(theta0, float), 1e-300)), lo, hi), (K, 1))
-    u, settled = newton_in_box(_log_terms(J, r, known, blocks), u0, lo, hi, max_iter)
-    return np.exp(u), settled
+    u0 = np.clip(np.log(np.maximum(np.asarray(theta0, float), 1e-300)), lo, hi)
+    u0 = np.array(np.broadcast_to(u0, (K, u0.shape[-1])))
+    out = newton_in_box(_log_terms(J, r, known, blocks), u0, lo, hi, max_iter, hessian=log_cov)
+    return (np.exp(out[0]), out[1], np.linalg.pinv(out[2], hermitian=True)) if log_cov else (np.exp(out[0]), out[1])
 
 
 def reml_max(J, r, known, blocks, bounds, start=None, grid_axes=None):
