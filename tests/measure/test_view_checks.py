@@ -131,3 +131,34 @@ def test_remeasure_with_a_selection_keeps_the_corners_and_frames_of_the_first_me
     # without the moved corner's selection the pose moves: the selection is what kept it out
     free = measure_pose(dets, charuco, DIST_INTR, config=MeasureConfig(corner_noise_px=50.0), covariance=False)
     assert np.abs(frames.pose_error(free.T_cam_target, m.T_cam_target)).max() > 1e-6
+
+
+@pytest.mark.parametrize("mode", ["corners", "poses"])
+def test_light_remeasure_equals_measure_pose_with_the_selection(charuco, mode):
+    """measure.remeasure.remeasure_pose (corners gathered once, undistorted with each camera, PnP refined from the
+    measured pose) equals measure_pose(selection=) under cameras a few px away, in both modes (the same minimum:
+    1e-10 in the pose, 1e-8 rad for the mean of per-frame poses, whose refinements stop at OpenCV's tolerance; the
+    pose's std here is ~1e-4 rad); with a dropped corner and a rejected frame kept out; None where measure_pose would reject
+    the pose (reprojection RMS over the limit), so that the caller's full measurement names why."""
+    from dataclasses import replace
+
+    from vision_calib.measure.remeasure import remeasurable, remeasure_pose
+
+    T, dets = _view(charuco, move=(17, np.array([4.0, -3.0])))
+    dets = [*dets, replace(dets[0], frame_index=3, uv_px=dets[0].uv_px + np.random.default_rng(1).normal(0, 2.0,
+                                                                                                     dets[0].uv_px.shape))]
+    cfg = MeasureConfig(mode=mode)
+    m = measure_pose(dets, charuco, DIST_INTR, config=cfg)
+    assert m.valid and not m.frames[3]["valid"] and m.frames[0]["dropped_corners"]
+    rm = remeasurable(dets, charuco, m, cfg)
+    assert rm is not None and rm.frame.max() == 2  # the 3 accepted frames
+    for change in ({"fx": DIST_INTR.fx + 3.0}, {"cx": DIST_INTR.cx - 2.0, "cy": DIST_INTR.cy + 1.5},
+                   {"dist": tuple(np.asarray(DIST_INTR.dist) * 1.02)}):
+        cam = replace(DIST_INTR, **change)
+        ref = measure_pose(dets, charuco, cam, config=cfg, selection=m.frames, covariance=False)
+        light = remeasure_pose(rm, cam)
+        assert np.abs(frames.pose_error(light, m.T_cam_target)).max() > 1e-6  # the camera moved the pose
+        assert np.abs(frames.pose_error(light, ref.T_cam_target)).max() < (1e-10 if mode == "corners" else 1e-8)
+    strict = replace(cfg, max_rms_px=1e-3)
+    assert remeasure_pose(remeasurable(dets, charuco, m, strict), DIST_INTR) is None
+    assert not measure_pose(dets, charuco, DIST_INTR, config=strict, selection=m.frames, covariance=False).valid

@@ -112,20 +112,33 @@ def intrinsics_directions(block: dict, camera):
     return out
 
 
-def remeasure(dets: dict, labels, target, camera, config, original: dict | None = None):
+def remeasure(dets: dict, labels, target, camera, config, original: dict | None = None,
+              prepared: dict | None = None):
     """(N, 4, 4) T_cam_target of the poses ``labels`` re-measured from their detections with ``camera``
     (undistortion + PnP only; no detection; config: measure.MeasureConfig, the recording's
     ``Recording.measure_config()``); None when one of them is no longer valid. original: {label:
     PoseMeasurement} of these detections: each pose keeps its frames and corners (``measure_pose(selection=)``,
-    the derivative of the measurement, not of its data association); None: the view rule is run again."""
+    the derivative of the measurement, not of its data association); None: the view rule is run again.
+    prepared: a dict kept by the caller over its cameras (filled here, {label: ``measure.remeasure.Remeasurable``
+    or None}): with ``original``, each pose's corners are gathered once and re-measured by
+    ``measure.remeasure.remeasure_pose`` (the same pose; ``measure_pose`` where it declines)."""
     import numpy as np
 
     from ..measure import measure_pose
+    from ..measure.remeasure import remeasurable, remeasure_pose
 
     T = []
     for lab in labels:
         pm0 = None if original is None else original.get(str(lab))
         sel = None if pm0 is None else pm0.frames
+        if pm0 is not None and prepared is not None:
+            if str(lab) not in prepared:
+                prepared[str(lab)] = remeasurable(dets[lab], target, pm0, config)
+            rm = prepared[str(lab)]
+            Tk = None if rm is None else remeasure_pose(rm, camera)
+            if Tk is not None:
+                T.append(Tk)
+                continue
         pm = measure_pose(dets[lab], target, camera, pose_id=lab, config=config, covariance=False, selection=sel)
         if not pm.valid:
             return None
@@ -192,11 +205,11 @@ def residual_response(dirs, dets: dict, labels, rec, x, r0, problem_for, used: l
     original: {label: PoseMeasurement}, the corner selection each re-measurement keeps (:func:`remeasure`)."""
     import numpy as np
 
-    cols = []
+    cols, prepared = [], {}
     if used is not None:
         used.clear()
     for cam in dirs:
-        T = remeasure(dets, labels, rec.target, cam, rec.measure_config(), original)
+        T = remeasure(dets, labels, rec.target, cam, rec.measure_config(), original, prepared)
         if T is not None:
             cols.append(np.asarray(problem_for(T).residual(x), float) - r0)
             if used is not None:

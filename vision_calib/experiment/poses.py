@@ -135,20 +135,20 @@ def _folds_from_fit(pp, trains: list, fit) -> dict:
     caller fits it alone, ``identify_handeye``) when its motions are degenerate, no closed form solves it, its
     iteration does not settle, or one of its closed forms is below it under its final weights (another minimum)."""
     from ..errors import VisionCalibError
-    from ..identify.handeye_fit import _robot_cov, candidate_costs
+    from ..identify.handeye_fit import candidate_costs
     from ..identify.handeye_loo import subset_fits, subset_weights
-    from ..identify.handeye_problem import transforms_from_x, x_from_transforms
+    from ..identify.handeye_problem import robot_pose_cov, transforms_from_x, x_from_transforms
     from ..measure.handeye import closed_forms
     from .checks import handeye_motions
-    from .handeye_step import _theta, all_poses_problem
+    from .handeye_step import all_poses_problem
 
     if pp.cov is None or not np.all(fit.result.free):
         return {}
     F, M, n = pp.T_base_flange, pp.T_cam_target, len(pp.ids)
     allp = all_poses_problem(F, M, pp.mount, pp.cov, fit.A, fit.B)
     estimate = pp.robot_std is None
-    theta = np.square(_theta(fit)) if estimate else np.square(np.asarray(pp.robot_std, float))
-    start_cov = _robot_cov(np.zeros(2) if estimate else theta)  # fit_handeye's weights when choosing its start
+    theta = fit.robot_variances if estimate else np.square(np.asarray(pp.robot_std, float))
+    start_cov = robot_pose_cov(*np.sqrt(np.zeros(2) if estimate else theta))  # fit_handeye's, choosing its start
     cands = {}
     for f, train in enumerate(trains):
         try:

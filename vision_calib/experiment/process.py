@@ -284,8 +284,9 @@ def fit_measured(m: Measured, out_dir: str | Path | None, method: str | None = N
         hold = None if held is None else held.block()
         failed = failure or inconsistency_failure(ident) or holdout_failure(hold)
         final["result"] = res = with_holdout_warning(result, hold)
+        prepared = {}  # each pose's corners gathered once for the shifted cameras
         sens = intrinsics_sensitivity(ident, meas, rec.camera, lambda cam, labels: remeasure(
-            dets, labels, rec.target, cam, rec.measure_config(), by_id), given_std=intr.get("std") is not None)
+            dets, labels, rec.target, cam, rec.measure_config(), by_id, prepared), given_std=intr.get("std") is not None)
         report = build_report(
             "process", source={"folder": str(rec.folder), "scene": {"name": scene.name, "path": str(scene.path),
                                                                    "robot_kind": setup.kind}},

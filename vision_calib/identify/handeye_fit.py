@@ -71,6 +71,11 @@ class HandeyeFit:
     candidates: dict
     noise: dict | None = None
 
+    @property
+    def robot_variances(self) -> np.ndarray:
+        """(2,) the variances (s_t^2 [m^2], s_r^2 [rad^2]) per axis of the robot's pose error (given or estimated)."""
+        return np.square([1e-3 * self.robot["translation_mm"], np.radians(self.robot["rotation_deg"])])
+
 
 def default_candidates(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: str) -> dict:
     """{:data:`DEFAULT_CANDIDATE`: (A, B) (4, 4) each, or the error message (str)}: the numpy closed form."""

@@ -71,8 +71,23 @@ def solve_pnp_planar(p_target: np.ndarray, uv_undist_px: np.ndarray, intr: Camer
     if n == 0:
         raise ValueError("solvePnP found no solution")
     best = int(np.argmin(np.asarray(errs).ravel())) if errs is not None and len(errs) else 0
-    rvec, tvec = rvecs[best].copy(), tvecs[best].copy()
-    rvec, tvec = cv2.solvePnPRefineLM(obj, img, K, zero, rvec, tvec,
+    return _refined(obj, img, intr, rvecs[best].copy(), tvecs[best].copy(), p_target, uv_undist_px)
+
+
+def refine_pnp_planar(p_target: np.ndarray, uv_undist_px: np.ndarray, intr: CameraIntrinsics,
+                      T_start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`solve_pnp_planar`'s Levenberg-Marquardt alone, from T_start (4, 4) T_cam_target (e.g. the pose measured
+    under nearby intrinsics: the same minimum, no IPPE). Same arguments, returns and errors."""
+    obj = np.ascontiguousarray(p_target, dtype=np.float64).reshape(-1, 1, 3)
+    img = np.ascontiguousarray(uv_undist_px, dtype=np.float64).reshape(-1, 1, 2)
+    T_start = np.asarray(T_start, float)
+    rvec = frames.rotvec_from_matrix(T_start[:3, :3]).reshape(3, 1)
+    return _refined(obj, img, intr, rvec, T_start[:3, 3].reshape(3, 1).copy(), p_target, uv_undist_px)
+
+
+def _refined(obj, img, intr, rvec, tvec, p_target, uv_undist_px):
+    """(T, residuals (K, 2) px) after cv2.solvePnPRefineLM from (rvec, tvec) (3, 1) (tolerance 1e-12, 50 steps)."""
+    rvec, tvec = cv2.solvePnPRefineLM(obj, img, intr.K, np.zeros(5), rvec, tvec,
                                       (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 50, 1e-12))
     T = frames.T_from_rvec_tvec(rvec.ravel(), tvec.ravel())
     if not np.all(np.isfinite(T)) or T[2, 3] <= 0:

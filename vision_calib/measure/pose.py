@@ -127,6 +127,12 @@ def _rms(res: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum(res**2, axis=1)))) if len(res) else float("nan")
 
 
+def selected_corners(d: Detection, lookup: dict, drop: set | None = None) -> np.ndarray:
+    """(n,) bool: the corners of detection d that are target corners (``lookup``: pnp.target_lookup) and not in
+    ``drop`` (ids the view rule dropped in an earlier measurement; None: none)."""
+    return np.array([int(i) in lookup and (drop is None or int(i) not in drop) for i in d.ids], dtype=bool)
+
+
 def measure_pose(detections: Sequence[Detection], target: TargetSpec, intrinsics: CameraIntrinsics, pose_id=0,
                  config: MeasureConfig = MeasureConfig(), covariance: bool = True,
                  selection: Sequence[dict] | None = None) -> PoseMeasurement:
@@ -160,7 +166,7 @@ def measure_pose(detections: Sequence[Detection], target: TargetSpec, intrinsics
                 continue
             fd.update({k: prev[k] for k in ("area_fraction", "homography_rms_px", "dropped_corners") if k in prev})
             drop = {int(c["id"]) for c in prev.get("dropped_corners", ())}
-        keep = np.array([int(i) in lookup and (drop is None or int(i) not in drop) for i in d.ids], dtype=bool)
+        keep = selected_corners(d, lookup, drop)
         if keep.sum() < config.min_corners:
             fd.update(valid=False, reason=f"too few corners: {int(keep.sum())} < {config.min_corners}")
             continue
