@@ -47,6 +47,19 @@ def test_pose_noise_draws_have_each_poses_covariance():
         pose_noise(rng, np.stack([Cs, np.full((6, 6), np.nan)]))
 
 
+def test_pose_noise_draws_are_continuous_in_the_covariance():
+    """Covariances equal to rounding (here with repeated eigenvalues, e.g. isotropic translation and rotation std,
+    where eigenvectors are arbitrary within each eigenspace) give draws equal to rounding: the symmetric square
+    root, not the eigenvectors' basis, maps the standard normal draw."""
+    rng = np.random.default_rng(8)
+    C = np.diag([1e-8] * 3 + [4e-8] * 3)
+    R = rng.normal(size=(50, 6, 6))
+    tiny = C[None] + 1e-23 * (R + np.swapaxes(R, 1, 2))  # 1e-15 relative
+    ref = pose_noise(np.random.default_rng(3), np.repeat(C[None], 50, axis=0))
+    d = pose_noise(np.random.default_rng(3), tiny)
+    assert np.max(np.abs(d - ref)) < 1e-9 * np.max(np.abs(ref))
+
+
 def test_synthetic_measurements_apply_the_drawn_noise_in_the_pose_error_convention():
     setup = load_scene(H4).setup
     rng = np.random.default_rng(3)

@@ -90,15 +90,18 @@ def pose_cov_from_sigmas(n: int, sigma_t_m: float, sigma_r_rad: float) -> np.nda
 def pose_noise(rng: np.random.Generator, cov: ArrayLike) -> np.ndarray:
     """(N, 6) pose errors d_k ~ N(0, cov[k]) for covariances cov (N, 6, 6) in the ``frames.pose_error``
     convention (translation m, rotation vector rad, camera frame; apply with ``frames.perturb_pose``).
-    Symmetric square root by eigen-decomposition (a semi-definite covariance is fine; negative rounding
-    eigenvalues count as 0). DataError when a covariance is not finite."""
+    d_k = S_k z_k, z_k ~ N(0, I), S_k = V diag(sqrt(lam)) V^T the symmetric square root of cov[k] (eigen-decomposition;
+    a semi-definite covariance is fine, negative rounding eigenvalues count as 0): unlike V sqrt(lam) alone, it does
+    not depend on the eigenvectors' signs or on their basis within a repeated eigenvalue, so covariances equal to
+    rounding give draws equal to rounding. DataError when a covariance is not finite."""
     cov = np.asarray(cov, float)
     if not np.all(np.isfinite(cov)):
         bad = np.flatnonzero(~np.all(np.isfinite(cov), axis=(1, 2)))
         raise DataError(f"pose covariance not finite for poses {bad.tolist()[:5]}: no noise can be drawn from it")
     lam, V = np.linalg.eigh(0.5 * (cov + np.swapaxes(cov, 1, 2)))
+    S = (V * np.sqrt(np.clip(lam, 0.0, None))[:, None, :]) @ np.swapaxes(V, 1, 2)
     z = rng.normal(size=(len(cov), 6))
-    return np.einsum("kij,kj->ki", V, np.sqrt(np.clip(lam, 0.0, None)) * z)
+    return np.einsum("kij,kj->ki", S, z)
 
 
 #: the kind-independent fields of ``Evaluation.to_dict()`` (the rest are the kind's criteria)
