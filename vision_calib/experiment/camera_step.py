@@ -120,25 +120,28 @@ def remeasure(dets: dict, labels, target, camera, config, original: dict | None 
     PoseMeasurement} of these detections: each pose keeps its frames and corners (``measure_pose(selection=)``,
     the derivative of the measurement, not of its data association); None: the view rule is run again.
     prepared: a dict kept by the caller over its cameras (filled here, {label: ``measure.remeasure.Remeasurable``
-    or None}): with ``original``, each pose's corners are gathered once and re-measured by
-    ``measure.remeasure.remeasure_pose`` (the same pose; ``measure_pose`` where it declines)."""
+    or None}): with ``original``, each pose's corners are gathered once and the poses re-measured together by
+    ``measure.remeasure.remeasure_many`` (the same poses; ``measure_pose`` where it declines)."""
     import numpy as np
 
     from ..measure import measure_pose
-    from ..measure.remeasure import remeasurable, remeasure_pose
+    from ..measure.remeasure import remeasurable, remeasure_many
 
+    light = {}  # label -> T of the light path (all the prepared poses at once)
+    if original is not None and prepared is not None:
+        for lab in labels:
+            pm0 = original.get(str(lab))
+            if pm0 is not None and str(lab) not in prepared:
+                prepared[str(lab)] = remeasurable(dets[lab], target, pm0, config)
+        labs = [str(lab) for lab in labels if prepared.get(str(lab)) is not None]
+        light = dict(zip(labs, remeasure_many([prepared[lab] for lab in labs], camera)))
     T = []
     for lab in labels:
+        if light.get(str(lab)) is not None:
+            T.append(light[str(lab)])
+            continue
         pm0 = None if original is None else original.get(str(lab))
         sel = None if pm0 is None else pm0.frames
-        if pm0 is not None and prepared is not None:
-            if str(lab) not in prepared:
-                prepared[str(lab)] = remeasurable(dets[lab], target, pm0, config)
-            rm = prepared[str(lab)]
-            Tk = None if rm is None else remeasure_pose(rm, camera)
-            if Tk is not None:
-                T.append(Tk)
-                continue
         pm = measure_pose(dets[lab], target, camera, pose_id=lab, config=config, covariance=False, selection=sel)
         if not pm.valid:
             return None

@@ -157,7 +157,8 @@ def _folds_from_fit(pp, trains: list, fit) -> dict:
             continue
         ok = {m: v for m, v in closed_forms(F[train], M[train], pp.mount).items() if not isinstance(v, str)}
         if ok:
-            cands[f] = (list(ok), np.array([x_from_transforms(allp, *v) for v in ok.values()]), ok)
+            AB = np.array(list(ok.values()))  # (k, 2, 4, 4)
+            cands[f] = (list(ok), x_from_transforms(allp, AB[:, 0], AB[:, 1]), ok)
     if not cands:
         return {}
     fs = list(cands)

@@ -288,7 +288,8 @@ def fit_handeye(T_base_flange: ArrayLike, T_cam_target: ArrayLike, mount: str, p
     base = handeye_problem(F, M, mount, first[0], first[1], pose_cov, labels=labels, robot_cov=_robot_cov(theta))
 
     names = list(ok)
-    Xc = np.array([x_from_transforms(base, *ok[m]) for m in names])  # (pb below shares base's parametrization)
+    AB = np.array([ok[m] for m in names])  # (k, 2, 4, 4)
+    Xc = x_from_transforms(base, AB[:, 0], AB[:, 1])  # (pb below shares base's parametrization)
     start = names[int(np.argmin(candidate_costs(base, Xc, _robot_cov(theta))))]  # weights at each candidate
     res, pb, th, tcov, its = _irls(base, Xc[names.index(start)], theta, estimate, theta_start=theta_start)
     # never worse than a closed form under the final weights: restart from one that is lower

@@ -367,11 +367,13 @@ def reweighted(problem: IdentificationProblem, x: ArrayLike,
 
 
 def x_from_transforms(problem: IdentificationProblem, A: ArrayLike, B: ArrayLike) -> np.ndarray:
-    """(12,) parameter vector of the transforms A, B (4, 4) (inverse of :func:`transforms_from_x`)."""
+    """(12,) parameter vector of the transforms A, B (4, 4) (inverse of :func:`transforms_from_x`); stacks A, B
+    (..., 4, 4) give (..., 12)."""
+    A, B = np.asarray(A, float), np.asarray(B, float)
     RA0, RB0 = problem.meta["R_A_nominal"], problem.meta["R_B_nominal"]
-    rA = frames.xyz_rotvec_from_T(frames.make_T(RA0.T @ np.asarray(A, float)[:3, :3]))[3:]
-    rB = frames.xyz_rotvec_from_T(frames.make_T(RB0.T @ np.asarray(B, float)[:3, :3]))[3:]
-    return np.r_[np.asarray(A, float)[:3, 3], rA, np.asarray(B, float)[:3, 3], rB]
+    rA = frames.rotvec_from_matrix(RA0.T @ A[..., :3, :3])
+    rB = frames.rotvec_from_matrix(RB0.T @ B[..., :3, :3])
+    return np.concatenate([A[..., :3, 3], rA, B[..., :3, 3], rB], axis=-1)
 
 
 def solve_handeye(T_base_flange: ArrayLike, T_cam_target_meas: ArrayLike, mount: str = "fixed",

@@ -85,6 +85,56 @@ def refine_pnp_planar(p_target: np.ndarray, uv_undist_px: np.ndarray, intr: Came
     return _refined(obj, img, intr, rvec, T_start[:3, 3].reshape(3, 1).copy(), p_target, uv_undist_px)
 
 
+#: :func:`refine_pnp_many` stops when no pose moves by more than this (m and rad) in a Gauss-Newton step
+GN_PNP_TOL = 1e-13
+
+
+def refine_pnp_many(p_target: np.ndarray, uv_undist_px: np.ndarray, weight: np.ndarray, intr: CameraIntrinsics,
+                    T_start: np.ndarray, max_iter: int = 20) -> tuple[np.ndarray, np.ndarray]:
+    """The minimum of :func:`refine_pnp_planar`'s cost (sum of squared reprojection errors, ideal pinhole) for P
+    poses at once by undamped Gauss-Newton steps from nearby starts: p_target (P, C, 3) m, uv_undist_px (P, C, 2)
+    px, weight (P, C) 1 for a corner, 0 for padding; T_start (P, 4, 4). Steps in the ``frames.perturb_pose``
+    convention (:func:`reprojection_jacobian`) until none moves by more than :data:`GN_PNP_TOL`. Returns
+    (T (P, 4, 4), settled (P,) bool: False where a step was singular or not finite, a point came behind the
+    camera, or the steps did not settle: the caller refines that pose with :func:`refine_pnp_planar`)."""
+    P = np.asarray(p_target, float)
+    uv = np.asarray(uv_undist_px, float)
+    w = np.asarray(weight, float)[..., None]  # (P, C, 1)
+    T = np.array(T_start, float)
+    n = T.shape[0]
+    active, settled = np.ones(n, bool), np.zeros(n, bool)
+    for _ in range(max_iter):
+        a = np.flatnonzero(active)
+        if not a.size:
+            break
+        q = P[a] @ np.swapaxes(T[a, :3, :3], 1, 2)  # R p (k, C, 3)
+        pc = q + T[a, None, :3, 3]
+        x, y, z = pc[..., 0], pc[..., 1], pc[..., 2]
+        zs = np.where(w[a, :, 0] > 0, z, 1.0)
+        r = (uv[a] - np.stack([intr.fx * x / zs + intr.cx, intr.fy * y / zs + intr.cy], axis=-1)) * w[a]
+        dproj = np.zeros(pc.shape[:2] + (2, 3))
+        dproj[..., 0, 0] = intr.fx / zs
+        dproj[..., 0, 2] = -intr.fx * x / zs**2
+        dproj[..., 1, 1] = intr.fy / zs
+        dproj[..., 1, 2] = -intr.fy * y / zs**2
+        J = np.concatenate([dproj, -(dproj @ frames.skew(q))], axis=-1) * w[a][..., None]  # (k, C, 2, 6)
+        J = J.reshape(a.size, -1, 6)
+        A = np.swapaxes(J, 1, 2) @ J
+        g = (np.swapaxes(J, 1, 2) @ r.reshape(a.size, -1, 1))[..., 0]
+        bad = ~np.all(np.isfinite(A), axis=(1, 2)) | ~np.all(np.isfinite(g), axis=1) | np.any(
+            (z <= 0) & (w[a, :, 0] > 0), axis=1)
+        d = np.zeros((a.size, 6))
+        try:
+            d[~bad] = np.linalg.solve(A[~bad], g[~bad][..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            bad[:] = True  # one singular: every pose of this step to the caller's refinement
+        T[a[~bad]] = frames.perturb_pose(T[a[~bad]], d[~bad])
+        done = ~bad & (np.max(np.abs(d), axis=1) <= GN_PNP_TOL)
+        settled[a[done]] = True
+        active[a[done | bad]] = False
+    return T, settled
+
+
 def _refined(obj, img, intr, rvec, tvec, p_target, uv_undist_px):
     """(T, residuals (K, 2) px) after cv2.solvePnPRefineLM from (rvec, tvec) (3, 1) (tolerance 1e-12, 50 steps)."""
     rvec, tvec = cv2.solvePnPRefineLM(obj, img, intr.K, np.zeros(5), rvec, tvec,

@@ -21,7 +21,7 @@ from .. import frames
 from ..camera import CameraIntrinsics
 from ..targets import TargetSpec
 from .detect import Detection
-from .pnp import project_pinhole, refine_pnp_planar, target_lookup, undistort_px
+from .pnp import project_pinhole, refine_pnp_many, refine_pnp_planar, target_lookup, undistort_px
 from .pose import MeasureConfig, PoseMeasurement, selected_corners
 
 
@@ -94,4 +94,45 @@ def remeasure_pose(rm: Remeasurable, intrinsics: CameraIntrinsics) -> np.ndarray
     return T if rms <= rm.max_rms_px else None
 
 
-__all__ = ["Remeasurable", "remeasurable", "remeasure_pose"]
+def remeasure_many(rms: Sequence[Remeasurable], intrinsics: CameraIntrinsics) -> list[np.ndarray | None]:
+    """[T_cam_target (4, 4) or None] of :func:`remeasure_pose` for each of ``rms``, the poses of mode "corners" at
+    once: their pixels undistorted in one call, their per-corner means, and one batched Gauss-Newton refinement
+    from the measured poses (``pnp.refine_pnp_many``: the same minimum); a pose it does not settle, and the poses of
+    mode "poses", by :func:`remeasure_pose`. None as there (the caller runs ``measure_pose``)."""
+    out: list = [None] * len(rms)
+    batch = [k for k, rm in enumerate(rms) if rm.mode == "corners"]
+    for k in sorted(set(range(len(rms))) - set(batch)):
+        out[k] = remeasure_pose(rms[k], intrinsics)
+    if not batch:
+        return out
+    uv_all = undistort_px(np.concatenate([rms[k].uv_raw for k in batch]), intrinsics)
+    cut = np.cumsum([0] + [len(rms[k].uv_raw) for k in batch])
+    C = max(rms[k].p_target.shape[0] for k in batch)
+    P, M, Wt = np.zeros((len(batch), C, 3)), np.zeros((len(batch), C, 2)), np.zeros((len(batch), C))
+    P[..., 2] = 1.0  # padding: a point in front of the camera, weight 0
+    ok = np.ones(len(batch), bool)
+    for j, k in enumerate(batch):
+        rm, uv = rms[k], uv_all[cut[j]:cut[j + 1]]
+        if not np.all(np.isfinite(uv)):
+            ok[j] = False
+            continue
+        n = rm.p_target.shape[0]
+        sums, cnt = np.zeros((n, 2)), np.zeros(n)
+        np.add.at(sums, rm.corner, uv)
+        np.add.at(cnt, rm.corner, 1)
+        P[j, :n], M[j, :n], Wt[j, :n] = rm.p_target, sums / cnt[:, None], 1.0
+    T, settled = refine_pnp_many(P, M, Wt, intrinsics, np.array([rms[k].T_start for k in batch]))
+    pc = P @ np.swapaxes(T[:, :3, :3], 1, 2) + T[:, None, :3, 3]  # every pixel's residual at its pose's T
+    proj = np.stack([intrinsics.fx * pc[..., 0] / pc[..., 2] + intrinsics.cx,
+                     intrinsics.fy * pc[..., 1] / pc[..., 2] + intrinsics.cy], axis=-1)
+    owner = np.repeat(np.arange(len(batch)), np.diff(cut))
+    r2 = np.sum((uv_all - proj[owner, np.concatenate([rms[k].corner for k in batch])]) ** 2, axis=1)
+    rms_px = np.sqrt(np.bincount(owner, r2, len(batch)) / np.diff(cut))
+    for j, k in enumerate(batch):
+        if ok[j]:
+            out[k] = remeasure_pose(rms[k], intrinsics) if not settled[j] else (
+                T[j] if rms_px[j] <= rms[k].max_rms_px else None)
+    return out
+
+
+__all__ = ["Remeasurable", "remeasurable", "remeasure_pose", "remeasure_many"]
