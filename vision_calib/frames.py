@@ -199,6 +199,15 @@ for _a, _b, _terms in ((0, 1, ((0, 1, 1), (1, 0, 1))), (0, 2, ((0, 2, 1), (2, 0,
         _SHEPPERD_MAP[3 * _i + _j, 4 * _b + _a] += _s
 
 
+def _quat_xyzw(R: np.ndarray) -> np.ndarray:
+    """(k, 4) unit quaternions, scalar last and >= 0, of rotation matrices R (k, 3, 3): Shepperd's stable row (the
+    largest diagonal entry of Shepperd's matrix, 1 + tr or 1 + 2 R_ii - tr: one product with a constant map)."""
+    K = (R.reshape(-1, 9) @ _SHEPPERD_MAP + _SHEPPERD_ONE).reshape(-1, 4, 4)
+    q = K[np.arange(K.shape[0]), np.argmax(np.diagonal(K, axis1=1, axis2=2), axis=1)]  # x, y, z, w (unnormalised)
+    q *= (np.where(q[:, 3] < 0, -1.0, 1.0) / np.sqrt(np.einsum("ij,ij->i", q, q)))[:, None]
+    return q
+
+
 def rotvec_from_matrix(R):
     """Rotation vector(s) (..., 3) [rad, angle in [0, pi]] of rotation matrices (..., 3, 3): Shepperd's stable
     quaternion (the row of the largest diagonal entry of Shepperd's matrix, 1 + tr or 1 + 2 R_ii - tr: one
@@ -207,9 +216,7 @@ def rotvec_from_matrix(R):
     object, no determinant check)."""
     R = np.asarray(R, dtype=float)
     shape = R.shape[:-2]
-    K = (R.reshape(-1, 9) @ _SHEPPERD_MAP + _SHEPPERD_ONE).reshape(-1, 4, 4)
-    q = K[np.arange(K.shape[0]), np.argmax(np.diagonal(K, axis1=1, axis2=2), axis=1)]  # x, y, z, w (unnormalised)
-    q *= (np.where(q[:, 3] < 0, -1.0, 1.0) / np.sqrt(np.einsum("ij,ij->i", q, q)))[:, None]
+    q = _quat_xyzw(R.reshape(-1, 3, 3))
     v, w = q[:, :3], q[:, 3]
     nv = np.sqrt(np.einsum("ij,ij->i", v, v))
     small = nv < 1e-4  # angle / |v| by its series (2 / w) (1 - |v|^2 / (3 w^2)), exact to rounding there
@@ -242,12 +249,18 @@ def perturb_pose(T, delta):
 
 def mean_pose(Ts, weights=None):
     """SE(3) mean of poses (N, 4, 4): arithmetic mean of translations, chordal L2 rotation mean
-    (scipy ``Rotation.mean``, quaternion eigenvector method). weights: (N,) or None."""
+    (the quaternion eigenvector method of scipy's ``Rotation.mean``: the largest eigenvector of sum w q q^T, the
+    quaternions by Shepperd's method). weights: (N,) or None."""
     Ts = np.asarray(Ts, dtype=float)
     if Ts.ndim != 3 or Ts.shape[0] == 0:
         raise DataError("mean_pose needs a non-empty (N, 4, 4) array of poses")
     w = None if weights is None else np.asarray(weights, dtype=float)
-    R = Rotation.from_matrix(Ts[:, :3, :3]).mean(weights=w).as_matrix()
+    q = _quat_xyzw(Ts[:, :3, :3])
+    _, V = np.linalg.eigh((q.T * (1.0 if w is None else w)) @ q)  # the largest eigenvector: the chordal mean
+    x, y, z, s = V[:, -1]
+    R = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * s), 2 * (x * z + y * s)],
+                  [2 * (x * y + z * s), 1 - 2 * (x * x + z * z), 2 * (y * z - x * s)],
+                  [2 * (x * z - y * s), 2 * (y * z + x * s), 1 - 2 * (x * x + y * y)]])
     t = np.average(Ts[:, :3, 3], axis=0, weights=w)
     return make_T(R, t)
 
