@@ -186,7 +186,7 @@ def pair_holdout(pp: PosePairs, folds: int, seed: int, outliers=(), theta_start=
     ``holdout.fold_indices``; each fold's
     model identified on the other folds (the whole-data outliers in no training set; the fit of
     ``handeye_step.identify_handeye`` without its outlier test) predicts the held-out poses ("after"), beside the
-    OpenCV closed form that fold's fit started from ("before"). Errors of T_cam_target, position [mm] and rotation
+    OpenCV closed form a fit of that fold's training poses starts from ("before": the one of least weighted cost). Errors of T_cam_target, position [mm] and rotation
     [deg] norms (``holdout.error_stats``), overall and without the flagged outliers; the paired-bootstrap interval
     of the RMS change. Decision not ok (the verdict fails): a fold that cannot be identified, or our model
     predicting held-out poses significantly worse than the closed form. theta_start: the robot's variances of the
@@ -235,7 +235,8 @@ def pair_holdout(pp: PosePairs, folds: int, seed: int, outliers=(), theta_start=
         per_fold.append({**rec, "converged": converged, "closed_form": start,
                          "before": error_stats(*_norms(before)), "after": error_stats(*_norms(after))})
     out = {"folds": int(folds), "seed": int(seed), "residual_kind": "pose", "residual_of": "T_cam_target",
-           "before_is": "the OpenCV closed form each fold's fit started from (measure.handeye.closed_forms)",
+           "before_is": "the OpenCV closed form of least weighted cost on each fold's training poses, the start a "
+                        "fit of them alone takes (measure.handeye.closed_forms)",
            "after_is": "the hand-eye fit of the fold's training poses",
            "outliers": [lab for lab in labels if lab in flagged], "per_fold": per_fold, "tcp_m": None}
     if not idx_all:
