@@ -173,12 +173,18 @@ def coverage(uv_list, size: tuple[int, int], grid=(8, 6), principal=None) -> dic
 
 
 def _fit(objs, imgs, size, flags):
-    """One calibrateCameraExtended run -> (rms, K, dist (5,), rvecs, tvecs)."""
+    """One calibrateCameraExtended run -> (rms, K, dist (5,), rvecs, tvecs). Run on one OpenCV thread: its threaded
+    sums are not bit-reproducible (the same images gave intrinsics differing at 1e-9 run to run, and every answer
+    after them at up to 6e-6 of its std)."""
     crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-12)
+    threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)
     try:
         out = cv2.calibrateCameraExtended(objs, imgs, size, None, None, flags=flags, criteria=crit)
     except cv2.error as exc:
         raise DataError(f"camera calibration failed in OpenCV: {str(exc).strip().splitlines()[-1]}") from None
+    finally:
+        cv2.setNumThreads(threads)
     rms, K, dist, rvecs, tvecs = out[0], out[1], out[2], out[3], out[4]
     return rms, K, np.asarray(dist, float).ravel()[:5], rvecs, tvecs
 
