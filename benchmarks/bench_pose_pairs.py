@@ -13,8 +13,9 @@ of least cost under the same weights; two weightings: 1 m : 1 rad and 1 mm : 0.1
     PYTHONPATH=. python benchmarks/bench_pose_pairs.py [--seeds 1-20] [--pairs 42] [--mount fixed]
     PYTHONPATH=. python benchmarks/bench_pose_pairs.py --scale 200 2000
 
-``--scale N1 N2 ..`` (issue 35: pose pairs in O(N)): a pose-pair file of N simulated pairs (noise estimated) through
-``vision-calib process-poses --no-plots``, each in a fresh interpreter: wall and CPU seconds, peak memory (max RSS),
+``--scale N1 N2 ..`` (issue 35: pose pairs in O(N)): a pose-pair file of N simulated pairs through
+``vision-calib process-poses --no-plots``, each in a fresh interpreter, with the noise estimated (the robust
+chi-square outlier test), then given (sigma columns: the deletion test of every pose, ``handeye_step.deletion_test``): wall and CPU seconds, peak memory (max RSS),
 the seconds and memory per pair against the smallest N's in this run (a ratio near 1: linear). Targets: 2,000 pairs
 in <= 30 s and <= 1 GB. Then ``import-pairs``: a TransformPairs file of the largest N x 100 pairs read streamed
 (``io.transform_pairs.read_transform_pairs``) against the YAML composer on its first 5,000 pairs, in this run.
@@ -59,6 +60,11 @@ def plain_ls(F, M, mount, wt, wr):
     return A, B, best
 
 
+#: a child interpreter running the CLI with its arguments, then printing its own peak memory (kB) to stderr
+_CHILD = ("import resource, sys\nfrom vision_calib.cli import main\ntry:\n    main(sys.argv[1:])\nfinally:\n"
+          "    print('MAXRSS', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr)")
+
+
 def scale(sizes, mount: str) -> None:
     """The ``--scale`` figures (module docstring)."""
     import os
@@ -70,26 +76,31 @@ def scale(sizes, mount: str) -> None:
 
     from vision_calib.io.measured_poses_writer import write_pose_pairs
 
-    print(f"process-poses --no-plots, mount {mount}, noise estimated; load average {os.getloadavg()[0]:.2f} "
+    print(f"process-poses --no-plots, mount {mount}; load average {os.getloadavg()[0]:.2f} "
           "(2 cores shared: wall moves with it, CPU less)")
-    print(f"{'pairs':>6}{'wall s':>9}{'CPU s':>8}{'max RSS MB':>12}{'CPU ms/pair':>13}{'x smallest':>11}"
+    print(f"{'noise':>10}{'pairs':>7}{'wall s':>9}{'CPU s':>8}{'max RSS MB':>12}{'CPU ms/pair':>13}{'x smallest':>11}"
           f"{'RSS ratio':>10}")
-    first = None
     with tempfile.TemporaryDirectory() as tmp:
-        for n in sizes:
-            d = simulate_pose_pairs(n, 4, mount)
-            path = write_pose_pairs(Path(tmp) / f"pairs{n}.yaml", d.labels, d.T_base_flange, d.T_cam_target, d.mount)
-            before = resource.getrusage(resource.RUSAGE_CHILDREN)
-            t0 = time.perf_counter()
-            subprocess.run([sys.executable, "-m", "vision_calib.cli", "process-poses", str(path), "--out",
-                            str(Path(tmp) / f"out{n}"), "--no-plots"], check=True, capture_output=True)
-            wall = time.perf_counter() - t0
-            after = resource.getrusage(resource.RUSAGE_CHILDREN)
-            cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-            rss = after.ru_maxrss / 1024  # kB -> MB (Linux); the largest child so far
-            first = first or (cpu / n, rss)
-            print(f"{n:>6}{wall:>9.2f}{cpu:>8.2f}{rss:>12.0f}{1e3 * cpu / n:>13.2f}{cpu / n / first[0]:>10.2f}x"
-                  f"{rss / first[1]:>9.2f}x")
+        # estimated: the robust chi-square outlier test; given (sigma columns): the deletion test of each pose
+        for noise in ("estimated", "given"):
+            first = None
+            for n in sizes:
+                d = simulate_pose_pairs(n, 4, mount)
+                sig = np.sqrt(np.einsum("nii->ni", d.pose_cov)) if noise == "given" else None
+                path = write_pose_pairs(Path(tmp) / f"pairs{n}{noise}.yaml", d.labels, d.T_base_flange, d.T_cam_target,
+                                        d.mount, sigmas=sig)
+                before = resource.getrusage(resource.RUSAGE_CHILDREN)
+                t0 = time.perf_counter()
+                run = subprocess.run([sys.executable, "-c", _CHILD, "process-poses", str(path), "--out",
+                                      str(Path(tmp) / f"out{n}{noise}"), "--no-plots"], check=True, capture_output=True,
+                                     text=True)
+                wall = time.perf_counter() - t0
+                after = resource.getrusage(resource.RUSAGE_CHILDREN)
+                cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+                rss = int(run.stderr.rsplit("MAXRSS", 1)[1].split()[0]) / 1024  # this child's peak, kB -> MB (Linux)
+                first = first or (cpu / n, rss)
+                print(f"{noise:>10}{n:>7}{wall:>9.2f}{cpu:>8.2f}{rss:>12.0f}{1e3 * cpu / n:>13.2f}"
+                      f"{cpu / n / first[0]:>10.2f}x{rss / first[1]:>9.2f}x")
         import vision_calib.io.transform_pairs as TP
 
         big, small = 100 * max(sizes), 5000

@@ -537,3 +537,34 @@ def test_subset_fits_at_once_reach_the_fits_from_the_closed_forms(mount, estimat
         np.testing.assert_allclose(std, ref.result.std, rtol=1e-2)
         t_ref = np.square([ref.robot["translation_mm"] * 1e-3, np.radians(ref.robot["rotation_deg"])])
         np.testing.assert_allclose(th[j], t_ref, rtol=1e-2)
+
+
+def test_linearized_deletion_equals_the_exact_leave_one_out_with_given_weights():
+    """identify.handeye_loo.linearized_deletion (closed form, O(N)) against leave_one_out (each subset refitted by
+    Gauss-Newton) with the robot's variances given: the same fits without each pose (1e-2 std), covariances (1 %)
+    and deletion statistics (1 %), the corrupted pose standing out in both."""
+    import vision_calib.identify.handeye_loo as loo
+    from vision_calib.experiment.handeye_step import all_poses_problem
+    from vision_calib.identify.handeye_fit import fit_handeye
+    from vision_calib.identify.handeye_problem import x_from_transforms
+
+    rng = np.random.default_rng(9)
+    N = 40
+    A, B, F, M = _scene(rng, "fixed", N=N)
+    cov = _random_cov(rng, N, 2e-4, 4e-4)
+    Fr = frames.perturb_pose(F, np.concatenate([rng.normal(scale=3e-4, size=(N, 3)),
+                                                rng.normal(scale=5e-4, size=(N, 3))], axis=1))
+    Mn = _noisy(rng, M, cov)
+    Mn[5] = frames.perturb_pose(Mn[5], np.r_[0.01, 0, 0, 0, 0.02, 0])
+    fit = fit_handeye(Fr, Mn, "fixed", cov, [f"p{k}" for k in range(N)], (3e-4, 5e-4))
+    allp = all_poses_problem(Fr, Mn, "fixed", cov, fit.A, fit.B)
+    x = x_from_transforms(allp, fit.A, fit.B)
+    X, C, th, ok = loo.leave_one_out(allp, x, fit.robot_variances, False)
+    d = loo.deletion_statistics(allp, X, C, th)
+    Xl, Cl, dl = loo.linearized_deletion(allp, x, fit.robot_variances)
+    assert ok.all()
+    std = np.sqrt(np.einsum("nii->ni", C))
+    assert np.max(np.abs(X - Xl) / std) < 1e-2
+    np.testing.assert_allclose(Cl, C, rtol=1e-2, atol=1e-2 * np.abs(C).max())
+    np.testing.assert_allclose(dl, d, rtol=1e-2)
+    assert int(np.argmax(dl)) == int(np.argmax(d)) == 5

@@ -167,11 +167,13 @@ def deletion_test(F, M, mount: str, C, labels: Sequence[str], robot_std, fit: Ha
     residual of pose k under the fit without it, ``S_k = C_k + J_k Sigma_(-k) J_k^T`` (C_k: camera + robot pose
     error at that fit; Sigma_(-k) its parameter covariance), against chi2(6) at the family-wise level
     ``OUTLIER_LEVEL`` over the N poses (and ``OUTLIER_MIN_RATIO`` x the median). An outlier cannot inflate the
-    variances it is tested with. Returns {d (N,), threshold, x_loo (N, 12): each fit's parameters}."""
+    variances it is tested with. Above :data:`LOO_EXACT_MAX` poses, every pose is screened in closed form and only
+    those near or above the threshold are refitted (O(N) instead of O(N^2)). Returns {d (N,), threshold, x_loo
+    (N, 12): each fit's parameters}."""
     from scipy.stats import chi2
 
     from ..identify.handeye_fit import deletion_fit
-    from ..identify.handeye_loo import deletion_statistics, leave_one_out
+    from ..identify.handeye_loo import deletion_statistics, leave_one_out, linearized_deletion
     from ..identify.handeye_problem import x_from_transforms
 
     n = len(labels)
@@ -180,10 +182,21 @@ def deletion_test(F, M, mount: str, C, labels: Sequence[str], robot_std, fit: Ha
     est = robot_std is None and fit.robot["source"] == "estimated"
     fits = []  # per k: (x, parameter covariance of the free ones, free mask, robot variances) of the fit without k
     allp = all_poses_problem(F, M, mount, C, fit.A, fit.B)
-    # all the subsets' fits at once (identify.handeye_loo: deletion_fit's steps, batched); one that does not settle
-    # is refitted alone
-    X, cov, th_k, settled = leave_one_out(allp, x_from_transforms(allp, fit.A, fit.B), theta, est)
-    d_all = deletion_statistics(allp, X, cov, th_k)  # pose k at the fit without it
+    x = x_from_transforms(allp, fit.A, fit.B)
+    thr = float(chi2.isf(OUTLIER_LEVEL / n, 6))
+    if n <= LOO_EXACT_MAX:  # all the subsets' fits at once (identify.handeye_loo: deletion_fit's steps, batched)
+        X, cov, th_k, settled = leave_one_out(allp, x, theta, est)
+        d_all = deletion_statistics(allp, X, cov, th_k)  # pose k at the fit without it
+    else:  # every pose screened in closed form, the exact fit without it where the decision could turn on it
+        X, cov, d_all = linearized_deletion(allp, x, theta)
+        th_k, settled = np.tile(theta, (n, 1)), np.isfinite(d_all)
+        fin = d_all[np.isfinite(d_all)]
+        limit = max(thr, OUTLIER_MIN_RATIO**2 * float(np.median(fin))) if fin.size else thr
+        screen = np.flatnonzero(~(d_all <= LOO_SCREEN * limit))  # (inf / NaN: refitted too)
+        if screen.size:
+            Xe, ce, te, se = leave_one_out(allp, x, theta, est, which=screen)
+            X[screen], cov[screen], th_k[screen], settled[screen] = Xe[screen], ce[screen], te[screen], se[screen]
+            d_all[screen] = deletion_statistics(allp, X, cov, th_k)[screen]
     for k in range(n):
         if settled[k]:
             fk = (X[k], cov[k], np.ones(12, bool), th_k[k])
@@ -196,9 +209,18 @@ def deletion_test(F, M, mount: str, C, labels: Sequence[str], robot_std, fit: Ha
             d[k] = pose_statistic(F, M, mount, C, k, fit.A, fit.B, fk, allp)
         xs[k] = fk[0]
         fits.append(fk)
-    thr = float(chi2.isf(OUTLIER_LEVEL / n, 6))
     thr = max(thr, OUTLIER_MIN_RATIO**2 * float(np.median(d[np.isfinite(d)]))) if np.isfinite(d).any() else thr
     return {"d": d, "threshold": thr, "x_loo": xs, "labels": [str(lab) for lab in labels], "fits": fits}
+
+
+#: the deletion test fits every subset exactly (``identify.handeye_loo.leave_one_out``, O(N^2)) up to this many poses;
+#: above it each pose is screened by the closed-form fit without it (``linearized_deletion``: the model linearised,
+#: the weights and robot variances of all the poses, O(N)) and refitted exactly only where its screened statistic
+#: exceeds :data:`LOO_SCREEN` x the threshold. A pose cannot hide below that by inflating the variances: one pose
+#: of statistic d moves them by about d / (6 N) of themselves, so the screened value is at least min(d / 2, 3 N)
+LOO_EXACT_MAX = 300
+#: fraction of the deletion threshold above which a screened pose is refitted exactly (:data:`LOO_EXACT_MAX`)
+LOO_SCREEN = 0.25
 
 
 def pose_statistic(F, M, mount: str, C, idx: int, A, B, fit_k, base=None) -> float:

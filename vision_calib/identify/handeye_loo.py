@@ -81,12 +81,14 @@ def gauss_newton_many(problem: IdentificationProblem, X: ArrayLike, W: np.ndarra
 LOO_CHUNK = 4096
 
 
-def leave_one_out(problem: IdentificationProblem, x: ArrayLike, theta: ArrayLike, estimate: bool):
+def leave_one_out(problem: IdentificationProblem, x: ArrayLike, theta: ArrayLike, estimate: bool,
+                  which: ArrayLike | None = None):
     """The N fits without one pose each (module docstring) of ``problem`` (a hand-eye problem of N poses, camera
     covariance in ``meta["camera_cov"]``, all 12 parameters free) from its fit x (12,) with the robot's variances
     theta (2,) (m^2, rad^2); ``estimate``: re-estimate them per subset. Subsets in chunks of :data:`LOO_CHUNK`
-    (subset, pose) pairs. Returns (X (N, 12), covariance (N, 12, 12), theta (N, 2), settled (N,) bool: where False,
-    the caller refits that subset with ``handeye_fit.deletion_fit``)."""
+    (subset, pose) pairs. which: the poses whose fits are made (default all; the other rows stay x, NaN, theta,
+    False). Returns (X (N, 12), covariance (N, 12, 12), theta (N, 2), settled (N,) bool: where False, the caller
+    refits that subset with ``handeye_fit.deletion_fit``)."""
     x = np.asarray(x, float)
     theta = np.asarray(theta, float)
     cam = np.asarray(problem.meta["camera_cov"], float)
@@ -96,9 +98,10 @@ def leave_one_out(problem: IdentificationProblem, x: ArrayLike, theta: ArrayLike
     W0 = whitening_of(cam + D0[0] @ R0 @ np.swapaxes(D0[0], 1, 2))[None]  # the weights at x, shared
     X, cov = np.tile(x, (N, 1)), np.full((N, 12, 12), np.nan)
     thetas, settled = np.tile(theta, (N, 1)), np.zeros(N, bool)
+    which = np.arange(N) if which is None else np.asarray(which, int).reshape(-1)
     step = max(1, LOO_CHUNK // N)
-    for a in range(0, N, step):
-        ks = np.arange(a, min(a + step, N))
+    for a in range(0, which.size, step):
+        ks = which[a:a + step]
         mask = np.arange(N)[None, :] != ks[:, None]  # (K, N): the poses of each subset
         Xk, ck, ok = gauss_newton_many(problem, X[ks], W0, mask)
         if estimate:
@@ -115,6 +118,44 @@ def leave_one_out(problem: IdentificationProblem, x: ArrayLike, theta: ArrayLike
             ok = ok & ok2 & ok3
         X[ks], cov[ks], settled[ks] = Xk, ck, ok
     return X, cov, thetas, settled
+
+
+def linearized_deletion(problem: IdentificationProblem, x: ArrayLike, theta: ArrayLike):
+    """The N fits without one pose each of ``problem`` (as :func:`leave_one_out`) in closed form for the model
+    linearised at its fit x (12,), with the weights at x and the robot's variances theta (2,) of all the poses
+    (not re-estimated): with A_n = W_n J_n and e_n = W_n r_n whitened, N = sum A_n^T A_n and H_k = A_k N^-1 A_k^T,
+    the fit without k is x + N^-1 A_k^T (I - H_k)^-1 e_k, its covariance (N - A_k^T A_k)^-1 = N^-1 + N^-1 A_k^T
+    (I - H_k)^-1 A_k N^-1, and pose k's deletion statistic e_k^T (I - H_k)^-1 e_k (Cook and Weisberg's
+    externally studentised residual, per 6-vector pose): O(N) time, exact for a linear model with fixed weights.
+    Returns (X (N, 12), covariance (N, 12, 12), d (N,); inf where I - H_k is singular)."""
+    x = np.asarray(x, float)
+    r, J, D = model_many(problem, x[None])
+    th = np.asarray(theta, float)
+    W = subset_weights(problem, x[None], th[None])[0]
+    A = W @ J[0]  # (N, 6, 12)
+    e = (W @ r[0][..., None])[..., 0]
+    Ninv = np.linalg.inv(np.einsum("nai,naj->ij", A, A))
+    NA = A @ Ninv  # (N, 6, 12): A_k N^-1
+    IH = np.eye(6)[None] - NA @ np.swapaxes(A, 1, 2)
+    n = e.shape[0]
+    d, X, cov = np.full(n, np.inf), np.tile(x, (n, 1)), np.full((n, 12, 12), np.nan)
+    ok = np.all(np.isfinite(IH), axis=(1, 2))
+    try:
+        s = np.linalg.solve(IH[ok], e[ok][..., None])[..., 0]  # (I - H_k)^-1 e_k
+        T = np.linalg.solve(IH[ok], NA[ok])  # (I - H_k)^-1 A_k N^-1
+    except np.linalg.LinAlgError:  # a pose that alone determines a direction: its rows one by one
+        s, T = np.full((int(ok.sum()), 6), np.nan), np.full((int(ok.sum()), 6, 12), np.nan)
+        for j, k in enumerate(np.flatnonzero(ok)):
+            try:
+                s[j], T[j] = np.linalg.solve(IH[k], e[k]), np.linalg.solve(IH[k], NA[k])
+            except np.linalg.LinAlgError:
+                pass
+    fine = np.all(np.isfinite(s), axis=1)
+    k = np.flatnonzero(ok)[fine]
+    d[k] = np.einsum("na,na->n", e[k], s[fine])
+    X[k] = x + np.einsum("nai,na->ni", NA[k], s[fine])
+    cov[k] = Ninv[None] + np.swapaxes(NA[k], 1, 2) @ T[fine]
+    return X, cov, d
 
 
 def subset_weights(problem: IdentificationProblem, X: ArrayLike, thetas: ArrayLike) -> np.ndarray:
@@ -199,4 +240,5 @@ def deletion_statistics(problem: IdentificationProblem, X: ArrayLike, cov: Array
     return d
 
 
-__all__ = ["gauss_newton_many", "leave_one_out", "subset_weights", "subset_fits", "deletion_statistics"]
+__all__ = ["gauss_newton_many", "leave_one_out", "linearized_deletion", "subset_weights", "subset_fits",
+           "deletion_statistics"]
