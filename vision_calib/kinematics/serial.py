@@ -465,14 +465,17 @@ class SerialChain(JointChainChecks):
                 trans_col(ix[f"l{i}"], R[:, :, 2])
                 o = o + R[:, :, 2] * x[ix[f"l{i}"]]
             rot_col(ix[f"alpha{i}"], R[:, :, 0], o)
-            R = R @ rot_x(x[ix[f"alpha{i}"]])
             if i in self.hayati:
+                R = R @ rot_x(x[ix[f"alpha{i}"]])
                 rot_col(ix[f"beta{i}"], R[:, :, 1], o)
                 R = R @ rot_y(x[ix[f"beta{i}"]])
-            trans_col(ix[f"a{i}"], R[:, :, 0])
-            o = o + R[:, :, 0] * x[ix[f"a{i}"]]
-            rot_col(ix[f"theta{i}"], R[:, :, 2], o)  # z axis unchanged by Rz(theta + q)
-            trans_col(ix[f"d{i}"], R[:, :, 2])
+                ax, az = R[:, :, 0], R[:, :, 2]
+            else:  # Rx(alpha) keeps the x axis; the z axis after it is frame i's (Rz(theta + q) keeps it)
+                ax, az = R[:, :, 0], frames[i][:, :3, 2]
+            trans_col(ix[f"a{i}"], ax)
+            o = o + ax * x[ix[f"a{i}"]]
+            rot_col(ix[f"theta{i}"], az, o)  # z axis unchanged by Rz(theta + q)
+            trans_col(ix[f"d{i}"], az)
             F = frames[i]
 
         # ---- right mount: T_flange_right = [R_nom Exp(r), t] in the flange frame F
