@@ -168,8 +168,8 @@ def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gto
                 return LMResult(z, cost, 0, LM_MESSAGES[0], nfev, njev)
             if rho > 1e-4:
                 break
-        if chord_g is None:
-            continue
+        if chord_g is None or np.max(np.abs(z - zJ)) - CHORD_CONTRACTION * step / np.sqrt(dsafe.min()) > CHORD_RADIUS:
+            continue  # (no chord step can come back within CHORD_RADIUS of the Jacobian's point: none tried)
         try:  # chord steps with this Jacobian (module doc)
             factor = cho_factor(A, check_finite=False)
         except (LinAlgError, ValueError):
