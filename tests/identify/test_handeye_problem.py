@@ -456,7 +456,8 @@ def test_leave_one_out_at_once_equals_the_fits_one_by_one(mount, estimate, chunk
 
 def test_candidate_costs_batched_equal_the_weighted_cost_one_by_one():
     """identify.handeye_fit.candidate_costs: the weighted cost of each closed form at its own weights (robot pose
-    error given) and under the problem's weights, equal to weighted_cost of the reweighted problem, one by one."""
+    error given) and under the problem's weights, equal to weighted_cost of the reweighted problem, one by one; with
+    a pose mask, the cost of the subset's own problem; with the whitening W given, the cost under those weights."""
     from vision_calib.identify.handeye_fit import candidate_costs, weighted_cost
     from vision_calib.identify.handeye_problem import reweighted, robot_pose_cov
 
@@ -472,28 +473,13 @@ def test_candidate_costs_batched_equal_the_weighted_cost_one_by_one():
         assert own[k] == pytest.approx(weighted_cost(reweighted(pb, x, R), x), rel=1e-12)
         assert fixed[k] == pytest.approx(weighted_cost(pb, x), rel=1e-12)
     assert not np.allclose(own, fixed)
-
-
-def test_candidate_costs_over_a_subset_and_given_weights():
-    """candidate_costs with a pose mask equals the cost of the subset's own problem; with the whitening W given it
-    equals the cost under those weights (here the problem's own)."""
-    from vision_calib.identify.handeye_fit import candidate_costs, weighted_cost
-    from vision_calib.identify.handeye_problem import reweighted, robot_pose_cov
-
-    rng = np.random.default_rng(13)
-    A, B, F, M = _scene(rng, "fixed", N=9)
-    cov = _random_cov(rng, 9)
-    R = robot_pose_cov(3e-4, 5e-4)
-    pb = handeye_problem(F, _noisy(rng, M, cov), "fixed", A0=A, B0=B, pose_cov=cov, robot_cov=R)
-    X = pb.params.nominal + rng.normal(scale=0.02, size=(4, 12))
     keep = [0, 2, 3, 7, 8]
     mask = np.isin(np.arange(9), keep)[None]
-    sub = pb.subset(keep)
     masked = candidate_costs(pb, X, R, mask=mask)
     given = candidate_costs(pb, X, W=pb.whitening()[None], mask=mask)
     for k, x in enumerate(X):
         assert masked[k] == pytest.approx(weighted_cost(reweighted(pb, x, R).subset(keep), x), rel=1e-12)
-        assert given[k] == pytest.approx(weighted_cost(sub, x), rel=1e-12)
+        assert given[k] == pytest.approx(weighted_cost(pb.subset(keep), x), rel=1e-12)
 
 
 @pytest.mark.parametrize("mount, estimate", [("fixed", True), ("eye_in_hand", True), ("eye_in_hand", False)])
