@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .handeye_fit import GN_TOL_STD, THETA_BOUNDS, THETA_TOL_STD, X_TOL_STD
-from .handeye_problem import model_many, robot_pose_cov
+from .handeye_problem import model_many
 from .reml import reml_newton
 from .problem import IdentificationProblem, whitening_of
 
@@ -93,9 +93,7 @@ def leave_one_out(problem: IdentificationProblem, x: ArrayLike, theta: ArrayLike
     theta = np.asarray(theta, float)
     cam = np.asarray(problem.meta["camera_cov"], float)
     N = cam.shape[0]
-    _, _, D0 = model_many(problem, x[None])
-    R0 = robot_pose_cov(np.sqrt(max(theta[0], 0.0)), np.sqrt(max(theta[1], 0.0)))
-    W0 = whitening_of(cam + D0[0] @ R0 @ np.swapaxes(D0[0], 1, 2))[None]  # the weights at x, shared
+    W0 = subset_weights(problem, x[None], theta[None])  # the weights at x, shared
     X, cov = np.tile(x, (N, 1)), np.full((N, 12, 12), np.nan)
     thetas, settled = np.tile(theta, (N, 1)), np.zeros(N, bool)
     which = np.arange(N) if which is None else np.asarray(which, int).reshape(-1)
@@ -107,10 +105,7 @@ def leave_one_out(problem: IdentificationProblem, x: ArrayLike, theta: ArrayLike
         if estimate:
             r, J, D = model_many(problem, Xk)
             w = mask[..., None].astype(float)
-            Dm = D * w[..., None]  # the left-out pose: no residual, Jacobian or robot blocks, identity camera part
-            known = np.where(mask[..., None, None], cam[None], np.eye(6))
-            blocks = np.stack([Dm[..., :3] @ np.swapaxes(Dm[..., :3], 2, 3),
-                               Dm[..., 3:] @ np.swapaxes(Dm[..., 3:], 2, 3)])
+            known, blocks = _subset_terms(cam, D, mask)
             th, ok2 = reml_newton(J * w[..., None], r * w, known, blocks, theta, THETA_BOUNDS)
             thetas[ks] = np.where(ok2[:, None], th, theta)
             C = known + np.einsum("ki,iknab->knab", thetas[ks], blocks)  # camera + robot part at each point
@@ -129,9 +124,9 @@ def linearized_deletion(problem: IdentificationProblem, x: ArrayLike, theta: Arr
     externally studentised residual, per 6-vector pose): O(N) time, exact for a linear model with fixed weights.
     Returns (X (N, 12), covariance (N, 12, 12), d (N,); inf where I - H_k is singular)."""
     x = np.asarray(x, float)
-    r, J, D = model_many(problem, x[None])
+    r, J, _ = model_many(problem, x[None], flange_map=False)
     th = np.asarray(theta, float)
-    W = subset_weights(problem, x[None], th[None])[0]
+    W = subset_weights(problem, x[None], th[None])[0]  # (its own model pass: the flange error map)
     A = W @ J[0]  # (N, 6, 12)
     e = (W @ r[0][..., None])[..., 0]
     Ninv = np.linalg.inv(np.einsum("nai,naj->ij", A, A))
@@ -162,11 +157,26 @@ def subset_weights(problem: IdentificationProblem, X: ArrayLike, thetas: ArrayLi
     """W (K, N, 6, 6): the whitening of every pose's camera covariance plus the robot's pose error at each row of X
     (K, 12) with the variances thetas (K, 2) (m^2, rad^2): the weights of ``handeye_problem.reweighted``."""
     _, _, D = model_many(problem, X, jacobian=False)
+    R = _robot_covs(thetas)[:, None]  # (K, 1, 6, 6)
+    return whitening_of(np.asarray(problem.meta["camera_cov"], float)[None] + D @ R @ np.swapaxes(D, 2, 3))
+
+
+def _robot_covs(thetas: ArrayLike) -> np.ndarray:
+    """(K, 6, 6) diag(s_t^2 I3, s_r^2 I3) of each row of thetas (K, 2): ``handeye_problem.robot_pose_cov``, batched."""
     th = np.asarray(thetas, float)
-    C = np.asarray(problem.meta["camera_cov"], float)[None] + (
-        th[:, 0, None, None, None] * (D[..., :3] @ np.swapaxes(D[..., :3], 2, 3))
-        + th[:, 1, None, None, None] * (D[..., 3:] @ np.swapaxes(D[..., 3:], 2, 3)))
-    return whitening_of(0.5 * (C + np.swapaxes(C, 2, 3)))
+    R = np.zeros((th.shape[0], 6, 6))
+    R[:, [0, 1, 2], [0, 1, 2]] = th[:, :1]
+    R[:, [3, 4, 5], [3, 4, 5]] = th[:, 1:2]
+    return R
+
+
+def _subset_terms(cam: np.ndarray, D: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(known (K, N, 6, 6), blocks (2, K, N, 6, 6)) of the REML terms (``reml.reml_terms``) of the pose subsets
+    ``mask`` (K, N) with the flange error maps D (K, N, 6, 6): a pose out of a subset has no robot blocks and an
+    identity camera part (it contributes nothing)."""
+    Dm = D * mask[..., None, None]
+    known = np.where(mask[..., None, None], cam[None], np.eye(6))
+    return known, np.stack([Dm[..., :3] @ np.swapaxes(Dm[..., :3], 2, 3), Dm[..., 3:] @ np.swapaxes(Dm[..., 3:], 2, 3)])
 
 
 def subset_fits(problem: IdentificationProblem, x: ArrayLike, theta: ArrayLike, estimate: bool, mask: ArrayLike,
@@ -184,7 +194,6 @@ def subset_fits(problem: IdentificationProblem, x: ArrayLike, theta: ArrayLike, 
     mask = np.asarray(mask, bool)
     K = mask.shape[0]
     cam = np.asarray(problem.meta["camera_cov"], float)
-    known = np.where(mask[..., None, None], cam[None], np.eye(6))  # a pose out of the subset: nothing of it
     w = mask[..., None].astype(float)
     X, cov, active = gauss_newton_many(problem, np.tile(x, (K, 1)), subset_weights(problem, x[None], theta[None]),
                                        mask)
@@ -194,18 +203,17 @@ def subset_fits(problem: IdentificationProblem, x: ArrayLike, theta: ArrayLike, 
         if not idx.size:
             break
         r, J, D = model_many(problem, X[idx])
-        Dm = D * w[idx][..., None]
-        blocks = np.stack([Dm[..., :3] @ np.swapaxes(Dm[..., :3], 2, 3), Dm[..., 3:] @ np.swapaxes(Dm[..., 3:], 2, 3)])
+        known, blocks = _subset_terms(cam, D, mask[idx])
         if estimate:
-            th, ok, lc = reml_newton(J * w[idx][..., None], r * w[idx], known[idx], blocks, thetas[idx], THETA_BOUNDS,
+            th, ok, lc = reml_newton(J * w[idx][..., None], r * w[idx], known, blocks, thetas[idx], THETA_BOUNDS,
                                      log_cov=True)
             du = np.abs(np.log(th) - np.log(thetas[idx]))
             su = np.sqrt(np.clip(np.diagonal(lc, axis1=1, axis2=2), 0, None))
             dt = np.where(du > 0, du / np.where(su > 0, su, 1e-300), 0.0)
         else:
             th, ok, dt = thetas[idx], np.ones(idx.size, bool), np.zeros((idx.size, 2))
-        C = known[idx] + np.einsum("ki,iknab->knab", th, blocks)
-        Xn, cn, ok2 = gauss_newton_many(problem, X[idx], whitening_of(0.5 * (C + np.swapaxes(C, 2, 3))), mask[idx])
+        C = known + np.einsum("ki,iknab->knab", th, blocks)
+        Xn, cn, ok2 = gauss_newton_many(problem, X[idx], whitening_of(C), mask[idx])
         std = np.sqrt(np.clip(np.diagonal(cn, axis1=1, axis2=2), 0, None))
         dx = np.abs(Xn - X[idx]) / np.where(std > 0, std, 1e-300)
         good = ok & ok2
@@ -225,11 +233,7 @@ def deletion_statistics(problem: IdentificationProblem, X: ArrayLike, cov: Array
     ks = np.arange(K)
     r, J, D = model_many(problem, X, poses=ks)
     r, J, D = r[:, 0], J[:, 0], D[:, 0]
-    th = np.asarray(thetas, float)
-    R = np.zeros((K, 6, 6))
-    R[:, [0, 1, 2], [0, 1, 2]] = th[:, :1]
-    R[:, [3, 4, 5], [3, 4, 5]] = th[:, 1:2]
-    C = np.asarray(problem.meta["camera_cov"], float)[ks] + D @ R @ np.swapaxes(D, 1, 2)
+    C = np.asarray(problem.meta["camera_cov"], float)[ks] + D @ _robot_covs(thetas) @ np.swapaxes(D, 1, 2)
     S = 0.5 * (C + np.swapaxes(C, 1, 2)) + J @ np.asarray(cov, float) @ np.swapaxes(J, 1, 2)
     d = np.full(K, np.inf)
     for k in range(K):

@@ -320,7 +320,7 @@ def solve_lse(
     s = params.scale[fi]
     W = problem.whitening()
     x0_free = x0[fi]
-    last = {"z": np.zeros(fi.size), "r": kept["r0"]}  # the residual (n_obs, m) at the last z evaluated
+    last = {"z": np.zeros(fi.size), "r": np.array(kept["r0"])}  # the residual (n_obs, m) at the last z (a copy)
 
     def x_of(z):
         x = x0.copy()
@@ -331,7 +331,7 @@ def solve_lse(
         x = x_of(z)
         if not np.array_equal(z, last["z"]):
             last["z"], last["r"] = np.array(z, float), None
-            last["r"] = np.asarray(problem.residual(x), float)
+            last["r"] = np.array(problem.residual(x), float)  # a copy: kept past the problem's next call
         rw = np.einsum("kij,kj->ki", W, last["r"]).ravel()
         return np.concatenate([rw, problem.prior_residual(x)]) if problem.prior_rows else rw
 

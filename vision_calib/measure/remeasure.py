@@ -70,6 +70,16 @@ def remeasurable(detections: Sequence[Detection], target: TargetSpec, pm: PoseMe
                         np.array([lookup[int(i)] for i in all_ids]), config.mode, T0, float(config.max_rms_px))
 
 
+def _corner_means(rm: Remeasurable, uv: np.ndarray) -> np.ndarray:
+    """(C, 2) px: the mean of each corner's undistorted pixels uv (M, 2) over the frames, summed in frame order as
+    ``measure_pose`` sums them."""
+    n = rm.p_target.shape[0]
+    sums, cnt = np.zeros((n, 2)), np.zeros(n)
+    np.add.at(sums, rm.corner, uv)
+    np.add.at(cnt, rm.corner, 1)
+    return sums / cnt[:, None]
+
+
 def remeasure_pose(rm: Remeasurable, intrinsics: CameraIntrinsics) -> np.ndarray | None:
     """T_cam_target (4, 4) of the pose ``rm`` re-measured with ``intrinsics`` (module docstring); None where the
     caller must run ``measure_pose`` (a non-finite undistortion, a failed refinement, RMS over the limit)."""
@@ -78,11 +88,7 @@ def remeasure_pose(rm: Remeasurable, intrinsics: CameraIntrinsics) -> np.ndarray
         return None
     try:
         if rm.mode == "corners":
-            n = rm.p_target.shape[0]
-            sums, cnt = np.zeros((n, 2)), np.zeros(n)
-            np.add.at(sums, rm.corner, uv)
-            np.add.at(cnt, rm.corner, 1)
-            T, _ = refine_pnp_planar(rm.p_target, sums / cnt[:, None], intrinsics, rm.T_start)
+            T, _ = refine_pnp_planar(rm.p_target, _corner_means(rm, uv), intrinsics, rm.T_start)
         else:
             Ts = [refine_pnp_planar(rm.p_target[rm.corner[rm.frame == f]], uv[rm.frame == f], intrinsics, T0)[0]
                   for f, T0 in enumerate(rm.T_start)]
@@ -117,10 +123,7 @@ def remeasure_many(rms: Sequence[Remeasurable], intrinsics: CameraIntrinsics) ->
             ok[j] = False
             continue
         n = rm.p_target.shape[0]
-        sums, cnt = np.zeros((n, 2)), np.zeros(n)
-        np.add.at(sums, rm.corner, uv)
-        np.add.at(cnt, rm.corner, 1)
-        P[j, :n], M[j, :n], Wt[j, :n] = rm.p_target, sums / cnt[:, None], 1.0
+        P[j, :n], M[j, :n], Wt[j, :n] = rm.p_target, _corner_means(rm, uv), 1.0
     T, settled = refine_pnp_many(P, M, Wt, intrinsics, np.array([rms[k].T_start for k in batch]))
     pc = P @ np.swapaxes(T[:, :3, :3], 1, 2) + T[:, None, :3, 3]  # every pixel's residual at its pose's T
     proj = np.stack([intrinsics.fx * pc[..., 0] / pc[..., 2] + intrinsics.cx,
