@@ -80,8 +80,8 @@ def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gto
     d2 = np.zeros(n)
     lam, status = None, 0
 
-    def finish(z, r, cost, status, A, chord_g, zJ, message=None):
-        """The last Gauss-Newton step (module doc), then the result."""
+    def finish(z, r, cost, status, A, chord_g, zJ, message=None, factor=None):
+        """The last Gauss-Newton step (module doc), then the result; factor: cho_factor(A) when already taken."""
         nonlocal nfev, njev
         A_end = None
         if nfev < max_nfev:
@@ -89,6 +89,7 @@ def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gto
                 if chord_g is not None and np.max(np.abs(z - zJ), initial=0.0) <= CHORD_RADIUS:
                     gr = chord_g(r)
                 else:  # a new Jacobian at z: its covariance, and the step with it
+                    factor = None
                     if normal is None:
                         J = np.asarray(jac(z), float)
                         A, gr = J.T @ J, J.T @ r
@@ -97,7 +98,8 @@ def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gto
                     njev += 1
                 if np.all(np.isfinite(A)) and np.all(np.isfinite(gr)):
                     A_end = A
-                    dz = -cho_solve(cho_factor(A, check_finite=False), gr, check_finite=False)
+                    factor = cho_factor(A, check_finite=False) if factor is None else factor
+                    dz = -cho_solve(factor, gr, check_finite=False)
                     r2 = np.asarray(fun(z + dz), float)
                     nfev += 1
                     c2 = 0.5 * float(r2 @ r2) if np.all(np.isfinite(r2)) else np.inf
@@ -131,10 +133,11 @@ def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gto
             status = 1
             break
         try:  # the undamped (Gauss-Newton) step's predicted reduction at most ftol: no step can reach ftol
-            if 0.5 * float(g @ cho_solve(cho_factor(A, check_finite=False), g, check_finite=False)) <= ftol * cost:
-                return finish(z, r, cost, 2, A, chord_g, zJ, LM_GN_FTOL)  # its final step: that Gauss-Newton step
+            factor = cho_factor(A, check_finite=False)  # (kept for the chord steps and the final step with A)
+            if 0.5 * float(g @ cho_solve(factor, g, check_finite=False)) <= ftol * cost:
+                return finish(z, r, cost, 2, A, chord_g, zJ, LM_GN_FTOL, factor)  # its final step: that GN step
         except (LinAlgError, ValueError):
-            pass
+            factor = None
         S = 1.0 / np.sqrt(dsafe)
         As, gs = A * np.outer(S, S), g * S
         if lam is None:
@@ -163,16 +166,14 @@ def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gto
                 lam *= 4.0
             if f_ok or x_ok:  # (a step rejected by rounding alone included: the final step is taken from z)
                 status = 4 if f_ok and x_ok else (2 if f_ok else 3)
-                return finish(z, r, cost, status, A, chord_g, zJ)
+                return finish(z, r, cost, status, A, chord_g, zJ, factor=factor)
             if nfev >= max_nfev:
                 return LMResult(z, cost, 0, LM_MESSAGES[0], nfev, njev)
             if rho > 1e-4:
                 break
         if chord_g is None or np.max(np.abs(z - zJ)) - CHORD_CONTRACTION * step / np.sqrt(dsafe.min()) > CHORD_RADIUS:
             continue  # (no chord step can come back within CHORD_RADIUS of the Jacobian's point: none tried)
-        try:  # chord steps with this Jacobian (module doc)
-            factor = cho_factor(A, check_finite=False)
-        except (LinAlgError, ValueError):
+        if factor is None:  # (chord steps with this Jacobian, module doc: A not positive definite, none)
             continue
         prev = step
         while nfev < max_nfev:
@@ -194,7 +195,7 @@ def levenberg_marquardt(fun, jac, z0, max_nfev=None, xtol=1e-12, ftol=1e-12, gto
                 z, r, cost, prev = z + dz, r_new, cost_new, step
             if f_ok or x_ok:  # (a step rejected by rounding alone: the minimum, to rounding)
                 status = 4 if f_ok and x_ok else (2 if f_ok else 3)
-                return finish(z, r, cost, status, A, chord_g, zJ)
+                return finish(z, r, cost, status, A, chord_g, zJ, factor=factor)
             if not accepted:
                 break
         if nfev >= max_nfev:

@@ -70,24 +70,6 @@ KNOWN_RIGHT = ("T_flange_tool", "T_flange_cam", "T_flange_target")
 WALK_BLOCK = 4096
 
 
-def _tz(v):
-    T = np.eye(4)
-    T[2, 3] = v
-    return T
-
-
-def _tx(v):
-    T = np.eye(4)
-    T[0, 3] = v
-    return T
-
-
-def _rot4(R):
-    T = np.eye(4)
-    T[:3, :3] = R
-    return T
-
-
 # ----------------------------------------------------------------------------- the chain
 class JointChainChecks:
     """What the serial chain classes (MDH :class:`SerialChain`, ``urdf.URDFChain``) share: mount names,
@@ -331,13 +313,13 @@ class SerialChain(JointChainChecks):
     def _link_parts(self, x, i):
         """Constant prefix C_i = [Tz(l)] Rx(alpha) [Ry(beta)] Tx(a) (4, 4), theta_i, d_i."""
         ix = self._idx
-        C = np.eye(4)
-        if i in self.pre_z:
-            C = C @ _tz(x[ix[f"l{i}"]])
-        C = C @ _rot4(rot_x(x[ix[f"alpha{i}"]]))
+        R = rot_x(x[ix[f"alpha{i}"]])
         if i in self.hayati:
-            C = C @ _rot4(rot_y(x[ix[f"beta{i}"]]))
-        C = C @ _tx(x[ix[f"a{i}"]])
+            R = R @ rot_y(x[ix[f"beta{i}"]])
+        C = np.zeros((4, 4))  # written out: [R, R e_x a (+ l e_z)]
+        C[:3, :3], C[:3, 3], C[3, 3] = R, R[:, 0] * x[ix[f"a{i}"]], 1.0
+        if i in self.pre_z:
+            C[2, 3] += x[ix[f"l{i}"]]
         return C, x[ix[f"theta{i}"]], x[ix[f"d{i}"]]
 
     def _constant_parts(self, x):
@@ -421,6 +403,18 @@ class SerialChain(JointChainChecks):
         walking again (``kinematics.protocols.WalkFrames``)."""
         return self._walk(self.check_joints(q), self._x(x))
 
+    def _jacobian_layout(self) -> dict:
+        """The columns of :meth:`pose_and_jacobian` by role (index arrays into ``params.names``): left_t, left_r,
+        right_t, right_r (3,) each, alpha, a, theta, d (n_joints,) in joint order; idx: the name -> index map."""
+        lay = self.__dict__.get("_jac_layout")
+        if lay is None:
+            ix, js = self._idx, range(1, self.n_joints + 1)
+            lay = {"idx": ix, **{f"{side}_{k}": np.array([ix[f"{m}.{k}{c}"] for c in "xyz"])
+                                 for side, m in (("left", self.left), ("right", self.right)) for k in "tr"},
+                   **{nm: np.array([ix[f"{nm}{i}"] for i in js]) for nm in ("alpha", "a", "theta", "d")}}
+            object.__setattr__(self, "_jac_layout", lay)
+        return lay
+
     def pose_and_jacobian(self, q, x=None, frames=None) -> tuple[np.ndarray, np.ndarray]:
         """(T_left_right (N, 4, 4) as :meth:`forward` gives it, :meth:`pose_jacobian` (N, 6, n_params)) from one
         walk of the chain (``frames``: :meth:`walk_frames` at the same q, x, when the caller has them)."""
@@ -428,68 +422,64 @@ class SerialChain(JointChainChecks):
         x = self._x(x)
         N = q.shape[0]
         n_par = len(self.params)
-        ix = self._idx
         if frames is None:
             frames = self._walk(q, x)  # (n+2, N, 4, 4)
         elif np.shape(frames) != (self.n_joints + 2, N, 4, 4):
             raise ParameterError(f"frames have shape {np.shape(frames)}, expected {(self.n_joints + 2, N, 4, 4)} "
                                  "(walk_frames of the same joint values)")
-        p_end = frames[-1, :, :3, 3]  # (N, 3)
-        p_end_t = np.ascontiguousarray(p_end.T)  # (3, N)
-        Jt = np.zeros((n_par, 6, N))  # filled column by column (contiguous writes), returned transposed
-        rot_k = []  # rotation columns: axis and moment arm p_end - p written now, the cross products at the end
-        V = np.empty((n_par, 3, N))
-
-        def rot_col(k, w, p):  # [w x (p_end - p), w]
-            Jt[k, 3:] = w.T
-            np.subtract(p_end_t, np.asarray(p).T, out=V[len(rot_k)])
-            rot_k.append(k)
-
-        def trans_col(k, w):
-            Jt[k, :3] = w.T
+        p_end_t = np.ascontiguousarray(frames[-1, :, :3, 3].T)  # (3, N)
+        lay = self._jacobian_layout()
+        nj = self.n_joints
+        Jt = np.zeros((n_par, 6, N))  # (columns, rows, poses), filled a group of columns at a time; returned transposed
+        rot_k, arms = [], []  # rotation columns [w x (p_end - p), w]: w written now, p_end - p kept for the end
 
         # ---- left mount: T_left_base = [R_nom Exp(r), t], parent frame = left (identity)
         TL, TR, _ = self._constant_parts(x)
-        for a, s in enumerate(("tx", "ty", "tz")):
-            Jt[ix[f"{self.left}.{s}"], a] = 1.0  # along axis a of left
-        rL = np.array([x[ix[f"{self.left}.{s}"]] for s in ("rx", "ry", "rz")])
-        WL = TL[:3, :3] @ so3_right_jacobian(rL)  # columns = axes in left
-        for a, s in enumerate(("rx", "ry", "rz")):
-            rot_col(ix[f"{self.left}.{s}"], np.broadcast_to(WL[:, a], (N, 3)), TL[:3, 3][:, None].T)
+        Jt[lay["left_t"], (0, 1, 2)] = 1.0  # along axis a of left
+        WL = TL[:3, :3] @ so3_right_jacobian(x[lay["left_r"]])  # columns = axes in left
+        Jt[lay["left_r"], 3:] = WL.T[:, :, None]
+        rot_k.append(lay["left_r"])
+        arms.append(np.broadcast_to(p_end_t - TL[:3, 3][:, None], (3, 3, N)))
 
-        # ---- joints
-        F = frames[0]  # (N, 4, 4) frame i-1
-        for i in range(1, self.n_joints + 1):
-            R, o = F[:, :3, :3], F[:, :3, 3]
-            if i in self.pre_z:
-                trans_col(ix[f"l{i}"], R[:, :, 2])
-                o = o + R[:, :, 2] * x[ix[f"l{i}"]]
-            rot_col(ix[f"alpha{i}"], R[:, :, 0], o)
-            if i in self.hayati:
-                R = R @ rot_x(x[ix[f"alpha{i}"]])
-                rot_col(ix[f"beta{i}"], R[:, :, 1], o)
-                R = R @ rot_y(x[ix[f"beta{i}"]])
-                ax, az = R[:, :, 0], R[:, :, 2]
-            else:  # Rx(alpha) keeps the x axis; the z axis after it is frame i's (Rz(theta + q) keeps it)
-                ax, az = R[:, :, 0], frames[i][:, :3, 2]
-            trans_col(ix[f"a{i}"], ax)
-            o = o + ax * x[ix[f"a{i}"]]
-            rot_col(ix[f"theta{i}"], az, o)  # z axis unchanged by Rz(theta + q)
-            trans_col(ix[f"d{i}"], az)
-            F = frames[i]
+        # ---- joints, all at once: frame i-1's axes and origin (k, 3, N) for joint i = k + 1
+        Fp = frames[:nj]
+        ax = Fp[:, :, :3, 0].transpose(0, 2, 1)  # x axis of frame i-1: Rx(alpha) keeps it
+        o = Fp[:, :, :3, 3].transpose(0, 2, 1)
+        az = frames[1:nj + 1, :, :3, 2].transpose(0, 2, 1)  # z axis of frame i (Rz(theta + q) and Tz(d) keep it)
+        if self.pre_z or self.hayati:
+            o, ax, az = o.copy(), ax.copy(), az.copy()
+        for i in self.pre_z:
+            zp = Fp[i - 1, :, :3, 2].T
+            Jt[lay["idx"][f"l{i}"], :3] = zp
+            o[i - 1] = o[i - 1] + zp * x[lay["idx"][f"l{i}"]]
+        Jt[lay["alpha"], 3:] = ax
+        rot_k.append(lay["alpha"])
+        arms.append(p_end_t - o)
+        for i in self.hayati:  # Rx(alpha) Ry(beta): the y axis after Rx(alpha) turns beta; x and z axes move
+            R = Fp[i - 1, :, :3, :3] @ rot_x(x[lay["idx"][f"alpha{i}"]])
+            rot_k.append(np.array([lay["idx"][f"beta{i}"]]))
+            Jt[rot_k[-1][0], 3:] = R[:, :, 1].T
+            arms.append((p_end_t - o[i - 1])[None])
+            R = R @ rot_y(x[lay["idx"][f"beta{i}"]])
+            ax[i - 1], az[i - 1] = R[:, :, 0].T, R[:, :, 2].T
+        Jt[lay["a"], :3] = ax
+        Jt[lay["theta"], 3:] = az
+        rot_k.append(lay["theta"])
+        arms.append(p_end_t - (o + ax * x[lay["a"]][:, None, None]))  # (the moment arm from after Tx(a))
+        Jt[lay["d"], :3] = az
 
         # ---- right mount: T_flange_right = [R_nom Exp(r), t] in the flange frame F
+        F = frames[nj]
         Rf, of = F[:, :3, :3], F[:, :3, 3]
-        for a, s in enumerate(("tx", "ty", "tz")):
-            trans_col(ix[f"{self.right}.{s}"], Rf[:, :, a])
-        rR = np.array([x[ix[f"{self.right}.{s}"]] for s in ("rx", "ry", "rz")])
-        WR = Rf @ (TR[:3, :3] @ so3_right_jacobian(rR))  # (N, 3, 3)
+        Jt[lay["right_t"], :3] = Rf.transpose(2, 1, 0)
+        WR = Rf @ (TR[:3, :3] @ so3_right_jacobian(x[lay["right_r"]]))  # (N, 3, 3)
+        Jt[lay["right_r"], 3:] = WR.transpose(2, 1, 0)
+        rot_k.append(lay["right_r"])
         p_right = of + np.einsum("nij,j->ni", Rf, TR[:3, 3])
-        for a, s in enumerate(("rx", "ry", "rz")):
-            rot_col(ix[f"{self.right}.{s}"], WR[:, :, a], p_right)
+        arms.append(np.broadcast_to(p_end_t - p_right.T, (3, 3, N)))
         # the cross products of every rotation column at once, written out on contiguous (columns, N) rows
-        K = np.array(rot_k)
-        w, v = Jt[K, 3:], V[:K.size]  # (r, 3, N)
+        K = np.concatenate(rot_k)
+        w, v = Jt[K, 3:], np.concatenate(arms)  # (r, 3, N)
         Jt[K, 0] = w[:, 1] * v[:, 2] - w[:, 2] * v[:, 1]
         Jt[K, 1] = w[:, 2] * v[:, 0] - w[:, 0] * v[:, 2]
         Jt[K, 2] = w[:, 0] * v[:, 1] - w[:, 1] * v[:, 0]
