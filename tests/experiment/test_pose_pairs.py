@@ -206,16 +206,13 @@ def test_bad_pose_pair_rows_are_named(tmp_path):
         process_poses(p, tmp_path / "o", method="ekf")
 
 
-@pytest.mark.parametrize("mount, robot_std, whole_start", [("fixed", None, False), ("eye_in_hand", None, False),
-                                                           ("eye_in_hand", (1e-4, np.radians(0.01)), False),
-                                                           ("fixed", None, True)])
-def test_held_out_folds_fitted_from_the_whole_fit_equal_the_folds_fitted_alone(mount, robot_std, whole_start,
-                                                                               monkeypatch):
+@pytest.mark.parametrize("mount, robot_std", [("fixed", None), ("eye_in_hand", None),
+                                              ("eye_in_hand", (1e-4, np.radians(0.01)))])
+def test_held_out_folds_fitted_from_the_whole_fit_equal_the_folds_fitted_alone(mount, robot_std, monkeypatch):
     """poses.pair_holdout with the whole-data fit (fit=: the folds' training sets fitted together from it,
     identify.handeye_loo.subset_fits) against the folds each fitted alone from their closed forms
     (identify_handeye): the same closed form per fold ("before" identical), the same held-out errors ("after", the
-    iteration's tolerance: 1e-4 relative), the same decision; with an outlier flagged (in no training set).
-    whole_start: the "before" of every fold by the whole fit's closed form (before_method=, what process passes)."""
+    iteration's tolerance: 1e-4 relative), the same decision; with an outlier flagged (in no training set)."""
     from types import SimpleNamespace
 
     from vision_calib.experiment.poses import pair_holdout
@@ -229,19 +226,17 @@ def test_held_out_folds_fitted_from_the_whole_fit_equal_the_folds_fitted_alone(m
                          cov=d.pose_cov, noise_frame=None, mount=mount, robot_std=robot_std, path="pairs")
     rob = ident.fit.robot
     start = None if robot_std is not None else ((1e-3 * rob["translation_mm"]) ** 2, np.radians(rob["rotation_deg"]) ** 2)
-    method = ident.fit.closed_forms["start"] if whole_start else None
-    alone = pair_holdout(pp, 5, 0, outliers=[labels[7]], theta_start=start, before_method=method)
+    alone = pair_holdout(pp, 5, 0, outliers=[labels[7]], theta_start=start)
     import vision_calib.experiment.handeye_step as step
 
     def alone_fit(*a, **k):
         raise AssertionError("a fold was fitted alone")
 
     monkeypatch.setattr(step, "identify_handeye", alone_fit)  # every fold from the whole fit here
-    near = pair_holdout(pp, 5, 0, outliers=[labels[7]], theta_start=start, fit=ident.fit, before_method=method)
+    near = pair_holdout(pp, 5, 0, outliers=[labels[7]], theta_start=start, fit=ident.fit)
     assert near["decision"]["ok"] == alone["decision"]["ok"]
     for a, b in zip(alone["per_fold"], near["per_fold"]):
         assert a["converged"] and b["converged"] and a["closed_form"] == b["closed_form"]
-        assert method is None or a["closed_form"] == method
         assert a["before"] == b["before"]
         for key, v in a["after"].items():
             assert b["after"][key] == pytest.approx(v, rel=1e-4), key

@@ -127,20 +127,18 @@ def _pair_errors(A, B, F, M, mount: str) -> np.ndarray:
     return pose_error(A @ mount_G(F, mount) @ B, M)
 
 
-def _folds_from_fit(pp, trains: list, fit, before_method: str | None = None) -> dict:
-    """{fold index: (A, B, closed-form name, (A, B) of that closed form)}: the folds' training sets fitted
+def _folds_from_fit(pp, trains: list, fit) -> dict:
+    """{fold index: (A, B, closed-form start name, (A, B) of that closed form)}: the folds' training sets fitted
     together from the whole-data fit ``fit`` (a ``HandeyeFit``; ``identify.handeye_loo.subset_fits``: the iteration
-    of ``fit_handeye`` from that fit instead of a closed form), with the closed form of each fold's "before" figures:
-    OpenCV's ``before_method`` on its training poses, or (None) the start its own fit would take (the closed form of
-    least weighted cost among all of them, weights at each one). A fold is left out (the caller fits it alone,
-    ``identify_handeye``) when its motions are degenerate, its closed form(s) fail, its iteration does not settle,
-    or a closed form (its own, or with ``before_method`` those of all the poses) is below it under its final weights
-    (another minimum)."""
+    of ``fit_handeye`` from that fit instead of a closed form), with the start each fold's own fit would take (the
+    closed form of least weighted cost, weights at each one) for the "before" figures. A fold is left out (the
+    caller fits it alone, ``identify_handeye``) when its motions are degenerate, no closed form solves it, its
+    iteration does not settle, or one of its closed forms is below it under its final weights (another minimum)."""
     from ..errors import VisionCalibError
     from ..identify.handeye_fit import candidate_costs
     from ..identify.handeye_loo import subset_fits, subset_weights
     from ..identify.handeye_problem import robot_pose_cov, transforms_from_x, x_from_transforms
-    from ..measure.handeye import CLOSED_FORM_METHODS, closed_forms
+    from ..measure.handeye import closed_forms
     from .checks import handeye_motions
     from .handeye_step import all_poses_problem
 
@@ -151,16 +149,13 @@ def _folds_from_fit(pp, trains: list, fit, before_method: str | None = None) -> 
     estimate = pp.robot_std is None
     theta = fit.robot_variances if estimate else np.square(np.asarray(pp.robot_std, float))
     start_cov = robot_pose_cov(*np.sqrt(np.zeros(2) if estimate else theta))  # fit_handeye's, choosing its start
-    methods = CLOSED_FORM_METHODS if before_method is None else (before_method,)
-    whole = [v for v in fit.candidates.values() if not isinstance(v, str)] if before_method is not None else []
-    Xw = x_from_transforms(allp, *np.moveaxis(np.array(whole), 1, 0)) if whole else np.zeros((0, 12))
     cands = {}
     for f, train in enumerate(trains):
         try:
             handeye_motions(F[train], pp.mount, [str(pp.ids[i]) for i in train], "")
         except VisionCalibError:
             continue
-        ok = {m: v for m, v in closed_forms(F[train], M[train], pp.mount, methods).items() if not isinstance(v, str)}
+        ok = {m: v for m, v in closed_forms(F[train], M[train], pp.mount).items() if not isinstance(v, str)}
         if ok:
             AB = np.array(list(ok.values()))  # (k, 2, 4, 4)
             cands[f] = (list(ok), x_from_transforms(allp, AB[:, 0], AB[:, 1]), ok)
@@ -176,9 +171,8 @@ def _folds_from_fit(pp, trains: list, fit, before_method: str | None = None) -> 
         if not settled[j]:
             continue
         names, Xc, ok = cands[f]
-        start = names[0] if before_method is not None else \
-            names[int(np.argmin(candidate_costs(allp, Xc, start_cov, mask=mask[j:j + 1])))]
-        c = candidate_costs(allp, np.vstack([X[j:j + 1], Xc, Xw]), mask=mask[j:j + 1],
+        start = names[int(np.argmin(candidate_costs(allp, Xc, start_cov, mask=mask[j:j + 1])))]
+        c = candidate_costs(allp, np.vstack([X[j:j + 1], Xc]), mask=mask[j:j + 1],
                             W=subset_weights(allp, X[j:j + 1], th[j:j + 1]))
         if np.min(c[1:]) < c[0] * (1 - 1e-9):
             continue
@@ -186,28 +180,22 @@ def _folds_from_fit(pp, trains: list, fit, before_method: str | None = None) -> 
     return out
 
 
-def pair_holdout(pp: PosePairs, folds: int, seed: int, outliers=(), theta_start=None, fit=None,
-                 before_method: str | None = None) -> dict:
+def pair_holdout(pp: PosePairs, folds: int, seed: int, outliers=(), theta_start=None, fit=None) -> dict:
     """k-fold held-out validation of a pose-pair fit (``pp``: a PosePairs, or any object with its ids,
     T_base_flange, T_cam_target, cov, noise_frame, mount, robot_std and path): the poses split by
     ``holdout.fold_indices``; each fold's
     model identified on the other folds (the whole-data outliers in no training set; the fit of
-    ``handeye_step.identify_handeye`` without its outlier test) predicts the held-out poses ("after"), beside an
-    OpenCV closed form of that fold's training poses ("before"): the method ``before_method`` (e.g. the one of
-    least weighted cost on all the poses, the whole fit's start: each fold then runs that one method, not OpenCV's
-    seven; a fold where it fails takes its own start), or (None) the closed form a fit of the fold's poses alone
-    starts from (the one of least weighted cost among the seven). Errors of T_cam_target, position [mm] and
-    rotation [deg] norms (``holdout.error_stats``), overall and without the flagged outliers; the paired-bootstrap
-    interval of the RMS change. Decision not ok (the verdict fails): a fold that cannot be identified, or our model
+    ``handeye_step.identify_handeye`` without its outlier test) predicts the held-out poses ("after"), beside the
+    OpenCV closed form a fit of that fold's training poses starts from ("before": the one of least weighted cost). Errors of T_cam_target, position [mm] and rotation
+    [deg] norms (``holdout.error_stats``), overall and without the flagged outliers; the paired-bootstrap interval
+    of the RMS change. Decision not ok (the verdict fails): a fold that cannot be identified, or our model
     predicting held-out poses significantly worse than the closed form. theta_start: the robot's variances of the
     fit of all the poses: each fold's REML search starts there (``identify_handeye``). fit: that fit (a
     ``HandeyeFit`` of the poses not flagged): the folds are then fitted together from it (:func:`_folds_from_fit`;
     the same minimum as from their closed forms, to the iteration's tolerance), a fold it cannot settle alone."""
-    from ..measure.handeye import CLOSED_FORM_METHODS
     from .handeye_step import identify_handeye
     from .holdout import error_stats, fold_indices, rms_change_interval
 
-    before_method = before_method if before_method in CLOSED_FORM_METHODS else None  # (numpy's start: not OpenCV's)
     labels = [str(i) for i in pp.ids]
     n, flagged = len(labels), {str(o) for o in outliers}
     F, M, C = pp.T_base_flange, pp.T_cam_target, pp.cov
@@ -216,7 +204,7 @@ def pair_holdout(pp: PosePairs, folds: int, seed: int, outliers=(), theta_start=
     parts = fold_indices(n, folds, seed)
     trains = [np.array(sorted(i for j, q in enumerate(parts) if j != f for i in q if labels[i] not in flagged), int)
               for f in range(len(parts))]
-    near = {} if fit is None else _folds_from_fit(pp, trains, fit, before_method)
+    near = {} if fit is None else _folds_from_fit(pp, trains, fit)
     for f, test in enumerate(parts):
         train = trains[f]
         rec = {"fold": f + 1, "n_train": int(len(train)), "n_test": int(len(test)),
@@ -235,8 +223,6 @@ def pair_holdout(pp: PosePairs, folds: int, seed: int, outliers=(), theta_start=
                 per_fold.append({**rec, "converged": False, "error": str(exc)})
                 continue
             start, (A_f, B_f), converged = fi.fit.closed_forms["start"], (fi.A, fi.B), bool(fi.result.converged)
-            if not isinstance(fi.fit.candidates.get(before_method, ""), str):
-                start = before_method
             Acf, Bcf = fi.fit.candidates[start]
             if not converged:
                 fails.append(f"fold {f + 1} ({len(train)} training poses): the fit did not converge "
@@ -249,11 +235,8 @@ def pair_holdout(pp: PosePairs, folds: int, seed: int, outliers=(), theta_start=
         per_fold.append({**rec, "converged": converged, "closed_form": start,
                          "before": error_stats(*_norms(before)), "after": error_stats(*_norms(after))})
     out = {"folds": int(folds), "seed": int(seed), "residual_kind": "pose", "residual_of": "T_cam_target",
-           "before_is": ("the OpenCV closed form of least weighted cost on each fold's training poses, the start a "
-                         "fit of them alone takes (measure.handeye.closed_forms)") if before_method is None else
-                        (f"OpenCV's closed form '{before_method}' (of least weighted cost on all the poses: the start "
-                         "of their fit) on each fold's training poses (measure.handeye.closed_forms; a fold where it "
-                         "fails: the start of its own fit, per fold under closed_form)"),
+           "before_is": "the OpenCV closed form of least weighted cost on each fold's training poses, the start a "
+                        "fit of them alone takes (measure.handeye.closed_forms)",
            "after_is": "the hand-eye fit of the fold's training poses",
            "outliers": [lab for lab in labels if lab in flagged], "per_fold": per_fold, "tcp_m": None}
     if not idx_all:
@@ -351,8 +334,7 @@ def process_pose_pairs(pp: PosePairs, out_dir, folds: int | None = None, plots: 
     he = handeye_report(result, A, B, problem)
     he.update(handeye_blocks(ident))
     t_id = time.perf_counter() - t0
-    hold = pair_holdout(pp, folds, pp.seed, outliers=[lab for lab, _ in ident.rejected], fit=ident.fit,
-                        before_method=ident.fit.closed_forms.get("start"))
+    hold = pair_holdout(pp, folds, pp.seed, outliers=[lab for lab, _ in ident.rejected], fit=ident.fit)
     failure = handeye_gross_failure(pp.T_base_flange, pp.T_cam_target, pp.mount, ident, str(pp.path),
                                     alternatives=alternative_readings(pp.T_base_flange, pp.T_cam_target, pp.mount,
                                                                       "the pose-pair file", "measured poses"))

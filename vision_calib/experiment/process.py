@@ -411,8 +411,7 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None, folds=No
         start = None if rob.get("source") != "estimated" else (
             (1e-3 * rob["translation_mm"]) ** 2, np.radians(rob["rotation_deg"]) ** 2)
         hold = pair_holdout(pairs, int(min(folds or DEFAULT_FOLDS, len(ok))), 0,
-                            outliers=[lab for lab, _ in ident.rejected], theta_start=start, fit=ident.fit,
-                            before_method=ident.fit.closed_forms.get("start"))
+                            outliers=[lab for lab, _ in ident.rejected], theta_start=start, fit=ident.fit)
         failure = holdout_failure(hold)
     cam_fit = None
     if ident.nuisance is not None:

@@ -88,9 +88,9 @@ def _closed_form(G, Ginv, M, method: str) -> tuple[np.ndarray, np.ndarray]:
 CLOSED_FORM_MAX_POSES = 200
 
 
-def closed_forms(T_base_flange, T_cam_target, mount: str, methods=CLOSED_FORM_METHODS) -> dict:
-    """{method: (A, B) (4, 4) each, or the error message (str) when OpenCV fails} for every one of ``methods``
-    (default :data:`CLOSED_FORM_METHODS`: the ``candidates`` of ``identify.handeye_fit.fit_handeye``), from at most
+def closed_forms(T_base_flange, T_cam_target, mount: str) -> dict:
+    """{method: (A, B) (4, 4) each, or the error message (str) when OpenCV fails} for every
+    :data:`CLOSED_FORM_METHODS` (the ``candidates`` of ``identify.handeye_fit.fit_handeye``), from at most
     :data:`CLOSED_FORM_MAX_POSES` of the pairs (evenly spaced; all of them up to that number)."""
     F, M = np.asarray(T_base_flange, float), np.asarray(T_cam_target, float)
     if F.ndim == 3 and len(F) > CLOSED_FORM_MAX_POSES:
@@ -103,11 +103,11 @@ def closed_forms(T_base_flange, T_cam_target, mount: str, methods=CLOSED_FORM_ME
         if F.shape[0] < 3:
             raise DataError(f"hand-eye calibration needs at least 3 poses, got {F.shape[0]}")
     except DataError as exc:  # every method fails the same way: each says why
-        return {m: str(exc) for m in methods}
+        return {m: str(exc) for m in CLOSED_FORM_METHODS}
     G = mount_G(F, mount)
     Ginv = frames.inv_T(G)
     out = {}
-    for m in methods:  # the poses checked once, each method on them
+    for m in CLOSED_FORM_METHODS:  # the poses checked once, each method on them
         try:
             out[m] = _closed_form(G, Ginv, M, m)
         except DataError as exc:
