@@ -12,6 +12,9 @@ Used to validate pose measurements on real data; identification proper lives in 
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
+
 import cv2
 import numpy as np
 
@@ -86,6 +89,9 @@ def _closed_form(G, Ginv, M, method: str) -> tuple[np.ndarray, np.ndarray]:
 #: ``calibrateHandEye`` pairs every motion with every other (time and memory grow as N^2: 800 pairs 30 s, 2,000 pairs
 #: out of memory, measured); the fit that starts from them reads all the pairs
 CLOSED_FORM_MAX_POSES = 200
+#: at most this many threads run :func:`closed_forms`' methods side by side (each OpenCV call releases the GIL: 1.9x
+#: on 2 cores at 40-80 poses, measured; their answers do not depend on it); 1: one after the other
+CLOSED_FORM_THREADS = 8
 
 
 def closed_forms(T_base_flange, T_cam_target, mount: str) -> dict:
@@ -106,13 +112,18 @@ def closed_forms(T_base_flange, T_cam_target, mount: str) -> dict:
         return {m: str(exc) for m in CLOSED_FORM_METHODS}
     G = mount_G(F, mount)
     Ginv = frames.inv_T(G)
-    out = {}
-    for m in CLOSED_FORM_METHODS:  # the poses checked once, each method on them
+
+    def one(m):  # the poses checked once, each method on them
         try:
-            out[m] = _closed_form(G, Ginv, M, m)
+            return _closed_form(G, Ginv, M, m)
         except DataError as exc:
-            out[m] = str(exc)
-    return out
+            return str(exc)
+
+    workers = min(len(CLOSED_FORM_METHODS), os.cpu_count() or 1, CLOSED_FORM_THREADS)
+    if workers < 2:
+        return {m: one(m) for m in CLOSED_FORM_METHODS}
+    with ThreadPoolExecutor(max_workers=workers) as pool:  # OpenCV releases the GIL: the methods side by side
+        return dict(zip(CLOSED_FORM_METHODS, pool.map(one, CLOSED_FORM_METHODS)))
 
 
 def hand_eye_consistency(T_base_flange: np.ndarray, T_cam_target: np.ndarray, setup: str = "eye_to_hand",
