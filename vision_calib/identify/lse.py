@@ -63,7 +63,8 @@ def prepare(
     keep: a dict that receives ``"r0"``, the residual (n_obs, m) at x0 checked here, and ``"blocks"``, the
     whitened free Jacobian at x0 of the final free set in blocks [(a, b, Aw ((b - a) m, n_free), columns times
     ``params.scale``)], when it fits in :data:`KEEP_BYTES` (the solver's first normal equations; the analysis reads
-    their Gram matrix, the same sums it would form; not with ``keep_jacobian=False``).
+    their Gram matrix, the same sums it would form; not with ``keep_jacobian=False``), and ``"gram"``, that Gram
+    matrix (prior rows included), when the free set is the one of the blocks.
     """
     params = problem.params
     if free is not None:
@@ -109,6 +110,8 @@ def prepare(
         keep["r0"] = r0
         if blocks is not None:
             keep["blocks"] = blocks
+            if G0 is not None and not (report.non_identifiable and fix_unidentifiable):
+                keep["gram"] = G0  # the blocks' own J^T J (after a column selection the solver forms it anew)
     return problem, x0, report, warnings
 
 
@@ -342,7 +345,8 @@ def solve_lse(
     cov = J = None
     if method == "lm" and jac == "analytic":  # the normal equations in BLAS, accumulated over blocks of poses
         sol = levenberg_marquardt(fun, None, np.zeros(fi.size), max_nfev, xtol, ftol, gtol,
-                                  normal=normal_equations(problem, W, x_of, s, start=kept.get("blocks")))
+                                  normal=normal_equations(problem, W, x_of, s, start=kept.get("blocks"),
+                                                          start_gram=kept.get("gram")))
         if sol.A is not None:
             cov = covariance_from_normal(sol.A, s, problem.n_obs * problem.m + problem.n_prior)
     else:
@@ -375,34 +379,37 @@ def solve_lse(
 
 
 def normal_equations(problem: IdentificationProblem, W: np.ndarray, x_of, s: np.ndarray, block: int | None = None,
-                     start: list | None = None):
+                     start: list | None = None, start_gram: np.ndarray | None = None):
     """(z, r) -> (A (n_free, n_free), g (n_free,)): J^T J and J^T r of the whitened, scaled residual
     ``fun`` of :func:`solve_lse` at z (r: its (n_obs m + n_prior,) value at z), accumulated over the
     :func:`~vision_calib.identify.identifiability.whitened_jacobian_blocks` of ``block`` poses (default
     ``BLOCK_POSES``), the prior rows last. W (n_obs, m, m) whitening, x_of: z -> x (n,), s (n_free,) scales. start:
-    the blocks at z = 0 when already computed (``prepare(keep=...)``), used by the first call there. When the
+    the blocks at z = 0 when already computed (``prepare(keep=...)``), used by the first call there, with
+    ``start_gram`` their J^T J when also computed (the same sums). When the
     whitened Jacobian fits in :data:`KEEP_BYTES` the last call's blocks are kept and ``normal.chord(r)`` is J^T r
     with them (a chord step: no new Jacobian); else ``normal.chord`` is None."""
     n_obs, m = problem.n_obs, problem.m
     block = int(block or BLOCK_POSES)
     P = scaled_prior_rows(problem, s)
     keep = kept_jacobian_fits(problem)
-    last = {"start": start}
+    last = {"start": start, "gram": start_gram}
 
     def normal(z, r):
-        blocks = last.pop("start", None)
+        blocks, gram = last.pop("start", None), last.pop("gram", None)
         if blocks is None or np.any(z):  # LM: status -1 when not finite
-            blocks = whitened_jacobian_blocks(problem, x_of(z), s, W, block, check=False)
-        A = np.zeros((s.size, s.size))
+            blocks, gram = whitened_jacobian_blocks(problem, x_of(z), s, W, block, check=False), None
+        A = np.zeros((s.size, s.size)) if gram is None else np.array(gram)
         g = np.zeros(s.size)
         kept = []
         for a, b, Jw in blocks:
-            A += Jw.T @ Jw
+            if gram is None:
+                A += Jw.T @ Jw
             g += Jw.T @ r[a * m:b * m]
             if keep:
                 kept.append((a, b, Jw))
         if P is not None:
-            A += P.T @ P
+            if gram is None:
+                A += P.T @ P
             g += P.T @ r[n_obs * m:]
         last["blocks"] = kept
         return A, g
