@@ -138,7 +138,7 @@ def _folds_from_fit(pp, trains: list, fit) -> dict:
     from ..identify.handeye_fit import candidate_costs
     from ..identify.handeye_loo import subset_fits, subset_weights
     from ..identify.handeye_problem import robot_pose_cov, transforms_from_x, x_from_transforms
-    from ..measure.handeye import closed_forms
+    from ..measure.handeye import closed_forms_many
     from .checks import handeye_motions
     from .handeye_step import all_poses_problem
 
@@ -149,13 +149,16 @@ def _folds_from_fit(pp, trains: list, fit) -> dict:
     estimate = pp.robot_std is None
     theta = fit.robot_variances if estimate else np.square(np.asarray(pp.robot_std, float))
     start_cov = robot_pose_cov(*np.sqrt(np.zeros(2) if estimate else theta))  # fit_handeye's, choosing its start
-    cands = {}
+    moving = []  # the folds whose training motions are not degenerate
     for f, train in enumerate(trains):
         try:
             handeye_motions(F[train], pp.mount, [str(pp.ids[i]) for i in train], "")
         except VisionCalibError:
             continue
-        ok = {m: v for m, v in closed_forms(F[train], M[train], pp.mount).items() if not isinstance(v, str)}
+        moving.append(f)
+    cands = {}
+    for f, cf in zip(moving, closed_forms_many([(F[trains[f]], M[trains[f]]) for f in moving], pp.mount)):
+        ok = {m: v for m, v in cf.items() if not isinstance(v, str)}
         if ok:
             AB = np.array(list(ok.values()))  # (k, 2, 4, 4)
             cands[f] = (list(ok), x_from_transforms(allp, AB[:, 0], AB[:, 1]), ok)

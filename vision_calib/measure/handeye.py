@@ -89,8 +89,8 @@ def _closed_form(G, Ginv, M, method: str) -> tuple[np.ndarray, np.ndarray]:
 #: ``calibrateHandEye`` pairs every motion with every other (time and memory grow as N^2: 800 pairs 30 s, 2,000 pairs
 #: out of memory, measured); the fit that starts from them reads all the pairs
 CLOSED_FORM_MAX_POSES = 200
-#: at most this many threads run :func:`closed_forms`' methods side by side (each OpenCV call releases the GIL: 1.9x
-#: on 2 cores at 40-80 poses, measured; their answers do not depend on it); 1: one after the other
+#: at most this many threads run :func:`closed_forms_many`' OpenCV calls side by side (each releases the GIL; one set
+#: of 7 methods on 2 cores: 1.4x at 16 poses, 1.6x at 40, 1.9x at 80, measured); 1: one after the other
 CLOSED_FORM_THREADS = 8
 
 
@@ -98,32 +98,47 @@ def closed_forms(T_base_flange, T_cam_target, mount: str) -> dict:
     """{method: (A, B) (4, 4) each, or the error message (str) when OpenCV fails} for every
     :data:`CLOSED_FORM_METHODS` (the ``candidates`` of ``identify.handeye_fit.fit_handeye``), from at most
     :data:`CLOSED_FORM_MAX_POSES` of the pairs (evenly spaced; all of them up to that number)."""
-    F, M = np.asarray(T_base_flange, float), np.asarray(T_cam_target, float)
-    if F.ndim == 3 and len(F) > CLOSED_FORM_MAX_POSES:
-        pick = np.unique(np.linspace(0, len(F) - 1, CLOSED_FORM_MAX_POSES).round().astype(int))
-        F, M = F[pick], M[pick[pick < len(M)]]
-    mount = check_mount(mount)
-    try:
-        F = check_poses("T_base_flange", F)
-        M = check_poses("T_cam_target_meas", M, F.shape[0])
-        if F.shape[0] < 3:
-            raise DataError(f"hand-eye calibration needs at least 3 poses, got {F.shape[0]}")
-    except DataError as exc:  # every method fails the same way: each says why
-        return {m: str(exc) for m in CLOSED_FORM_METHODS}
-    G = mount_G(F, mount)
-    Ginv = frames.inv_T(G)
+    return closed_forms_many([(T_base_flange, T_cam_target)], mount)[0]
 
-    def one(m):  # the poses checked once, each method on them
+
+def closed_forms_many(pose_sets, mount: str) -> list:
+    """:func:`closed_forms` of each (T_base_flange (N, 4, 4), T_cam_target (N, 4, 4)) of ``pose_sets`` (e.g. the
+    training sets of held-out folds): every (set, method) call of OpenCV side by side in up to
+    :data:`CLOSED_FORM_THREADS` threads (each releases the GIL; the answers do not depend on it)."""
+    mount = check_mount(mount)
+    out, tasks = [], []
+    for T_base_flange, T_cam_target in pose_sets:
+        F, M = np.asarray(T_base_flange, float), np.asarray(T_cam_target, float)
+        if F.ndim == 3 and len(F) > CLOSED_FORM_MAX_POSES:
+            pick = np.unique(np.linspace(0, len(F) - 1, CLOSED_FORM_MAX_POSES).round().astype(int))
+            F, M = F[pick], M[pick[pick < len(M)]]
         try:
-            return _closed_form(G, Ginv, M, m)
+            F = check_poses("T_base_flange", F)
+            M = check_poses("T_cam_target_meas", M, F.shape[0])
+            if F.shape[0] < 3:
+                raise DataError(f"hand-eye calibration needs at least 3 poses, got {F.shape[0]}")
+        except DataError as exc:  # every method fails the same way: each says why
+            out.append({m: str(exc) for m in CLOSED_FORM_METHODS})
+            continue
+        out.append({})
+        G = mount_G(F, mount)
+        tasks += [(len(out) - 1, m, G, frames.inv_T(G), M) for m in CLOSED_FORM_METHODS]  # the poses checked once
+
+    def one(task):
+        try:
+            return _closed_form(*task[2:], task[1])
         except DataError as exc:
             return str(exc)
 
-    workers = min(len(CLOSED_FORM_METHODS), os.cpu_count() or 1, CLOSED_FORM_THREADS)
+    workers = min(len(tasks), os.cpu_count() or 1, CLOSED_FORM_THREADS)
     if workers < 2:
-        return {m: one(m) for m in CLOSED_FORM_METHODS}
-    with ThreadPoolExecutor(max_workers=workers) as pool:  # OpenCV releases the GIL: the methods side by side
-        return dict(zip(CLOSED_FORM_METHODS, pool.map(one, CLOSED_FORM_METHODS)))
+        found = [one(t) for t in tasks]
+    else:
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            found = list(pool.map(one, tasks))
+    for (k, m, *_), v in zip(tasks, found):
+        out[k][m] = v
+    return out
 
 
 def hand_eye_consistency(T_base_flange: np.ndarray, T_cam_target: np.ndarray, setup: str = "eye_to_hand",
