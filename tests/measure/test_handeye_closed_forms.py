@@ -117,3 +117,26 @@ def test_closed_forms_of_many_pairs_read_an_evenly_spaced_subset(monkeypatch):
         assert np.linalg.norm(frames.pose_error(A, many[m][0])[:3]) < 0.01
     few = closed_forms(F[:20], M[:20], "fixed")
     assert np.array_equal(few["tsai"][0], opencv_closed_form(F[:20], M[:20], "fixed", "tsai")[0])
+
+
+def test_closed_forms_of_many_sets_in_threads_equal_them_one_by_one(monkeypatch):
+    """measure.handeye.closed_forms_many (the OpenCV calls of several pose sets side by side in threads): for each set
+    the very numbers of closed_forms run one method after the other (CLOSED_FORM_THREADS = 1), the methods in
+    CLOSED_FORM_METHODS order; a set too small for any method gets each method's message, the others unaffected."""
+    import vision_calib.measure.handeye as handeye
+
+    rng = np.random.default_rng(7)
+    sets = []
+    for mount_n in (12, 9, 2, 20):  # the third: 2 poses, no method can run
+        _, _, F, M = _scene(rng, "fixed", mount_n)
+        sets.append((F, _noisy(rng, M)))
+    many = handeye.closed_forms_many(sets, "fixed")
+    monkeypatch.setattr(handeye, "CLOSED_FORM_THREADS", 1)
+    for (F, M), got in zip(sets, many):
+        want = closed_forms(F, M, "fixed")
+        assert list(got) == list(want) == list(CLOSED_FORM_METHODS)
+        for m in CLOSED_FORM_METHODS:
+            if isinstance(want[m], str):
+                assert got[m] == want[m] and "at least 3 poses" in want[m] and len(F) == 2
+            else:
+                assert np.array_equal(got[m][0], want[m][0]) and np.array_equal(got[m][1], want[m][1])

@@ -130,7 +130,8 @@ def closed_forms_many(pose_sets, mount: str) -> list:
         except DataError as exc:
             return str(exc)
 
-    workers = min(len(tasks), os.cpu_count() or 1, CLOSED_FORM_THREADS)
+    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    workers = min(len(tasks), cpus, CLOSED_FORM_THREADS)
     if workers < 2:
         found = [one(t) for t in tasks]
     else:
