@@ -122,7 +122,8 @@ def closed_forms_many(pose_sets, mount: str) -> list:
             continue
         out.append({})
         G = mount_G(F, mount)
-        tasks += [(len(out) - 1, m, G, frames.inv_T(G), M) for m in CLOSED_FORM_METHODS]  # the poses checked once
+        Ginv = frames.inv_T(G)
+        tasks += [(len(out) - 1, m, G, Ginv, M) for m in CLOSED_FORM_METHODS]  # the poses checked once, every method
 
     def one(task):
         try:
