@@ -189,9 +189,9 @@ def pair_holdout(pp: PosePairs, folds: int, seed: int, outliers=(), theta_start=
     ``holdout.fold_indices``; each fold's
     model identified on the other folds (the whole-data outliers in no training set; the fit of
     ``handeye_step.identify_handeye`` without its outlier test) predicts the held-out poses ("after"), beside the
-    OpenCV closed form a fit of that fold's training poses starts from ("before": the one of least weighted cost). Errors of T_cam_target, position [mm] and rotation
-    [deg] norms (``holdout.error_stats``), overall and without the flagged outliers; the paired-bootstrap interval
-    of the RMS change. Decision not ok (the verdict fails): a fold that cannot be identified, or our model
+    OpenCV closed form a fit of that fold's training poses starts from ("before": the one of least weighted cost).
+    Errors of T_cam_target, position [mm] and rotation [deg] norms (``holdout.error_stats``), overall and without
+    the flagged outliers; the paired-bootstrap interval of the RMS change. Decision not ok (the verdict fails): a fold that cannot be identified, or our model
     predicting held-out poses significantly worse than the closed form. theta_start: the robot's variances of the
     fit of all the poses: each fold's REML search starts there (``identify_handeye``). fit: that fit (a
     ``HandeyeFit`` of the poses not flagged): the folds are then fitted together from it (:func:`_folds_from_fit`;

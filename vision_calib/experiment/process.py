@@ -407,9 +407,8 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None, folds=No
 
         pairs = SimpleNamespace(ids=tuple(str(lab) for lab in labels), T_base_flange=rec.poses[ok], T_cam_target=T,
                                 cov=cov, noise_frame=None, mount=mount, robot_std=rec.robot_pose_std, path=rec.folder)
-        rob = ident.fit.robot  # the folds' REML starts from the full fit's robot variances
-        start = None if rob.get("source") != "estimated" else (
-            (1e-3 * rob["translation_mm"]) ** 2, np.radians(rob["rotation_deg"]) ** 2)
+        # the folds' REML starts from the full fit's robot variances
+        start = tuple(ident.fit.robot_variances) if ident.fit.robot.get("source") == "estimated" else None
         hold = pair_holdout(pairs, int(min(folds or DEFAULT_FOLDS, len(ok))), 0,
                             outliers=[lab for lab, _ in ident.rejected], theta_start=start, fit=ident.fit)
         failure = holdout_failure(hold)

@@ -38,7 +38,7 @@ from numpy.typing import ArrayLike
 from .. import frames
 from ..errors import DataError
 from .handeye_problem import (flange_error_map, handeye_initial_guess, handeye_problem, model_many, reweighted,
-                              robot_pose_cov, transforms_from_x, x_from_transforms)
+                              robot_blocks, robot_pose_cov, robot_weighted_cov, transforms_from_x, x_from_transforms)
 from .lse import solve_lse
 from .problem import IdentificationProblem, IdentificationResult, whitening_of
 from .reml import reml_max, reml_variance_cov
@@ -100,8 +100,7 @@ def candidate_costs(problem: IdentificationProblem, X: ArrayLike, robot_cov: Arr
     X = np.asarray(X, float).reshape(-1, 12)
     r, _, D = model_many(problem, X, flange_map=robot_cov is not None, jacobian=False)
     if robot_cov is not None:
-        W = whitening_of(np.asarray(problem.meta["camera_cov"], float)[None]
-                         + D @ np.asarray(robot_cov, float) @ np.swapaxes(D, 2, 3))
+        W = whitening_of(robot_weighted_cov(np.asarray(problem.meta["camera_cov"], float)[None], D, robot_cov))
     W = problem.whitening()[None] if W is None else np.asarray(W, float)
     rw = (W @ r[..., None])[..., 0]
     if mask is not None:
@@ -191,8 +190,7 @@ class Refit:
 def _robot_blocks(problem: IdentificationProblem, x) -> tuple[np.ndarray, np.ndarray]:
     """(V_t, V_r) (N, 6, 6): the residual covariance per unit variance of the flange's translation and rotation
     error per axis at x (``D_t D_t^T``, ``D_r D_r^T`` of :func:`.handeye_problem.flange_error_map`)."""
-    D = flange_error_map(problem, x)
-    return D[:, :, :3] @ np.swapaxes(D[:, :, :3], 1, 2), D[:, :, 3:] @ np.swapaxes(D[:, :, 3:], 1, 2)
+    return robot_blocks(flange_error_map(problem, x))
 
 
 def _irls(base: IdentificationProblem, x0, theta, estimate: bool, max_iter: int = 50, theta_start=None):

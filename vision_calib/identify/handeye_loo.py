@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .handeye_fit import GN_TOL_STD, THETA_BOUNDS, THETA_TOL_STD, X_TOL_STD
-from .handeye_problem import model_many
+from .handeye_problem import model_many, robot_blocks, robot_weighted_cov
 from .reml import reml_newton
 from .problem import IdentificationProblem, whitening_of
 
@@ -124,9 +124,8 @@ def linearized_deletion(problem: IdentificationProblem, x: ArrayLike, theta: Arr
     externally studentised residual, per 6-vector pose): O(N) time, exact for a linear model with fixed weights.
     Returns (X (N, 12), covariance (N, 12, 12), d (N,); inf where I - H_k is singular)."""
     x = np.asarray(x, float)
-    r, J, _ = model_many(problem, x[None], flange_map=False)
-    th = np.asarray(theta, float)
-    W = subset_weights(problem, x[None], th[None])[0]  # (its own model pass: the flange error map)
+    r, J, D = model_many(problem, x[None])
+    W = subset_weights(problem, x[None], np.asarray(theta, float)[None], D)[0]
     A = W @ J[0]  # (N, 6, 12)
     e = (W @ r[0][..., None])[..., 0]
     Ninv = np.linalg.inv(np.einsum("nai,naj->ij", A, A))
@@ -153,12 +152,15 @@ def linearized_deletion(problem: IdentificationProblem, x: ArrayLike, theta: Arr
     return X, cov, d
 
 
-def subset_weights(problem: IdentificationProblem, X: ArrayLike, thetas: ArrayLike) -> np.ndarray:
+def subset_weights(problem: IdentificationProblem, X: ArrayLike, thetas: ArrayLike,
+                   D: np.ndarray | None = None) -> np.ndarray:
     """W (K, N, 6, 6): the whitening of every pose's camera covariance plus the robot's pose error at each row of X
-    (K, 12) with the variances thetas (K, 2) (m^2, rad^2): the weights of ``handeye_problem.reweighted``."""
-    _, _, D = model_many(problem, X, jacobian=False)
-    R = _robot_covs(thetas)[:, None]  # (K, 1, 6, 6)
-    return whitening_of(np.asarray(problem.meta["camera_cov"], float)[None] + D @ R @ np.swapaxes(D, 2, 3))
+    (K, 12) with the variances thetas (K, 2) (m^2, rad^2): the weights of ``handeye_problem.reweighted``. D: the
+    flange error maps (K, N, 6, 6) at X when the caller has them (else a model pass here)."""
+    if D is None:
+        _, _, D = model_many(problem, X, jacobian=False)
+    cam = np.asarray(problem.meta["camera_cov"], float)[None]
+    return whitening_of(robot_weighted_cov(cam, D, _robot_covs(thetas)[:, None]))
 
 
 def _robot_covs(thetas: ArrayLike) -> np.ndarray:
@@ -174,9 +176,8 @@ def _subset_terms(cam: np.ndarray, D: np.ndarray, mask: np.ndarray) -> tuple[np.
     """(known (K, N, 6, 6), blocks (2, K, N, 6, 6)) of the REML terms (``reml.reml_terms``) of the pose subsets
     ``mask`` (K, N) with the flange error maps D (K, N, 6, 6): a pose out of a subset has no robot blocks and an
     identity camera part (it contributes nothing)."""
-    Dm = D * mask[..., None, None]
     known = np.where(mask[..., None, None], cam[None], np.eye(6))
-    return known, np.stack([Dm[..., :3] @ np.swapaxes(Dm[..., :3], 2, 3), Dm[..., 3:] @ np.swapaxes(Dm[..., 3:], 2, 3)])
+    return known, np.stack(robot_blocks(D * mask[..., None, None]))
 
 
 def subset_fits(problem: IdentificationProblem, x: ArrayLike, theta: ArrayLike, estimate: bool, mask: ArrayLike,
@@ -233,7 +234,7 @@ def deletion_statistics(problem: IdentificationProblem, X: ArrayLike, cov: Array
     ks = np.arange(K)
     r, J, D = model_many(problem, X, poses=ks)
     r, J, D = r[:, 0], J[:, 0], D[:, 0]
-    C = np.asarray(problem.meta["camera_cov"], float)[ks] + D @ _robot_covs(thetas) @ np.swapaxes(D, 1, 2)
+    C = robot_weighted_cov(np.asarray(problem.meta["camera_cov"], float)[ks], D, _robot_covs(thetas))
     S = 0.5 * (C + np.swapaxes(C, 1, 2)) + J @ np.asarray(cov, float) @ np.swapaxes(J, 1, 2)
     d = np.full(K, np.inf)
     for k in range(K):

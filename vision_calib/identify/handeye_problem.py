@@ -216,6 +216,19 @@ def robot_pose_cov(sigma_t_m: float, sigma_rot_rad: float) -> np.ndarray:
     return np.diag([float(sigma_t_m) ** 2] * 3 + [float(sigma_rot_rad) ** 2] * 3)
 
 
+def robot_weighted_cov(camera_cov: ArrayLike, D: np.ndarray, robot_cov: ArrayLike) -> np.ndarray:
+    """(..., N, 6, 6) each measured pose's covariance with the robot's pose error: camera_cov (..., N, 6, 6) + D
+    robot_cov D^T, D (..., N, 6, 6) the flange error maps (:func:`flange_error_map`), robot_cov (..., 6, 6) [m, rad]
+    (e.g. :func:`robot_pose_cov`; broadcast over the poses)."""
+    return np.asarray(camera_cov, float) + D @ np.asarray(robot_cov, float) @ np.swapaxes(D, -1, -2)
+
+
+def robot_blocks(D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(V_t, V_r) (..., N, 6, 6): the residual covariance per unit variance of the flange's translation and rotation
+    error per axis, D_t D_t^T and D_r D_r^T of the flange error maps D (..., N, 6, 6) (the REML blocks)."""
+    return D[..., :3] @ np.swapaxes(D[..., :3], -1, -2), D[..., 3:] @ np.swapaxes(D[..., 3:], -1, -2)
+
+
 def handeye_problem(T_base_flange: ArrayLike, T_cam_target_meas: ArrayLike, mount: str = "fixed",
                     A0: ArrayLike | None = None, B0: ArrayLike | None = None, pose_cov: ArrayLike | None = None,
                     sigma_t_m: float | None = None, sigma_rot_rad: float | None = None,
@@ -361,7 +374,7 @@ def reweighted(problem: IdentificationProblem, x: ArrayLike,
     if rc is None:
         return problem
     D = flange_error_map(problem, x)
-    cov = problem.meta["camera_cov"] + D @ rc @ np.swapaxes(D, 1, 2)
+    cov = robot_weighted_cov(problem.meta["camera_cov"], D, rc)
     return dataclasses.replace(problem, obs_cov=0.5 * (cov + np.swapaxes(cov, 1, 2)),
                                meta={**problem.meta, "robot_cov": rc})
 

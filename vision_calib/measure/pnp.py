@@ -31,10 +31,25 @@ def target_lookup(target) -> dict[int, np.ndarray]:
     return {int(i): np.asarray(q, dtype=float) for i, q in zip(ids, p)}
 
 
+def pinhole(pc: np.ndarray, intr: CameraIntrinsics, z: np.ndarray | None = None, derivative: bool = False):
+    """Ideal (undistorted) pixels uv (..., 2) of camera-frame points pc (..., 3) m; z (...): the depths divided by
+    (default pc's own, e.g. 1 where a padded point has none). With ``derivative``, (uv, d uv / d pc (..., 2, 3))."""
+    x, y = pc[..., 0], pc[..., 1]
+    z = pc[..., 2] if z is None else z
+    uv = np.stack([intr.fx * x / z + intr.cx, intr.fy * y / z + intr.cy], axis=-1)
+    if not derivative:
+        return uv
+    d = np.zeros(pc.shape[:-1] + (2, 3))
+    d[..., 0, 0] = intr.fx / z
+    d[..., 0, 2] = -intr.fx * x / z**2
+    d[..., 1, 1] = intr.fy / z
+    d[..., 1, 2] = -intr.fy * y / z**2
+    return uv, d
+
+
 def project_pinhole(T_cam_target: np.ndarray, p_target: np.ndarray, intr: CameraIntrinsics) -> np.ndarray:
     """Ideal (undistorted) projection of target points (K, 3) m -> (K, 2) px."""
-    pc = frames.transform_points(T_cam_target, p_target)
-    return np.stack([intr.fx * pc[:, 0] / pc[:, 2] + intr.cx, intr.fy * pc[:, 1] / pc[:, 2] + intr.cy], axis=1)
+    return pinhole(frames.transform_points(T_cam_target, p_target), intr)
 
 
 def reprojection_jacobian(T_cam_target: np.ndarray, p_target: np.ndarray, intr: CameraIntrinsics) -> np.ndarray:
@@ -43,13 +58,8 @@ def reprojection_jacobian(T_cam_target: np.ndarray, p_target: np.ndarray, intr: 
     p_target = np.asarray(p_target, dtype=float)
     q = p_target @ T_cam_target[:3, :3].T  # R p, (K, 3)
     pc = q + T_cam_target[:3, 3]
-    x, y, z = pc[:, 0], pc[:, 1], pc[:, 2]
     K = len(pc)
-    dproj = np.zeros((K, 2, 3))
-    dproj[:, 0, 0] = intr.fx / z
-    dproj[:, 0, 2] = -intr.fx * x / z**2
-    dproj[:, 1, 1] = intr.fy / z
-    dproj[:, 1, 2] = -intr.fy * y / z**2
+    dproj = pinhole(pc, intr, derivative=True)[1]
     dpc = np.concatenate([np.broadcast_to(np.eye(3), (K, 3, 3)), -frames.skew(q)], axis=2)  # (K, 3, 6)
     return np.einsum("kij,kjl->kil", dproj, dpc).reshape(2 * K, 6)
 
@@ -109,14 +119,9 @@ def refine_pnp_many(p_target: np.ndarray, uv_undist_px: np.ndarray, weight: np.n
             break
         q = P[a] @ np.swapaxes(T[a, :3, :3], 1, 2)  # R p (k, C, 3)
         pc = q + T[a, None, :3, 3]
-        x, y, z = pc[..., 0], pc[..., 1], pc[..., 2]
-        zs = np.where(w[a, :, 0] > 0, z, 1.0)
-        r = (uv[a] - np.stack([intr.fx * x / zs + intr.cx, intr.fy * y / zs + intr.cy], axis=-1)) * w[a]
-        dproj = np.zeros(pc.shape[:2] + (2, 3))
-        dproj[..., 0, 0] = intr.fx / zs
-        dproj[..., 0, 2] = -intr.fx * x / zs**2
-        dproj[..., 1, 1] = intr.fy / zs
-        dproj[..., 1, 2] = -intr.fy * y / zs**2
+        z = pc[..., 2]
+        proj, dproj = pinhole(pc, intr, np.where(w[a, :, 0] > 0, z, 1.0), derivative=True)
+        r = (uv[a] - proj) * w[a]
         J = np.concatenate([dproj, -(dproj @ frames.skew(q))], axis=-1) * w[a][..., None]  # (k, C, 2, 6)
         J = J.reshape(a.size, -1, 6)
         A = np.swapaxes(J, 1, 2) @ J

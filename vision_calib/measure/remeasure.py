@@ -21,7 +21,7 @@ from .. import frames
 from ..camera import CameraIntrinsics
 from ..targets import TargetSpec
 from .detect import Detection
-from .pnp import project_pinhole, refine_pnp_many, refine_pnp_planar, target_lookup, undistort_px
+from .pnp import pinhole, project_pinhole, refine_pnp_many, refine_pnp_planar, target_lookup, undistort_px
 from .pose import MeasureConfig, PoseMeasurement, selected_corners
 
 
@@ -125,9 +125,7 @@ def remeasure_many(rms: Sequence[Remeasurable], intrinsics: CameraIntrinsics) ->
         n = rm.p_target.shape[0]
         P[j, :n], M[j, :n], Wt[j, :n] = rm.p_target, _corner_means(rm, uv), 1.0
     T, settled = refine_pnp_many(P, M, Wt, intrinsics, np.array([rms[k].T_start for k in batch]))
-    pc = P @ np.swapaxes(T[:, :3, :3], 1, 2) + T[:, None, :3, 3]  # every pixel's residual at its pose's T
-    proj = np.stack([intrinsics.fx * pc[..., 0] / pc[..., 2] + intrinsics.cx,
-                     intrinsics.fy * pc[..., 1] / pc[..., 2] + intrinsics.cy], axis=-1)
+    proj = pinhole(P @ np.swapaxes(T[:, :3, :3], 1, 2) + T[:, None, :3, 3], intrinsics)  # each pixel at its pose's T
     owner = np.repeat(np.arange(len(batch)), np.diff(cut))
     r2 = np.sum((uv_all - proj[owner, np.concatenate([rms[k].corner for k in batch])]) ** 2, axis=1)
     rms_px = np.sqrt(np.bincount(owner, r2, len(batch)) / np.diff(cut))
