@@ -35,6 +35,8 @@ def test_wrong_intrinsics_named_as_the_cause_and_refined(flange_rec, tmp_path):
     assert cause["chosen"] == "refined" and cause["decisive"], cause["message"]
     given, refined = cause["hypotheses"]
     assert given["rms_px"] > 4 * refined["rms_px"] and refined["n_intrinsics_refined"] >= 4
+    # decisive: both hypotheses' k-fold held-out prediction fitted and compared
+    assert "holdout" in given and "holdout" in refined and cause["holdout_agrees"] is True
     assert given["robot_pose_std"]["translation_mm"] > 0.3  # the misfit read as a robot error ...
     assert rep["intrinsics"]["source"] == "calibrated from the recording"  # ... the refined hypothesis applied
     robot = rep["handeye"]["robot_pose_std"]
@@ -42,12 +44,23 @@ def test_wrong_intrinsics_named_as_the_cause_and_refined(flange_rec, tmp_path):
     assert "cause tested" in rep["summary_text"] and "the refined ones are applied" in rep["summary_text"]
 
 
-def test_true_intrinsics_are_kept(flange_rec, tmp_path):
+def test_true_intrinsics_are_kept(flange_rec, tmp_path, monkeypatch):
     """With the true intrinsics (the robot's 0.05 mm error still puts the reprojection above 4x the corner
-    noise, so the test runs) the given intrinsics are kept."""
+    noise, so the test runs) the given intrinsics are kept; the BIC not decisive, the refined hypothesis' held-out
+    folds are not fitted (only the given one's, for its report)."""
+    import vision_calib.experiment.poses as poses
+    from vision_calib.experiment.cause import DECISIVE_BIC
+
+    calls, holdout = [], poses.pair_holdout
+    monkeypatch.setattr(poses, "pair_holdout", lambda *a, **k: calls.append(1) or holdout(*a, **k))
     rep = process_folder(flange_rec, tmp_path / "out", plots=False)
-    assert (rep.get("cause") or {}).get("chosen", "given") == "given", rep["cause"]["message"]
+    cause = rep.get("cause") or {}
+    assert cause.get("chosen", "given") == "given", cause["message"]
     assert rep["intrinsics"]["source"] == "recording.yaml"
+    assert rep["holdout"]["decision"]["ok"] and len(calls) == 1
+    if cause:
+        assert cause["delta_bic"] <= DECISIVE_BIC and cause["holdout_agrees"] is None
+        assert all("holdout" not in h for h in cause["hypotheses"]) and "held-out" not in cause["message"]
 
 
 def test_both_hypotheses_from_one_decode_and_detection_per_image(flange_rec, tmp_path, monkeypatch):

@@ -10,7 +10,8 @@ RMS ``rms_h`` over n corners; its Gaussian log-likelihood of the 2n coordinates 
 model's free parameters, + the intrinsics refined) give ``BIC_h = -2 log L_h + p_h log(2n)``. The refined
 hypothesis is applied when its BIC is lower by more than :data:`DECISIVE_BIC` ("very strong" evidence, Kass &
 Raftery 1995) and its k-fold held-out prediction (the runs' ``holdout`` blocks: each hypothesis against its own
-measurements) is not worse, else the given intrinsics stay, and the report shows both.
+measurements) is not worse, else the given intrinsics stay, and the report shows both. The held-out folds of
+both are fitted only when the BIC is decisive (``compare(holdout=)``): the decision reads them only then.
 """
 
 from __future__ import annotations
@@ -55,23 +56,38 @@ def hypothesis(report: dict, name: str) -> dict:
            "bic": float(nll2 + p * np.log(max(m2, 2)))}
     if robot.get("source") == "estimated":
         out["robot_pose_std"] = {"translation_mm": robot.get("translation_mm"), "rotation_deg": robot.get("rotation_deg")}
-    o = (report.get("holdout") or {}).get("overall")
-    if o:  # k-fold held-out prediction of each hypothesis' own measurements
-        out["holdout"] = {"residual_of": report["holdout"].get("residual_of") or report["holdout"].get("residual_kind"),
-                          "position_rms_mm": o["after"]["position_rms_mm"],
-                          "rotation_rms_deg": o["after"].get("rotation_rms_deg")}
+    held = held_out_figures(report.get("holdout"))
+    if held:
+        out["holdout"] = held
     return out
 
 
-def compare(given: dict, refined: dict | None, refined_error: str | None = None) -> dict:
+def held_out_figures(block: dict | None) -> dict | None:
+    """{residual_of, position_rms_mm, rotation_rms_deg} of a report's ``holdout`` block (its k-fold prediction of
+    the hypothesis' own measurements, ``overall.after``), None without one."""
+    o = (block or {}).get("overall")
+    if not o:
+        return None
+    return {"residual_of": block.get("residual_of") or block.get("residual_kind"),
+            "position_rms_mm": o["after"]["position_rms_mm"], "rotation_rms_deg": o["after"].get("rotation_rms_deg")}
+
+
+def compare(given: dict, refined: dict | None, refined_error: str | None = None, holdout=None) -> dict:
     """The report's ``cause`` block from the two runs' reports (``refined`` None: the views could not calibrate
-    the intrinsics, ``refined_error`` says why)."""
+    the intrinsics, ``refined_error`` says why). holdout: () -> (given's ``holdout`` block, refined's), asked for
+    only when the BIC favours the refined intrinsics decisively (the one case whose decision reads them; the
+    hypotheses then carry their figures); None: the reports' own blocks, when they have them."""
     g = hypothesis(given, "intrinsics given + robot pose error")
     if refined is None:
         return {"hypotheses": [g], "chosen": "given", "decisive": False,
                 "message": f"the cause could not be tested: the views cannot calibrate the intrinsics ({refined_error})"}
     r = hypothesis(refined, "intrinsics refined from these images + robot pose error")
     d = g["bic"] - r["bic"]
+    if holdout is not None and d > DECISIVE_BIC:
+        for h, block in zip((g, r), holdout()):
+            fig = held_out_figures(block)
+            if fig:
+                h["holdout"] = fig
     hg, hr = g.get("holdout"), r.get("holdout")
     held = None if not (hg and hr) else hr["position_rms_mm"] <= hg["position_rms_mm"]
     chosen = "refined" if d > DECISIVE_BIC and held is not False else "given"
@@ -92,4 +108,4 @@ def compare(given: dict, refined: dict | None, refined_error: str | None = None)
             "holdout_agrees": held, "message": msg}
 
 
-__all__ = ["DECISIVE_BIC", "cause_test_applies", "hypothesis", "compare"]
+__all__ = ["DECISIVE_BIC", "cause_test_applies", "hypothesis", "held_out_figures", "compare"]

@@ -109,7 +109,10 @@ def measure_folder(rec: Recording, refine_intrinsics: bool = False, progress: bo
 class _Fitted:
     """One hypothesis fitted, nothing written yet. view: what the cause test reads of its report
     (:func:`.cause.cause_test_applies`, :func:`.cause.compare`: the blocks ``verdict`` (converged, finite),
-    ``reprojection``, ``parameters``, ``intrinsics``, ``holdout`` (residual_of, overall) with the report's values);
+    ``reprojection``, ``parameters``, ``intrinsics`` with the report's values); holdout() -> the report's
+    ``holdout`` block as far as the cause test reads it (residual_of, overall), or None: the k-fold fits, made
+    on the first call (the cause test asks for them only when the likelihood favours the refined intrinsics
+    decisively, :func:`.cause.compare`; the report's build asks for its own);
     build() -> (report, tail: the summary lines that follow the cause message): the work only the written report
     needs (the held-out mounts-only baseline, prediction and decision, the intrinsics sensitivity) is done there,
     so not for a hypothesis the cause test does not choose. :meth:`finish` builds the report, adds the :mod:`.cause`
@@ -118,8 +121,13 @@ class _Fitted:
     view: dict
     build: Callable[[], tuple[dict, str]]
     write: Callable[[dict], None]
+    holdout: Callable[[], dict | None]
     scene: object = None  #: the recording's scene (a joint-pose recording), for the other hypothesis
     _built: tuple | None = field(default=None, init=False, repr=False)
+
+    def full_view(self) -> dict:
+        """``view`` with its ``holdout`` block (the k-fold fits made if not yet): the report's figures."""
+        return {**self.view, "holdout": self.holdout()}
 
     def built(self) -> tuple[dict, str]:
         """(report, tail) of ``build`` (built once)."""
@@ -179,7 +187,11 @@ def process_folder(folder: str | Path, out_dir: str | Path | None, method: str |
                                     early_measurements=False, scene=given.scene, **kw), None
     except VisionCalibError as exc:
         refined, why = None, str(exc)
-    block = compare(given.view, None if refined is None else refined.view, why)
+    try:  # the held-out folds of both, only when the likelihood favours the refined intrinsics decisively
+        block = compare(given.view, None if refined is None else refined.view, why,
+                        holdout=None if refined is None else lambda: (given.holdout(), refined.holdout()))
+    except VisionCalibError as exc:  # the refined hypothesis' folds (the given one's say it again when built)
+        block = compare(given.view, None, str(exc))
     if block["chosen"] == "refined":
         try:  # its report's work, done for the chosen hypothesis only: an error there is one of the refined fit
             refined.built()
@@ -258,9 +270,9 @@ def fit_measured(m: Measured, out_dir: str | Path | None, method: str | None = N
     failure = gross_failure(setup, meas, ident, residual, where,
                             untested=f"a wrong robot file or scene mounts ({scene.path}), joint columns in another "
                                      "order, the target's or camera's description in recording.yaml")
-    held = None if failure else holdout_folds(nominal, meas, method, residual, rep, folds, 0,
-                                              outliers=flagged_labels(meas, ident.rejected), tcp=tcp, result=result,
-                                              fitted_setup=setup)
+    folds_of = _once(lambda: None if failure else holdout_folds(
+        nominal, meas, method, residual, rep, folds, 0, outliers=flagged_labels(meas, ident.rejected), tcp=tcp,
+        result=result, fitted_setup=setup))  # the k-fold fits, when first asked for (``_Fitted.holdout``)
     cam_fit = None
     if ident.nuisance is not None:
         cam_fit = fitted_camera(rec.camera, used, ident.nuisance["coefficients"])
@@ -276,11 +288,12 @@ def fit_measured(m: Measured, out_dir: str | Path | None, method: str | None = N
     ps = setup.params
     view = {"verdict": {"converged": bool(result.converged), "finite": result_is_finite(result)},
             "reprojection": reproj, "parameters": parameters_table(ps.names, ps.nominal, None, result, ps.kinds),
-            "intrinsics": intr, "holdout": None if held is None else held.figures()}
+            "intrinsics": intr}
     final = {}  # the result with the held-out decision's warning, for write()
 
     def build():
         t2 = time.perf_counter()
+        held = folds_of()
         hold = None if held is None else held.block()
         failed = failure or inconsistency_failure(ident) or holdout_failure(hold)
         final["result"] = res = with_holdout_warning(result, hold)
@@ -318,7 +331,19 @@ def fit_measured(m: Measured, out_dir: str | Path | None, method: str | None = N
                      overlays=_overlay_source(rec, dets, setup if report["verdict"].get("usable") else None,
                                               result) if plots else None)
 
-    return _Fitted(view, build, write, scene)
+    return _Fitted(view, build, write, lambda: None if folds_of() is None else folds_of().figures(), scene)
+
+
+def _once(fn: Callable[[], object]) -> Callable[[], object]:
+    """fn, called on the first call only (its value kept; an exception is raised again by the next call)."""
+    box = []
+
+    def once():
+        if not box:
+            box.append(fn())
+        return box[0]
+
+    return once
 
 
 def _overlay_source(rec, dets, setup=None, result=None):
@@ -398,8 +423,9 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None, folds=No
     result, A, B, problem = ident.result, ident.A, ident.B, ident.problem
     failure = handeye_gross_failure(rec.poses[ok], T, mount, ident, str(rec.folder), alternatives=alternative_readings(
         rec.poses[ok], T, mount, "recording.yaml camera_mount"))
-    hold = None
-    if failure is None:
+    def pairs_holdout():  # the k-fold fits, when first asked for (``_Fitted.holdout``)
+        if failure is not None:
+            return None
         from types import SimpleNamespace
 
         from .holdout import DEFAULT_FOLDS
@@ -409,9 +435,10 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None, folds=No
                                 cov=cov, noise_frame=None, mount=mount, robot_std=rec.robot_pose_std, path=rec.folder)
         # the folds' REML starts from the full fit's robot variances
         start = tuple(ident.fit.robot_variances) if ident.fit.robot.get("source") == "estimated" else None
-        hold = pair_holdout(pairs, int(min(folds or DEFAULT_FOLDS, len(ok))), 0,
+        return pair_holdout(pairs, int(min(folds or DEFAULT_FOLDS, len(ok))), 0,
                             outliers=[lab for lab, _ in ident.rejected], theta_start=start, fit=ident.fit)
-        failure = holdout_failure(hold)
+
+    hold_of = _once(pairs_holdout)
     cam_fit = None
     if ident.nuisance is not None:
         cam_fit = fitted_camera(rec.camera, used, ident.nuisance["coefficients"])
@@ -437,29 +464,33 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None, folds=No
                                                  intr, px2, he.get("robot_pose_std"))
         if rcheck is not None:
             he["reprojection"] = {**he["reprojection"], "noise_check": rcheck}
-    report = build_report(
-        "process_handeye", source={"folder": str(rec.folder)},
-        settings={"poses": mblock["n_poses"], "mount": mount, "camera": rec.camera.to_dict(), "method": "lse"},
-        measurements=mblock, warnings=[*rec.notes, *intr["warnings"], *copies_warning(copies, "flange pose"),
-                                       *([rwarn] if rwarn else [])], result=result,
-        identified=ident,
-        residuals=residual_stats(result.residuals, "pose"),
-        extra={"handeye": he, "intrinsics": intr, "reprojection": he["reprojection"], "cause": None,
-               **({"holdout": hold} if hold is not None else {})},
-        timings={"total": time.perf_counter() - t0}, failure=failure)
-    report["summary_text"] += points_line(report.get("reprojection"))
-    tail = ""
-    if hold is not None:
-        from .poses import pair_holdout_lines
+    def report_with(hold):
+        """(report, tail) with the held-out block ``hold`` (None: none; its decision can fail the verdict)."""
+        report = build_report(
+            "process_handeye", source={"folder": str(rec.folder)},
+            settings={"poses": mblock["n_poses"], "mount": mount, "camera": rec.camera.to_dict(), "method": "lse"},
+            measurements=mblock, warnings=[*rec.notes, *intr["warnings"], *copies_warning(copies, "flange pose"),
+                                           *([rwarn] if rwarn else [])], result=result,
+            identified=ident,
+            residuals=residual_stats(result.residuals, "pose"),
+            extra={"handeye": he, "intrinsics": intr, "reprojection": he["reprojection"], "cause": None,
+                   **({"holdout": hold} if hold is not None else {})},
+            timings={"total": time.perf_counter() - t0}, failure=failure or holdout_failure(hold))
+        report["summary_text"] += points_line(report.get("reprojection"))
+        tail = ""
+        if hold is not None:
+            from .poses import pair_holdout_lines
 
-        tail = "\n" + "\n".join(pair_holdout_lines(hold))
+            tail = "\n" + "\n".join(pair_holdout_lines(hold))
+        return report, tail
 
     def write(report):
         if write_first is not None:
             write_first()
         write_report(out, report, plots=plots, overlays=_overlay_source(rec, dets) if plots else None)
 
-    return _Fitted(report, lambda: (report, tail), write)
+    view, _ = report_with(None)  # what the cause test reads: the report but its held-out block
+    return _Fitted(view, lambda: report_with(hold_of()), write, hold_of)
 
 
 __all__ = ["process_folder", "process_once", "fit_measured", "measure_folder", "Measured", "measure_recording"]
