@@ -84,3 +84,19 @@ def test_real_images_wrong_target_and_size():
     from vision_calib.camera import CameraIntrinsics
     m, d = measure_images([DATA / "franka_image-1.png"], TAG, CameraIntrinsics(1024, 768, 900, 900, 512, 384))
     assert not d[0].valid and "does not match" in d[0].reason and not m.valid
+
+
+def test_one_tag_cannot_calibrate_the_camera_said_before_any_image_is_read(monkeypatch):
+    """One tag has 4 corners, fewer than a usable calibration view needs: calibrate_from_images says so, naming the
+    target, before it decodes anything (the real images given; no decode is made)."""
+    import importlib
+
+    from vision_calib.measure.intrinsics import CalibrationConfig, calibrate_from_images
+
+    D = importlib.import_module("vision_calib.measure.detect")
+    monkeypatch.setattr(D, "load_gray", lambda *a, **k: pytest.fail("an image was decoded"))
+    files = [DATA / f"franka_image-{i}.png" for i in range(1, 9)]
+    with pytest.raises(DataError, match="franka_tag36h11_10.* has 4 corners, a usable view needs at least 8"):
+        calibrate_from_images(files, TAG)
+    with pytest.raises(DataError, match="has 4 corners, a usable view needs at least 5"):
+        calibrate_from_images(files, TAG, config=CalibrationConfig(min_corners=5))

@@ -46,9 +46,9 @@ def recording_intrinsics(rec, refine: bool = False, progress: bool = False, came
                                     names=[f"pose {p}" for p in pids], progress=progress,
                                     detected=_first_frames(detections, pids, rec.target))
     except DataError as exc:
-        why = "has no camera fx/fy/cx/cy" if rec.camera is None else "asks to refine the intrinsics"
-        raise DataError(f"{rec.folder}: recording.yaml {why}, and calibrating them from the images failed: "
-                        f"{exc}") from None
+        why = "recording.yaml has no camera fx/fy/cx/cy, and calibrating them" if rec.camera is None else \
+            "refining recording.yaml's intrinsics"
+        raise DataError(f"{rec.folder}: {why} from the images failed: {exc}") from None
     d = res.to_dict()
     block = {"source": SOURCE_CALIBRATED, "values": res.values(), "std": dict(res.std), "rms_px": res.rms_px,
              "n_views_used": d["n_views_used"], "n_views_rejected": d["n_views_rejected"],

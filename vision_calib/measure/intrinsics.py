@@ -414,10 +414,15 @@ def calibrate_from_images(paths, target, image_size=None, names=None, config: Ca
     (:mod:`.image_header`): a file beyond the pixel limit, and one whose size differs from ``image_size`` (default:
     the size most of the files have -- the majority wins, not the first file), is a rejected view named in the
     result's warnings, never decoded. detected: {index: valid Detection} already made of those files with
-    ``DetectConfig(**CALIBRATION_DETECT)`` and no intrinsics (``batch.reusable_detections``): not detected again."""
+    ``DetectConfig(**CALIBRATION_DETECT)`` and no intrinsics (``batch.reusable_detections``): not detected again.
+    A target with fewer corners than a usable view needs (``config.min_corners``): DataError before any image is
+    read (no view of it can calibrate)."""
     from .detect import DetectConfig, Detection, detect
     from .image_header import header_size, majority_size, pixel_refusal
 
+    if target.n_corners < config.min_corners:
+        raise DataError(f"camera calibration: the target {target.name!r} has {target.n_corners} corners, a usable "
+                        f"view needs at least {config.min_corners}: no image of it can calibrate the intrinsics")
     paths = list(paths)
     names = names or [str(p) for p in paths]
     heads = [header_size(p) for p in paths]
