@@ -2,6 +2,7 @@
 
     PYTHONPATH=. .venv/bin/python benchmarks/bench_process_once.py [--poses 16] [--frames 2] [--fx-error 0.05]
                                                                    [--image-size W H] [--folder DIR ...] [--repeat 3]
+                                                                   [--folders-only]
 
 Folders: a simulated RX-90 eye-in-hand recording (``--poses`` x ``--frames``, rendered here, not timed) whose
 recording.yaml gives fx, fy ``--fx-error`` off, so that ``process`` runs the cause test (both hypotheses on the
@@ -9,7 +10,7 @@ intrinsics, :mod:`vision_calib.experiment.cause`), the same folder with the true
 flange poses instead of joints (the true flange poses with a 0.2 mm / 0.02 deg robot pose error, its std not
 given: the hand-eye path that ``import-rosi`` / ``import-visp`` folders take, with the robot's pose error
 estimated; true intrinsics and fx off), and any ``--folder`` given (a recorded folder, e.g. one ``import-rosi`` /
-``import-visp`` wrote).
+``import-visp`` wrote; ``--folders-only``: those alone, nothing simulated).
 
 ``--image-size W H``: the scene's camera rescaled to W x H px with the same field of view (focal lengths and
 principal point times W / its width): e.g. 1600 1200, the AVT Mako of the ROS-I ``test_set_charuco`` set (16
@@ -110,10 +111,15 @@ def main() -> None:
     ap.add_argument("--image-size", nargs=2, type=int, default=None, metavar=("W", "H"))
     ap.add_argument("--folder", nargs="*", default=[])
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--folders-only", action="store_true", help="the --folder ones only, nothing simulated")
     a = ap.parse_args()
+    if a.folders_only and not a.folder:
+        ap.error("--folders-only needs --folder DIR ...")
     print(f"load average {os.getloadavg()[0]:.2f} (2 cores shared: wall times move with it)")
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
+        if a.folders_only:
+            return run_folders([(str(f), Path(f)) for f in a.folder], a.repeat, d / "out")
         run_simulation(scene_at(a.image_size), out_dir=d / "sim", seed=7, n_poses=a.poses, frames=a.frames,
                        export_recording=d / "rec", workers=1, progress=False, plots=False)
         sys.path.insert(0, str(REPO / "tests"))
@@ -132,19 +138,24 @@ def main() -> None:
                    (f"simulated RX-90 images{px}, flange poses (hand-eye), {size}, fx {a.fx_error:+.0%}", flange_bad),
                    (f"the same images{px}, flange poses (hand-eye), true intrinsics", d / "flange"),
                    *((str(f), Path(f)) for f in a.folder)]
-        for name, folder in folders:
-            n_img = sum(len(v) for v in read_recording(folder).images.values())
-            fls, runs = [], []
-            for _ in range(a.repeat):  # interleaved: a slow spell of the machine hits both
-                fls.append(floor_s(folder))
-                runs.append(process_s(folder, d / "out"))
-            fl = min(fls)
-            wall, rep, n_load, n_find = min(runs, key=lambda r: r[0])
-            cause = (rep.get("cause") or {}).get("chosen")
-            print(f"{name}: {n_img} images; floor (decode + detect + PnP once each) {fl:.3f} s; process "
-                  f"{wall:.3f} s = {wall / fl:.2f} x the floor; during process {n_load} decodes, {n_find} detections"
-                  f" ({n_load / n_img:.2f}, {n_find / n_img:.2f} per image); cause test: "
-                  f"{'not run' if cause is None else 'chosen ' + cause}")
+        run_folders(folders, a.repeat, d / "out")
+
+
+def run_folders(folders, repeat: int, out: Path) -> None:
+    """Print each (name, folder)'s floor, process time (the best of ``repeat``, interleaved) and their ratio."""
+    for name, folder in folders:
+        n_img = sum(len(v) for v in read_recording(folder).images.values())
+        fls, runs = [], []
+        for _ in range(repeat):  # interleaved: a slow spell of the machine hits both
+            fls.append(floor_s(folder))
+            runs.append(process_s(folder, out))
+        fl = min(fls)
+        wall, rep, n_load, n_find = min(runs, key=lambda r: r[0])
+        cause = (rep.get("cause") or {}).get("chosen")
+        print(f"{name}: {n_img} images; floor (decode + detect + PnP once each) {fl:.3f} s; process "
+              f"{wall:.3f} s = {wall / fl:.2f} x the floor; during process {n_load} decodes, {n_find} detections"
+              f" ({n_load / n_img:.2f}, {n_find / n_img:.2f} per image); cause test: "
+              f"{'not run' if cause is None else 'chosen ' + cause}")
 
 
 if __name__ == "__main__":
