@@ -162,7 +162,11 @@ def test_calibrate_from_images_skips_the_odd_and_the_huge_without_decoding_them(
         got.update(dets=dets, size=size)
         return I.IntrinsicsResult(None, {}, 0.0, (), {}, ("coverage",))
     monkeypatch.setattr(I, "calibrate_intrinsics", fake_calibrate)
-    res = I.calibrate_from_images(paths, target=None)
+    from vision_calib.targets.spec import TargetSpec
+
+    board = TargetSpec(kind="charuco", name="board", rows=5, cols=7, dictionary="DICT_5X5_100", square_m=0.025,
+                       marker_m=0.018)
+    res = I.calibrate_from_images(paths, target=board)
     assert seen == [str(p) for p in paths[1:5]]
     assert got["size"] == (64, 48)
     assert got["dets"][0].reason == "image size 40x30 differs from the majority 64x48 (4 of 5 images)"
