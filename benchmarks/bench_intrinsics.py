@@ -1,12 +1,18 @@
 """Camera calibration benchmark (measure.intrinsics): recovered vs true intrinsics, std and z per seed,
 RMS, time; the spread over seeds vs the mean reported std; a white-noise check of the std.
 
-    .venv/bin/python benchmarks/bench_intrinsics.py [--seeds 0,1,2,3,4] [--views 20] [--resampled]
+    .venv/bin/python benchmarks/bench_intrinsics.py [--seeds 0,1,2,3,4] [--views 20] [--resampled] [--apriltag]
 
 Setting: 1024 x 768, fx = fy = 1100 px, distortion (-0.1, 0.05, 5e-4, -5e-4, 0), ChArUco 7 x 10 (30 mm),
 views from ``sim.intrinsics_views.calibration_poses`` (tilt 20-45 deg, 0.4-0.65 m), distortion drawn
 geometrically (``render_views``; --resampled: the sensor stage's bilinear resampling instead, for comparison)
 + SensorEffects() defaults (blur 0.6 px, ~2 grey levels noise), one frame per view.
+
+--apriltag: the same camera and effects, the AprilTag grid targets/apriltag_grid.yaml (4 x 6 tags of 30 mm) at
+0.25-0.45 m, the images written to files and calibrated by ``calibrate_from_images`` (tag-edge corners, refitted
+once in the undistorted pixels of a first calibration: ``TAG_EDGE_REFIT``), against the same without the refit
+(edges in raw pixels), with two refits, and OpenCV's AprilTag marker refinement (``detect`` per frame, refine "apriltag"): RMS and
+mean z, RMS error, detection time per image.
 """
 
 from __future__ import annotations
@@ -95,12 +101,59 @@ def white_noise(trials=100, sigma=0.1):
     print(f"calibration time per trial: {dt * 1e3:.0f} ms")
 
 
+def apriltag(seeds, n_views):
+    """The --apriltag comparison (module docstring)."""
+    import tempfile
+
+    import cv2
+
+    import vision_calib.measure.intrinsics as I
+    from vision_calib.targets.spec import load_target
+
+    tag = load_target(Path(__file__).resolve().parents[1] / "targets" / "apriltag_grid.yaml")
+    print(f"\n=== AprilTag grid {tag.rows} x {tag.cols}: {n_views} views per seed, seeds {list(seeds)} ===")
+    out = {"tag edges, refitted (calibrate_from_images)": [], "tag edges in raw pixels (no refit)": [],
+           "tag edges, refitted twice": [], "OpenCV AprilTag refinement, per frame": []}
+    secs = dict.fromkeys(out, 0.0)
+    for seed in seeds:
+        imgs = render_views(tag, INTR, calibration_poses(tag, INTR, n_views, seed, dist_range=(0.25, 0.45)), seed)
+        with tempfile.TemporaryDirectory() as tmp:
+            files = [str(Path(tmp) / f"{k:02d}.png") for k in range(len(imgs))]
+            for f, im in zip(files, imgs):
+                cv2.imwrite(f, im)
+            for name, refit in list(zip(out, (1, 0, 2))):
+                I.TAG_EDGE_REFIT, keep = refit, I.TAG_EDGE_REFIT
+                try:
+                    t0 = time.perf_counter()
+                    res = I.calibrate_from_images(files, tag, INTR.size)
+                    secs[name] += time.perf_counter() - t0
+                finally:
+                    I.TAG_EDGE_REFIT = keep
+                out[name].append(res)
+            name = list(out)[3]
+            t0 = time.perf_counter()
+            dets = [detect(f, tag, None, config=DetectConfig(batch="per_frame")) for f in files]
+            out[name].append(calibrate_intrinsics(dets, files, tag))
+            secs[name] += time.perf_counter() - t0
+    for name, rs in out.items():
+        v = np.array([list(r.values().values()) for r in rs])
+        z = (v - TRUE) / np.array([list(r.std.values()) for r in rs])
+        print(f"{name}: {secs[name] / len(rs) / n_views * 1e3:.0f} ms per image (decode, detect, calibrate), "
+              f"reprojection RMS {np.mean([r.rms_px for r in rs]):.3f} px")
+        print("   RMS z     " + "  ".join(f"{n} {x:.2f}" for n, x in zip(PARAM_NAMES, np.sqrt(np.mean(z**2, 0)))))
+        print("   mean z    " + "  ".join(f"{n} {x:+.2f}" for n, x in zip(PARAM_NAMES, z.mean(0))))
+        print("   RMS error " + "  ".join(f"{n} {x:.2g}" for n, x in zip(PARAM_NAMES, np.sqrt(np.mean((v - TRUE)**2, 0)))))
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", default="0,1,2,3,4")
     ap.add_argument("--views", type=int, default=20)
     ap.add_argument("--resampled", action="store_true", help="also run with the sensor stage's resampled distortion")
+    ap.add_argument("--apriltag", action="store_true", help="the AprilTag grid comparison only (module docstring)")
     a = ap.parse_args()
+    if a.apriltag:
+        return apriltag([int(s) for s in a.seeds.split(",")], a.views)
     rendered([int(s) for s in a.seeds.split(",")], a.views)
     if a.resampled:
         rendered([int(s) for s in a.seeds.split(",")], a.views, exact=False)

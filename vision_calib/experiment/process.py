@@ -423,6 +423,7 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None, folds=No
     result, A, B, problem = ident.result, ident.A, ident.B, ident.problem
     failure = handeye_gross_failure(rec.poses[ok], T, mount, ident, str(rec.folder), alternatives=alternative_readings(
         rec.poses[ok], T, mount, "recording.yaml camera_mount"))
+
     def pairs_holdout():  # the k-fold fits, when first asked for (``_Fitted.holdout``)
         if failure is not None:
             return None
