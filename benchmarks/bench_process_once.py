@@ -2,7 +2,7 @@
 
     PYTHONPATH=. .venv/bin/python benchmarks/bench_process_once.py [--poses 16] [--frames 2] [--fx-error 0.05]
                                                                    [--image-size W H] [--folder DIR ...] [--repeat 3]
-                                                                   [--folders-only]
+                                                                   [--folders-only] [--target T.yaml]
 
 Folders: a simulated RX-90 eye-in-hand recording (``--poses`` x ``--frames``, rendered here, not timed) whose
 recording.yaml gives fx, fy ``--fx-error`` off, so that ``process`` runs the cause test (both hypotheses on the
@@ -11,6 +11,9 @@ flange poses instead of joints (the true flange poses with a 0.2 mm / 0.02 deg r
 given: the hand-eye path that ``import-rosi`` / ``import-visp`` folders take, with the robot's pose error
 estimated; true intrinsics and fx off), and any ``--folder`` given (a recorded folder, e.g. one ``import-rosi`` /
 ``import-visp`` wrote; ``--folders-only``: those alone, nothing simulated).
+
+``--target T.yaml``: the simulated folders show this target instead of the scene's (e.g. targets/apriltag_grid.yaml;
+the hand-eye folders only, as with ``--image-size``).
 
 ``--image-size W H``: the scene's camera rescaled to W x H px with the same field of view (focal lengths and
 principal point times W / its width): e.g. 1600 1200, the AVT Mako of the ROS-I ``test_set_charuco`` set (16
@@ -79,13 +82,16 @@ def process_s(folder: Path, out: Path) -> tuple[float, dict, int, int]:
         D.load_gray, D._find_corners = load, find
 
 
-def scene_at(size):
-    """The RX-90 scene, its camera rescaled to size (W, H) px with the same field of view (None: as it is)."""
+def scene_at(size, target=None):
+    """The RX-90 scene, its camera rescaled to size (W, H) px with the same field of view (None: as it is), its
+    target file replaced by ``target`` (a path; None: the scene's)."""
     from dataclasses import replace
 
     from vision_calib.rig.scene import load_scene
 
     scene = load_scene(SCENE)
+    if target is not None:
+        scene = replace(scene, target_path=Path(target).resolve())
     if size is None:
         return scene
     c = scene.setup.camera
@@ -112,6 +118,7 @@ def main() -> None:
     ap.add_argument("--folder", nargs="*", default=[])
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--folders-only", action="store_true", help="the --folder ones only, nothing simulated")
+    ap.add_argument("--target", default=None, help="a target file for the simulated folders (default: the scene's)")
     a = ap.parse_args()
     if a.folders_only and not a.folder:
         ap.error("--folders-only needs --folder DIR ...")
@@ -120,7 +127,7 @@ def main() -> None:
         d = Path(tmp)
         if a.folders_only:
             return run_folders([(str(f), Path(f)) for f in a.folder], a.repeat, d / "out")
-        run_simulation(scene_at(a.image_size), out_dir=d / "sim", seed=7, n_poses=a.poses, frames=a.frames,
+        run_simulation(scene_at(a.image_size, a.target), out_dir=d / "sim", seed=7, n_poses=a.poses, frames=a.frames,
                        export_recording=d / "rec", workers=1, progress=False, plots=False)
         sys.path.insert(0, str(REPO / "tests"))
         from flange_folder import flange_pose_folder  # the test suite's writer of flange-pose folders
@@ -129,12 +136,15 @@ def main() -> None:
         bad, flange_bad = with_fx_error(d / "rec", d / "rec_fx", a.fx_error), with_fx_error(d / "flange",
                                                                                             d / "flange_fx", a.fx_error)
         size = f"{a.poses} poses x {a.frames} frame(s)"
-        px = "" if a.image_size is None else f", {a.image_size[0]} x {a.image_size[1]} px"
+        px = ("" if a.image_size is None else f", {a.image_size[0]} x {a.image_size[1]} px") + \
+            ("" if a.target is None else f", target {a.target}")
         joints = [(f"simulated RX-90, {size}, fx {a.fx_error:+.0%}", bad),
                   (f"simulated RX-90, {size}, true intrinsics", d / "rec")]
-        if a.image_size is not None:  # the joint folders name the scene, whose camera is not this one
-            print("--image-size: the hand-eye folders only (a joint folder's scene has the scene's camera)")
-        folders = [*(joints if a.image_size is None else []),
+        alone = a.image_size is not None or a.target is not None
+        if alone:  # the joint folders name the scene, whose camera and target are not these
+            print("--image-size, --target: the hand-eye folders only (a joint folder names its scene, whose camera and "
+                  "target these replace)")
+        folders = [*(joints if not alone else []),
                    (f"simulated RX-90 images{px}, flange poses (hand-eye), {size}, fx {a.fx_error:+.0%}", flange_bad),
                    (f"the same images{px}, flange poses (hand-eye), true intrinsics", d / "flange"),
                    *((str(f), Path(f)) for f in a.folder)]
