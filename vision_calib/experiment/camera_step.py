@@ -62,15 +62,21 @@ def recording_intrinsics(rec, refine: bool = False, progress: bool = False, came
 
 
 def _first_frames(detections, pids, target) -> dict | None:
-    """{index in pids: the pose's first-frame Detection} when those are what the calibration would detect, else None."""
-    from ..measure.batch import reusable_detections
+    """{index in pids: the pose's first-frame Detection} when those are what the calibration would detect, or
+    carry the edge samples it refits (AprilTag grids: ``measure.batch.refit_detection``), else None."""
+    from ..measure.batch import refittable, reusable_detections
     from ..measure.detect import DetectConfig
     from ..measure.intrinsics import CALIBRATION_DETECT
 
-    if not detections or replace(DetectConfig(), batch="per_frame") != DetectConfig(**CALIBRATION_DETECT) \
+    if not detections:
+        return None
+    first = {i: detections[p][0] for i, p in enumerate(pids) if detections.get(p)}
+    if target.kind_impl.seeded_mode(DetectConfig()) == "tag_edges":
+        return first if refittable(first.values()) else None
+    if replace(DetectConfig(), batch="per_frame") != DetectConfig(**CALIBRATION_DETECT) \
             or not reusable_detections(target):
         return None
-    return {i: detections[p][0] for i, p in enumerate(pids) if detections.get(p)}
+    return first
 
 
 def _file_uncertainty(path) -> dict:

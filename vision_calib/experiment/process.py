@@ -91,17 +91,25 @@ def measure_folder(rec: Recording, refine_intrinsics: bool = False, progress: bo
     """Measure ``rec`` (:func:`measure_recording`) with the intrinsics ``camera_step.recording_intrinsics`` gives.
     reuse: the same folder measured with other intrinsics: each image is decoded and detected once per run, its
     detections serve the camera calibration and, where detection reads no intrinsics
-    (``measure.batch.reusable_detections``), the measurement (undistortion + PnP only)."""
-    from ..measure.batch import reusable_detections
+    (``measure.batch.reusable_detections``), the measurement (undistortion + PnP only); AprilTag grids' corners
+    (edge fits in undistorted pixels) are fitted again to their edge samples under these intrinsics
+    (``measure.batch.refit_detection``), no image read."""
+    from ..measure.batch import refit_detection, refittable, reusable_detections
+    from ..measure.detect import DetectConfig
     from .camera_step import recording_intrinsics
 
     t0 = time.perf_counter()
     rec, intr = recording_intrinsics(rec, refine_intrinsics, progress, camera_file,
                                      detections=None if reuse is None else reuse.dets)
-    same = (reuse is not None and reuse.rec.camera is not None and reuse.rec.camera.size == rec.camera.size
-            and reusable_detections(rec.target))
+    same = reuse is not None and reuse.rec.camera is not None and reuse.rec.camera.size == rec.camera.size
+    detected = None
+    if same and reusable_detections(rec.target):
+        detected = reuse.dets
+    elif same and refittable(d for ds in reuse.dets.values() for d in ds):  # AprilTag grids: edges refitted
+        n_min = DetectConfig().min_corners  # (measure_images' detection settings)
+        detected = {pid: [refit_detection(d, rec.camera, n_min) or d for d in ds] for pid, ds in reuse.dets.items()}
     dets = {}
-    pms = measure_recording(rec, progress, dets, detected=reuse.dets if same else None)
+    pms = measure_recording(rec, progress, dets, detected=detected)
     return Measured(rec, intr, pms, dets, time.perf_counter() - t0)
 
 

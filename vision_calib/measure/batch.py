@@ -30,3 +30,34 @@ def reusable_detections(target, config: DetectConfig = DetectConfig()) -> bool:
     return config.batch == "per_frame" or (kind.seeded_mode(config) != "tag_edges"
                                            and config.seed_config().refine_for(target.kind)
                                            == config.refine_for(target.kind))
+
+
+def refit_detection(det: Detection, intrinsics: CameraIntrinsics | None, min_corners: int = 1) -> Detection | None:
+    """``det``'s corners fitted again to its edge samples (``Detection.edges``, AprilTag grids) under
+    ``intrinsics`` (their lines in its undistorted pixels; None: in raw pixels), no image read
+    (:func:`.tag_edges.corners_from_edges`): the detection those intrinsics give, to the placement of the edge
+    profiles. A marker whose sides no longer intersect is dropped; fewer than ``min_corners`` corners left: an
+    invalid Detection saying so. An invalid ``det`` is returned as it is; None when ``det`` has no edge samples
+    (another kind: detect again)."""
+    import numpy as np
+
+    from .tag_edges import corners_from_edges
+
+    if not det.valid:
+        return det
+    if det.edges is None:
+        return None
+    corners, ok = corners_from_edges(det.edges, intrinsics)
+    keep = np.repeat(ok, 4)
+    ids, uv = det.ids[keep], corners.reshape(-1, 2)[keep]
+    diag = {**det.diagnostics, "n_corners": int(len(ids)), "refit": "tag edges under other intrinsics"}
+    valid = len(ids) >= min_corners
+    return Detection(valid, "" if valid else f"too few corners after the edge refit: {len(ids)} < {min_corners}", ids,
+                     uv, det.image_size, det.frame_index, diag, det.edges.take(ok))
+
+
+def refittable(detections) -> bool:
+    """Whether every valid Detection of ``detections`` (an iterable) carries edge samples
+    (:func:`refit_detection`), at least one of them valid."""
+    valid = [d for d in detections if d.valid]
+    return bool(valid) and all(d.edges is not None for d in valid)

@@ -99,7 +99,9 @@ class Detection:
     valid: usable for PnP; reason: why not ("" when valid). ids: (K,) int corner ids.
     uv_px: (K, 2) float64 distorted pixel coordinates. image_size: (width, height) px or None
     (unreadable). frame_index: index of the frame in its pose batch. diagnostics: dict
-    (n_markers, marker_ids, time_s, source, ...)."""
+    (n_markers, marker_ids, time_s, source, ...). edges: the :class:`.tag_edges.EdgeSamples` the corners were
+    fitted to (AprilTag grids' seeded detection: corner ids 4 m .. 4 m + 3 of marker m in order), from which
+    :func:`.batch.refit_detection` fits them under other intrinsics; None for other kinds (not serialised)."""
 
     valid: bool
     reason: str
@@ -108,6 +110,7 @@ class Detection:
     image_size: tuple[int, int] | None
     frame_index: int = 0
     diagnostics: dict = field(default_factory=dict)
+    edges: object = None
 
     @property
     def n_corners(self) -> int:
@@ -258,9 +261,10 @@ def subpix(img, uv, win):
 
 def detect_gray(img, size, source, target, frame_index, config: DetectConfig, t0,
                  post=None, intrinsics=None) -> Detection:
-    """Detection on a loaded grey image. post: optional (img, ids, uv) -> (ids, uv) refinement replacing
-    the extra cornerSubPix pass (the seeded batch mode's per-frame estimator). intrinsics: passed to the
-    kind's corner finder (circle grids correct the perspective offset of the dot centres with it)."""
+    """Detection on a loaded grey image. post: optional (img, ids, uv) -> (ids, uv, edges) refinement replacing
+    the extra cornerSubPix pass (the seeded batch mode's per-frame estimator; edges: ``Detection.edges`` or None).
+    intrinsics: passed to the kind's corner finder (circle grids correct the perspective offset of the dot centres
+    with it)."""
     _, target_ids = _detector(target, config)
     diag = {"source": source}
     try:
@@ -272,8 +276,9 @@ def detect_gray(img, size, source, target, frame_index, config: DetectConfig, t0
         ids, uv = ids[keep], uv[keep]
         order = np.argsort(ids, kind="stable")
         ids, uv = ids[order], uv[order]
+        edges = None
         if post is not None and len(ids):
-            ids, uv = post(img, ids, uv)
+            ids, uv, edges = post(img, ids, uv)
         elif config.extra_subpix_for(target.kind) and len(ids):
             uv = subpix(img, uv, config.subpix_win)
     except cv2.error as exc:
@@ -281,5 +286,6 @@ def detect_gray(img, size, source, target, frame_index, config: DetectConfig, t0
     diag["n_corners"] = int(len(ids))
     diag["time_s"] = time.perf_counter() - t0
     if len(ids) < config.min_corners:
-        return Detection(False, f"too few corners: {len(ids)} < {config.min_corners}", ids, uv, size, frame_index, diag)
-    return Detection(True, "", ids, uv, size, frame_index, diag)
+        return Detection(False, f"too few corners: {len(ids)} < {config.min_corners}", ids, uv, size, frame_index, diag,
+                         edges)
+    return Detection(True, "", ids, uv, size, frame_index, diag, edges)

@@ -406,12 +406,12 @@ def find_images(folder, allow_symlinks: bool = False, hint: str = "--allow-path 
 CALIBRATION_DETECT = {"min_corners": 4, "batch": "per_frame"}
 #: AprilTag grids' corners for the calibration (:func:`calibrate_from_images`): the tag-edge fits of the measurement
 #: (``measure.tag_edges``) instead of OpenCV's AprilTag marker refinement, first in raw pixels, whose straight-edge
-#: assumption the lens distortion breaks, then refitted this many times in the undistorted pixels of the calibration
-#: before. Measured (``python benchmarks/bench_intrinsics.py --apriltag --seeds 0,1,2,3,4,5 --views 15``: 1024 x 768,
-#: k1 -0.1, the 4 x 6 grid of 30 mm tags at 0.25-0.45 m): RMS z of fx, fy 12.0, 12.7 in raw pixels; 1.36, 1.71 with
-#: one refit (the others 0.5-0.8; fx error 0.03 px RMS), 1.39, 1.75 with two; OpenCV's refinement 2.32, 2.36 with
-#: 0.39 px RMS error on fx and 7-15x the RMS error of one refit on every parameter; 40 ms per image against its 153
-#: (decode, detect, calibrate)
+#: assumption the lens distortion breaks, then refitted to the same edge samples this many times in the undistorted
+#: pixels of the calibration before. Measured (``python benchmarks/bench_intrinsics.py --apriltag --seeds
+#: 0,1,2,3,4,5 --views 15``: 1024 x 768, k1 -0.1, the 4 x 6 grid of 30 mm tags at 0.25-0.45 m): RMS z of fx, fy
+#: 12.0, 12.7 in raw pixels; 1.44, 1.80 with one refit (the others 0.5-0.7; fx error 0.03 px RMS), 1.47, 1.83 with
+#: two; OpenCV's refinement 2.32, 2.36 with 0.39 px RMS error on fx and 8-15x the RMS error of one refit on every
+#: parameter; 22 ms per image against its 158 (decode, detect, calibrate)
 TAG_EDGE_REFIT = 1
 
 
@@ -427,9 +427,10 @@ def calibrate_from_images(paths, target, image_size=None, names=None, config: Ca
     A target with fewer corners than a usable view needs (``config.min_corners``): DataError before any image is
     read (no view of it can calibrate). AprilTag grids (the kinds whose corners are straight-edge fits,
     ``seeded_mode`` "tag_edges"): the edges fitted in raw pixels, a calibration, then the edges of every detected
-    view refitted in the undistorted pixels of that calibration and the calibration made again from them
-    (:data:`TAG_EDGE_REFIT`)."""
-    from .batch import detect_batch
+    view refitted in the undistorted pixels of that calibration (their edge samples: no image read again,
+    ``batch.refit_detection``) and the calibration made again from them (:data:`TAG_EDGE_REFIT`); ``detected``
+    may then hold detections made with any intrinsics (their edge samples are refitted in raw pixels first)."""
+    from .batch import detect_batch, refit_detection
     from .detect import DetectConfig, Detection, detect
     from .image_header import header_size, majority_size, pixel_refusal
 
@@ -458,16 +459,19 @@ def calibrate_from_images(paths, target, image_size=None, names=None, config: Ca
 
         it = tqdm(todo, desc="calibrate camera: detect", unit="image", leave=False)
     edges = target.kind_impl.seeded_mode(DetectConfig()) == "tag_edges"
+    n_min = CALIBRATION_DETECT["min_corners"]
     if edges:  # the tag-edge fits, first in raw pixels (no intrinsics), then (below) in the calibration's own
-        def detect_with(i, intr):
-            return detect_batch([str(paths[i])], target, intr, DetectConfig(min_corners=CALIBRATION_DETECT[
-                "min_corners"]))[0]
+        known = {i: refit_detection(d, None, n_min) for i, d in known.items()}  # (detected with edge samples)
+        known = {i: d for i, d in known.items() if d is not None}
+
+        def detect_one(i):
+            return detect_batch([str(paths[i])], target, None, DetectConfig(min_corners=n_min))[0]
     else:
         dcfg = DetectConfig(**CALIBRATION_DETECT)
 
-        def detect_with(i, intr):
+        def detect_one(i):
             return detect(str(paths[i]), target, None, config=dcfg)
-    found = {**known, **{i: detect_with(i, None) for i in it}}
+    found = {**known, **{i: detect_one(i) for i in it}}
 
     def views(found):
         return [found[i] if i in found else Detection(False, skip[i], np.zeros(0, int), np.zeros((0, 2)), heads[i])
@@ -475,12 +479,7 @@ def calibrate_from_images(paths, target, image_size=None, names=None, config: Ca
 
     res = calibrate_intrinsics(views(found), names, target, size, config)
     for _ in range(TAG_EDGE_REFIT if edges else 0):  # straight tag edges hold in undistorted pixels: refit there
-        it = [i for i in range(len(paths)) if i not in skip and found.get(i) is not None and found[i].valid]
-        if progress:
-            from tqdm import tqdm
-
-            it = tqdm(it, desc="calibrate camera: tag edges refit", unit="image", leave=False)
-        found = {**found, **{i: detect_with(i, res.camera) for i in it}}
+        found = {i: refit_detection(d, res.camera, n_min) or d for i, d in found.items()}  # (no image read)
         res = calibrate_intrinsics(views(found), names, target, size, config)
     if not skip:
         return res

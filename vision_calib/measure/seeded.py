@@ -77,6 +77,7 @@ class Refiner:
         self.cells = target.kind_impl.tag_cells(target) if mode == "tag_edges" else 0
         self.max_move = config.max_shift_px
         self.refine = {"subpix": self._subpix, "tag_edges": self._tag_edges, "saddle": self._saddle}[mode]
+        self.edges = None  #: the last tag-edge refinement's EdgeSamples (its last pass), else None
 
     def _subpix(self, img, ids, uv, passes=1):
         out = subpix(img, uv, self.win)
@@ -90,7 +91,7 @@ class Refiner:
         q = uv.reshape(-1, 4, 2)
         ok = np.ones(len(q), dtype=bool)
         for _ in range(passes):
-            q, ok_p = refine_quads(img, q, self.cells, self.intr)
+            q, ok_p, self.edges = refine_quads(img, q, self.cells, self.intr, samples=True)
             ok &= ok_p
         return ids, q.reshape(-1, 2), np.repeat(ok, 4)
 
@@ -114,9 +115,11 @@ class Refiner:
         return mask
 
     def full_post(self, img, ids, uv):
-        """Refinement of a fully detected frame (AprilTag grids: markers that cannot be refined are dropped)."""
+        """Refinement of a fully detected frame (AprilTag grids: markers that cannot be refined are dropped):
+        (ids, uv, the kept markers' EdgeSamples or None)."""
+        self.edges = None
         ids, uv, ok = self.refine(img, ids, uv, passes=2)
-        return ids[ok], uv[ok]
+        return ids[ok], uv[ok], None if self.edges is None else self.edges.take(ok[::4])
 
 
 def _from_seed(img, size, source, i, seed: _Seed, ref: Refiner, config: DetectConfig, t0):
@@ -127,6 +130,7 @@ def _from_seed(img, size, source, i, seed: _Seed, ref: Refiner, config: DetectCo
         return None, (f"view differs from seed frame {seed.frame_index} "
                       f"(1/{SMALL}-scale NCC {ncc:.3f} < {config.min_view_ncc})")
     try:
+        ref.edges = None
         ids, uv, ok = ref.refine(img, seed.ids, seed.uv)
     except cv2.error as exc:
         return None, f"seeded refinement failed: {exc}".splitlines()[0]
@@ -140,7 +144,7 @@ def _from_seed(img, size, source, i, seed: _Seed, ref: Refiner, config: DetectCo
             "max_shift_px": shift, "n_markers": seed.diag.get("n_markers"),
             "marker_ids": list(seed.diag.get("marker_ids", [])), "n_corners": int(len(ids)),
             "time_s": time.perf_counter() - t0}
-    return Detection(True, "", ids.copy(), uv, size, i, diag), ""
+    return Detection(True, "", ids.copy(), uv, size, i, diag, ref.edges), ""
 
 
 def detect_seeded(images, target, intrinsics: CameraIntrinsics | None, config: DetectConfig) -> list[Detection]:

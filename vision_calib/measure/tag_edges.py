@@ -13,6 +13,8 @@ there), so the corners come out in the same convention as the seeds.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from ..camera import CameraIntrinsics
@@ -122,19 +124,52 @@ def _fit_lines(q: np.ndarray, w: np.ndarray):
     return c, vec[..., :, 1]  # eigenvector of the largest eigenvalue
 
 
-def refine_quads(img: np.ndarray, quads: np.ndarray, cells: int,
-                 intrinsics: CameraIntrinsics | None = None) -> tuple[np.ndarray, np.ndarray]:
+@dataclass(frozen=True, eq=False)
+class EdgeSamples:
+    """The edge points :func:`refine_quads` fitted its corners to, for M markers: points (M, 4, S, 2) float32
+    [distorted px, side k from corner k to k + 1], good (M, 4, S) bool (points used), ok_side (M, 4) bool (sides
+    with contrast and enough points). The image is read only to find them: :func:`corners_from_edges` fits the
+    corners again under other intrinsics without it."""
+
+    points: np.ndarray
+    good: np.ndarray
+    ok_side: np.ndarray
+
+    def take(self, keep: np.ndarray) -> "EdgeSamples":
+        """The samples of the markers ``keep`` ((M,) bool or indices)."""
+        return EdgeSamples(self.points[keep], self.good[keep], self.ok_side[keep])
+
+
+def refine_quads(img: np.ndarray, quads: np.ndarray, cells: int, intrinsics: CameraIntrinsics | None = None,
+                 samples: bool = False):
     """Refine marker corners from seeds.
 
     img: (H, W) grey image (uint8 or float). quads: (M, 4, 2) seed corners [distorted px] in OpenCV's
     marker order (consecutive corners share a side). cells: marker side in bits incl. the border
     (markerSize + 2). intrinsics: when given with distortion, lines are fitted in undistorted pixels.
     Returns (corners (M, 4, 2) distorted px, ok (M,) bool: all four sides had contrast and an edge
-    inside the sampling window)."""
+    inside the sampling window), and the :class:`EdgeSamples` when ``samples``."""
     quads = np.asarray(quads, dtype=np.float64).reshape(-1, 4, 2)
     if len(quads) == 0:
-        return quads.copy(), np.zeros(0, dtype=bool)
+        empty = EdgeSamples(np.zeros((0, 4, 0, 2), np.float32), np.zeros((0, 4, 0), bool), np.zeros((0, 4), bool))
+        return (quads.copy(), np.zeros(0, dtype=bool)) + ((empty,) if samples else ())
     q, good, ok_side = _edge_points(np.asarray(img, dtype=np.float32), quads, cells)
+    corners, ok = _corners(q, good, ok_side, intrinsics)
+    if not samples:
+        return corners, ok
+    return corners, ok, EdgeSamples(q.astype(np.float32), good, ok_side)
+
+
+def corners_from_edges(edges: EdgeSamples, intrinsics: CameraIntrinsics | None = None):
+    """(corners (M, 4, 2) distorted px, ok (M,) bool) of :func:`refine_quads` fitted to its ``edges`` under
+    ``intrinsics`` (the lines in their undistorted pixels; None or no distortion: in raw pixels): no image read."""
+    if len(edges.points) == 0:
+        return np.zeros((0, 4, 2)), np.zeros(0, dtype=bool)
+    return _corners(edges.points.astype(np.float64), edges.good, edges.ok_side, intrinsics)
+
+
+def _corners(q, good, ok_side, intrinsics):
+    """The corners and their validity from the edge points q (M, 4, S, 2) [distorted px] (module docstring)."""
     q = _undistort(q, intrinsics)
     c, d = _fit_lines(q, good.astype(np.float64))
     # corner k is the intersection of side k-1 (corner k-1 -> k) and side k (corner k -> k+1)
