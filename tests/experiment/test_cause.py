@@ -61,6 +61,8 @@ def test_true_intrinsics_are_kept(flange_rec, tmp_path, monkeypatch):
     if cause:
         assert cause["delta_bic"] <= DECISIVE_BIC and cause["holdout_agrees"] is None
         assert all("holdout" not in h for h in cause["hypotheses"]) and "held-out" not in cause["message"]
+        assert cause["message"].endswith("the given intrinsics decisively: they are kept" if cause["delta_bic"]
+                                         < -DECISIVE_BIC else "the given ones are kept")
 
 
 def test_both_hypotheses_from_one_decode_and_detection_per_image(flange_rec, tmp_path, monkeypatch):

@@ -103,6 +103,7 @@ def compare(given: dict, refined: dict | None, refined_error: str | None = None,
     msg += ": " + ("the intrinsics were wrong: the refined ones are applied (the result below)" if chosen == "refined"
                    else "the held-out prediction contradicts the likelihood: the given intrinsics are kept"
                    if d > DECISIVE_BIC else
+                   "the likelihood favours the given intrinsics decisively: they are kept" if d < -DECISIVE_BIC else
                    "the evidence does not favour refining the intrinsics decisively: the given ones are kept")
     return {"hypotheses": [g, r], "chosen": chosen, "decisive": bool(abs(d) > DECISIVE_BIC), "delta_bic": float(d),
             "holdout_agrees": held, "message": msg}
