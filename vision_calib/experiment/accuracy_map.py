@@ -130,7 +130,8 @@ def norm_quantile(cov: ArrayLike, level: float = LEVEL) -> np.ndarray:
             lo = np.where(p < 0, t, lo)
             hi = np.where(p < 0, hi, t)
             step = t - p / np.where(dens > 0, dens, np.nan)
-            t = np.where(np.isfinite(step) & (step > lo) & (step < hi), step, 0.5 * (lo + hi))
+            t = np.where(np.isfinite(step) & (step >= lo) & (step <= hi), step, 0.5 * (lo + hi))  # (closed: a
+            # converged t is a bracket end, and its Newton step stays there)
     r = np.sqrt(t * lmax)
     r[zero] = 0.0
     out[ok] = r
