@@ -38,7 +38,7 @@ def used_corners(dets: dict, pms, target) -> tuple[dict, dict]:
                 continue
             drop = {int(c["id"]) for c in f.get("dropped_corners", ())}
             m = on_target & np.array([int(i) not in drop for i in d.ids], bool)
-            kept.append(replace(d, ids=d.ids[m], uv_px=d.uv_px[m]))
+            kept.append(replace(d, ids=d.ids[m], uv_px=d.uv_px[m], edges=None))  # (a subset: no edge refit)
             n_used += int(m.sum())
         out[pid], counts[str(pid)] = kept, (n_used, n_all)
     return out, counts
