@@ -179,8 +179,8 @@ def test_refinement_reads_only_its_read_mask(name, request):
         assert 0 < mask.mean() < 0.15
         for img in imgs[1:]:
             blank = np.where(mask, img, 0).astype(np.uint8)
-            _, uv_a, ok_a = ref.refine(img, d0.ids, d0.uv_px)
-            _, uv_b, ok_b = ref.refine(blank, d0.ids, d0.uv_px)
+            _, uv_a, ok_a, _ = ref.refine(img, d0.ids, d0.uv_px)
+            _, uv_b, ok_b, _ = ref.refine(blank, d0.ids, d0.uv_px)
             np.testing.assert_array_equal(ok_a, ok_b)
             np.testing.assert_array_equal(uv_a, uv_b)
             n_checked += int(ok_a.sum())

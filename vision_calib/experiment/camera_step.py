@@ -71,8 +71,8 @@ def _first_frames(detections, pids, target) -> dict | None:
     if not detections:
         return None
     first = {i: detections[p][0] for i, p in enumerate(pids) if detections.get(p)}
-    if target.kind_impl.seeded_mode(DetectConfig()) == "tag_edges":
-        return first if refittable(first.values()) else None
+    if refittable(first.values()):
+        return first
     if replace(DetectConfig(), batch="per_frame") != DetectConfig(**CALIBRATION_DETECT) \
             or not reusable_detections(target):
         return None

@@ -9,6 +9,7 @@ kept even when identification then fails (e.g. too few usable poses).
 
 from __future__ import annotations
 
+import functools
 import time
 from pathlib import Path
 from dataclasses import dataclass, field
@@ -278,7 +279,7 @@ def fit_measured(m: Measured, out_dir: str | Path | None, method: str | None = N
     failure = gross_failure(setup, meas, ident, residual, where,
                             untested=f"a wrong robot file or scene mounts ({scene.path}), joint columns in another "
                                      "order, the target's or camera's description in recording.yaml")
-    folds_of = _once(lambda: None if failure else holdout_folds(
+    folds_of = functools.cache(lambda: None if failure else holdout_folds(
         nominal, meas, method, residual, rep, folds, 0, outliers=flagged_labels(meas, ident.rejected), tcp=tcp,
         result=result, fitted_setup=setup))  # the k-fold fits, when first asked for (``_Fitted.holdout``)
     cam_fit = None
@@ -340,18 +341,6 @@ def fit_measured(m: Measured, out_dir: str | Path | None, method: str | None = N
                                               result) if plots else None)
 
     return _Fitted(view, build, write, lambda: None if folds_of() is None else folds_of().figures(), scene)
-
-
-def _once(fn: Callable[[], object]) -> Callable[[], object]:
-    """fn, called on the first call only (its value kept; an exception is raised again by the next call)."""
-    box = []
-
-    def once():
-        if not box:
-            box.append(fn())
-        return box[0]
-
-    return once
 
 
 def _overlay_source(rec, dets, setup=None, result=None):
@@ -447,7 +436,7 @@ def _process_handeye(rec, out, pms, mblock, t0, plots, intr, dets=None, folds=No
         return pair_holdout(pairs, int(min(folds or DEFAULT_FOLDS, len(ok))), 0,
                             outliers=[lab for lab, _ in ident.rejected], theta_start=start, fit=ident.fit)
 
-    hold_of = _once(pairs_holdout)
+    hold_of = functools.cache(pairs_holdout)
     cam_fit = None
     if ident.nuisance is not None:
         cam_fit = fitted_camera(rec.camera, used, ident.nuisance["coefficients"])

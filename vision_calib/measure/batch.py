@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 from ..camera import CameraIntrinsics
 from .detect import DetectConfig, Detection, detect
 from .seeded import detect_seeded
@@ -39,8 +41,6 @@ def refit_detection(det: Detection, intrinsics: CameraIntrinsics | None, min_cor
     profiles. A marker whose sides no longer intersect is dropped; fewer than ``min_corners`` corners left: an
     invalid Detection saying so. An invalid ``det`` is returned as it is; None when ``det`` has no edge samples
     (another kind: detect again)."""
-    import numpy as np
-
     from .tag_edges import corners_from_edges
 
     if not det.valid:

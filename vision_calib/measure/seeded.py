@@ -67,7 +67,8 @@ class _Seed:
 
 class Refiner:
     """Per-frame corner estimator of a target kind started from a seed: refine(img, ids, uv, passes) -> (ids, uv,
-    ok (K,) bool) [px]; ``mode``: the kind's ``seeded_mode`` ("subpix" | "tag_edges" | "saddle"); read_mask: the
+    ok (K,) bool, edges) [px] (edges: the tag-edge fit's ``tag_edges.EdgeSamples`` of its last pass, else None);
+    ``mode``: the kind's ``seeded_mode`` ("subpix" | "tag_edges" | "saddle"); read_mask: the
     pixels it reads."""
 
     def __init__(self, target, intrinsics: CameraIntrinsics | None, config: DetectConfig, mode: str):
@@ -77,23 +78,22 @@ class Refiner:
         self.cells = target.kind_impl.tag_cells(target) if mode == "tag_edges" else 0
         self.max_move = config.max_shift_px
         self.refine = {"subpix": self._subpix, "tag_edges": self._tag_edges, "saddle": self._saddle}[mode]
-        self.edges = None  #: the last tag-edge refinement's EdgeSamples (its last pass), else None
 
     def _subpix(self, img, ids, uv, passes=1):
         out = subpix(img, uv, self.win)
-        return ids, out, np.all(np.isfinite(out), axis=1)
+        return ids, out, np.all(np.isfinite(out), axis=1), None
 
     def _saddle(self, img, ids, uv, passes=1):
         out, ok = saddle.refine_saddles(img, uv, self.max_move)
-        return ids, out, ok
+        return ids, out, ok, None
 
     def _tag_edges(self, img, ids, uv, passes=1):
         q = uv.reshape(-1, 4, 2)
         ok = np.ones(len(q), dtype=bool)
         for _ in range(passes):
-            q, ok_p, self.edges = refine_quads(img, q, self.cells, self.intr, samples=True)
+            q, ok_p, edges = refine_quads(img, q, self.cells, self.intr, samples=True)
             ok &= ok_p
-        return ids, q.reshape(-1, 2), np.repeat(ok, 4)
+        return ids, q.reshape(-1, 2), np.repeat(ok, 4), edges
 
     def read_mask(self, uv, shape, max_shift_px: float) -> np.ndarray:
         """(H, W) bool: every pixel :meth:`refine` reads when started from the seed corners uv (N, 2).
@@ -117,9 +117,8 @@ class Refiner:
     def full_post(self, img, ids, uv):
         """Refinement of a fully detected frame (AprilTag grids: markers that cannot be refined are dropped):
         (ids, uv, the kept markers' EdgeSamples or None)."""
-        self.edges = None
-        ids, uv, ok = self.refine(img, ids, uv, passes=2)
-        return ids[ok], uv[ok], None if self.edges is None else self.edges.take(ok[::4])
+        ids, uv, ok, edges = self.refine(img, ids, uv, passes=2)
+        return ids[ok], uv[ok], None if edges is None else edges.take(ok[::4])
 
 
 def _from_seed(img, size, source, i, seed: _Seed, ref: Refiner, config: DetectConfig, t0):
@@ -130,8 +129,7 @@ def _from_seed(img, size, source, i, seed: _Seed, ref: Refiner, config: DetectCo
         return None, (f"view differs from seed frame {seed.frame_index} "
                       f"(1/{SMALL}-scale NCC {ncc:.3f} < {config.min_view_ncc})")
     try:
-        ref.edges = None
-        ids, uv, ok = ref.refine(img, seed.ids, seed.uv)
+        ids, uv, ok, edges = ref.refine(img, seed.ids, seed.uv)
     except cv2.error as exc:
         return None, f"seeded refinement failed: {exc}".splitlines()[0]
     if not ok.all():
@@ -144,7 +142,7 @@ def _from_seed(img, size, source, i, seed: _Seed, ref: Refiner, config: DetectCo
             "max_shift_px": shift, "n_markers": seed.diag.get("n_markers"),
             "marker_ids": list(seed.diag.get("marker_ids", [])), "n_corners": int(len(ids)),
             "time_s": time.perf_counter() - t0}
-    return Detection(True, "", ids.copy(), uv, size, i, diag, ref.edges), ""
+    return Detection(True, "", ids.copy(), uv, size, i, diag, edges), ""
 
 
 def detect_seeded(images, target, intrinsics: CameraIntrinsics | None, config: DetectConfig) -> list[Detection]:
